@@ -1,0 +1,496 @@
+//! The checker: resolves names, infers and checks shapes and physical units, enforces the i/j
+//! discipline, and produces the typed IR (`ir::Model`) with each equation's read and write sets.
+//!
+//! Order of work: collect groups, constants, fields, parameters, helpers and kernels from every
+//! module; declare equation outputs; check every body; then, for a complete model (one with an
+//! `integrate` block), the model-wide checks in `model.rs`.
+
+mod equations;
+mod expr;
+pub mod load;
+mod model;
+pub mod types;
+
+use crate::diag::{closest, Diagnostic, Diagnostics, Sources, Span};
+use crate::ir::{self, FieldId, GroupSet, Model, Type};
+use crate::syntax::ast::{self, Item, Shape, Storage};
+use crate::units::{Ratio, Unit};
+use std::collections::HashMap;
+use std::path::Path;
+use std::rc::Rc;
+
+pub use load::{Loader, Stdlib};
+
+/// What `check` gives back: the model (complete as far as it could be checked) and every diagnostic.
+pub struct Checked {
+    pub model: Model,
+    pub diags: Vec<Diagnostic>,
+    /// Whether the modules form a whole model (they integrate something) rather than a library.
+    pub is_model: bool,
+}
+
+impl Checked {
+    pub fn has_errors(&self) -> bool {
+        self.diags.iter().any(|d| d.is_error())
+    }
+    pub fn into_result(self) -> Result<(Model, Vec<Diagnostic>), Diagnostics> {
+        if self.has_errors() {
+            Err(Diagnostics(self.diags))
+        } else {
+            Ok((self.model, self.diags))
+        }
+    }
+}
+
+/// Loads the given files (and what they `use`) and checks them as one model.
+pub fn check_paths(sources: &mut Sources, paths: &[&Path], stdlib: Stdlib) -> Checked {
+    let mut loader = Loader::new(sources, stdlib);
+    for p in paths {
+        loader.load_path(p);
+    }
+    finish(loader)
+}
+
+/// Checks source text (tests, fuzzing, models embedded in case files).
+pub fn check_text(sources: &mut Sources, name: &str, text: &str, stdlib: Stdlib) -> Checked {
+    let mut loader = Loader::new(sources, stdlib);
+    loader.load_text(name, text, None);
+    finish(loader)
+}
+
+/// Checks stdlib modules by their relative paths.
+pub fn check_stdlib_modules(sources: &mut Sources, modules: &[&str], stdlib: Stdlib) -> Checked {
+    let mut loader = Loader::new(sources, stdlib);
+    for m in modules {
+        loader.load_stdlib_module(m, None, true);
+    }
+    finish(loader)
+}
+
+fn finish(loader: Loader<'_>) -> Checked {
+    let Loader { sources, modules, diags, .. } = loader;
+    let _ = sources;
+    let mut checker = Checker::new();
+    checker.diags = diags;
+    if checker.diags.iter().any(|d| d.is_error()) {
+        // A module that does not parse leaves names undefined; checking the rest would only
+        // pile consequences on the real error.
+        return Checked { model: checker.model, diags: checker.diags, is_model: false };
+    }
+    let files: Vec<&ast::File> = modules.iter().map(|m| &m.ast).collect();
+    let is_model = files.iter().any(|f| f.items.iter().any(|i| matches!(i, Item::Integrate(_))));
+    checker.run(&files, is_model);
+    let mut diags = checker.diags;
+    dedup(&mut diags);
+    Checked { model: checker.model, diags, is_model }
+}
+
+fn dedup(diags: &mut Vec<Diagnostic>) {
+    let mut seen = std::collections::HashSet::new();
+    diags.retain(|d| seen.insert((d.message.clone(), d.primary.as_ref().map(|p| p.0))));
+}
+
+/// Names no declaration may take: the language's own.
+pub const RESERVED: [&str; 15] =
+    ["t", "dt", "dim", "I", "pi", "inf", "x_ij", "r_ij", "v_ij", "h_ij", "W_ij", "gradW_ij", "true", "false", "R"];
+
+pub(crate) struct ConstVal {
+    value: f64,
+    unit: Unit,
+}
+
+pub(crate) struct Checker {
+    pub(crate) model: Model,
+    pub(crate) diags: Vec<Diagnostic>,
+    consts: HashMap<String, ConstVal>,
+    const_defs: HashMap<String, ast::ConstDecl>,
+    const_busy: Vec<String>,
+    fns: HashMap<String, Rc<ast::FnDef>>,
+    /// Which equation declared each accumulator (for "writes another equation's accumulator").
+    accumulator_of: HashMap<FieldId, String>,
+    /// Active `let` and helper-parameter bindings, innermost last.
+    scope: Vec<(String, ir::LocalId)>,
+    /// The `acc` temporaries of the pair sum being checked, by their short name.
+    temps: Vec<(String, FieldId)>,
+    /// Helpers being inlined (to catch recursion and to say "called from").
+    fn_stack: Vec<(String, Span)>,
+}
+
+impl Checker {
+    fn new() -> Checker {
+        Checker {
+            model: Model::default(),
+            diags: vec![],
+            consts: HashMap::new(),
+            const_defs: HashMap::new(),
+            const_busy: vec![],
+            fns: HashMap::new(),
+            accumulator_of: HashMap::new(),
+            scope: vec![],
+            temps: vec![],
+            fn_stack: vec![],
+        }
+    }
+
+    pub(crate) fn error(&mut self, d: Diagnostic) {
+        self.diags.push(d);
+    }
+
+    fn run(&mut self, files: &[&ast::File], is_model: bool) {
+        let items: Vec<&Item> = files.iter().flat_map(|f| f.items.iter()).collect();
+        self.collect_groups(&items);
+        for it in &items {
+            if let Item::Const(c) = it {
+                if self.const_defs.insert(c.name.name.clone(), c.clone()).is_some() {
+                    self.error(
+                        Diagnostic::error("E0101", format!("constant `{}` is defined twice", c.name.name))
+                            .at(c.name.span, "second definition"),
+                    );
+                }
+            }
+        }
+        for it in &items {
+            match it {
+                Item::Field(f) => self.declare_field(f),
+                Item::Param(p) => self.declare_param(p),
+                Item::Fn(f) => {
+                    if self.fns.insert(f.name.name.clone(), Rc::new(f.clone())).is_some() {
+                        self.error(
+                            Diagnostic::error("E0101", format!("helper `{}` is defined twice", f.name.name))
+                                .at(f.name.span, "second definition"),
+                        );
+                    }
+                }
+                _ => {}
+            }
+        }
+        let names: Vec<String> = self.const_defs.keys().cloned().collect();
+        for n in names {
+            self.const_value(&n);
+        }
+        for it in &items {
+            if let Item::Kernel(k) = it {
+                self.kernel(k);
+            }
+        }
+        self.declare_outputs(&items);
+        self.check_declaration_values(&items);
+        for it in &items {
+            match it {
+                Item::PairSum(p) => self.pairsum(p),
+                Item::Particle(p) => self.particle(p),
+                Item::Integrate(i) => self.integrate(i),
+                Item::Timestep(t) => self.timestep(t),
+                Item::KernelSelect(k) => match self.model.kernel_id(&k.name) {
+                    Some(id) => self.model.kernel = Some(id),
+                    None => {
+                        let names: Vec<&str> = self.model.kernels.iter().map(|k| k.name.as_str()).collect();
+                        let mut d = Diagnostic::error("E0102", format!("unknown kernel `{}`", k.name))
+                            .at(k.span, "no kernel of this name");
+                        if let Some(b) = closest(&k.name, names.iter().copied()) {
+                            d = d.help(format!("did you mean `{b}`?"));
+                        } else {
+                            d = d.help("define it with `kernel name { ... }` or `use kernels`");
+                        }
+                        self.error(d);
+                    }
+                },
+                _ => {}
+            }
+        }
+        self.check_unchecked_helpers();
+        self.check_writers();
+        if is_model && !self.diags.iter().any(|d| d.is_error()) {
+            self.model_checks();
+        }
+    }
+
+    fn collect_groups(&mut self, items: &[&Item]) {
+        for it in items {
+            if let Item::Groups(gs) = it {
+                for g in gs {
+                    if self.model.group_id(&g.name).is_none() {
+                        self.model.groups.push(ir::Group { name: g.name.clone(), span: g.span });
+                    }
+                }
+            }
+        }
+        if self.model.groups.len() > 64 {
+            let span = self.model.groups[64].span;
+            self.error(Diagnostic::error("E0103", "a model has at most 64 particle groups").at(span, "the 65th"));
+            self.model.groups.truncate(64);
+        }
+    }
+
+    pub(crate) fn groups(&mut self, list: Option<&Vec<ast::Ident>>) -> GroupSet {
+        let Some(list) = list else {
+            return self.model.all_groups();
+        };
+        let mut set = GroupSet::default();
+        for g in list {
+            match self.model.group_id(&g.name) {
+                Some(id) => set = set.with(id),
+                None => {
+                    let names: Vec<String> = self.model.groups.iter().map(|g| g.name.clone()).collect();
+                    let mut d = Diagnostic::error("E0104", format!("unknown particle group `{}`", g.name))
+                        .at(g.span, "no group of this name");
+                    if let Some(b) = closest(&g.name, names.iter().map(String::as_str)) {
+                        d = d.help(format!("did you mean `{b}`?"));
+                    } else if names.is_empty() {
+                        d = d.help(format!("declare it: `group {}`", g.name));
+                    } else {
+                        d = d.note(format!("the groups are: {}", names.join(", ")));
+                    }
+                    self.error(d);
+                }
+            }
+        }
+        set
+    }
+
+    pub(crate) fn unit(&mut self, u: &ast::UnitAnnot) -> Option<Unit> {
+        self.unit_expr(&u.expr)
+    }
+
+    fn unit_expr(&mut self, u: &ast::UnitExpr) -> Option<Unit> {
+        match u {
+            ast::UnitExpr::One => Some(Unit::ONE),
+            ast::UnitExpr::Name(n) => match Unit::named(&n.name) {
+                Some(u) => Some(u),
+                None => {
+                    let mut d = Diagnostic::error("E0105", format!("unknown unit `{}`", n.name))
+                        .at(n.span, "not a unit the language knows");
+                    let prefixed = ["k", "M", "G", "m", "u", "n", "c", "m"]
+                        .iter()
+                        .any(|p| n.name.strip_prefix(p).is_some_and(|rest| Unit::named(rest).is_some()));
+                    if prefixed {
+                        d = d.help("units in the language are SI without prefixes; write the base unit (values in case files may use prefixes)");
+                    } else if let Some(b) = closest(&n.name, Unit::KNOWN.iter().copied()) {
+                        d = d.help(format!("did you mean `{b}`?"));
+                    } else {
+                        d = d.note(format!("known units: {}", Unit::KNOWN.join(", ")));
+                    }
+                    self.error(d);
+                    None
+                }
+            },
+            ast::UnitExpr::Mul(a, b) => {
+                let (a, b) = (self.unit_expr(a)?, self.unit_expr(b)?);
+                a.mul(&b)
+            }
+            ast::UnitExpr::Div(a, b) => {
+                let (a, b) = (self.unit_expr(a)?, self.unit_expr(b)?);
+                a.div(&b)
+            }
+            ast::UnitExpr::Pow(a, n, d, span) => {
+                let base = self.unit_expr(a)?;
+                match Ratio::new(*n, *d) {
+                    Some(r) => base.powr(r),
+                    None => {
+                        self.error(
+                            Diagnostic::error("E0105", "a unit exponent with a zero denominator").at(*span, "here"),
+                        );
+                        None
+                    }
+                }
+            }
+        }
+    }
+
+    pub(crate) fn type_spec(&mut self, t: &ast::TypeSpec) -> Option<Type> {
+        let unit = match &t.unit {
+            Some(u) => self.unit(u)?,
+            None => Unit::ONE,
+        };
+        Some(Type::new(t.shape, unit))
+    }
+
+    fn reserved(&mut self, name: &ast::Ident, what: &str) -> bool {
+        if RESERVED.contains(&name.name.as_str()) || types::builtin_by_name(&name.name).is_some() {
+            self.error(
+                Diagnostic::error(
+                    "E0106",
+                    format!("`{}` is a name of the language and cannot name a {what}", name.name),
+                )
+                .at(name.span, "reserved name"),
+            );
+            return true;
+        }
+        false
+    }
+
+    fn declare_field(&mut self, f: &ast::FieldDecl) {
+        if self.reserved(&f.name, "field") {
+            return;
+        }
+        let Some(ty) = self.type_spec(&f.ty) else {
+            return;
+        };
+        self.add_field(&f.name, ty, f.storage, f.span);
+    }
+
+    /// Declares a field, or accepts an identical redeclaration.
+    pub(crate) fn add_field(&mut self, name: &ast::Ident, ty: Type, storage: Storage, span: Span) -> Option<FieldId> {
+        if let Some(id) = self.model.field_id(&name.name) {
+            let old = self.model.field(id).clone();
+            if old.ty != ty || old.storage != storage {
+                let word = |s: Storage| {
+                    if s == Storage::State {
+                        "state"
+                    } else {
+                        "field"
+                    }
+                };
+                self.error(
+                    Diagnostic::error("E0107", format!("conflicting declarations of field `{}`", name.name))
+                        .at(name.span, format!("declared here as {} {}", word(storage), ty))
+                        .also(old.span, format!("and here as {} {}", word(old.storage), old.ty)),
+                );
+                return None;
+            }
+            return Some(id);
+        }
+        if self.model.param_id(&name.name).is_some() {
+            self.error(
+                Diagnostic::error("E0107", format!("`{}` is already a parameter", name.name))
+                    .at(name.span, "also declared as a field"),
+            );
+            return None;
+        }
+        self.model.fields.push(ir::Field { name: name.name.clone(), ty, storage, init: None, span });
+        Some(FieldId(self.model.fields.len() as u32 - 1))
+    }
+
+    fn declare_param(&mut self, p: &ast::ParamDecl) {
+        if self.reserved(&p.name, "parameter") {
+            return;
+        }
+        let Some(ty) = self.type_spec(&p.ty) else {
+            return;
+        };
+        if let Some(id) = self.model.param_id(&p.name.name) {
+            let old = self.model.params[id.index()].clone();
+            if old.ty != ty {
+                self.error(
+                    Diagnostic::error("E0107", format!("conflicting declarations of parameter `{}`", p.name.name))
+                        .at(p.name.span, format!("declared here as {ty}"))
+                        .also(old.span, format!("and here as {}", old.ty)),
+                );
+            }
+            return;
+        }
+        if self.model.field_id(&p.name.name).is_some() {
+            self.error(
+                Diagnostic::error("E0107", format!("`{}` is already a field", p.name.name))
+                    .at(p.name.span, "also declared as a parameter"),
+            );
+            return;
+        }
+        self.model.params.push(ir::Param { name: p.name.name.clone(), ty, default: None, span: p.span });
+    }
+
+    /// Field initial values and parameter defaults, once every name is known.
+    fn check_declaration_values(&mut self, items: &[&Item]) {
+        for it in items {
+            match it {
+                Item::Field(f) => {
+                    let Some(init) = &f.init else { continue };
+                    let Some(id) = self.model.field_id(&f.name.name) else {
+                        continue;
+                    };
+                    if f.storage != Storage::State {
+                        self.error(
+                            Diagnostic::error(
+                                "E0108",
+                                format!(
+                                    "only state fields have initial values; `{}` is recomputed every step",
+                                    f.name.name
+                                ),
+                            )
+                            .at(init.span, "initial value of a non-state field")
+                            .help(format!(
+                                "declare it `state {}: ...` if it carries over from step to step",
+                                f.name.name
+                            )),
+                        );
+                        continue;
+                    }
+                    let ty = self.model.field(id).ty;
+                    let cx = expr::Cx::particle("the initial value of a field");
+                    if let Some(e) = self.expr_as(init, &cx, ty, "the initial value") {
+                        self.model.fields[id.index()].init = Some(e);
+                    }
+                }
+                Item::Param(p) => {
+                    let Some(default) = &p.default else { continue };
+                    let Some(id) = self.model.param_id(&p.name.name) else {
+                        continue;
+                    };
+                    let ty = self.model.params[id.index()].ty;
+                    let cx = expr::Cx::constant("a parameter's default");
+                    if let Some(e) = self.expr_as(default, &cx, ty, "the default") {
+                        self.model.params[id.index()].default = Some(e);
+                    }
+                }
+                _ => {}
+            }
+        }
+    }
+
+    /// Evaluates a constant (on first use), detecting cycles.
+    pub(crate) fn const_value(&mut self, name: &str) -> Option<(f64, Unit)> {
+        if let Some(c) = self.consts.get(name) {
+            return Some((c.value, c.unit));
+        }
+        let def = self.const_defs.get(name)?.clone();
+        if self.const_busy.iter().any(|n| n == name) {
+            self.error(
+                Diagnostic::error("E0109", format!("constant `{name}` is defined in terms of itself"))
+                    .at(def.name.span, "cycle"),
+            );
+            return None;
+        }
+        self.const_busy.push(name.to_string());
+        let cx = expr::Cx::constant("a constant");
+        let result = self.expr(&def.value, &cx);
+        self.const_busy.pop();
+        let e = result?;
+        if e.ty.shape != Shape::Scalar {
+            self.error(
+                Diagnostic::error("E0109", "constants are scalars")
+                    .at(def.value.span, format!("this is a {}", e.ty.shape.name())),
+            );
+            return None;
+        }
+        let Some(v) = types::const_value(&e) else {
+            self.error(
+                Diagnostic::error("E0109", format!("`{name}` is not a constant expression"))
+                    .at(def.value.span, "cannot be computed before the run"),
+            );
+            return None;
+        };
+        self.consts.insert(name.to_string(), ConstVal { value: v, unit: e.ty.unit });
+        Some((v, e.ty.unit))
+    }
+
+    pub(crate) fn has_const(&self, name: &str) -> bool {
+        self.const_defs.contains_key(name)
+    }
+
+    /// A field by name, the current pair sum's `acc` temporaries first.
+    pub(crate) fn lookup_field(&self, name: &str) -> Option<FieldId> {
+        self.temps.iter().find(|(n, _)| n == name).map(|(_, f)| *f).or_else(|| self.model.field_id(name))
+    }
+
+    pub(crate) fn helper(&self, name: &str) -> Option<Rc<ast::FnDef>> {
+        self.fns.get(name).cloned()
+    }
+
+    pub(crate) fn helper_names(&self) -> Vec<String> {
+        self.fns.keys().cloned().collect()
+    }
+
+    pub(crate) fn const_names(&self) -> Vec<String> {
+        self.const_defs.keys().cloned().collect()
+    }
+}

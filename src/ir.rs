@@ -1,0 +1,455 @@
+//! The typed intermediate representation: what `check` produces and every later stage reads.
+//! Names are resolved to ids, every expression carries its shape and unit, helper functions are
+//! inlined, and each equation knows what it reads (per side) and writes.
+
+use crate::diag::Span;
+pub use crate::syntax::ast::{Shape, Side, Storage};
+use crate::units::Unit;
+use std::collections::BTreeSet;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct Type {
+    pub shape: Shape,
+    pub unit: Unit,
+}
+
+impl Type {
+    pub const BOOL: Type = Type { shape: Shape::Bool, unit: Unit::ONE };
+    pub fn new(shape: Shape, unit: Unit) -> Type {
+        Type { shape, unit }
+    }
+    pub fn scalar(unit: Unit) -> Type {
+        Type { shape: Shape::Scalar, unit }
+    }
+}
+
+impl std::fmt::Display for Type {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.shape == Shape::Bool {
+            write!(f, "bool")
+        } else {
+            write!(f, "{} [{}]", self.shape.name(), self.unit)
+        }
+    }
+}
+
+/// Components a shape holds in `dim` dimensions. Symmetric and skew tensors keep their upper
+/// triangle row by row (sym 3D: xx xy xz yy yz zz; skew 3D: xy xz yz); full tensors are row-major.
+pub fn components(shape: Shape, dim: usize) -> usize {
+    match shape {
+        Shape::Scalar | Shape::Bool => 1,
+        Shape::Vec => dim,
+        Shape::SymTensor => dim * (dim + 1) / 2,
+        Shape::SkewTensor => dim * (dim - 1) / 2,
+        Shape::Tensor => dim * dim,
+    }
+}
+
+/// The (row, column) of each stored component of a shape.
+pub fn component_indices(shape: Shape, dim: usize) -> Vec<(usize, usize)> {
+    match shape {
+        Shape::Scalar | Shape::Bool => vec![(0, 0)],
+        Shape::Vec => (0..dim).map(|a| (a, 0)).collect(),
+        Shape::SymTensor => (0..dim).flat_map(|a| (a..dim).map(move |b| (a, b))).collect(),
+        Shape::SkewTensor => (0..dim).flat_map(|a| (a + 1..dim).map(move |b| (a, b))).collect(),
+        Shape::Tensor => (0..dim).flat_map(|a| (0..dim).map(move |b| (a, b))).collect(),
+    }
+}
+
+macro_rules! id {
+    ($name:ident) => {
+        #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+        pub struct $name(pub u32);
+        impl $name {
+            pub fn index(self) -> usize {
+                self.0 as usize
+            }
+        }
+    };
+}
+id!(FieldId);
+id!(ParamId);
+id!(GroupId);
+id!(EqId);
+id!(LocalId);
+id!(KernelId);
+
+/// A set of particle groups (at most 64 per model).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+pub struct GroupSet(pub u64);
+
+impl GroupSet {
+    pub const ALL: GroupSet = GroupSet(u64::MAX);
+    pub fn contains(self, g: GroupId) -> bool {
+        self.0 & (1 << g.0) != 0
+    }
+    pub fn with(self, g: GroupId) -> GroupSet {
+        GroupSet(self.0 | (1 << g.0))
+    }
+    pub fn union(self, o: GroupSet) -> GroupSet {
+        GroupSet(self.0 | o.0)
+    }
+    pub fn intersect(self, o: GroupSet) -> GroupSet {
+        GroupSet(self.0 & o.0)
+    }
+    pub fn is_empty(self) -> bool {
+        self.0 == 0
+    }
+    pub fn iter(self, n_groups: usize) -> impl Iterator<Item = GroupId> {
+        (0..n_groups as u32).map(GroupId).filter(move |g| self.contains(*g))
+    }
+}
+
+#[derive(Clone, Debug)]
+pub struct Field {
+    pub name: String,
+    pub ty: Type,
+    pub storage: Storage,
+    /// Initial value (per particle, i side only) for state fields the scene does not set.
+    pub init: Option<Expr>,
+    pub span: Span,
+}
+
+#[derive(Clone, Debug)]
+pub struct Param {
+    pub name: String,
+    pub ty: Type,
+    /// Used when a material does not bind the parameter (a constant expression).
+    pub default: Option<Expr>,
+    pub span: Span,
+}
+
+#[derive(Clone, Debug)]
+pub struct Group {
+    pub name: String,
+    pub span: Span,
+}
+
+/// A smoothing kernel: `W = norm_d / h^d · w(R)`, `∇W = norm_d / h^(d+1) · dw(R) · x_ij / r`,
+/// `R = r / h`, zero for `R ≥ support`. `w` and `dw` are expressions in the local `arg`.
+#[derive(Clone, Debug)]
+pub struct Kernel {
+    pub name: String,
+    pub support: f64,
+    pub norm: [f64; 3],
+    pub arg: LocalId,
+    pub w: Expr,
+    pub dw: Expr,
+    pub span: Span,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Reduce {
+    Sum,
+    Min,
+    Max,
+}
+
+impl Reduce {
+    pub fn identity(self) -> f64 {
+        match self {
+            Reduce::Sum => 0.0,
+            Reduce::Min => f64::INFINITY,
+            Reduce::Max => f64::NEG_INFINITY,
+        }
+    }
+    pub fn name(self) -> &'static str {
+        match self {
+            Reduce::Sum => "sum",
+            Reduce::Min => "min",
+            Reduce::Max => "max",
+        }
+    }
+}
+
+#[derive(Clone, Debug)]
+pub struct Accumulator {
+    pub field: FieldId,
+    pub reduce: Reduce,
+}
+
+#[derive(Clone, Debug)]
+pub enum EquationKind {
+    /// Summed over the neighbours j (in `sources`) of each particle i: `init`, then `body` per
+    /// neighbour, then `finally`.
+    PairSum { sources: GroupSet, accumulators: Vec<Accumulator>, init: Vec<Stmt>, body: Vec<Stmt>, finally: Vec<Stmt> },
+    /// Per particle, no neighbours.
+    Particle { body: Vec<Stmt> },
+}
+
+#[derive(Clone, Debug)]
+pub struct Equation {
+    pub name: String,
+    pub kind: EquationKind,
+    /// Destination groups: the particles i this equation runs on.
+    pub dest: GroupSet,
+    pub writes: Vec<FieldId>,
+    /// Fields read, with the side they are read on.
+    pub reads: BTreeSet<(FieldId, Side)>,
+    pub params: BTreeSet<(ParamId, Side)>,
+    pub span: Span,
+}
+
+impl Equation {
+    pub fn is_pair(&self) -> bool {
+        matches!(self.kind, EquationKind::PairSum { .. })
+    }
+    pub fn sources(&self) -> GroupSet {
+        match &self.kind {
+            EquationKind::PairSum { sources, .. } => *sources,
+            EquationKind::Particle { .. } => GroupSet::default(),
+        }
+    }
+    pub fn reads_field(&self, f: FieldId) -> bool {
+        self.reads.contains(&(f, Side::I)) || self.reads.contains(&(f, Side::J))
+    }
+}
+
+/// `integrate on G { x' = rate }`
+#[derive(Clone, Debug)]
+pub struct Rate {
+    pub state: FieldId,
+    pub rate: Expr,
+    pub dest: GroupSet,
+    pub reads: BTreeSet<FieldId>,
+    pub span: Span,
+}
+
+/// `timestep name = expr`: the step is the minimum over all of them.
+#[derive(Clone, Debug)]
+pub struct Timestep {
+    pub name: String,
+    pub value: Expr,
+    pub reads: BTreeSet<FieldId>,
+    pub span: Span,
+}
+
+#[derive(Clone, Debug)]
+pub enum Stmt {
+    Let(LocalId, Expr),
+    /// Give an output (or, in `finally`, an accumulator) its value.
+    Set(FieldId, Expr),
+    /// In a pair loop: fold a value into an accumulator.
+    Accum(FieldId, Reduce, Expr),
+    If(Expr, Vec<Stmt>, Vec<Stmt>),
+}
+
+#[derive(Clone, Debug)]
+pub struct Expr {
+    pub kind: ExprKind,
+    pub ty: Type,
+    pub span: Span,
+}
+
+/// Quantities of the pair (i, j) that the neighbour iterator provides.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum PairValue {
+    /// x_i − x_j
+    Xij,
+    /// |x_i − x_j|
+    Rij,
+    /// (h_i + h_j) / 2
+    Hij,
+    /// W(r_ij, h_ij)
+    W,
+    /// ∇_i W(r_ij, h_ij)
+    GradW,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Global {
+    Time,
+    Dt,
+    Dim,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Op {
+    Neg,
+    Not,
+    /// Same shape on both sides.
+    Add,
+    Sub,
+    /// scalar × any
+    Scale,
+    /// any ÷ scalar
+    Div,
+    /// tensor-like × vec
+    MatVec,
+    /// tensor-like × tensor-like → tensor
+    MatMul,
+    /// scalar ^ scalar
+    Pow,
+    Lt,
+    Le,
+    Gt,
+    Ge,
+    Eq,
+    Ne,
+    And,
+    Or,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Builtin {
+    Dot,
+    Outer,
+    Sym,
+    Skew,
+    Dev,
+    Trace,
+    Transpose,
+    Norm,
+    DDot,
+    Inv,
+    Det,
+    Sqrt,
+    Exp,
+    Ln,
+    Abs,
+    Min,
+    Max,
+    /// W at a given distance and smoothing length: `W_at(r, h)`
+    KernelAt,
+}
+
+impl Builtin {
+    pub fn name(self) -> &'static str {
+        match self {
+            Builtin::Dot => "dot",
+            Builtin::Outer => "outer",
+            Builtin::Sym => "sym",
+            Builtin::Skew => "skew",
+            Builtin::Dev => "dev",
+            Builtin::Trace => "trace",
+            Builtin::Transpose => "transpose",
+            Builtin::Norm => "norm",
+            Builtin::DDot => "ddot",
+            Builtin::Inv => "inv",
+            Builtin::Det => "det",
+            Builtin::Sqrt => "sqrt",
+            Builtin::Exp => "exp",
+            Builtin::Ln => "ln",
+            Builtin::Abs => "abs",
+            Builtin::Min => "min",
+            Builtin::Max => "max",
+            Builtin::KernelAt => "W_at",
+        }
+    }
+}
+
+#[derive(Clone, Debug)]
+pub enum ExprKind {
+    /// A scalar constant (bool constants are 0/1 with type bool).
+    Const(f64),
+    Field(FieldId, Side),
+    Param(ParamId, Side),
+    Local(LocalId),
+    Pair(PairValue),
+    Global(Global),
+    /// The identity tensor I (a symtensor).
+    Identity,
+    /// Whether particle i or j belongs to one of the groups.
+    InGroup(Side, GroupSet),
+    Unary(Op, Box<Expr>),
+    Binary(Op, Box<Expr>, Box<Expr>),
+    Call(Builtin, Vec<Expr>),
+    /// `select(c, a, b)`
+    Select(Box<Expr>, Box<Expr>, Box<Expr>),
+    /// A symtensor or skewtensor widened to a full tensor.
+    ToTensor(Box<Expr>),
+    /// One component: a vec's `.x` is (0, 0); a tensor's `.xy` is (0, 1).
+    Component(Box<Expr>, u8, u8),
+    /// `let local = value in body` (from inlined helper functions).
+    Let(LocalId, Box<Expr>, Box<Expr>),
+    /// `min_over`, `max_over`, `sum_over` a per-particle expression (timesteps and reports).
+    Reduction(Reduce, Box<Expr>),
+}
+
+#[derive(Clone, Debug)]
+pub struct Local {
+    pub name: String,
+    pub ty: Type,
+}
+
+/// A checked model: everything the scheduler and the backends need.
+#[derive(Clone, Debug, Default)]
+pub struct Model {
+    pub fields: Vec<Field>,
+    pub params: Vec<Param>,
+    pub groups: Vec<Group>,
+    pub kernels: Vec<Kernel>,
+    /// The kernel the model asks for (`kernel = name`); a case may override it.
+    pub kernel: Option<KernelId>,
+    pub equations: Vec<Equation>,
+    pub rates: Vec<Rate>,
+    pub timesteps: Vec<Timestep>,
+    pub locals: Vec<Local>,
+}
+
+impl Model {
+    pub fn field(&self, id: FieldId) -> &Field {
+        &self.fields[id.index()]
+    }
+    pub fn field_id(&self, name: &str) -> Option<FieldId> {
+        self.fields.iter().position(|f| f.name == name).map(|i| FieldId(i as u32))
+    }
+    pub fn param_id(&self, name: &str) -> Option<ParamId> {
+        self.params.iter().position(|p| p.name == name).map(|i| ParamId(i as u32))
+    }
+    pub fn group_id(&self, name: &str) -> Option<GroupId> {
+        self.groups.iter().position(|g| g.name == name).map(|i| GroupId(i as u32))
+    }
+    pub fn kernel_id(&self, name: &str) -> Option<KernelId> {
+        self.kernels.iter().position(|k| k.name == name).map(|i| KernelId(i as u32))
+    }
+    pub fn all_groups(&self) -> GroupSet {
+        GroupSet(if self.groups.len() >= 64 { u64::MAX } else { (1u64 << self.groups.len()) - 1 })
+    }
+    pub fn group_names(&self, set: GroupSet) -> String {
+        let names: Vec<&str> = set.iter(self.groups.len()).map(|g| self.groups[g.index()].name.as_str()).collect();
+        names.join("|")
+    }
+}
+
+/// Visits every sub-expression (pre-order).
+pub fn walk_expr<'a>(e: &'a Expr, f: &mut impl FnMut(&'a Expr)) {
+    f(e);
+    match &e.kind {
+        ExprKind::Unary(_, a) | ExprKind::ToTensor(a) | ExprKind::Component(a, _, _) | ExprKind::Reduction(_, a) => {
+            walk_expr(a, f)
+        }
+        ExprKind::Binary(_, a, b) | ExprKind::Let(_, a, b) => {
+            walk_expr(a, f);
+            walk_expr(b, f);
+        }
+        ExprKind::Select(c, a, b) => {
+            walk_expr(c, f);
+            walk_expr(a, f);
+            walk_expr(b, f);
+        }
+        ExprKind::Call(_, args) => args.iter().for_each(|a| walk_expr(a, f)),
+        ExprKind::Const(_)
+        | ExprKind::Field(..)
+        | ExprKind::Param(..)
+        | ExprKind::Local(_)
+        | ExprKind::Pair(_)
+        | ExprKind::Global(_)
+        | ExprKind::Identity
+        | ExprKind::InGroup(..) => {}
+    }
+}
+
+/// Visits every expression of a statement list.
+pub fn walk_stmts<'a>(stmts: &'a [Stmt], f: &mut impl FnMut(&'a Expr)) {
+    for s in stmts {
+        match s {
+            Stmt::Let(_, e) | Stmt::Set(_, e) | Stmt::Accum(_, _, e) => walk_expr(e, f),
+            Stmt::If(c, a, b) => {
+                walk_expr(c, f);
+                walk_stmts(a, f);
+                walk_stmts(b, f);
+            }
+        }
+    }
+}
