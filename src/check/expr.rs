@@ -513,11 +513,8 @@ impl Checker {
             return None;
         };
         match arity {
-            Some(n) => {
-                if !self.arity(f, args, n, span) {
-                    return None;
-                }
-            }
+            Some(n) if !self.arity(f, args, n, span) => return None,
+            Some(_) => {}
             None if args.len() < 2 => {
                 self.error(
                     Diagnostic::error(

@@ -153,13 +153,11 @@ impl Checker {
             match it {
                 Item::Field(f) => self.declare_field(f),
                 Item::Param(p) => self.declare_param(p),
-                Item::Fn(f) => {
-                    if self.fns.insert(f.name.name.clone(), Rc::new(f.clone())).is_some() {
-                        self.error(
-                            Diagnostic::error("E0101", format!("helper `{}` is defined twice", f.name.name))
-                                .at(f.name.span, "second definition"),
-                        );
-                    }
+                Item::Fn(f) if self.fns.insert(f.name.name.clone(), Rc::new(f.clone())).is_some() => {
+                    self.error(
+                        Diagnostic::error("E0101", format!("helper `{}` is defined twice", f.name.name))
+                            .at(f.name.span, "second definition"),
+                    );
                 }
                 _ => {}
             }
