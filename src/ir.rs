@@ -309,6 +309,8 @@ pub enum Builtin {
     Abs,
     Min,
     Max,
+    /// The diagonal symtensor of a vec.
+    Diag,
     /// W at a given distance and smoothing length: `W_at(r, h)`
     KernelAt,
 }
@@ -333,6 +335,7 @@ impl Builtin {
             Builtin::Abs => "abs",
             Builtin::Min => "min",
             Builtin::Max => "max",
+            Builtin::Diag => "diag",
             Builtin::KernelAt => "W_at",
         }
     }

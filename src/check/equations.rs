@@ -240,11 +240,12 @@ impl Checker {
                     return None;
                 }
                 let x = match ty {
-                    Some(t) => {
-                        let t = self.type_spec(t)?;
-                        self.expr_as(value, cx, t, &format!("`{}`", name.name))?
-                    }
-                    None => self.expr(value, cx)?,
+                    Some(t) => self.type_spec(t).and_then(|t| self.expr_as(value, cx, t, &format!("`{}`", name.name))),
+                    None => self.expr(value, cx),
+                };
+                let Some(x) = x else {
+                    self.scope.push((name.name.clone(), super::POISONED));
+                    return None;
                 };
                 let id = self.new_local(&name.name, x.ty);
                 self.scope.push((name.name.clone(), id));

@@ -10,8 +10,10 @@ use crate::units::{Ratio, Unit};
 /// Where an expression stands, which decides what it may read.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Where {
-    /// Constants and parameter defaults: literals and constants only.
+    /// Constants: literals and other constants only.
     Const,
+    /// A parameter's default: constants and the same material's other parameters.
+    Material,
     /// A kernel's `w(R)` and `dw(R)`.
     Kernel,
     /// One particle i: particle equations, `init`/`finally` of pair sums, rates, initial values.
@@ -81,9 +83,9 @@ fn mk(kind: ExprKind, ty: Type, span: Span) -> Expr {
 
 impl Checker {
     fn type_error(&mut self, e: TypeError, span: Span, operands: &[&Expr]) {
-        let mut d = Diagnostic::error(if e.message.starts_with("unit") { "E0201" } else { "E0202" }, e.message)
-            .at(span, e.label);
-        if operands.len() == 2 && operands[0].ty.unit != operands[1].ty.unit {
+        let code = if e.message.starts_with("unit") { "E0201" } else { "E0202" };
+        let mut d = Diagnostic::error(code, e.message).at(span, e.label);
+        if code == "E0201" && operands.len() == 2 && operands[0].ty.unit != operands[1].ty.unit {
             for (o, side) in operands.iter().zip(["left", "right"]) {
                 d = d.also(o.span, format!("{side}: {}", o.ty.unit));
             }
@@ -152,7 +154,7 @@ impl Checker {
                     self.not_here_j(span, cx);
                     return None;
                 }
-                if matches!(cx.at, Where::Const | Where::Kernel | Where::Global) {
+                if matches!(cx.at, Where::Const | Where::Material | Where::Kernel | Where::Global) {
                     self.error(
                         Diagnostic::error("E0203", format!("a group test needs a particle, and {} has none", cx.what))
                             .at(span, "no particle here"),
@@ -221,7 +223,7 @@ impl Checker {
     fn field_read(&mut self, f: FieldId, side: Side, span: Span, cx: &Cx) -> Option<Expr> {
         let fld = self.model.field(f).clone();
         match cx.at {
-            Where::Const | Where::Kernel => {
+            Where::Const | Where::Material | Where::Kernel => {
                 self.error(
                     Diagnostic::error("E0205", format!("field `{}` cannot appear in {}", fld.name, cx.what))
                         .at(span, "a per-particle value"),
@@ -260,6 +262,9 @@ impl Checker {
         let span = n.span;
         let name = n.name.as_str();
         if let Some((_, id)) = self.scope.iter().rev().find(|(s, _)| s == name) {
+            if *id == super::POISONED {
+                return None; // its definition had an error, already reported
+            }
             let ty = self.model.locals[id.index()].ty;
             return Some(mk(ExprKind::Local(*id), ty, span));
         }
@@ -302,8 +307,8 @@ impl Checker {
             "pi" => return Some(mk(ExprKind::Const(std::f64::consts::PI), Type::scalar(Unit::ONE), span)),
             "inf" => return Some(mk(ExprKind::Const(f64::INFINITY), Type::scalar(Unit::ONE), span)),
             "I" => return Some(mk(ExprKind::Identity, Type::new(Shape::SymTensor, Unit::ONE), span)),
-            "dim" if cx.at != Where::Const => return global(Global::Dim),
-            "t" | "dt" if !matches!(cx.at, Where::Const | Where::Kernel) => {
+            "dim" if !matches!(cx.at, Where::Const | Where::Material) => return global(Global::Dim),
+            "t" | "dt" if !matches!(cx.at, Where::Const | Where::Material | Where::Kernel) => {
                 return global(if name == "t" { Global::Time } else { Global::Dt });
             }
             _ => {}
@@ -379,7 +384,7 @@ impl Checker {
                 self.error(d);
                 return None;
             }
-            Where::Particle if side == Side::J => {
+            Where::Particle | Where::Material if side == Side::J => {
                 self.not_here_j(span, cx);
                 return None;
             }
@@ -738,11 +743,12 @@ impl Checker {
                 continue;
             };
             let x = match ty {
-                Some(t) => {
-                    let t = self.type_spec(t)?;
-                    self.expr_as(value, cx, t, &format!("`{}`", name.name))?
-                }
-                None => self.expr(value, cx)?,
+                Some(t) => self.type_spec(t).and_then(|t| self.expr_as(value, cx, t, &format!("`{}`", name.name))),
+                None => self.expr(value, cx),
+            };
+            let Some(x) = x else {
+                self.scope.push((name.name.clone(), super::POISONED));
+                continue;
             };
             let id = self.new_local(&name.name, x.ty);
             self.scope.push((name.name.clone(), id));

@@ -94,6 +94,10 @@ fn dedup(diags: &mut Vec<Diagnostic>) {
 pub const RESERVED: [&str; 15] =
     ["t", "dt", "dim", "I", "pi", "inf", "x_ij", "r_ij", "v_ij", "h_ij", "W_ij", "gradW_ij", "true", "false", "R"];
 
+/// The binding of a `let` whose value had an error: later uses stay quiet instead of reporting an
+/// unknown name.
+pub(crate) const POISONED: ir::LocalId = ir::LocalId(u32::MAX);
+
 pub(crate) struct ConstVal {
     value: f64,
     unit: Unit,
@@ -324,7 +328,7 @@ impl Checker {
         let Some(ty) = self.type_spec(&f.ty) else {
             return;
         };
-        self.add_field(&f.name, ty, f.storage, f.span);
+        self.add_field(&f.name, ty, f.storage, f.name.span);
     }
 
     /// Declares a field, or accepts an identical redeclaration.
@@ -384,7 +388,7 @@ impl Checker {
             );
             return;
         }
-        self.model.params.push(ir::Param { name: p.name.name.clone(), ty, default: None, span: p.span });
+        self.model.params.push(ir::Param { name: p.name.name.clone(), ty, default: None, span: p.name.span });
     }
 
     /// Field initial values and parameter defaults, once every name is known.
@@ -425,7 +429,15 @@ impl Checker {
                         continue;
                     };
                     let ty = self.model.params[id.index()].ty;
-                    let cx = expr::Cx::constant("a parameter's default");
+                    if self.model.params[id.index()].default.is_some() {
+                        self.error(
+                            Diagnostic::error("E0107", format!("parameter `{}` has two defaults", p.name.name))
+                                .at(default.span, "second default")
+                                .help("keep one; a material can always bind its own value"),
+                        );
+                        continue;
+                    }
+                    let cx = expr::Cx::new(expr::Where::Material, "a parameter's default");
                     if let Some(e) = self.expr_as(default, &cx, ty, "the default") {
                         self.model.params[id.index()].default = Some(e);
                     }

@@ -219,6 +219,11 @@ impl Checker {
                 ir::walk_expr(i, &mut note);
             }
         }
+        for p in &self.model.params {
+            if let Some(d) = &p.default {
+                ir::walk_expr(d, &mut note);
+            }
+        }
         read.extend(self.model.rates.iter().map(|r| r.state));
         let mut warnings = vec![];
         for e in &self.model.equations {

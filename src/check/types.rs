@@ -363,6 +363,12 @@ pub fn builtin(f: Builtin, mut args: Vec<Expr>, span: crate::diag::Span) -> Resu
             }
             Ok(acc)
         }
+        Builtin::Diag => {
+            if shapes[0] != Shape::Vec {
+                return Err(bad("a vec", None));
+            }
+            Ok(call(args, Type::new(Shape::SymTensor, units[0])))
+        }
         Builtin::KernelAt => {
             let m = Unit::M;
             if shapes != [Shape::Scalar, Shape::Scalar] || units[0] != m || units[1] != m {
@@ -406,12 +412,14 @@ pub fn builtin_by_name(name: &str) -> Option<(Builtin, Option<usize>)> {
         "min" => (Min, None),
         "max" => (Max, None),
         "W_at" => (KernelAt, Some(2)),
+        "diag" => (Diag, Some(1)),
         _ => return None,
     })
 }
 
 /// Every callable name the language knows besides user helpers (for suggestions).
-pub const CALLABLE: [&str; 24] = [
+pub const CALLABLE: [&str; 25] = [
+    "diag",
     "dot",
     "outer",
     "ddot",

@@ -78,7 +78,7 @@ fn rule_text(r: Rule) -> &'static str {
         group_list => "a group name",
         outputs | output => "an output field",
         rate => "a rate `x' = ...`",
-        module_path | string => "a module path",
+        module_path | string | path_part => "a module path",
         storage => "`field` or `state`",
         item | use_item | group_decl | field_decl | param_decl | const_decl | kernel_select | kernel_def | fn_def
         | pairsum_def | particle_def | integrate_def | timestep_def => "an item (field, param, pairsum, particle, ...)",
