@@ -1,0 +1,202 @@
+//! The CPU neighbour search: a uniform cell grid built by counting sort, and Morton reordering.
+//!
+//! This module owns the spatial index the CPU backend iterates to find interacting pairs. It knows
+//! nothing about fields or equations: it takes interleaved positions (`x.len() == n * dim`,
+//! `dim` ∈ {1, 2, 3}, `f32` or `f64` via [`Coord`]) and a cell size, and answers "which particles
+//! may lie within one cell of this point".
+//!
+//! # Completeness
+//!
+//! The caller chooses `cell_size = support * h_max`. A pair (i, j) interacts when
+//! `r_ij < support * (h_i + h_j) / 2`, and since `(h_i + h_j) / 2 <= h_max`, every interacting
+//! pair has `r_ij < cell_size`, hence `|x_i - x_j| < cell_size` along every axis, hence the cells of
+//! i and j differ by at most one along every axis: j is among the 3^dim cells around i's cell. This
+//! holds with variable h; the grid only returns *candidates*, and the caller filters by distance.
+//! The grid enlarges the requested cell size by a relative [`CELL_MARGIN`] so that a distance the
+//! caller rounds to just below the support still lands in adjacent cells.
+//!
+//! # Invariants of a [`Grid`]
+//!
+//! - `order` is a permutation of `0..n`, sorted by linear cell index (x fastest, then y, then z)
+//!   and, within a cell, by particle index (the counting sort is stable);
+//! - `cell_start.len() == cells + 1`, `cell_start[0] == 0`, `cell_start[cells] == n`, and the
+//!   particles of cell `c` are `order[cell_start[c]..cell_start[c + 1]]`;
+//! - the number of cells is at most `max(4 n, 4096)`: when the bounding box would need more (a
+//!   few particles flung far away), the cell size is doubled until it fits. Larger cells are still
+//!   complete, only slower;
+//! - a non-finite coordinate puts the particle in cell 0 of that axis, and a query point is clamped
+//!   to the grid, so building and querying never panic on NaN or infinite positions.
+
+mod geometry;
+mod morton;
+
+pub use geometry::{point_of, CELL_MARGIN};
+pub use morton::{apply_permutation, morton_code, morton_codes, morton_permutation};
+
+use geometry::{check_layout, Geometry};
+
+/// A coordinate type the grid accepts; cell coordinates are computed in f64.
+pub trait Coord: Copy + Send + Sync + 'static {
+    fn to_f64(self) -> f64;
+}
+
+impl Coord for f32 {
+    #[inline]
+    fn to_f64(self) -> f64 {
+        self as f64
+    }
+}
+
+impl Coord for f64 {
+    #[inline]
+    fn to_f64(self) -> f64 {
+        self
+    }
+}
+
+/// The cap on the number of cells for `n` particles: `max(4 n, 4096)`, and at most `u32::MAX`.
+pub fn max_cells(n: usize) -> usize {
+    (4 * n).max(4096).min(u32::MAX as usize)
+}
+
+/// A uniform cell grid over a set of particles, with the particles counting-sorted by cell.
+#[derive(Clone, Debug)]
+pub struct Grid {
+    geom: Geometry,
+    cell_start: Vec<u32>,
+    order: Vec<u32>,
+}
+
+impl Grid {
+    /// Builds the grid of the `x.len() / dim` particles at (at least) `cell_size`.
+    ///
+    /// Panics if `dim` is not 1, 2 or 3, or `x.len()` is not a multiple of `dim`. A non-positive
+    /// or non-finite `cell_size` gives a single cell holding every particle.
+    pub fn build<T: Coord>(x: &[T], dim: usize, cell_size: f64) -> Grid {
+        let n = check_layout(x, dim);
+        Grid::with_geometry(x, Geometry::fit(x, dim, cell_size, max_cells(n), usize::MAX))
+    }
+
+    pub(crate) fn with_geometry<T: Coord>(x: &[T], geom: Geometry) -> Grid {
+        let cells = geom.linear_of_all(x);
+        let (cell_start, order) = counting_sort(&cells, geom.num_cells());
+        Grid { geom, cell_start, order }
+    }
+
+    /// Particle indices sorted by cell, stable within a cell.
+    pub fn order(&self) -> &[u32] {
+        &self.order
+    }
+
+    /// Start of each cell's particles in [`order`](Self::order); one more entry than cells.
+    pub fn cell_start(&self) -> &[u32] {
+        &self.cell_start
+    }
+
+    /// The cell size in use: the requested one times `1 + CELL_MARGIN`, doubled as often as the
+    /// cell cap required (infinite for the single-cell fallback).
+    pub fn cell_size(&self) -> f64 {
+        self.geom.cell_size
+    }
+
+    /// Cells along each axis; 1 for the axes beyond `dim`.
+    pub fn cells_per_axis(&self) -> [usize; 3] {
+        self.geom.counts
+    }
+
+    /// Lower corner of the bounding box of the finite coordinates (0 beyond `dim`).
+    pub fn origin(&self) -> [f64; 3] {
+        self.geom.origin
+    }
+
+    pub fn dim(&self) -> usize {
+        self.geom.dim
+    }
+
+    pub fn num_cells(&self) -> usize {
+        self.cell_start.len() - 1
+    }
+
+    pub fn num_particles(&self) -> usize {
+        self.order.len()
+    }
+
+    /// Cell coordinates of point `p`, clamped to the grid (0 beyond `dim`).
+    pub fn cell_coords(&self, p: [f64; 3]) -> [u32; 3] {
+        self.geom.cell_of(p)
+    }
+
+    /// Linear index of the cell with coordinates `c`: `cx + nx * (cy + ny * cz)`.
+    pub fn linear_index(&self, c: [u32; 3]) -> usize {
+        self.geom.linear(c)
+    }
+
+    /// Coordinates of the cell with linear index `c`.
+    pub fn cell_coords_of_index(&self, c: usize) -> [u32; 3] {
+        let [nx, ny, _] = self.geom.counts;
+        [(c % nx) as u32, (c / nx % ny) as u32, (c / (nx * ny)) as u32]
+    }
+
+    /// Calls `f(j)` for every particle j in the 3^dim cells around the cell of `p` (fewer at the
+    /// border of the grid; no cell twice). Visits cells in increasing linear order.
+    pub fn for_each_candidate(&self, p: [f64; 3], mut f: impl FnMut(u32)) {
+        self.for_each_range(p, |a, b| self.order[a as usize..b as usize].iter().for_each(|&j| f(j)));
+    }
+
+    /// Replaces `out` with the ranges into [`order`](Self::order) of the cells around `p` that
+    /// [`for_each_candidate`](Self::for_each_candidate) visits: one per row along x, rows that end
+    /// where the next begins merged, empty ones left out. The ranges are disjoint and increasing.
+    pub fn cell_ranges_around(&self, p: [f64; 3], out: &mut Vec<(u32, u32)>) {
+        out.clear();
+        self.for_each_range(p, |a, b| match out.last_mut() {
+            Some(last) if last.1 == a => last.1 = b,
+            _ => out.push((a, b)),
+        });
+    }
+
+    /// Calls `g(a, b)` for each non-empty row of neighbouring cells, in increasing order.
+    fn for_each_range(&self, p: [f64; 3], mut g: impl FnMut(u32, u32)) {
+        let (lo, hi) = self.neighbourhood(p);
+        for z in lo[2]..=hi[2] {
+            for y in lo[1]..=hi[1] {
+                let a = self.cell_start[self.geom.linear([lo[0], y, z])];
+                let b = self.cell_start[self.geom.linear([hi[0], y, z]) + 1];
+                if a < b {
+                    g(a, b);
+                }
+            }
+        }
+    }
+
+    /// The inclusive box of cell coordinates within one cell of `p`'s cell, clamped to the grid.
+    fn neighbourhood(&self, p: [f64; 3]) -> ([u32; 3], [u32; 3]) {
+        let c = self.geom.cell_of(p);
+        let (mut lo, mut hi) = (c, c);
+        for k in 0..self.geom.dim {
+            lo[k] = c[k].saturating_sub(1);
+            hi[k] = (c[k] + 1).min(self.geom.counts[k] as u32 - 1);
+        }
+        (lo, hi)
+    }
+}
+
+/// Stable counting sort of particle indices by cell: returns `(cell_start, order)`.
+fn counting_sort(cells: &[u32], num_cells: usize) -> (Vec<u32>, Vec<u32>) {
+    let mut start = vec![0u32; num_cells + 1];
+    for &c in cells {
+        start[c as usize + 1] += 1;
+    }
+    for c in 0..num_cells {
+        start[c + 1] += start[c];
+    }
+    // Scatter with `start[c]` as the cursor of cell c; afterwards it holds the start of c + 1.
+    let mut order = vec![0u32; cells.len()];
+    for (i, &c) in cells.iter().enumerate() {
+        let s = &mut start[c as usize];
+        order[*s as usize] = i as u32;
+        *s += 1;
+    }
+    start.copy_within(0..num_cells, 1);
+    start[0] = 0;
+    (start, order)
+}
