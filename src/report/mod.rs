@@ -1,0 +1,60 @@
+//! The outputs of a run, independent of how the run was computed: everything here takes plain
+//! `f64` data.
+//!
+//! - [`vtk`]: particle snapshots as VTK XML unstructured grids (`.vtu`) and a `.pvd` time series
+//!   that ParaView opens.
+//! - [`json`]: the machine-readable run report (`report.json`) and its types.
+//! - [`markdown`]: the human-readable run report (`report.md`) with embedded plots.
+//! - [`plot`]: SVG line plots of time histories.
+//!
+//! [`write`] writes a whole report directory: `report.json`, `report.md` and one SVG per history.
+
+pub mod json;
+pub mod markdown;
+pub mod plot;
+pub mod vtk;
+
+use std::io::{self, Write};
+use std::path::{Path, PathBuf};
+
+pub use json::{Curve, GroupBytes, History, ResultRow, RunReport};
+pub use vtk::{read_vtu, write_vtu, PointField, Series, VtuData};
+
+/// Writes `dir/report.json`, `dir/report.md` and, for every history, `dir/<name>.svg` (see
+/// [`markdown::plot_file_name`]). Creates `dir` if needed. A plot that cannot be drawn does not
+/// fail the report: `report.md` says why in its place. Errors are I/O errors only.
+pub fn write(dir: &Path, report: &RunReport) -> io::Result<()> {
+    std::fs::create_dir_all(dir)?;
+    json::write_json(&dir.join("report.json"), report)?;
+    markdown::write_markdown(dir, report)
+}
+
+/// Writes `contents` to `path` through a temporary file in the same directory and a rename, so a
+/// reader (or a run killed mid-write) never sees a half-written file.
+pub(crate) fn write_atomic(path: &Path, contents: &[u8]) -> io::Result<()> {
+    write_atomic_with(path, |w| w.write_all(contents))
+}
+
+/// Like [`write_atomic`], with the contents streamed by `fill` into a buffered writer. On error the
+/// temporary file is removed and `path` is left as it was.
+pub(crate) fn write_atomic_with(path: &Path, fill: impl FnOnce(&mut dyn Write) -> io::Result<()>) -> io::Result<()> {
+    let tmp = tmp_path(path);
+    let written = (|| {
+        let mut w = io::BufWriter::new(std::fs::File::create(&tmp)?);
+        fill(&mut w)?;
+        w.flush()
+    })();
+    match written.and_then(|()| std::fs::rename(&tmp, path)) {
+        Ok(()) => Ok(()),
+        Err(e) => {
+            let _ = std::fs::remove_file(&tmp);
+            Err(e)
+        }
+    }
+}
+
+/// `.name.tmp` next to `path`.
+fn tmp_path(path: &Path) -> PathBuf {
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    path.with_file_name(format!(".{name}.tmp"))
+}

@@ -1,0 +1,104 @@
+//! The run report written as a whole: report.json, report.md and the plots, plus a VTK series.
+
+use std::path::PathBuf;
+
+use pairsum::report::{self, Curve, GroupBytes, History, PointField, ResultRow, RunReport, Series};
+
+fn tmpdir(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("pairsum-tests-report-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+fn sample_report() -> RunReport {
+    RunReport {
+        case: "taylor_green".into(),
+        backend: "cpu".into(),
+        precision: "f64".into(),
+        particles: 4096,
+        steps: 200,
+        wall_s: 2.5,
+        particle_steps_per_s: 4096.0 * 200.0 / 2.5,
+        results: vec![
+            ResultRow::new("decay rate", "1/s", 0.079, Some(0.08)).with_source("analytic"),
+            ResultRow::new("max |v|", "m/s", 1.0, None),
+        ],
+        bytes_per_particle: vec![GroupBytes { group: "fluid".into(), bytes: 112 }],
+        histories: vec![
+            History {
+                name: "kinetic energy".into(),
+                x_label: "t [s]".into(),
+                y_label: "E_k [J]".into(),
+                series: vec![
+                    Curve::new("sph", (0..20).map(|i| (i as f64 * 0.05, (-0.16 * i as f64 * 0.05).exp())).collect()),
+                    Curve::new("exact", (0..20).map(|i| (i as f64 * 0.05, (-0.16 * i as f64 * 0.05).exp())).collect()),
+                ],
+                reference: None,
+            },
+            History {
+                name: "mass".into(),
+                x_label: "t [s]".into(),
+                y_label: "m [kg]".into(),
+                series: vec![Curve::new("total", vec![(0.0, 1.0), (1.0, 1.0)])],
+                reference: Some(1.0),
+            },
+        ],
+        notes: vec!["decay rate fitted on t in [0.1, 1]".into()],
+        resolution: "64 x 64".into(),
+        end_time: 1.0,
+    }
+}
+
+#[test]
+fn report_json_and_markdown() {
+    let dir = tmpdir("write");
+    let r = sample_report();
+    report::write(&dir, &r).unwrap();
+
+    let text = std::fs::read_to_string(dir.join("report.json")).unwrap();
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    for key in ["case", "backend", "precision", "particles", "steps", "wall_s", "particle_steps_per_s", "results"] {
+        assert!(v.get(key).is_some(), "report.json lacks `{key}`");
+    }
+    assert_eq!(v["case"], "taylor_green");
+    assert_eq!(v["particles"], 4096);
+    let row = &v["results"][0];
+    for key in ["quantity", "unit", "value", "reference", "rel_error"] {
+        assert!(row.get(key).is_some(), "result row lacks `{key}`");
+    }
+    assert!((row["rel_error"].as_f64().unwrap() - (-0.0125)).abs() < 1e-12);
+    assert!(v["results"][1]["reference"].is_null() && v["results"][1]["rel_error"].is_null());
+    let back: RunReport = serde_json::from_str(&text).unwrap();
+    assert_eq!(back, r);
+
+    let md = std::fs::read_to_string(dir.join("report.md")).unwrap();
+    assert!(md.contains("# Run report: taylor_green"));
+    assert!(md.contains("| decay rate | 1/s | 0.08 | 0.079 | -1.25 % | analytic |"), "{md}");
+    for text in ["4096", "200", "2.5 s", "327680", "cpu", "f64", "64 x 64", "| fluid | 112 |", "fitted on t"] {
+        assert!(md.contains(text), "report.md lacks {text:?}:\n{md}");
+    }
+    assert!(md.contains("![kinetic energy](kinetic_energy.svg)"));
+    assert!(md.contains("![mass](mass.svg)"));
+    let svg = std::fs::read_to_string(dir.join("kinetic_energy.svg")).unwrap();
+    assert!(svg.contains("sph") && svg.contains("exact"));
+    assert!(std::fs::metadata(dir.join("mass.svg")).unwrap().len() > 0);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn vtk_series_lists_files() {
+    let dir = tmpdir("series");
+    let mut s = Series::new(&dir, "particles").unwrap();
+    let pos = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]];
+    for k in 0..3 {
+        let rho = PointField::scalar("rho", vec![1000.0 + k as f64, 1000.0]);
+        s.add(k as f64 * 0.1, &pos, &[rho]).unwrap();
+    }
+    let pvd = std::fs::read_to_string(dir.join("particles.pvd")).unwrap();
+    for k in 0..3 {
+        let name = format!("particles_{k:06}.vtu");
+        assert!(pvd.contains(&format!("file=\"{name}\"")), "{pvd}");
+        assert!(dir.join(&name).exists());
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
