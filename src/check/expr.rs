@@ -83,7 +83,7 @@ fn mk(kind: ExprKind, ty: Type, span: Span) -> Expr {
 
 impl Checker {
     fn type_error(&mut self, e: TypeError, span: Span, operands: &[&Expr]) {
-        let code = if e.message.starts_with("unit") { "E0201" } else { "E0202" };
+        let code = e.code;
         let mut d = Diagnostic::error(code, e.message).at(span, e.label);
         if code == "E0201" && operands.len() == 2 && operands[0].ty.unit != operands[1].ty.unit {
             for (o, side) in operands.iter().zip(["left", "right"]) {
@@ -375,11 +375,10 @@ impl Checker {
                     Diagnostic::error("E0209", format!("parameter `{}` cannot appear in {}", par.name, cx.what))
                         .at(span, "parameters belong to a particle's material");
                 if cx.at == Where::Global {
-                    d = d.help(
-                        "read it inside a reduction, where each particle has its material: `min_over(... ).`"
-                            .trim_end_matches('.')
-                            .to_string(),
-                    );
+                    d = d.help(format!(
+                        "read it inside a reduction, where each particle has its material: e.g. `min_over({} * h)`",
+                        par.name
+                    ));
                 }
                 self.error(d);
                 return None;

@@ -166,7 +166,8 @@ impl Checker {
                 _ => {}
             }
         }
-        let names: Vec<String> = self.const_defs.keys().cloned().collect();
+        let mut names: Vec<String> = self.const_defs.keys().cloned().collect();
+        names.sort();
         for n in names {
             self.const_value(&n);
         }
@@ -216,6 +217,10 @@ impl Checker {
                     }
                 }
             }
+        }
+        if self.model.groups.is_empty() {
+            // A model that declares no group has one: every particle belongs to `all`.
+            self.model.groups.push(ir::Group { name: "all".into(), span: Span::default() });
         }
         if self.model.groups.len() > 64 {
             let span = self.model.groups[64].span;

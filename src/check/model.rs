@@ -49,10 +49,11 @@ impl Checker {
         let all = self.model.all_groups();
         let mut errors = vec![];
         for e in &self.model.equations {
+            let mut reported = BTreeSet::new();
             for &(f, side) in &e.reads {
                 let need = if side == Side::I { e.dest } else { e.sources() };
                 let missing = GroupSet(need.0 & !self.provided_on(f).0 & all.0);
-                if missing.is_empty() {
+                if missing.is_empty() || !reported.insert(f) {
                     continue;
                 }
                 let span = Self::first_read_span(&stmts_of(e), f, side).unwrap_or(e.span);

@@ -7,13 +7,20 @@ use crate::units::{Ratio, Unit};
 
 /// What went wrong, ready for a diagnostic.
 pub struct TypeError {
+    /// E0201 (units) or E0202 (shapes and the rest).
+    pub code: &'static str,
     pub message: String,
     pub label: String,
     pub help: Option<String>,
 }
 
 fn err(message: impl Into<String>, label: impl Into<String>, help: Option<String>) -> TypeError {
-    TypeError { message: message.into(), label: label.into(), help }
+    TypeError { code: "E0202", message: message.into(), label: label.into(), help }
+}
+
+/// An error about units.
+fn unit_err(message: impl Into<String>, label: impl Into<String>, help: Option<String>) -> TypeError {
+    TypeError { code: "E0201", ..err(message, label, help) }
 }
 
 pub fn is_tensor_like(s: Shape) -> bool {
@@ -64,11 +71,7 @@ pub fn same_unit(a: &Type, b: &Type, what: &str) -> Result<(), TypeError> {
     if a.unit == b.unit {
         return Ok(());
     }
-    Err(err(
-        format!("unit mismatch in {what}: {} and {}", a.unit, b.unit),
-        format!("left is {}, right is {}", a.unit, b.unit),
-        None,
-    ))
+    Err(unit_err(format!("unit mismatch in {what}: {} and {}", a.unit, b.unit), "these have different units", None))
 }
 
 fn binary(op: Op, a: Expr, b: Expr, ty: Type, span: crate::diag::Span) -> Expr {
@@ -204,7 +207,7 @@ fn power(a: Expr, b: Expr, span: crate::diag::Span) -> Result<Expr, TypeError> {
         ));
     }
     if !b.ty.unit.is_one() {
-        return Err(err(
+        return Err(unit_err(
             format!("an exponent must be dimensionless, but this one is {}", b.ty.unit),
             format!("exponent is {}", b.ty.unit),
             None,
@@ -214,7 +217,7 @@ fn power(a: Expr, b: Expr, span: crate::diag::Span) -> Result<Expr, TypeError> {
         Unit::ONE
     } else {
         let p = const_value(&b).and_then(Ratio::from_f64).ok_or_else(|| {
-            err(
+            unit_err(
                 format!("a quantity with units ({}) can only be raised to a constant rational power", a.ty.unit),
                 "this exponent is not a constant",
                 Some("make the base dimensionless, e.g. `(rho[i] / rho0)^gamma`".into()),
@@ -242,7 +245,7 @@ pub fn builtin(f: Builtin, mut args: Vec<Expr>, span: crate::diag::Span) -> Resu
         if units[0].is_one() {
             Ok(())
         } else {
-            Err(err(
+            Err(unit_err(
                 format!("`{}` needs a dimensionless argument, found {}", f.name(), units[0]),
                 format!("argument is {}", units[0]),
                 Some(format!("divide by a reference {what} to make it dimensionless")),
@@ -319,7 +322,7 @@ pub fn builtin(f: Builtin, mut args: Vec<Expr>, span: crate::diag::Span) -> Resu
                 return Err(bad("a tensor", None));
             }
             if !units[0].is_one() {
-                return Err(err(
+                return Err(unit_err(
                     format!("`det` of a tensor with units ({}) depends on the dimension", units[0]),
                     format!("tensor is {}", units[0]),
                     Some("take the determinant of a dimensionless tensor".into()),
@@ -372,7 +375,7 @@ pub fn builtin(f: Builtin, mut args: Vec<Expr>, span: crate::diag::Span) -> Resu
         Builtin::KernelAt => {
             let m = Unit::M;
             if shapes != [Shape::Scalar, Shape::Scalar] || units[0] != m || units[1] != m {
-                return Err(err(
+                return Err(unit_err(
                     format!(
                         "`W_at(r, h)` takes a distance and a smoothing length in m, found ({} [{}], {} [{}])",
                         shapes[0].name(),

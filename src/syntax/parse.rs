@@ -105,6 +105,10 @@ fn rule_text(r: Rule) -> &'static str {
         K_finally => "`finally`",
         K_in => "`in`",
         K_acc => "`acc`",
+        K_rbrace => "`}`",
+        K_rparen => "`)`",
+        K_arrow => "`->`",
+        K_rbracket => "`]`",
         temp_decl => "`acc`",
         _ => "something else",
     }
@@ -152,6 +156,10 @@ fn is_keyword(r: Rule) -> bool {
             | K_finally
             | K_in
             | K_acc
+            | K_rbrace
+            | K_rparen
+            | K_arrow
+            | K_rbracket
     )
 }
 
@@ -165,9 +173,10 @@ struct Builder {
 }
 
 impl Builder {
+    /// A pair's span without the whitespace and comments pest lets a rule absorb at its end.
     fn span(&self, p: &Pair<Rule>) -> Span {
         let s = p.as_span();
-        Span::new(self.file, s.start(), s.end())
+        Span::new(self.file, s.start(), s.start() + trimmed_len(p.as_str()))
     }
 
     fn ident(&self, p: Pair<Rule>) -> Ident {
@@ -564,6 +573,25 @@ impl Builder {
             r => unreachable!("primary rule {r:?}"),
         };
         Expr { kind, span }
+    }
+}
+
+/// Length of `text` without trailing whitespace and comments.
+fn trimmed_len(text: &str) -> usize {
+    let mut t = text;
+    loop {
+        let before = t.len();
+        t = t.trim_end();
+        if let Some(open) = t.strip_suffix("*/").and_then(|rest| rest.rfind("/*")) {
+            t = &t[..open];
+        }
+        let line_start = t.rfind('\n').map(|k| k + 1).unwrap_or(0);
+        if let Some(c) = t[line_start..].find("//") {
+            t = &t[..line_start + c];
+        }
+        if t.len() == before {
+            return t.len();
+        }
     }
 }
 
