@@ -23,6 +23,63 @@ enum Command {
         #[arg(long)]
         deny_warnings: bool,
     },
+    /// Run a case end to end; writes VTK output, report.json and report.md into --out
+    Run {
+        /// The case file (cases/<name>.toml or a bundled case's name)
+        case: String,
+        /// cpu, gpu, or auto (the GPU when one is found, else the CPU)
+        #[arg(long, default_value = "auto")]
+        backend: String,
+        /// f32 or f64
+        #[arg(long, default_value = "f64")]
+        precision: String,
+        /// A resolution the case defines (ci, paper) or a particle spacing (0.005, "5 mm")
+        #[arg(long)]
+        resolution: Option<String>,
+        /// Output directory (default: out/<case>)
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Simulated end time in seconds, overriding the case
+        #[arg(long)]
+        end_time: Option<f64>,
+        /// Write a checkpoint every this many steps
+        #[arg(long)]
+        checkpoint_every: Option<u64>,
+        /// Resume from a checkpoint written by an earlier run of the same case
+        #[arg(long)]
+        restart: Option<PathBuf>,
+        /// Stop after this many steps
+        #[arg(long)]
+        max_steps: Option<u64>,
+        /// No progress bar
+        #[arg(long)]
+        quiet: bool,
+    },
+    /// List the bundled cases
+    Cases,
+    /// Benchmark the closure backend against a hand-written native step (ratios from one run)
+    Bench {
+        /// Particle counts
+        #[arg(long, value_delimiter = ',', default_values_t = vec![10_000, 100_000])]
+        particles: Vec<usize>,
+        /// Repetitions per measurement (the best is kept)
+        #[arg(long, default_value_t = 5)]
+        reps: usize,
+    },
+    /// Print the plan of a step: passes, fused equations, fields read and written, bytes per particle
+    Plan {
+        /// A model (.sph) or a case (.toml)
+        path: PathBuf,
+        /// Dimension, for a model
+        #[arg(long, default_value_t = 3)]
+        dim: usize,
+        /// Integrator, for a model: euler, predictor_corrector, symplectic
+        #[arg(long, default_value = "predictor_corrector")]
+        integrator: String,
+        /// Precision of the reals: f32 or f64
+        #[arg(long, default_value = "f64")]
+        precision: String,
+    },
 }
 
 /// Runs the CLI; returns the process exit code (0 ok, 1 errors in the input, 2 usage).
@@ -36,6 +93,34 @@ pub fn main() -> i32 {
     };
     match cli.command {
         Command::Check { paths, deny_warnings } => run_check(&paths, deny_warnings),
+        Command::Plan { path, dim, integrator, precision } => run_plan(&path, dim, &integrator, &precision),
+        Command::Run {
+            case,
+            backend,
+            precision,
+            resolution,
+            out,
+            end_time,
+            checkpoint_every,
+            restart,
+            max_steps,
+            quiet,
+        } => {
+            let opts =
+                RunArgs { backend, precision, resolution, out, end_time, checkpoint_every, restart, max_steps, quiet };
+            run_run(&case, opts)
+        }
+        Command::Cases => run_cases(),
+        Command::Bench { particles, reps } => match crate::bench::run(&particles, reps.max(1)) {
+            Ok(table) => {
+                print!("{table}");
+                0
+            }
+            Err(e) => {
+                eprintln!("error: {e}");
+                1
+            }
+        },
     }
 }
 
@@ -85,5 +170,208 @@ fn run_check(paths: &[PathBuf], deny_warnings: bool) -> i32 {
     } else {
         eprintln!("checked {n} file(s): ok ({warnings} warning(s))");
         0
+    }
+}
+
+fn real_bytes(precision: &str) -> Option<usize> {
+    match precision {
+        "f32" => Some(4),
+        "f64" => Some(8),
+        _ => None,
+    }
+}
+
+/// Checks a model file and prints its diagnostics; the model if it has no errors.
+pub fn load_model(path: &Path, sources: &mut Sources) -> Option<crate::ir::Model> {
+    let checked = check::check_paths(sources, &[path], Stdlib::locate());
+    if !checked.diags.is_empty() {
+        eprint!("{}", render(sources, &checked.diags));
+    }
+    (!checked.has_errors()).then_some(checked.model)
+}
+
+/// The directory of the bundled cases.
+pub fn cases_dir() -> PathBuf {
+    if let Some(d) = std::env::var_os("PAIRSUM_CASES") {
+        return PathBuf::from(d);
+    }
+    let local = PathBuf::from("cases");
+    if local.is_dir() {
+        return local;
+    }
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("cases")
+}
+
+/// A case by path, or a bundled case by name.
+pub fn find_case(name: &str) -> PathBuf {
+    let p = PathBuf::from(name);
+    if p.is_file() {
+        return p;
+    }
+    let dir = cases_dir();
+    for candidate in [dir.join(format!("{name}.toml")), dir.join(name).join("case.toml"), dir.join(name)] {
+        if candidate.is_file() {
+            return candidate;
+        }
+    }
+    p
+}
+
+/// Every bundled case file.
+pub fn bundled_cases() -> Vec<PathBuf> {
+    let mut out: Vec<PathBuf> = vec![];
+    let Ok(entries) = std::fs::read_dir(cases_dir()) else { return out };
+    for e in entries.flatten() {
+        let p = e.path();
+        if p.extension().is_some_and(|x| x == "toml") {
+            out.push(p);
+        } else if p.join("case.toml").is_file() {
+            out.push(p.join("case.toml"));
+        }
+    }
+    out.sort();
+    out
+}
+
+fn run_cases() -> i32 {
+    for p in bundled_cases() {
+        let text = std::fs::read_to_string(&p).unwrap_or_default();
+        let table: toml::Table = toml::from_str(&text).unwrap_or_default();
+        let name = table.get("name").and_then(|v| v.as_str()).unwrap_or("?").to_string();
+        let title = table.get("title").and_then(|v| v.as_str()).unwrap_or("").to_string();
+        println!("{name:<28} {title}\n{:<28} {}", "", p.display());
+    }
+    0
+}
+
+struct RunArgs {
+    backend: String,
+    precision: String,
+    resolution: Option<String>,
+    out: Option<PathBuf>,
+    end_time: Option<f64>,
+    checkpoint_every: Option<u64>,
+    restart: Option<PathBuf>,
+    max_steps: Option<u64>,
+    quiet: bool,
+}
+
+fn run_run(case: &str, a: RunArgs) -> i32 {
+    use crate::runner::{run_case, BackendChoice, Precision, RunFailure, RunOptions};
+    let backend = match a.backend.as_str() {
+        "cpu" => BackendChoice::Cpu,
+        "gpu" => BackendChoice::Gpu,
+        "auto" => BackendChoice::Auto,
+        other => {
+            eprintln!("error: --backend is cpu, gpu or auto, not `{other}`");
+            return 2;
+        }
+    };
+    let precision = match a.precision.as_str() {
+        "f32" => Precision::F32,
+        "f64" => Precision::F64,
+        other => {
+            eprintln!("error: --precision is f32 or f64, not `{other}`");
+            return 2;
+        }
+    };
+    let path = find_case(case);
+    if !path.is_file() {
+        eprintln!("error: no case `{case}` (a .toml file, or one of the bundled cases: pairsum cases)");
+        return 1;
+    }
+    let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "case".into());
+    let name = if stem == "case" {
+        path.parent().and_then(|p| p.file_name()).map(|s| s.to_string_lossy().into_owned()).unwrap_or(stem)
+    } else {
+        stem
+    };
+    let out = a.out.unwrap_or_else(|| PathBuf::from("out").join(name));
+    let opts = RunOptions {
+        backend,
+        precision,
+        scene: crate::scene::Options { resolution: a.resolution, end_time: a.end_time },
+        out,
+        progress: !a.quiet && std::io::IsTerminal::is_terminal(&std::io::stderr()),
+        checkpoint_every: a.checkpoint_every,
+        restart: a.restart,
+        max_steps: a.max_steps,
+        vtk: true,
+    };
+    match run_case(&path, &opts) {
+        Ok(o) => {
+            let r = &o.report;
+            eprintln!(
+                "{}: {} particles, {} steps in {:.2} s on {} ({:.3e} particle-steps/s)",
+                r.case, r.particles, r.steps, r.wall_s, r.backend, r.particle_steps_per_s
+            );
+            for row in &r.results {
+                let reference = row.reference.map(|x| format!("{x:.6e}")).unwrap_or_else(|| "-".into());
+                let err = row.rel_error.map(|e| format!("{:+.2} %", 100.0 * e)).unwrap_or_default();
+                eprintln!(
+                    "  {:<32} {:>14.6e} {:<6} reference {:>14} {}",
+                    row.quantity, row.value, row.unit, reference, err
+                );
+            }
+            println!("report: {}", o.out.join("report.md").display());
+            0
+        }
+        Err(RunFailure::Input(msg)) => {
+            eprint!("{msg}");
+            1
+        }
+        Err(RunFailure::Run(msg)) => {
+            eprintln!("error: {msg}");
+            eprintln!("report: {}", opts.out.join("report.md").display());
+            1
+        }
+    }
+}
+
+fn run_plan(path: &Path, dim: usize, integrator: &str, precision: &str) -> i32 {
+    let Some(real) = real_bytes(precision) else {
+        eprintln!("error: --precision is f32 or f64, not `{precision}`");
+        return 2;
+    };
+    let Some(integrator) = crate::schedule::IntegratorKind::parse(integrator) else {
+        eprintln!("error: unknown integrator `{integrator}` (euler, predictor_corrector, symplectic)");
+        return 2;
+    };
+    if !(1..=3).contains(&dim) {
+        eprintln!("error: --dim is 1, 2 or 3");
+        return 2;
+    }
+    if path.extension().is_some_and(|e| e == "toml") {
+        return match crate::runner::prepare(path, &crate::scene::Options::default()) {
+            Ok((_, plan)) => {
+                print!("{}", plan.describe(real));
+                0
+            }
+            Err(e) => {
+                eprint!("{e}");
+                1
+            }
+        };
+    }
+    let mut sources = Sources::new();
+    let Some(model) = load_model(path, &mut sources) else { return 1 };
+    let scene = crate::schedule::SceneSpec {
+        dim,
+        groups: model.all_groups(),
+        outputs: vec![],
+        integrator,
+        gravity: None,
+        loads: vec![],
+        constraints: vec![],
+    };
+    match crate::schedule::Plan::build(&model, &scene, None) {
+        Ok(plan) => {
+            print!("{}", plan.describe(real));
+            0
+        }
+        Err(e) => {
+            eprintln!("error: {e}");
+            1
+        }
     }
 }

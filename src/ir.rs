@@ -369,6 +369,58 @@ pub enum ExprKind {
     Reduction(Reduce, Box<Expr>),
 }
 
+/// Constructors for expressions that later stages synthesise (integrator updates, constraints).
+impl Expr {
+    pub fn new(kind: ExprKind, ty: Type) -> Expr {
+        Expr { kind, ty, span: Span::default() }
+    }
+    pub fn constant(v: f64, ty: Type) -> Expr {
+        Expr::new(ExprKind::Const(v), ty)
+    }
+    pub fn field(f: FieldId, ty: Type) -> Expr {
+        Expr::new(ExprKind::Field(f, Side::I), ty)
+    }
+    pub fn param(p: ParamId, ty: Type) -> Expr {
+        Expr::new(ExprKind::Param(p, Side::I), ty)
+    }
+    pub fn global(g: Global) -> Expr {
+        let unit = match g {
+            Global::Time | Global::Dt => Unit::S,
+            Global::Dim => Unit::ONE,
+        };
+        Expr::new(ExprKind::Global(g), Type::scalar(unit))
+    }
+    pub fn binary(op: Op, a: Expr, b: Expr, ty: Type) -> Expr {
+        Expr::new(ExprKind::Binary(op, Box::new(a), Box::new(b)), ty)
+    }
+    /// a + b (same type)
+    pub fn plus(self, b: Expr) -> Expr {
+        let ty = self.ty;
+        Expr::binary(Op::Add, self, b, ty)
+    }
+    /// a − b (same type)
+    pub fn minus(self, b: Expr) -> Expr {
+        let ty = self.ty;
+        Expr::binary(Op::Sub, self, b, ty)
+    }
+    /// s × a for a scalar s; the unit is the product.
+    pub fn scaled_by(self, s: Expr) -> Expr {
+        let unit = self.ty.unit.mul(&s.ty.unit).unwrap_or(self.ty.unit);
+        let ty = Type::new(self.ty.shape, unit);
+        Expr::binary(Op::Scale, s, self, ty)
+    }
+    /// a ÷ s for a scalar s.
+    pub fn divided_by(self, s: Expr) -> Expr {
+        let unit = self.ty.unit.div(&s.ty.unit).unwrap_or(self.ty.unit);
+        let ty = Type::new(self.ty.shape, unit);
+        Expr::binary(Op::Div, self, s, ty)
+    }
+    pub fn select(c: Expr, a: Expr, b: Expr) -> Expr {
+        let ty = a.ty;
+        Expr::new(ExprKind::Select(Box::new(c), Box::new(a), Box::new(b)), ty)
+    }
+}
+
 #[derive(Clone, Debug)]
 pub struct Local {
     pub name: String,

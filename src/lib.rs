@@ -3,9 +3,18 @@
 //! The pipeline, one module per stage (see docs/ARCHITECTURE.md):
 //! `syntax` (parse) → `check` (names, shapes, units, i/j) → `ir` (typed model) → …
 
+pub mod backend;
+pub mod bench;
 pub mod check;
 pub mod cli;
 pub mod diag;
+pub mod engine;
+pub mod grid;
 pub mod ir;
+pub mod particles;
+pub mod report;
+pub mod runner;
+pub mod scene;
+pub mod schedule;
 pub mod syntax;
 pub mod units;

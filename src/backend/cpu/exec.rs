@@ -1,0 +1,426 @@
+//! Running compiled programs over the particle store: chunks of particles in parallel (rayon),
+//! each particle gathering its neighbours in batches from the cell list (gather only: a chunk
+//! writes the rows of its own particles and nothing else).
+
+use super::program::{ColView, Ctx, Program, LANES};
+use super::{Mirror, PairRegs, Variant};
+use crate::grid::Grid;
+use crate::ir::Reduce;
+use crate::particles::{Real, Store};
+
+/// A chunk of consecutive particles of one group.
+#[derive(Clone, Copy, Debug)]
+pub struct Chunk {
+    pub group: usize,
+    pub start: usize,
+    pub len: usize,
+}
+
+pub fn chunks<T>(store: &Store<T>) -> Vec<Chunk> {
+    let mut out = vec![];
+    for (g, r) in &store.ranges {
+        let mut s = r.start;
+        while s < r.end {
+            let len = (r.end - s).min(LANES);
+            out.push(Chunk { group: g.index(), start: s, len });
+            s += len;
+        }
+    }
+    out
+}
+
+/// Raw views of every stored column.
+pub fn views<T: Real>(store: &mut Store<T>) -> Vec<Option<ColView<T>>> {
+    let ranges = store.ranges.len();
+    store
+        .columns
+        .iter_mut()
+        .map(|c| {
+            c.as_mut().map(|c| {
+                let present: Vec<isize> = c.base.iter().copied().filter(|b| *b != crate::particles::ABSENT).collect();
+                let uniform =
+                    present.first().copied().filter(|b| present.iter().all(|x| x == b) && present.len() == ranges);
+                ColView { ptr: c.data.as_mut_ptr(), comps: c.comps, base: c.base.clone(), uniform }
+            })
+        })
+        .collect()
+}
+
+/// Per-thread working memory.
+#[derive(Default)]
+pub struct Scratch<T> {
+    pub a: Vec<T>,
+    pub b: Vec<T>,
+    pub c: Vec<T>,
+    pub j: Vec<u32>,
+    pub sign: Vec<T>,
+    pub slots: Vec<T>,
+    pub temps: Vec<Vec<T>>,
+    pub ranges: Vec<(u32, u32)>,
+}
+
+fn frame<'a, T: Real>(buf: &'a mut Vec<T>, p: &Program<T>) -> &'a mut [T] {
+    let len = p.n_regs.max(1) * LANES;
+    if buf.len() < len {
+        buf.resize(len, T::zero());
+    }
+    p.fill_consts(&mut buf[..len]);
+    &mut buf[..len]
+}
+
+/// Writes a program's stores for the lanes of a chunk.
+pub fn write_stores<T: Real>(
+    p: &Program<T>,
+    regs: &[T],
+    cols: &[Option<ColView<T>>],
+    temps: &[Option<ColView<T>>],
+    chunk: Chunk,
+) {
+    for s in &p.stores {
+        let view = if s.temp { &temps[s.field.index()] } else { &cols[s.field.index()] };
+        let Some(c) = view else { continue };
+        let values = &regs[s.reg * LANES..s.reg * LANES + chunk.len];
+        if s.temp {
+            for (k, v) in values.iter().enumerate() {
+                // SAFETY: the chunk's temp buffer has LANES rows.
+                unsafe { *c.ptr.add(k * c.comps + s.comp) = *v };
+            }
+            continue;
+        }
+        let base = c.base[chunk.group];
+        if base == crate::particles::ABSENT {
+            continue;
+        }
+        let start = (chunk.start as isize + base) as usize;
+        for (k, v) in values.iter().enumerate() {
+            // SAFETY: rows of this chunk's particles; no other chunk writes them.
+            unsafe { *c.ptr.add((start + k) * c.comps + s.comp) = *v };
+        }
+    }
+}
+
+pub struct Shared<'a, T> {
+    pub cols: &'a [Option<ColView<T>>],
+    /// How many groups have particles (a pass reading from all of them skips the group test).
+    pub groups_present: usize,
+    pub params: &'a [T],
+    pub param_stride: usize,
+    pub param_offset: &'a [usize],
+    pub group: &'a [u32],
+    pub material: &'a [u32],
+    pub time: T,
+    pub dt: T,
+}
+
+impl<'a, T: Real> Shared<'a, T> {
+    pub fn ctx(
+        &self,
+        temps: &'a [Option<ColView<T>>],
+        chunk: Chunk,
+        j: &'a [u32],
+        sign: &'a [T],
+        n: usize,
+    ) -> Ctx<'a, T> {
+        Ctx {
+            cols: self.cols,
+            temps,
+            params: self.params,
+            param_stride: self.param_stride,
+            param_offset: self.param_offset,
+            group: self.group,
+            material: self.material,
+            time: self.time,
+            dt: self.dt,
+            i0: chunk.start,
+            g: chunk.group,
+            j,
+            sign,
+            n,
+        }
+    }
+}
+
+/// Runs a particle program (an update, a tail) over one chunk and writes its stores.
+pub fn run_particle<T: Real>(p: &Program<T>, sh: &Shared<T>, scratch: &mut Scratch<T>, chunk: Chunk) {
+    let no_temps: Vec<Option<ColView<T>>> = vec![];
+    let regs = frame(&mut scratch.a, p);
+    let ctx = sh.ctx(&no_temps, chunk, &[], &[], chunk.len);
+    p.run(regs, &ctx);
+    write_stores(p, regs, sh.cols, &no_temps, chunk);
+}
+
+/// Runs a particle program's reductions over one chunk.
+pub fn run_reduction<T: Real>(p: &Program<T>, sh: &Shared<T>, scratch: &mut Scratch<T>, chunk: Chunk, acc: &mut [f64]) {
+    let regs = frame(&mut scratch.a, p);
+    let ctx = sh.ctx(&[], chunk, &[], &[], chunk.len);
+    p.run(regs, &ctx);
+    for (index, reduce, reg) in &p.reduces {
+        for v in &regs[reg * LANES..reg * LANES + chunk.len] {
+            acc[*index] = fold(*reduce, acc[*index], v.to_f64());
+        }
+    }
+}
+
+fn fold(r: Reduce, a: f64, b: f64) -> f64 {
+    match r {
+        Reduce::Sum => a + b,
+        Reduce::Min => a.min(b),
+        Reduce::Max => a.max(b),
+    }
+}
+
+#[inline(always)]
+fn fold_t<T: Real>(r: Reduce, a: T, lanes: &[T]) -> T {
+    match r {
+        Reduce::Sum => lanes.iter().fold(a, |s, x| s + *x),
+        Reduce::Min => lanes.iter().fold(a, |s, x| s.min(*x)),
+        Reduce::Max => lanes.iter().fold(a, |s, x| s.max(*x)),
+    }
+}
+
+/// What the neighbour batches of one pass need.
+pub struct Neighbours<'a, T> {
+    pub grid: &'a Grid,
+    pub x: &'a [T],
+    pub h: &'a [T],
+    pub dim: usize,
+    pub support: T,
+    pub h_max: f64,
+    pub mirrors: &'a [Mirror],
+}
+
+/// One pass variant over one chunk: accumulator initial values and particle-i values, the
+/// neighbour loop of every particle in batches, then the tail.
+pub fn run_pass_chunk<T: Real>(
+    v: &Variant<T>,
+    sh: &Shared<T>,
+    nb: &Neighbours<T>,
+    scratch: &mut Scratch<T>,
+    chunk: Chunk,
+) {
+    // Temp accumulators live in chunk-local buffers.
+    scratch.temps.resize(v.temps.len(), vec![]);
+    let mut temp_views: Vec<Option<ColView<T>>> = vec![None; sh.cols.len()];
+    for (k, (f, comps)) in v.temps.iter().enumerate() {
+        let buf = &mut scratch.temps[k];
+        buf.resize(LANES * comps, T::zero());
+        temp_views[f.index()] = Some(ColView { ptr: buf.as_mut_ptr(), comps: *comps, base: vec![], uniform: None });
+    }
+    let Scratch { a, b, c, j, sign, slots, ranges, .. } = scratch;
+    let init_regs: &mut [T] = match &v.init {
+        Some(p) => {
+            let regs = frame(a, p);
+            p.run(regs, &sh.ctx(&temp_views, chunk, &[], &[], chunk.len));
+            regs
+        }
+        None => &mut [],
+    };
+    let dest = frame(b, &v.dest);
+    v.dest.run(dest, &sh.ctx(&temp_views, chunk, &[], &[], chunk.len));
+    let pair = frame(c, &v.pair);
+    j.resize(LANES, 0);
+    let with_sign = !nb.mirrors.is_empty();
+    sign.resize(if with_sign { 3 * LANES } else { 0 }, T::one());
+    let ns = v.slots.len();
+    slots.resize(ns * chunk.len, T::zero());
+    for k in 0..chunk.len {
+        for (s, slot) in v.slots.iter().enumerate() {
+            slots[k * ns + s] = match slot.init_reg {
+                Some(r) => init_regs[r * LANES + k],
+                None => T::from_f64(slot.reduce.identity()),
+            };
+        }
+    }
+    // Lanes hold the neighbours of several particles of the chunk one after another, so that the
+    // cost of running an operation is shared by more pairs; `segs` marks whose lanes are whose.
+    let all_sources = (0..64).filter(|g| v.sources >> g & 1 == 1).count() >= sh_groups(sh);
+    let mut w =
+        Writer { v, sh, temps: &temp_views, chunk, pair, dest, j, sign, with_sign, slots, n: 0, segs: vec![], k: 0 };
+    for k in 0..chunk.len {
+        w.k = k;
+        w.segs.push((k, w.n));
+        match nb.dim {
+            1 => neighbours_of::<T, 1>(&mut w, nb, chunk.start + k, ranges, !all_sources),
+            2 => neighbours_of::<T, 2>(&mut w, nb, chunk.start + k, ranges, !all_sources),
+            _ => neighbours_of::<T, 3>(&mut w, nb, chunk.start + k, ranges, !all_sources),
+        }
+    }
+    if w.n > 0 {
+        w.flush();
+    }
+    let slots = w.slots;
+    // Accumulators to their rows (stored fields) or the chunk's temp rows.
+    for k in 0..chunk.len {
+        let i = chunk.start + k;
+        for (s, slot) in v.slots.iter().enumerate() {
+            let view = if slot.temp { &temp_views[slot.field.index()] } else { &sh.cols[slot.field.index()] };
+            let Some(col) = view else { continue };
+            let row = if slot.temp {
+                k
+            } else {
+                let base = col.base[chunk.group];
+                if base == crate::particles::ABSENT {
+                    continue;
+                }
+                (i as isize + base) as usize
+            };
+            // SAFETY: particle i's row (or the chunk's temp row k): written only by this chunk.
+            unsafe { *col.ptr.add(row * col.comps + slot.comp) = slots[k * ns + s] };
+        }
+    }
+    if let Some(tail) = &v.tail {
+        let regs = frame(a, tail);
+        tail.run(regs, &sh.ctx(&temp_views, chunk, &[], &[], chunk.len));
+        write_stores(tail, regs, sh.cols, &temp_views, chunk);
+    }
+}
+
+/// Fills the lanes of a batch with neighbours and runs the pair program when it is full.
+struct Writer<'a, 'b, T> {
+    v: &'a Variant<T>,
+    sh: &'a Shared<'b, T>,
+    temps: &'a [Option<ColView<T>>],
+    chunk: Chunk,
+    pair: &'a mut [T],
+    dest: &'a [T],
+    j: &'a mut Vec<u32>,
+    sign: &'a mut Vec<T>,
+    with_sign: bool,
+    slots: &'a mut Vec<T>,
+    /// Lanes filled, and where each particle's lanes start: (particle in chunk, first lane).
+    n: usize,
+    segs: Vec<(usize, usize)>,
+    /// The particle whose neighbours are being added.
+    k: usize,
+}
+
+impl<T: Real> Writer<'_, '_, T> {
+    #[inline(always)]
+    fn push<const D: usize>(&mut self, j: u32, dx: [T; 3], r: T, h: T, flip: [bool; 3]) {
+        let n = self.n;
+        let PairRegs { x, r: rr, h: hr } = self.v.pair_regs;
+        for (c, v) in dx.iter().enumerate().take(D) {
+            self.pair[(x + c) * LANES + n] = *v;
+        }
+        self.pair[rr * LANES + n] = r;
+        self.pair[hr * LANES + n] = h;
+        self.j[n] = j;
+        if self.with_sign {
+            for (c, f) in flip.iter().enumerate() {
+                self.sign[c * LANES + n] = if *f { -T::one() } else { T::one() };
+            }
+        }
+        self.n += 1;
+        if self.n == LANES {
+            self.flush();
+            self.segs.push((self.k, 0));
+        }
+    }
+
+    /// Broadcasts each particle's own values over its lanes, runs the pair program, and folds
+    /// every particle's lanes into its accumulators.
+    fn flush(&mut self) {
+        let (n, v) = (self.n, self.v);
+        let ns = v.slots.len();
+        let segs = &self.segs;
+        let seg_end = |q: usize| segs.get(q + 1).map(|s| s.1).unwrap_or(n);
+        for (u, r) in &v.exports {
+            for (q, &(k, start)) in segs.iter().enumerate() {
+                self.pair[r * LANES + start..r * LANES + seg_end(q)].fill(self.dest[u * LANES + k]);
+            }
+        }
+        let sign: &[T] = if self.with_sign { self.sign } else { &[] };
+        let ctx = self.sh.ctx(self.temps, self.chunk, self.j, sign, n);
+        v.pair.run(self.pair, &ctx);
+        for (a, s) in v.pair.accums.iter().zip(&v.accum_slot) {
+            for (q, &(k, start)) in segs.iter().enumerate() {
+                let end = seg_end(q);
+                if end > start {
+                    let slot = &mut self.slots[k * ns + s];
+                    *slot = fold_t(a.reduce, *slot, &self.pair[a.reg * LANES + start..a.reg * LANES + end]);
+                }
+            }
+        }
+        self.n = 0;
+        self.segs.clear();
+    }
+}
+
+fn sh_groups<T>(sh: &Shared<T>) -> usize {
+    sh.groups_present
+}
+
+/// Adds the neighbours of particle i (and of its mirror images) to the batch: x_ij, r_ij, h_ij.
+#[inline(always)]
+fn neighbours_of<T: Real, const D: usize>(
+    w: &mut Writer<T>,
+    nb: &Neighbours<T>,
+    i: usize,
+    ranges: &mut Vec<(u32, u32)>,
+    filter: bool,
+) {
+    let mut xi = [T::zero(); 3];
+    xi[..D].copy_from_slice(&nb.x[i * D..i * D + D]);
+    let hi = nb.h[i];
+    let half = T::from_f64(0.5);
+    let group = w.sh.group;
+    let sources = w.v.sources;
+    let order = nb.grid.order();
+    let transforms = 1usize << nb.mirrors.len();
+    for t in 0..transforms {
+        // Transform t reflects particle j across the mirrors whose bit is set; the image of j is
+        // near i exactly when j is near the reflection of i.
+        let mut yi = xi;
+        let mut flip = [false; 3];
+        let mut skip = false;
+        for (m, mirror) in nb.mirrors.iter().enumerate() {
+            if t >> m & 1 == 1 {
+                let dist = (xi[mirror.axis].to_f64() - mirror.offset).abs();
+                if dist >= nb.support.to_f64() * nb.h_max {
+                    skip = true;
+                }
+                yi[mirror.axis] = T::from_f64(2.0 * mirror.offset) - xi[mirror.axis];
+                flip[mirror.axis] = !flip[mirror.axis];
+            }
+        }
+        if skip {
+            continue;
+        }
+        let mut p = [0.0; 3];
+        for c in 0..D {
+            p[c] = yi[c].to_f64();
+        }
+        nb.grid.cell_ranges_around(p, ranges);
+        let mirrored = flip.iter().any(|f| *f);
+        for &(s, e) in ranges.iter() {
+            for &jj in &order[s as usize..e as usize] {
+                let jj = jj as usize;
+                if (t == 0 && jj == i) || (filter && (sources >> group[jj]) & 1 == 0) {
+                    continue;
+                }
+                let xj = &nb.x[jj * D..jj * D + D];
+                let mut r2 = T::zero();
+                let mut dx = [T::zero(); 3];
+                for c in 0..D {
+                    let diff = yi[c] - xj[c];
+                    dx[c] = diff;
+                    r2 = r2 + diff * diff;
+                }
+                let hij = (hi + nb.h[jj]) * half;
+                let rc = nb.support * hij;
+                if r2 >= rc * rc || r2 == T::zero() {
+                    continue;
+                }
+                if mirrored {
+                    // x_ij = x_i − (image of x_j): the reflection of (y_i − x_j) on the flipped axes.
+                    for c in 0..D {
+                        if flip[c] {
+                            dx[c] = -dx[c];
+                        }
+                    }
+                }
+                w.push::<D>(jj as u32, dx, r2.sqrt(), hij, flip);
+            }
+        }
+    }
+}

@@ -1,0 +1,583 @@
+//! The CPU backend: every block of the plan lowered to scalar SSA (`lower`), compiled to closures
+//! over batches of lanes (`program`), and run over the particle store in parallel chunks with the
+//! cell list as the neighbour iterator (`exec`).
+
+mod exec;
+pub mod lower;
+pub mod program;
+
+use super::{timestep, Backend, BackendError, Globals, Mirror, Snapshot};
+use crate::grid::{morton_permutation, Grid};
+use crate::ir::{FieldId, GroupId, Reduce, Storage};
+use crate::particles::{Real, Store};
+use crate::schedule::{Block, Plan};
+use exec::{chunks, views, Chunk, Neighbours, Scratch, Shared};
+use lower::{Effect, Id, Lowerer, Mode, Node};
+use program::{compile, live_nodes, Pinned, Program, LANES};
+use rayon::prelude::*;
+
+/// Registers of the pair program that the neighbour batch fills: x_ij components, r_ij, h_ij.
+#[derive(Clone, Copy, Debug)]
+pub struct PairRegs {
+    pub x: usize,
+    pub r: usize,
+    pub h: usize,
+}
+
+/// An accumulator component of a pass variant.
+pub struct Slot {
+    pub field: FieldId,
+    pub comp: usize,
+    pub reduce: Reduce,
+    pub temp: bool,
+    /// Register of its `init` value in the init program, if `init` sets it.
+    pub init_reg: Option<usize>,
+}
+
+/// A pass compiled for one destination group.
+pub struct Variant<T> {
+    pub group: usize,
+    pub sources: u64,
+    pub init: Option<Program<T>>,
+    /// Values of particle i that the neighbour loop reads (computed once per particle).
+    pub dest: Program<T>,
+    /// (register in `dest`, register in `pair`) of every value broadcast to the neighbour lanes.
+    pub exports: Vec<(usize, usize)>,
+    pub pair: Program<T>,
+    pub pair_regs: PairRegs,
+    pub slots: Vec<Slot>,
+    /// For each of `pair.accums`, its slot.
+    pub accum_slot: Vec<usize>,
+    pub tail: Option<Program<T>>,
+    /// Temp accumulators (`acc`) and their component counts.
+    pub temps: Vec<(FieldId, usize)>,
+}
+
+pub struct CpuBackend<T: Real> {
+    pub plan: Plan,
+    pub store: Store<T>,
+    passes: Vec<Vec<Variant<T>>>,
+    /// Per stage, per group: the fused update program.
+    stages: Vec<Vec<Option<Program<T>>>>,
+    derived: Vec<Option<Program<T>>>,
+    reductions: Vec<Option<Program<T>>>,
+    n_reductions: usize,
+    mirrors: Vec<Mirror>,
+    chunks: Vec<Chunk>,
+    pub support: f64,
+    x: FieldId,
+    h: FieldId,
+}
+
+fn is_stored(plan: &Plan, g: usize) -> impl Fn(FieldId) -> bool + '_ {
+    move |f| plan.field_layout(f).is_some_and(|l| l.groups.contains(GroupId(g as u32)))
+}
+
+/// A particle program for group `g` from blocks run in order.
+fn particle_program<T: Real>(plan: &Plan, g: usize, blocks: &[Block]) -> Option<Program<T>> {
+    let kernel = &plan.model.kernels[plan.kernel.index()];
+    let mut lw = Lowerer::new(&plan.model, kernel, plan.dim, Mode::Particle, Box::new(is_stored(plan, g)));
+    let mut any = false;
+    for b in blocks.iter().filter(|b| b.dest.contains(GroupId(g as u32))) {
+        lw.block(&b.stmts, None);
+        any = true;
+    }
+    if !any {
+        return None;
+    }
+    lw.finish_stores();
+    lw.optimise();
+    let roots: Vec<Id> = lw.effects.iter().map(effect_value).collect();
+    let nodes = live_nodes(&lw.g, roots);
+    Some(compile(&plan.model, plan.dim, &lw.g, &nodes, &lw.effects, &Pinned { preset: vec![], exports: vec![] }))
+}
+
+fn effect_value(e: &Effect) -> Id {
+    match *e {
+        Effect::Store { value, .. } | Effect::Accum { value, .. } | Effect::Reduce { value, .. } => value,
+    }
+}
+
+fn eq_blocks(plan: &Plan, eqs: &[crate::ir::EqId]) -> Vec<Block> {
+    eqs.iter()
+        .map(|e| {
+            let eq = plan.equation(*e);
+            let stmts = match &eq.kind {
+                crate::ir::EquationKind::Particle { body } => body.clone(),
+                crate::ir::EquationKind::PairSum { finally, .. } => finally.clone(),
+            };
+            Block { name: eq.name.clone(), dest: eq.dest, stmts }
+        })
+        .collect()
+}
+
+fn varying(node: &Node, flags: &[bool]) -> bool {
+    match *node {
+        Node::Load { side, .. } | Node::Param { side, .. } | Node::InGroup(side, _) => side == crate::ir::Side::J,
+        Node::PairX(_) | Node::PairR | Node::PairH => true,
+        _ => node.operands().iter().any(|o| flags[*o as usize]),
+    }
+}
+
+fn compile_variant<T: Real>(plan: &Plan, v: &crate::schedule::PassVariant) -> Variant<T> {
+    let g = v.group.index();
+    let model = &plan.model;
+    let kernel = &model.kernels[plan.kernel.index()];
+    let dim = plan.dim;
+    // The neighbour loops of every pair sum of the pass, one graph.
+    let mut lw = Lowerer::new(model, kernel, dim, Mode::Pair, Box::new(|_| true));
+    let mut init_blocks = vec![];
+    let mut slots: Vec<Slot> = vec![];
+    let mut temps = vec![];
+    for e in &v.pair_sums {
+        let eq = plan.equation(*e);
+        let crate::ir::EquationKind::PairSum { sources, accumulators, init, body, .. } = &eq.kind else { continue };
+        let mask = (sources.intersect(plan.groups) != v.sources).then(|| lw.sources_mask(*sources));
+        lw.block(body, mask);
+        init_blocks.push(Block { name: eq.name.clone(), dest: eq.dest, stmts: init.clone() });
+        for a in accumulators {
+            let f = model.field(a.field);
+            let temp = f.storage == Storage::Temp;
+            let comps = crate::ir::components(f.ty.shape, dim);
+            if temp {
+                temps.push((a.field, comps));
+            } else if !is_stored(plan, g)(a.field) {
+                continue;
+            }
+            for c in 0..comps {
+                slots.push(Slot { field: a.field, comp: c, reduce: a.reduce, temp, init_reg: None });
+            }
+        }
+    }
+    // Initial accumulator values (`init` blocks), as a particle program whose stores are read.
+    let init = if init_blocks.iter().any(|b| !b.stmts.is_empty()) {
+        let mut il = Lowerer::new(model, kernel, dim, Mode::Particle, Box::new(|_| true));
+        for b in &init_blocks {
+            il.block(&b.stmts, None);
+        }
+        il.finish_stores();
+        let roots: Vec<Id> = il.effects.iter().map(effect_value).collect();
+        let nodes = live_nodes(&il.g, roots);
+        let p: Program<T> =
+            compile(model, dim, &il.g, &nodes, &il.effects, &Pinned { preset: vec![], exports: vec![] });
+        for st in &p.stores {
+            if let Some(s) = slots.iter_mut().find(|s| s.field == st.field && s.comp == st.comp) {
+                s.init_reg = Some(st.reg);
+            }
+        }
+        Some(p)
+    } else {
+        None
+    };
+    // Split: values of particle i alone (computed once per particle) and per-neighbour values.
+    lw.optimise();
+    let graph = &lw.g;
+    let mut flags = vec![false; graph.nodes.len()];
+    for (k, n) in graph.nodes.iter().enumerate() {
+        flags[k] = varying(n, &flags);
+    }
+    let accum_effects: Vec<Effect> = lw
+        .effects
+        .iter()
+        .filter(|e| match e {
+            Effect::Accum { field, comp, .. } => slots.iter().any(|s| s.field == *field && s.comp == *comp as usize),
+            _ => false,
+        })
+        .cloned()
+        .collect();
+    let roots: Vec<Id> = accum_effects.iter().map(effect_value).collect();
+    let all = live_nodes(graph, roots.iter().copied());
+    let is_const = |id: Id| matches!(graph.nodes[id as usize], Node::Const(_));
+    let pair_nodes: Vec<Id> = all.iter().copied().filter(|id| flags[*id as usize] || is_const(*id)).collect();
+    // Uniform values the pair program reads: operands of varying nodes, and uniform accum values.
+    let mut exports: Vec<Id> = vec![];
+    for id in &pair_nodes {
+        for o in graph.nodes[*id as usize].operands() {
+            if !flags[o as usize] && !is_const(o) && !exports.contains(&o) {
+                exports.push(o);
+            }
+        }
+    }
+    for r in &roots {
+        if !flags[*r as usize] && !is_const(*r) && !exports.contains(r) {
+            exports.push(*r);
+        }
+    }
+    let dest_nodes = live_nodes(graph, exports.iter().copied());
+    let dest_nodes: Vec<Id> = dest_nodes.into_iter().filter(|id| !flags[*id as usize]).collect();
+    let dest: Program<T> =
+        compile(model, dim, graph, &dest_nodes, &[], &Pinned { preset: vec![], exports: exports.clone() });
+    // Pair program registers: x_ij (dim), r_ij, h_ij, then the broadcast uniforms.
+    let pair_regs = PairRegs { x: 0, r: dim, h: dim + 1 };
+    let mut preset: Vec<(Id, usize)> = vec![];
+    for (k, n) in graph.nodes.iter().enumerate() {
+        match n {
+            Node::PairX(c) => preset.push((k as Id, *c as usize)),
+            Node::PairR => preset.push((k as Id, dim)),
+            Node::PairH => preset.push((k as Id, dim + 1)),
+            _ => {}
+        }
+    }
+    let mut bcast = vec![];
+    for (k, u) in exports.iter().enumerate() {
+        preset.push((*u, dim + 2 + k));
+        bcast.push((dest.reg_of[u], dim + 2 + k));
+    }
+    let mut preset_regs = preset.clone();
+    if preset_regs.iter().all(|(_, r)| *r != dim + 1) {
+        // Keep the fixed registers reserved even when no node reads them.
+        preset_regs.push((Id::MAX, dim + 1));
+    }
+    if std::env::var("PAIRSUM_DEBUG").is_ok_and(|v| v == "2") {
+        for id in &pair_nodes {
+            eprintln!("  v{id} = {:?}", graph.nodes[*id as usize]);
+        }
+        for e in &accum_effects {
+            eprintln!("  {e:?}");
+        }
+    }
+    let pair: Program<T> =
+        compile(model, dim, graph, &pair_nodes, &accum_effects, &Pinned { preset: preset_regs, exports: vec![] });
+    let accum_slot = pair
+        .accums
+        .iter()
+        .map(|a| slots.iter().position(|s| s.field == a.field && s.comp == a.comp).expect("slot of every accum"))
+        .collect();
+    let tail = particle_program(plan, g, &plan.tail_blocks(&v.tail));
+    Variant {
+        group: g,
+        sources: v.sources.0,
+        init,
+        dest,
+        exports: bcast,
+        pair,
+        pair_regs,
+        slots,
+        accum_slot,
+        tail,
+        temps,
+    }
+}
+
+impl<T: Real> CpuBackend<T> {
+    /// Compiles every block of the plan for every group present. The store must hold the
+    /// particles (sorted group-major) with the scene's fields and the material parameters set.
+    pub fn new(plan: Plan, store: Store<T>, mirrors: Vec<Mirror>) -> Result<CpuBackend<T>, BackendError> {
+        let x = plan.model.field_id("x").ok_or_else(|| BackendError("the model has no position field `x`".into()))?;
+        let h = plan.model.field_id("h").ok_or_else(|| BackendError("the model has no smoothing length `h`".into()))?;
+        let n_groups = plan.model.groups.len();
+        let present: Vec<usize> = plan.groups.iter(n_groups).map(|g| g.index()).collect();
+        let per_group = |f: &dyn Fn(usize) -> Option<Program<T>>| -> Vec<Option<Program<T>>> {
+            (0..n_groups).map(|g| if present.contains(&g) { f(g) } else { None }).collect()
+        };
+        let passes: Vec<Vec<Variant<T>>> =
+            plan.passes.iter().map(|p| p.variants.iter().map(|v| compile_variant(&plan, v)).collect()).collect();
+        let mut stages = vec![];
+        for st in &plan.stages {
+            let mut blocks = st.updates.clone();
+            blocks.extend(eq_blocks(&plan, &st.corrections));
+            blocks.extend(eq_blocks(&plan, &st.derived));
+            stages.push(per_group(&|g| particle_program(&plan, g, &blocks)));
+        }
+        let derived = per_group(&|g| particle_program(&plan, g, &eq_blocks(&plan, &plan.derived)));
+        let reds = timestep::reductions(&plan.model, &plan.timesteps);
+        let kernel = &plan.model.kernels[plan.kernel.index()];
+        let reductions = per_group(&|_| {
+            if reds.is_empty() {
+                return None;
+            }
+            let mut lw = Lowerer::new(&plan.model, kernel, plan.dim, Mode::Particle, Box::new(|_| true));
+            for (k, (r, e)) in reds.iter().enumerate() {
+                lw.reduction(k, *r, e);
+            }
+            let roots: Vec<Id> = lw.effects.iter().map(effect_value).collect();
+            let nodes = live_nodes(&lw.g, roots);
+            Some(compile(
+                &plan.model,
+                plan.dim,
+                &lw.g,
+                &nodes,
+                &lw.effects,
+                &Pinned { preset: vec![], exports: vec![] },
+            ))
+        });
+        let support = kernel.support;
+        let chunks = chunks(&store);
+        if std::env::var_os("PAIRSUM_DEBUG").is_some() {
+            for (k, p) in passes.iter().enumerate() {
+                for v in p {
+                    let v: &Variant<T> = v;
+                    eprintln!(
+                        "pass {k} group {}: dest {} instrs/{} regs, pair {} instrs/{} regs, {} exports, tail {}",
+                        v.group,
+                        v.dest.instrs.len(),
+                        v.dest.n_regs,
+                        v.pair.instrs.len(),
+                        v.pair.n_regs,
+                        v.exports.len(),
+                        v.tail.as_ref().map(|t| t.instrs.len()).unwrap_or(0)
+                    );
+                }
+            }
+        }
+        Ok(CpuBackend {
+            passes,
+            stages,
+            derived,
+            reductions,
+            n_reductions: reds.len(),
+            mirrors,
+            chunks,
+            support,
+            x,
+            h,
+            plan,
+            store,
+        })
+    }
+
+    fn params(&self) -> (&[T], usize, &[usize]) {
+        (&self.store.params.values, self.store.params.stride, &self.store.params.offset)
+    }
+
+    /// Runs a per-group particle program over every chunk in parallel.
+    fn run_programs(&mut self, programs: &[Option<Program<T>>], g: Globals) {
+        let cols = views(&mut self.store);
+        let (params, stride, offset) = self.params();
+        let sh = Shared {
+            groups_present: self.store.ranges.len(),
+            cols: &cols,
+            params,
+            param_stride: stride,
+            param_offset: offset,
+            group: &self.store.group,
+            material: &self.store.material,
+            time: T::from_f64(g.time),
+            dt: T::from_f64(g.dt),
+        };
+        self.chunks.par_iter().for_each_init(Scratch::default, |scratch, chunk| {
+            if let Some(p) = &programs[chunk.group] {
+                exec::run_particle(p, &sh, scratch, *chunk);
+            }
+        });
+    }
+
+    fn h_max(&self) -> f64 {
+        let Some(c) = self.store.column(self.h) else { return 0.0 };
+        c.data.par_iter().map(|v| v.to_f64()).reduce(|| 0.0, f64::max)
+    }
+
+    fn positions(&self) -> &[T] {
+        &self.store.column(self.x).expect("x is stored on every group").data
+    }
+}
+
+impl<T: Real> Backend for CpuBackend<T> {
+    fn describe(&self) -> String {
+        format!("cpu ({}, {} threads)", T::NAME, rayon::current_num_threads())
+    }
+
+    fn plan(&self) -> &Plan {
+        &self.plan
+    }
+
+    fn particles(&self) -> usize {
+        self.store.n
+    }
+
+    fn initialise(&mut self) -> Result<(), BackendError> {
+        let derived = std::mem::take(&mut self.derived);
+        self.run_programs(&derived, Globals::default());
+        self.derived = derived;
+        Ok(())
+    }
+
+    fn save(&mut self) {
+        for (f, s) in self.plan.saved.clone() {
+            let (Some(src), Some(_)) = (self.store.column(f).cloned(), self.store.column(s)) else { continue };
+            let n = self.store.n;
+            let group = self.store.group.clone();
+            let dst = self.store.column_mut(s).expect("checked");
+            for (i, g) in group.iter().enumerate().take(n) {
+                let g = *g as usize;
+                if !src.has(g) || !dst.has(g) {
+                    continue;
+                }
+                let (a, b) = (src.row(i, g), dst.row(i, g));
+                dst.data[b * dst.comps..(b + 1) * dst.comps]
+                    .copy_from_slice(&src.data[a * src.comps..(a + 1) * src.comps]);
+            }
+        }
+    }
+
+    fn evaluate(&mut self, g: Globals) -> Result<(), BackendError> {
+        let dim = self.plan.dim;
+        let h_max = self.h_max();
+        if h_max.is_nan() || h_max <= 0.0 || !h_max.is_finite() {
+            return Err(BackendError(format!(
+                "the largest smoothing length is {h_max}: no neighbour search is possible"
+            )));
+        }
+        let grid = Grid::build(self.positions(), dim, self.support * h_max);
+        let x: Vec<T> = self.positions().to_vec();
+        let h: Vec<T> = self.store.column(self.h).expect("h is stored").data.clone();
+        let cols = views(&mut self.store);
+        let (params, stride, offset) = (&self.store.params.values, self.store.params.stride, &self.store.params.offset);
+        let sh = Shared {
+            groups_present: self.store.ranges.len(),
+            cols: &cols,
+            params,
+            param_stride: stride,
+            param_offset: offset,
+            group: &self.store.group,
+            material: &self.store.material,
+            time: T::from_f64(g.time),
+            dt: T::from_f64(g.dt),
+        };
+        let nb = Neighbours {
+            grid: &grid,
+            x: &x,
+            h: &h,
+            dim,
+            support: T::from_f64(self.support),
+            h_max,
+            mirrors: &self.mirrors,
+        };
+        for pass in &self.passes {
+            self.chunks.par_iter().for_each_init(Scratch::default, |scratch, chunk| {
+                if let Some(v) = pass.iter().find(|v| v.group == chunk.group) {
+                    exec::run_pass_chunk(v, &sh, &nb, scratch, *chunk);
+                }
+            });
+        }
+        Ok(())
+    }
+
+    fn reductions(&mut self, g: Globals) -> Vec<f64> {
+        let n = self.n_reductions;
+        if n == 0 {
+            return vec![];
+        }
+        let reds = timestep::reductions(&self.plan.model, &self.plan.timesteps);
+        let identity: Vec<f64> = reds.iter().map(|(r, _)| r.identity()).collect();
+        let cols = views(&mut self.store);
+        let (params, stride, offset) = (&self.store.params.values, self.store.params.stride, &self.store.params.offset);
+        let sh = Shared {
+            groups_present: self.store.ranges.len(),
+            cols: &cols,
+            params,
+            param_stride: stride,
+            param_offset: offset,
+            group: &self.store.group,
+            material: &self.store.material,
+            time: T::from_f64(g.time),
+            dt: T::from_f64(g.dt),
+        };
+        let programs = &self.reductions;
+        // Per chunk partial results, combined in chunk order: the same on any thread count.
+        let partials: Vec<Vec<f64>> = self
+            .chunks
+            .par_iter()
+            .map_init(Scratch::default, |scratch, chunk| {
+                let mut acc = identity.clone();
+                if let Some(p) = &programs[chunk.group] {
+                    exec::run_reduction(p, &sh, scratch, *chunk, &mut acc);
+                }
+                acc
+            })
+            .collect();
+        let mut out = identity.clone();
+        for p in partials {
+            for (k, (r, _)) in reds.iter().enumerate() {
+                out[k] = match r {
+                    Reduce::Sum => out[k] + p[k],
+                    Reduce::Min => out[k].min(p[k]),
+                    Reduce::Max => out[k].max(p[k]),
+                };
+            }
+        }
+        out
+    }
+
+    fn update(&mut self, stage: usize, g: Globals) {
+        let programs = std::mem::take(&mut self.stages[stage]);
+        self.run_programs(&programs, g);
+        self.stages[stage] = programs;
+    }
+
+    fn reorder(&mut self) {
+        let dim = self.plan.dim;
+        let h_max = self.h_max();
+        if h_max.is_nan() || h_max <= 0.0 {
+            return;
+        }
+        let cell = self.support * h_max;
+        let mut perm: Vec<u32> = Vec::with_capacity(self.store.n);
+        for (_, r) in self.store.ranges.clone() {
+            let x = &self.positions()[r.start * dim..r.end * dim];
+            perm.extend(morton_permutation(x, dim, cell).into_iter().map(|p| p + r.start as u32));
+        }
+        self.store.permute(&perm);
+    }
+
+    fn read(&self, f: FieldId) -> Option<(usize, Vec<f64>)> {
+        self.store.read_f64(f)
+    }
+
+    fn ids(&self) -> Vec<u32> {
+        self.store.id.clone()
+    }
+
+    fn groups(&self) -> Vec<u32> {
+        self.store.group.clone()
+    }
+
+    fn snapshot(&self) -> Snapshot {
+        Snapshot {
+            columns: self
+                .store
+                .columns
+                .iter()
+                .map(|c| c.as_ref().map(|c| c.data.iter().map(|v| v.to_f64()).collect()))
+                .collect(),
+            id: self.store.id.clone(),
+            material: self.store.material.clone(),
+        }
+    }
+
+    fn restore(&mut self, s: &Snapshot) {
+        for (c, d) in self.store.columns.iter_mut().zip(&s.columns) {
+            if let (Some(c), Some(d)) = (c.as_mut(), d) {
+                for (x, v) in c.data.iter_mut().zip(d) {
+                    *x = T::from_f64(*v);
+                }
+            }
+        }
+        self.store.id = s.id.clone();
+        self.store.material = s.material.clone();
+    }
+
+    fn first_non_finite(&self, fields: &[FieldId]) -> Option<(usize, FieldId)> {
+        let mut best: Option<(usize, FieldId)> = None;
+        for f in fields {
+            let Some(c) = self.store.column(*f) else { continue };
+            for i in 0..self.store.n {
+                let g = self.store.group[i] as usize;
+                if !c.has(g) {
+                    continue;
+                }
+                let row = c.row(i, g);
+                if c.data[row * c.comps..(row + 1) * c.comps].iter().any(|v| !v.is_finite()) {
+                    if best.is_none_or(|(b, _)| i < b) {
+                        best = Some((i, *f));
+                    }
+                    break;
+                }
+            }
+        }
+        best
+    }
+}
+
+/// Lanes per batch, for reports.
+pub const BATCH_LANES: usize = LANES;

@@ -1,0 +1,71 @@
+//! Backends run a plan: the CPU one as compiled closures under rayon, the GPU one as WGSL through
+//! wgpu. The engine drives either through `Backend`, one integrator action at a time.
+
+pub mod cpu;
+pub mod timestep;
+
+use crate::ir::FieldId;
+use crate::schedule::Plan;
+
+/// Simulated time and the current time step, as the programs see them.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Globals {
+    pub time: f64,
+    pub dt: f64,
+}
+
+/// A symmetry plane `x[axis] = offset`: neighbours see the mirror image of every particle.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Mirror {
+    pub axis: usize,
+    pub offset: f64,
+}
+
+/// A backend-independent copy of the particle state (checkpoints, restarts, last good state).
+#[derive(Clone, Debug, Default)]
+pub struct Snapshot {
+    /// Per stored field (by id): the raw column data as f64.
+    pub columns: Vec<Option<Vec<f64>>>,
+    pub id: Vec<u32>,
+    pub material: Vec<u32>,
+}
+
+#[derive(Debug, Clone)]
+pub struct BackendError(pub String);
+
+impl std::fmt::Display for BackendError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+pub trait Backend {
+    /// "cpu (f64, 2 threads)", "gpu (llvmpipe, f32)".
+    fn describe(&self) -> String;
+    fn plan(&self) -> &Plan;
+    fn particles(&self) -> usize;
+    /// Runs the state-only particle equations on the initial state (initial values are set by
+    /// `engine::setup`).
+    fn initialise(&mut self) -> Result<(), BackendError>;
+    /// Copies the evolving state to its saved copy.
+    fn save(&mut self);
+    /// Builds the neighbour search and runs every pass.
+    fn evaluate(&mut self, g: Globals) -> Result<(), BackendError>;
+    /// The values of the time-step reductions (`min_over` …), in the order of
+    /// `timestep::reductions`.
+    fn reductions(&mut self, g: Globals) -> Vec<f64>;
+    /// Runs integrator stage `stage`.
+    fn update(&mut self, stage: usize, g: Globals);
+    /// Reorders particles along a space-filling curve for memory locality.
+    fn reorder(&mut self);
+    /// A field for every particle in the current order (`n × comps`, NaN where not stored).
+    fn read(&self, f: FieldId) -> Option<(usize, Vec<f64>)>;
+    /// Each particle's index at creation, in the current order.
+    fn ids(&self) -> Vec<u32>;
+    /// Each particle's group, in the current order.
+    fn groups(&self) -> Vec<u32>;
+    fn snapshot(&self) -> Snapshot;
+    fn restore(&mut self, s: &Snapshot);
+    /// The first particle and field that is NaN or infinite among `fields`.
+    fn first_non_finite(&self, fields: &[FieldId]) -> Option<(usize, FieldId)>;
+}

@@ -1,0 +1,205 @@
+//! The engine: the time loop around a backend. It runs the integrator's actions (save, evaluate,
+//! time step, update), reorders particles for locality, watches for NaN/Inf (and then finds the
+//! exact step, particle, group and field, and keeps the last good state), and writes and reads
+//! checkpoints. It knows nothing of how a backend computes.
+
+pub mod checkpoint;
+pub mod setup;
+
+use crate::backend::{timestep, Backend, BackendError, Globals, Snapshot};
+use crate::ir::{FieldId, Storage};
+use crate::schedule::Action;
+
+#[derive(Clone, Debug)]
+pub struct RunConfig {
+    pub end_time: f64,
+    /// Upper bound of the time step (also the step when the model declares no `timestep`).
+    pub dt_max: f64,
+    /// Reorder particles along the Morton curve every this many steps (0: never).
+    pub reorder_every: u64,
+    /// Check for NaN/Inf every this many steps.
+    pub watch_every: u64,
+    pub max_steps: Option<u64>,
+}
+
+impl Default for RunConfig {
+    fn default() -> Self {
+        RunConfig { end_time: 1.0, dt_max: f64::INFINITY, reorder_every: 25, watch_every: 10, max_steps: None }
+    }
+}
+
+/// Where a run went unstable.
+#[derive(Clone, Debug)]
+pub struct Instability {
+    pub step: u64,
+    pub time: f64,
+    /// The particle's index when the scene created it.
+    pub particle: u32,
+    pub group: String,
+    pub field: String,
+    /// The state before that step.
+    pub last_good: Snapshot,
+    pub last_good_time: f64,
+}
+
+#[derive(Debug)]
+pub enum RunError {
+    Unstable(Box<Instability>),
+    Backend(BackendError),
+    /// The time step is not positive or not finite.
+    BadTimestep {
+        step: u64,
+        dt: f64,
+    },
+}
+
+impl std::fmt::Display for RunError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            RunError::Unstable(u) => write!(
+                f,
+                "the run went unstable at step {} (t = {:.6e} s): field `{}` of particle {} (group {}) is not finite; the last good state (t = {:.6e} s) was kept",
+                u.step, u.time, u.field, u.particle, u.group, u.last_good_time
+            ),
+            RunError::Backend(e) => write!(f, "{e}"),
+            RunError::BadTimestep { step, dt } => {
+                write!(f, "the time step at step {step} is {dt:e} s: the `timestep` limits gave no positive finite value")
+            }
+        }
+    }
+}
+
+impl From<BackendError> for RunError {
+    fn from(e: BackendError) -> Self {
+        RunError::Backend(e)
+    }
+}
+
+pub struct Engine<B: Backend> {
+    pub backend: B,
+    pub config: RunConfig,
+    pub time: f64,
+    pub step: u64,
+    /// The last time step (what equations read as `dt`).
+    pub dt: f64,
+    watched: Vec<FieldId>,
+    good: Option<(Snapshot, f64, u64, f64)>,
+}
+
+impl<B: Backend> Engine<B> {
+    pub fn new(backend: B, config: RunConfig) -> Engine<B> {
+        let plan = backend.plan();
+        let watched =
+            plan.layout.iter().map(|l| l.field).filter(|f| plan.model.field(*f).storage != Storage::Temp).collect();
+        Engine { backend, config, time: 0.0, step: 0, dt: 0.0, watched, good: None }
+    }
+
+    /// Initial values, state-only equations, and a first time step for equations that read `dt`.
+    pub fn initialise(&mut self) -> Result<(), RunError> {
+        self.backend.initialise()?;
+        self.dt = self.next_dt(Globals { time: 0.0, dt: 0.0 });
+        if !(self.dt > 0.0 && self.dt.is_finite()) {
+            return Err(RunError::BadTimestep { step: 0, dt: self.dt });
+        }
+        self.keep_good();
+        Ok(())
+    }
+
+    fn next_dt(&mut self, g: Globals) -> f64 {
+        let plan = self.backend.plan();
+        let limit = if plan.timesteps.is_empty() {
+            f64::INFINITY
+        } else {
+            let timesteps = plan.timesteps.clone();
+            let values = self.backend.reductions(g);
+            timestep::value(&self.backend.plan().model, &timesteps, &values, g.time, g.dt)
+        };
+        limit.min(self.config.dt_max)
+    }
+
+    /// One step of the integrator.
+    pub fn step(&mut self) -> Result<(), RunError> {
+        let actions = self.backend.plan().actions.clone();
+        let mut dt = self.dt;
+        for a in actions {
+            match a {
+                Action::Save => self.backend.save(),
+                Action::Evaluate => self.backend.evaluate(Globals { time: self.time, dt })?,
+                Action::Timestep => {
+                    dt = self.next_dt(Globals { time: self.time, dt: self.dt });
+                    let remaining = self.config.end_time - self.time;
+                    if remaining > 0.0 && remaining < dt * 1.000001 {
+                        dt = remaining;
+                    }
+                    if !(dt > 0.0 && dt.is_finite()) {
+                        return Err(RunError::BadTimestep { step: self.step + 1, dt });
+                    }
+                }
+                Action::Update { stage, time_fraction } => {
+                    self.backend.update(stage, Globals { time: self.time + time_fraction * dt, dt })
+                }
+            }
+        }
+        self.time += dt;
+        self.dt = dt;
+        self.step += 1;
+        if self.config.reorder_every > 0 && self.step.is_multiple_of(self.config.reorder_every) {
+            self.backend.reorder();
+        }
+        Ok(())
+    }
+
+    fn keep_good(&mut self) {
+        self.good = Some((self.backend.snapshot(), self.time, self.step, self.dt));
+    }
+
+    fn bad(&self) -> Option<(usize, FieldId)> {
+        self.backend.first_non_finite(&self.watched)
+    }
+
+    /// Steps until the end time (or `max_steps`), calling `after_step` after each step; stops with
+    /// the exact place of a NaN/Inf.
+    pub fn run(&mut self, after_step: &mut dyn FnMut(&Engine<B>) -> Result<(), String>) -> Result<(), RunError> {
+        while self.time < self.config.end_time * (1.0 - 1e-12) {
+            if self.config.max_steps.is_some_and(|m| self.step >= m) {
+                break;
+            }
+            self.step()?;
+            let watch = self.config.watch_every.max(1);
+            if self.step.is_multiple_of(watch) || self.time >= self.config.end_time * (1.0 - 1e-12) {
+                if self.bad().is_some() {
+                    return Err(RunError::Unstable(Box::new(self.locate_instability()?)));
+                }
+                self.keep_good();
+            }
+            after_step(self).map_err(|e| RunError::Backend(BackendError(e)))?;
+        }
+        Ok(())
+    }
+
+    /// Replays from the last good state one step at a time to the first step that produces a
+    /// non-finite value.
+    fn locate_instability(&mut self) -> Result<Instability, RunError> {
+        let (snap, time, step, dt) = self.good.clone().expect("a good state is kept at initialisation");
+        self.backend.restore(&snap);
+        (self.time, self.step, self.dt) = (time, step, dt);
+        loop {
+            let before = self.backend.snapshot();
+            let before_time = self.time;
+            self.step()?;
+            if let Some((i, f)) = self.bad() {
+                let plan = self.backend.plan();
+                let group = self.backend.groups()[i] as usize;
+                return Ok(Instability {
+                    step: self.step,
+                    time: self.time,
+                    particle: self.backend.ids()[i],
+                    group: plan.model.groups[group].name.clone(),
+                    field: plan.model.field(f).name.clone(),
+                    last_good: before,
+                    last_good_time: before_time,
+                });
+            }
+        }
+    }
+}

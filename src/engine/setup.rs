@@ -1,0 +1,314 @@
+//! From the scene's particles and materials to a particle store: particles sorted by group,
+//! the scene-set fields written, every material's parameters resolved (defaults included) and
+//! checked against what the plan reads.
+
+use crate::ir::{self, Builtin, Expr, ExprKind, FieldId, GroupId, GroupSet, Model, Op, ParamId, Side};
+use crate::particles::{Real, Store};
+use crate::schedule::Plan;
+use std::collections::{BTreeMap, BTreeSet};
+
+/// Particles as the scene places them (any order).
+#[derive(Clone, Debug, Default)]
+pub struct ParticleInput {
+    pub x: Vec<[f64; 3]>,
+    pub v: Vec<[f64; 3]>,
+    pub vol: Vec<f64>,
+    pub dx: Vec<f64>,
+    pub body: Vec<u32>,
+    /// The load/constraint region each particle lies in, −1 for none.
+    pub part: Vec<i32>,
+    pub group: Vec<u32>,
+    pub material: Vec<u32>,
+}
+
+impl ParticleInput {
+    pub fn len(&self) -> usize {
+        self.x.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.x.is_empty()
+    }
+    /// The groups that have particles.
+    pub fn groups(&self) -> GroupSet {
+        self.group.iter().fold(GroupSet::default(), |s, g| s.with(GroupId(*g)))
+    }
+}
+
+/// The values a material binds, by parameter (others take their defaults).
+#[derive(Clone, Debug, Default)]
+pub struct MaterialInput {
+    pub name: String,
+    pub values: BTreeMap<ParamId, Vec<f64>>,
+}
+
+#[derive(Debug, Clone)]
+pub struct SetupError(pub String);
+
+impl std::fmt::Display for SetupError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+/// Parameters the plan reads on each group (at i on the group, at j on the sources).
+pub fn params_used(plan: &Plan) -> BTreeMap<ParamId, GroupSet> {
+    let mut used: BTreeMap<ParamId, GroupSet> = BTreeMap::new();
+    let mut note = |p: ParamId, g: GroupSet| {
+        let e = used.entry(p).or_default();
+        *e = e.union(g.intersect(plan.groups));
+    };
+    let walk = |stmts: &[ir::Stmt], i: GroupSet, j: GroupSet, note: &mut dyn FnMut(ParamId, GroupSet)| {
+        ir::walk_stmts(stmts, &mut |e| {
+            if let ExprKind::Param(p, side) = e.kind {
+                note(p, if side == Side::I { i } else { j });
+            }
+        });
+    };
+    for pass in &plan.passes {
+        for v in &pass.variants {
+            let g = GroupSet::default().with(v.group);
+            for e in &v.pair_sums {
+                for s in crate::schedule::stmts_of(plan.equation(*e)) {
+                    walk(s, g, v.sources, &mut note);
+                }
+            }
+            for b in plan.tail_blocks(&v.tail) {
+                walk(&b.stmts, g, g, &mut note);
+            }
+        }
+    }
+    for st in &plan.stages {
+        for b in &st.updates {
+            walk(&b.stmts, b.dest, b.dest, &mut note);
+        }
+        for e in st.corrections.iter().chain(&st.derived) {
+            let eq = plan.equation(*e);
+            for s in crate::schedule::stmts_of(eq) {
+                walk(s, eq.dest, eq.dest, &mut note);
+            }
+        }
+    }
+    let all = plan.groups;
+    for f in &plan.initial {
+        if let Some(init) = &plan.model.field(*f).init {
+            ir::walk_expr(init, &mut |e| {
+                if let ExprKind::Param(p, _) = e.kind {
+                    note(p, all);
+                }
+            });
+        }
+    }
+    for t in &plan.timesteps {
+        ir::walk_expr(&plan.model.timesteps[*t].value, &mut |e| {
+            if let ExprKind::Param(p, _) = e.kind {
+                note(p, all);
+            }
+        });
+    }
+    used
+}
+
+/// Every parameter's value for one material: bound, else its default (which may read the
+/// material's other parameters), else missing.
+pub fn resolve_material(model: &Model, dim: usize, m: &MaterialInput) -> Vec<Option<Vec<f64>>> {
+    let mut out: Vec<Option<Vec<f64>>> = vec![None; model.params.len()];
+    for (p, v) in &m.values {
+        out[p.index()] = Some(v.clone());
+    }
+    for k in 0..model.params.len() {
+        let mut busy = BTreeSet::new();
+        resolve(model, dim, ParamId(k as u32), &mut out, &mut busy);
+    }
+    out
+}
+
+fn resolve(
+    model: &Model,
+    dim: usize,
+    p: ParamId,
+    out: &mut Vec<Option<Vec<f64>>>,
+    busy: &mut BTreeSet<ParamId>,
+) -> Option<Vec<f64>> {
+    if let Some(v) = &out[p.index()] {
+        return Some(v.clone());
+    }
+    let default = model.params[p.index()].default.clone()?;
+    if !busy.insert(p) {
+        return None;
+    }
+    let v = eval(model, dim, &default, out, busy, None)?;
+    out[p.index()] = Some(v.clone());
+    Some(v)
+}
+
+/// Per-particle values known on the host (scene fields and computed initial values), `n × comps`
+/// in the scene's order.
+pub type HostFields = BTreeMap<FieldId, (usize, Vec<f64>)>;
+
+/// Evaluates a parameter default or an initial value (constants, parameters, fields of one
+/// particle, arithmetic) component-wise, on the host.
+fn eval(
+    model: &Model,
+    dim: usize,
+    e: &Expr,
+    out: &mut Vec<Option<Vec<f64>>>,
+    busy: &mut BTreeSet<ParamId>,
+    particle: Option<(&HostFields, usize)>,
+) -> Option<Vec<f64>> {
+    let n = ir::components(e.ty.shape, dim);
+    let mut go = |x: &Expr| eval(model, dim, x, out, busy, particle);
+    Some(match &e.kind {
+        ExprKind::Const(v) => vec![*v; n],
+        ExprKind::Param(p, _) => return resolve(model, dim, *p, out, busy),
+        ExprKind::Field(f, _) => {
+            let (fields, k) = particle?;
+            let (comps, values) = fields.get(f)?;
+            values[k * comps..(k + 1) * comps].to_vec()
+        }
+        ExprKind::Global(ir::Global::Dim) => vec![dim as f64],
+        ExprKind::Unary(Op::Neg, a) => go(a)?.iter().map(|x| -x).collect(),
+        ExprKind::Binary(op, a, b) => {
+            let (x, y) = (go(a)?, go(b)?);
+            match op {
+                Op::Add => x.iter().zip(&y).map(|(a, b)| a + b).collect(),
+                Op::Sub => x.iter().zip(&y).map(|(a, b)| a - b).collect(),
+                Op::Scale => y.iter().map(|b| x[0] * b).collect(),
+                Op::Div => x.iter().map(|a| a / y[0]).collect(),
+                Op::Pow => vec![x[0].powf(y[0])],
+                _ => return None,
+            }
+        }
+        ExprKind::Call(f, args) => {
+            let a: Vec<Vec<f64>> = args.iter().map(&mut go).collect::<Option<_>>()?;
+            match f {
+                Builtin::Sqrt => vec![a[0][0].sqrt()],
+                Builtin::Exp => vec![a[0][0].exp()],
+                Builtin::Ln => vec![a[0][0].ln()],
+                Builtin::Abs => a[0].iter().map(|x| x.abs()).collect(),
+                Builtin::Min => a[0].iter().zip(&a[1]).map(|(x, y)| x.min(*y)).collect(),
+                Builtin::Max => a[0].iter().zip(&a[1]).map(|(x, y)| x.max(*y)).collect(),
+                Builtin::Norm => vec![a[0].iter().map(|x| x * x).sum::<f64>().sqrt()],
+                Builtin::Dot => vec![a[0].iter().zip(&a[1]).map(|(x, y)| x * y).sum()],
+                _ => return None,
+            }
+        }
+        _ => return None,
+    })
+}
+
+/// Sorts particles group-major (stable) and returns the permutation: new index k holds input
+/// particle `perm[k]`.
+pub fn group_order(input: &ParticleInput) -> Vec<u32> {
+    let mut perm: Vec<u32> = (0..input.len() as u32).collect();
+    perm.sort_by_key(|&i| input.group[i as usize]);
+    perm
+}
+
+/// Builds the store: particles in group order, scene fields set, parameters resolved.
+pub fn build_store<T: Real>(
+    plan: &Plan,
+    input: &ParticleInput,
+    materials: &[MaterialInput],
+) -> Result<Store<T>, SetupError> {
+    let model = &plan.model;
+    let dim = plan.dim;
+    if input.is_empty() {
+        return Err(SetupError("the scene has no particles".into()));
+    }
+    let perm = group_order(input);
+    let pick = |k: usize| perm[k] as usize;
+    let group: Vec<u32> = (0..input.len()).map(|k| input.group[pick(k)]).collect();
+    let material: Vec<u32> = (0..input.len()).map(|k| input.material[pick(k)]).collect();
+    let mut store: Store<T> = Store::new(plan, group, material, materials.len());
+    store.id = perm.clone();
+    let mut resolved: Vec<Vec<Option<Vec<f64>>>> = materials.iter().map(|m| resolve_material(model, dim, m)).collect();
+    // The scene's own constants (gravity, loads, prescribed velocities) are the same for all.
+    for values in &mut resolved {
+        for sp in &plan.scene_params {
+            values[sp.param.index()] = Some(sp.value.clone());
+        }
+    }
+    let host = host_fields(plan, input, &resolved)?;
+    for (f, (comps, values)) in &host {
+        let ordered: Vec<f64> =
+            (0..input.len()).flat_map(|k| values[pick(k) * comps..(pick(k) + 1) * comps].to_vec()).collect();
+        store.write_f64(*f, &ordered, *comps);
+    }
+    // Parameters: every material its values; a parameter the plan reads on a group must be
+    // bound (or defaulted) for every material with particles on that group.
+    let used = params_used(plan);
+    for (mi, (m, values)) in materials.iter().zip(&resolved).enumerate() {
+        let groups = input
+            .material
+            .iter()
+            .zip(&input.group)
+            .filter(|(mat, _)| **mat as usize == mi)
+            .fold(GroupSet::default(), |s, (_, g)| s.with(GroupId(*g)));
+        for (p, v) in values.iter().enumerate() {
+            match v {
+                Some(v) => store.params.set(mi, ParamId(p as u32), v),
+                None => {
+                    let need = used.get(&ParamId(p as u32)).copied().unwrap_or_default();
+                    if !need.intersect(groups).is_empty() {
+                        let param = &model.params[p];
+                        return Err(SetupError(format!(
+                            "material `{}` does not bind parameter `{}` ({}), which the model reads on {}",
+                            m.name,
+                            param.name,
+                            param.ty,
+                            model.group_names(need.intersect(groups))
+                        )));
+                    }
+                }
+            }
+        }
+    }
+    Ok(store)
+}
+
+/// The scene's fields (x, v, vol, dx, body) and the initial values computed from them, per
+/// particle in the scene's order. Fields used only to compute initial values are never stored.
+pub fn host_fields(
+    plan: &Plan,
+    input: &ParticleInput,
+    materials: &[Vec<Option<Vec<f64>>>],
+) -> Result<HostFields, SetupError> {
+    let model = &plan.model;
+    let dim = plan.dim;
+    let n = input.len();
+    let mut fields: HostFields = BTreeMap::new();
+    let vec3 = |v: &Vec<[f64; 3]>| -> Vec<f64> { v.iter().flat_map(|p| p[..dim].to_vec()).collect() };
+    let body: Vec<f64> = input.body.iter().map(|b| *b as f64).collect();
+    let part: Vec<f64> = (0..n).map(|k| input.part.get(k).map(|p| *p as f64).unwrap_or(-1.0)).collect();
+    for (name, values, comps) in [
+        ("x", vec3(&input.x), dim),
+        ("v", vec3(&input.v), dim),
+        ("vol", input.vol.clone(), 1),
+        ("dx", input.dx.clone(), 1),
+        ("body", body, 1),
+        ("part", part, 1),
+    ] {
+        if let Some(f) = model.field_id(name) {
+            fields.insert(f, (comps, values));
+        }
+    }
+    for f in &plan.initial {
+        let field = model.field(*f);
+        let Some(init) = &field.init else { continue };
+        let comps = ir::components(field.ty.shape, dim);
+        let mut values = vec![0.0; n * comps];
+        let mut params = materials.to_vec();
+        for k in 0..n {
+            let params = &mut params[input.material[k] as usize];
+            let v = eval(model, dim, init, params, &mut BTreeSet::new(), Some((&fields, k))).ok_or_else(|| {
+                SetupError(format!(
+                    "cannot compute the initial value of `{}` (it reads something the scene does not set)",
+                    field.name
+                ))
+            })?;
+            values[k * comps..(k + 1) * comps].copy_from_slice(&v[..comps]);
+        }
+        fields.insert(*f, (comps, values));
+    }
+    Ok(fields)
+}

@@ -1,0 +1,324 @@
+//! Running a case end to end: scene → plan → backend → engine, with VTK output, probes, a
+//! progress bar, checkpoints, and `report.json` / `report.md` at the end.
+
+use crate::backend::cpu::CpuBackend;
+use crate::backend::{Backend, BackendError};
+use crate::diag::{Diagnostic, Sources};
+use crate::engine::{checkpoint, setup, Engine, RunError};
+use crate::ir::FieldId;
+use crate::particles::Real;
+use crate::report::{self, Curve, GroupBytes, History, PointField, ResultRow, RunReport};
+use crate::scene::{self, measure, Scene};
+use crate::schedule::Plan;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BackendChoice {
+    Cpu,
+    Gpu,
+    Auto,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Precision {
+    F32,
+    F64,
+}
+
+#[derive(Clone, Debug)]
+pub struct RunOptions {
+    pub backend: BackendChoice,
+    pub precision: Precision,
+    pub scene: scene::Options,
+    pub out: PathBuf,
+    pub progress: bool,
+    /// Write a checkpoint every this many steps.
+    pub checkpoint_every: Option<u64>,
+    /// Resume from this checkpoint.
+    pub restart: Option<PathBuf>,
+    pub max_steps: Option<u64>,
+    /// Write VTK files (off for tests that only need the report).
+    pub vtk: bool,
+}
+
+impl Default for RunOptions {
+    fn default() -> Self {
+        RunOptions {
+            backend: BackendChoice::Auto,
+            precision: Precision::F64,
+            scene: scene::Options::default(),
+            out: PathBuf::from("out"),
+            progress: false,
+            checkpoint_every: None,
+            restart: None,
+            max_steps: None,
+            vtk: true,
+        }
+    }
+}
+
+/// Why a run did not complete.
+#[derive(Debug)]
+pub enum RunFailure {
+    /// The case or its model has errors (rendered with their sources).
+    Input(String),
+    /// The run itself failed (unstable, backend error); the report up to there was written.
+    Run(String),
+}
+
+impl std::fmt::Display for RunFailure {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            RunFailure::Input(s) | RunFailure::Run(s) => f.write_str(s),
+        }
+    }
+}
+
+pub struct RunOutcome {
+    pub report: RunReport,
+    pub out: PathBuf,
+    /// Probe histories, by probe name.
+    pub histories: Vec<(String, Vec<(f64, f64)>)>,
+}
+
+fn input_error(sources: &Sources, diags: &[Diagnostic]) -> RunFailure {
+    RunFailure::Input(crate::diag::render(sources, diags))
+}
+
+/// Loads a case and its plan, without running it.
+pub fn prepare(path: &Path, opts: &scene::Options) -> Result<(Scene, Plan), RunFailure> {
+    let mut sources = Sources::new();
+    let scene = scene::load(path, &mut sources, opts).map_err(|d| input_error(&sources, &d))?;
+    let plan = Plan::build(&scene.model, &scene.spec, scene.kernel.as_deref())
+        .map_err(|e| RunFailure::Input(format!("error: {}: {e}\n", path.display())))?;
+    Ok((scene, plan))
+}
+
+/// Runs a case on the chosen backend and writes its outputs and report into `opts.out`.
+pub fn run_case(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailure> {
+    let (scene, plan) = prepare(path, &opts.scene)?;
+    std::fs::create_dir_all(&opts.out)
+        .map_err(|e| RunFailure::Run(format!("cannot create `{}`: {e}", opts.out.display())))?;
+    match (opts.backend, opts.precision) {
+        (BackendChoice::Gpu, _) => Err(RunFailure::Run("the GPU backend is not available in this build".into())),
+        (_, Precision::F64) => run_cpu::<f64>(scene, plan, opts),
+        (_, Precision::F32) => run_cpu::<f32>(scene, plan, opts),
+    }
+}
+
+fn run_cpu<T: Real>(scene: Scene, plan: Plan, opts: &RunOptions) -> Result<RunOutcome, RunFailure> {
+    let store = setup::build_store::<T>(&plan, &scene.particles, &scene.materials)
+        .map_err(|e| RunFailure::Input(format!("error: {e}\n")))?;
+    let backend = CpuBackend::new(plan, store, scene.mirrors.clone()).map_err(|e| RunFailure::Run(e.0))?;
+    drive(scene, backend, opts, T::NAME)
+}
+
+/// Everything a run records while it goes.
+struct Recorder<'a> {
+    scene: &'a Scene,
+    opts: &'a RunOptions,
+    series: Option<report::Series>,
+    next_output: f64,
+    histories: Vec<measure::History>,
+    progress: Option<indicatif::ProgressBar>,
+    started: Instant,
+}
+
+impl Recorder<'_> {
+    fn observe<B: Backend>(&mut self, e: &Engine<B>) -> Result<(), String> {
+        for (p, h) in self.scene.probes.iter().zip(&mut self.histories) {
+            if e.step.is_multiple_of(p.every) {
+                let v = measure::evaluate(p, self.scene, &e.backend);
+                h.record(p, e.time, v);
+            }
+        }
+        if let Some(interval) = self.scene.output_interval {
+            if e.time >= self.next_output - 1e-12 * interval {
+                self.write_vtk(&e.backend, e.time)?;
+                self.next_output += interval;
+            }
+        }
+        if self.opts.checkpoint_every.is_some_and(|n| n > 0 && e.step.is_multiple_of(n)) {
+            checkpoint::write(e, &self.opts.out.join("checkpoint.bin"))
+                .map_err(|err| format!("writing a checkpoint: {err}"))?;
+        }
+        if let Some(pb) = &self.progress {
+            let end = e.config.end_time;
+            pb.set_position((1000.0 * e.time / end).min(1000.0) as u64);
+            let rate = e.step as f64 / self.started.elapsed().as_secs_f64().max(1e-9);
+            pb.set_message(format!("t = {:.4e} s, step {}, {:.1} steps/s, dt = {:.2e} s", e.time, e.step, rate, e.dt));
+        }
+        Ok(())
+    }
+
+    fn write_vtk<B: Backend>(&mut self, b: &B, time: f64) -> Result<(), String> {
+        let Some(series) = &mut self.series else { return Ok(()) };
+        let (positions, fields) = vtk_data(self.scene, b);
+        series.add(time, &positions, &fields).map_err(|e| format!("writing VTK: {e}"))?;
+        Ok(())
+    }
+}
+
+/// Positions and output fields of every particle, for a VTK file.
+pub fn vtk_data<B: Backend>(scene: &Scene, b: &B) -> (Vec<[f64; 3]>, Vec<PointField>) {
+    let positions = measure::positions(b).unwrap_or_default();
+    let ids = b.ids();
+    let mut fields = vec![
+        PointField::scalar("id", ids.iter().map(|i| *i as f64).collect()),
+        PointField::scalar("body", ids.iter().map(|i| scene.particles.body[*i as usize] as f64).collect()),
+    ];
+    let plan = b.plan();
+    for f in &scene.output_fields {
+        if let Some((comps, data)) = b.read(*f) {
+            fields.push(PointField::new(plan.model.field(*f).name.clone(), comps, data));
+        }
+    }
+    (positions, fields)
+}
+
+fn drive<B: Backend>(scene: Scene, backend: B, opts: &RunOptions, precision: &str) -> Result<RunOutcome, RunFailure> {
+    let mut config = scene.config.clone();
+    config.max_steps = opts.max_steps;
+    let mut engine = Engine::new(backend, config);
+    engine.initialise().map_err(|e| RunFailure::Run(e.to_string()))?;
+    if let Some(r) = &opts.restart {
+        checkpoint::read(&mut engine, r)
+            .map_err(|e| RunFailure::Run(format!("cannot restart from `{}`: {e}", r.display())))?;
+    }
+    let series = if opts.vtk {
+        Some(
+            report::Series::new(opts.out.join("vtk"), scene.name.clone())
+                .map_err(|e| RunFailure::Run(format!("VTK output: {e}")))?,
+        )
+    } else {
+        None
+    };
+    let progress = opts.progress.then(|| {
+        let pb = indicatif::ProgressBar::new(1000);
+        pb.set_style(
+            indicatif::ProgressStyle::with_template("{bar:40} {percent:>3}% {msg} (ETA {eta})")
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        pb
+    });
+    let mut rec = Recorder {
+        scene: &scene,
+        opts,
+        series,
+        next_output: engine.time,
+        histories: vec![measure::History::default(); scene.probes.len()],
+        progress,
+        started: Instant::now(),
+    };
+    rec.observe(&engine).map_err(RunFailure::Run)?;
+    let start_step = engine.step;
+    let started = Instant::now();
+    let result = engine.run(&mut |e| rec.observe(e));
+    let wall = started.elapsed().as_secs_f64();
+    if let Some(pb) = &rec.progress {
+        pb.finish_and_clear();
+    }
+    let mut failure = None;
+    match result {
+        Ok(()) => {
+            if scene.output_interval.is_none()
+                || rec.series.as_ref().is_some_and(|s| s.entries().last().is_none_or(|(t, _)| *t < engine.time))
+            {
+                rec.write_vtk(&engine.backend, engine.time).map_err(RunFailure::Run)?;
+            }
+        }
+        Err(RunError::Unstable(u)) => {
+            // Keep the last good state where the user will look for it.
+            engine.backend.restore(&u.last_good);
+            let (positions, fields) = vtk_data(&scene, &engine.backend);
+            let _ = report::write_vtu(&opts.out.join("last_good.vtu"), &positions, &fields);
+            failure =
+                Some(format!("{}; written to {}", RunError::Unstable(u), opts.out.join("last_good.vtu").display()));
+        }
+        Err(e) => failure = Some(e.to_string()),
+    }
+    let steps = engine.step - start_step;
+    let report = make_report(&scene, &engine, &rec.histories, wall, steps, precision, failure.as_deref());
+    report::write(&opts.out, &report).map_err(|e| RunFailure::Run(format!("writing the report: {e}")))?;
+    if let Some(f) = failure {
+        return Err(RunFailure::Run(f));
+    }
+    let histories = scene.probes.iter().zip(&rec.histories).map(|(p, h)| (p.name.clone(), h.points.clone())).collect();
+    Ok(RunOutcome { report, out: opts.out.clone(), histories })
+}
+
+fn make_report<B: Backend>(
+    scene: &Scene,
+    engine: &Engine<B>,
+    histories: &[measure::History],
+    wall: f64,
+    steps: u64,
+    precision: &str,
+    failure: Option<&str>,
+) -> RunReport {
+    let n = engine.backend.particles();
+    let plan = engine.backend.plan();
+    let real = if precision == "f32" { 4 } else { 8 };
+    let results = scene
+        .results
+        .iter()
+        .map(|r| {
+            let v = measure::result_value(r, &histories[r.probe]);
+            let mut row = ResultRow::new(r.quantity.clone(), r.unit.clone(), v, r.reference);
+            if let Some(s) = &r.source {
+                row = row.with_source(s.clone());
+            }
+            row
+        })
+        .collect();
+    let bytes = plan
+        .groups
+        .iter(plan.model.groups.len())
+        .map(|g| GroupBytes {
+            group: plan.model.groups[g.index()].name.clone(),
+            bytes: plan.bytes_per_particle(g, real),
+        })
+        .collect();
+    let plots = scene
+        .probes
+        .iter()
+        .zip(histories)
+        .map(|(p, h)| History {
+            name: p.name.clone(),
+            x_label: "t [s]".into(),
+            y_label: if p.unit.is_empty() { p.name.clone() } else { format!("{} [{}]", p.name, p.unit) },
+            series: vec![Curve::new(p.name.clone(), h.points.clone())],
+            reference: scene
+                .results
+                .iter()
+                .find(|r| scene.probes[r.probe].name == p.name)
+                .and_then(|r| r.reference.map(|x| x / r.scale)),
+        })
+        .collect();
+    let mut notes = vec![format!("resolution `{}`: particle spacing {} m", scene.resolution, scene.dx)];
+    if let Some(f) = failure {
+        notes.push(format!("the run did not complete: {f}"));
+    }
+    let _: Option<FieldId> = None;
+    RunReport {
+        case: scene.name.clone(),
+        backend: engine.backend.describe(),
+        precision: precision.to_string(),
+        particles: n,
+        steps,
+        wall_s: wall,
+        particle_steps_per_s: if wall > 0.0 { n as f64 * steps as f64 / wall } else { 0.0 },
+        results,
+        bytes_per_particle: bytes,
+        histories: plots,
+        notes,
+        resolution: scene.resolution.clone(),
+        end_time: engine.time,
+    }
+}
+
+/// For the GPU backend's caller: a backend error as a run failure.
+pub fn backend_failure(e: BackendError) -> RunFailure {
+    RunFailure::Run(e.0)
+}

@@ -1,0 +1,823 @@
+//! Case file → scene: the model checked, bodies filled with particles, materials bound with
+//! their units checked, loads, constraints and symmetry planes, outputs, probes and results.
+//! Every mistake in the case file is a diagnostic at its line and column.
+
+use super::case::{self, CaseFile, Value};
+use super::geometry::{self, Primitive};
+use super::quantity;
+use crate::backend::Mirror;
+use crate::check::{self, Stdlib};
+use crate::diag::{closest, Diagnostic, Sources, Span};
+use crate::engine::setup::{MaterialInput, ParticleInput};
+use crate::engine::RunConfig;
+use crate::ir::{FieldId, GroupId, GroupSet, Model, Shape};
+use crate::schedule::{Constraint, IntegratorKind, Load, SceneSpec, Target};
+use crate::units::Unit;
+use std::path::{Path, PathBuf};
+
+/// What to run: the resolution by name (`ci`, `paper`) or a spacing, and overrides.
+#[derive(Clone, Debug, Default)]
+pub struct Options {
+    pub resolution: Option<String>,
+    pub end_time: Option<f64>,
+}
+
+#[derive(Clone, Debug)]
+pub struct BodyInfo {
+    pub name: String,
+    pub group: GroupId,
+    pub material: usize,
+    /// Indices of its particles in the scene's order.
+    pub particles: std::ops::Range<usize>,
+    pub mass: f64,
+}
+
+#[derive(Clone, Debug)]
+pub enum ProbeKind {
+    /// A field component reduced over a set of particles (by their index in the scene).
+    Field { select: Option<Vec<bool>>, field: FieldId, component: usize, reduce: String, relative: bool },
+    /// A named measurement (`scene::measure`).
+    Measure(String),
+}
+
+#[derive(Clone, Debug)]
+pub struct ProbeSpec {
+    pub name: String,
+    pub kind: ProbeKind,
+    pub unit: String,
+    pub every: u64,
+}
+
+#[derive(Clone, Debug)]
+pub struct ResultSpec {
+    pub quantity: String,
+    pub probe: usize,
+    pub at: String,
+    pub from: Option<f64>,
+    pub to: Option<f64>,
+    pub scale: f64,
+    pub unit: String,
+    pub reference: Option<f64>,
+    pub source: Option<String>,
+    pub tolerance: Option<f64>,
+    pub tolerance_why: Option<String>,
+}
+
+pub struct Scene {
+    pub name: String,
+    pub title: String,
+    pub path: PathBuf,
+    pub model: Model,
+    pub spec: SceneSpec,
+    pub kernel: Option<String>,
+    pub particles: ParticleInput,
+    pub materials: Vec<MaterialInput>,
+    pub bodies: Vec<BodyInfo>,
+    pub mirrors: Vec<Mirror>,
+    pub config: RunConfig,
+    pub resolution: String,
+    pub dx: f64,
+    /// The resolution's `time_scale` (1: the paper's timing).
+    pub time_scale: f64,
+    /// Relative tolerance the CI test asserts for every result at this resolution, if given.
+    pub tolerance: Option<f64>,
+    pub output_interval: Option<f64>,
+    pub output_fields: Vec<FieldId>,
+    pub probes: Vec<ProbeSpec>,
+    pub results: Vec<ResultSpec>,
+    /// Per resolution name: its dx (for listings).
+    pub resolutions: Vec<(String, f64)>,
+}
+
+struct Ctx<'a> {
+    file: u32,
+    dim: usize,
+    diags: &'a mut Vec<Diagnostic>,
+}
+
+impl Ctx<'_> {
+    fn span(&self, r: std::ops::Range<usize>) -> Span {
+        Span::new(self.file, r.start, r.end)
+    }
+    fn err(
+        &mut self,
+        span: std::ops::Range<usize>,
+        code: &'static str,
+        msg: impl Into<String>,
+        label: impl Into<String>,
+    ) {
+        let s = self.span(span);
+        self.diags.push(Diagnostic::error(code, msg).at(s, label));
+    }
+
+    /// A scalar quantity: a number (SI) or a string with a unit, checked against `unit`.
+    fn scalar(&mut self, v: &Value, unit: Unit, what: &str) -> Option<f64> {
+        let span = v.span();
+        let q = match v.get_ref() {
+            toml::Value::Integer(i) => quantity::Quantity { value: *i as f64, unit },
+            toml::Value::Float(f) => quantity::Quantity { value: *f, unit },
+            toml::Value::String(s) => match quantity::parse(s) {
+                Ok(q) => q,
+                Err(e) => {
+                    self.err(span, "C0002", format!("{what}: {e}"), "not a quantity");
+                    return None;
+                }
+            },
+            other => {
+                self.err(
+                    span,
+                    "C0002",
+                    format!("{what} must be a number or a quantity like \"490 MPa\", found {}", other.type_str()),
+                    "here",
+                );
+                return None;
+            }
+        };
+        if q.unit != unit {
+            let s = self.span(span);
+            self.diags.push(
+                Diagnostic::error("C0003", format!("wrong unit for {what}: expected {unit}, found {}", q.unit))
+                    .at(s, format!("this is {}", q.unit))
+                    .help(format!("write a value in {unit} (prefixes such as k, M, G, m, u are fine)")),
+            );
+            return None;
+        }
+        Some(q.value)
+    }
+
+    /// A vector of `dim` quantities (a list), each checked against `unit`.
+    fn vector(&mut self, v: &Value, unit: Unit, what: &str) -> Option<[f64; 3]> {
+        let span = v.span();
+        let toml::Value::Array(items) = v.get_ref() else {
+            self.err(span, "C0002", format!("{what} must be a list of {} components", self.dim), "not a list");
+            return None;
+        };
+        if items.len() < self.dim || items.len() > 3 {
+            self.err(
+                span,
+                "C0002",
+                format!("{what} needs {} components (the case is {}D), found {}", self.dim, self.dim, items.len()),
+                "here",
+            );
+            return None;
+        }
+        let mut out = [0.0; 3];
+        for (k, item) in items.iter().take(self.dim).enumerate() {
+            let spanned = toml::Spanned::new(span.clone(), item.clone());
+            out[k] = self.scalar(&spanned, unit, what)?;
+        }
+        Some(out)
+    }
+}
+
+fn unit(s: &str) -> Unit {
+    crate::units::parse_simple(s).unwrap_or(Unit::ONE)
+}
+
+/// Reads and builds a case. Diagnostics (DSL and case file) are returned on failure.
+pub fn load(path: &Path, sources: &mut Sources, opts: &Options) -> Result<Scene, Vec<Diagnostic>> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| vec![Diagnostic::error("C0001", format!("cannot read `{}`: {e}", path.display()))])?;
+    let file = sources.add(check::load::display_path(path), text.clone());
+    let case: CaseFile = toml::from_str(&text).map_err(|e| {
+        let span = e.span().unwrap_or(0..0);
+        let msg = e.message().trim().to_string();
+        vec![Diagnostic::error("C0001", format!("case file: {msg}")).at(Span::new(file, span.start, span.end), msg)]
+    })?;
+    let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+    let mut diags = vec![];
+    // The model.
+    let model = load_model(&case, &dir, file, sources, &mut diags);
+    let Some(model) = model else { return Err(diags) };
+    let dim = *case.dim.get_ref();
+    if !(1..=3).contains(&dim) {
+        diags.push(
+            Diagnostic::error("C0004", format!("dim must be 1, 2 or 3, found {dim}"))
+                .at(Span::new(file, case.dim.span().start, case.dim.span().end), "here"),
+        );
+        return Err(diags);
+    }
+    let mut cx = Ctx { file, dim, diags: &mut diags };
+    let scene = build(&case, path, &dir, model, opts, &mut cx);
+    match scene {
+        Some(s) if !diags.iter().any(|d| d.is_error()) => Ok(s),
+        _ => Err(diags),
+    }
+}
+
+fn load_model(
+    case: &CaseFile,
+    dir: &Path,
+    file: u32,
+    sources: &mut Sources,
+    diags: &mut Vec<Diagnostic>,
+) -> Option<Model> {
+    let m = case.model.get_ref();
+    let checked = if m.ends_with(".sph") {
+        let p = dir.join(m);
+        if !p.is_file() {
+            let s = case.model.span();
+            diags.push(
+                Diagnostic::error("C0005", format!("model file `{}` not found", p.display()))
+                    .at(Span::new(file, s.start, s.end), "no such file"),
+            );
+            return None;
+        }
+        check::check_paths(sources, &[p.as_path()], Stdlib::locate())
+    } else {
+        let rel = m.replace("::", "/") + ".sph";
+        let mut loader = check::Loader::new(sources, Stdlib::locate());
+        loader.load_stdlib_module(&rel, None, true);
+        if loader.diags.iter().any(|d| d.code == "E0003") {
+            let s = case.model.span();
+            diags.push(
+                Diagnostic::error("C0005", format!("no stdlib model `{m}`"))
+                    .at(Span::new(file, s.start, s.end), "not a file (ending in .sph) nor a stdlib module")
+                    .help("name a model file next to the case, or a stdlib module such as `models::elastic_solid`"),
+            );
+            return None;
+        }
+        check::check_stdlib_modules(sources, &[rel.as_str()], Stdlib::locate())
+    };
+    let has_errors = checked.has_errors();
+    diags.extend(checked.diags.into_iter().filter(|d| d.is_error()));
+    (!has_errors).then_some(checked.model)
+}
+
+fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options, cx: &mut Ctx) -> Option<Scene> {
+    let dim = cx.dim;
+    let m = Unit::M;
+    let s = Unit::S;
+    // Resolution.
+    let mut resolutions = vec![];
+    for (name, r) in &case.resolutions {
+        let (dx_value, _) = match r.get_ref() {
+            case::Resolution::Spacing(v) => (v.clone(), None::<f64>),
+            case::Resolution::Table(t) => (t.dx.clone(), t.tolerance),
+        };
+        let v = toml::Spanned::new(r.span(), dx_value);
+        if let Some(dx) = cx.scalar(&v, m, &format!("resolution `{name}`")) {
+            resolutions.push((name.clone(), dx));
+        }
+    }
+    let wanted = opts
+        .resolution
+        .clone()
+        .or_else(|| case.default_resolution.as_ref().map(|r| r.get_ref().clone()))
+        .unwrap_or_else(|| "ci".to_string());
+    let dx = match resolutions.iter().find(|(n, _)| *n == wanted) {
+        Some((_, dx)) => *dx,
+        None => {
+            match quantity::parse(&wanted).ok().filter(|q| q.unit == m || q.unit == Unit::ONE) {
+                Some(q) if q.value > 0.0 => q.value,
+                _ => {
+                    let names: Vec<String> = resolutions.iter().map(|(n, _)| n.clone()).collect();
+                    cx.diags.push(Diagnostic::error(
+                    "C0006",
+                    format!("unknown resolution `{wanted}`: the case has {} (or give a spacing such as 0.005 or \"5 mm\")", names.join(", ")),
+                ));
+                    return None;
+                }
+            }
+        }
+    };
+    let res_table = case.resolutions.get(&wanted).and_then(|r| match r.get_ref() {
+        case::Resolution::Table(t) => Some(t),
+        _ => None,
+    });
+    // A resolution may run the case faster in time (loads, ramps, outputs and result windows
+    // scale with it), e.g. a quicker but still quasi-static load for CI.
+    let time_scale = res_table.and_then(|t| t.time_scale).unwrap_or(1.0);
+    let mut end_time = time_scale * cx.scalar(&case.end_time, s, "end_time")?;
+    if let Some(t) = res_table.and_then(|t| t.end_time.clone()) {
+        end_time = cx.scalar(&toml::Spanned::new(case.end_time.span(), t), s, "end_time")?;
+    }
+    if let Some(t) = opts.end_time {
+        end_time = t;
+    }
+    // Materials.
+    let mut materials = vec![];
+    for (mat_name, values) in &case.materials {
+        let mut mi = MaterialInput { name: mat_name.clone(), ..Default::default() };
+        for (key, v) in values {
+            let Some(p) = model.param_id(key) else {
+                let names: Vec<&str> =
+                    model.params.iter().map(|p| p.name.as_str()).filter(|n| !n.starts_with('@')).collect();
+                let mut d = Diagnostic::error(
+                    "C0007",
+                    format!("material `{}` sets `{key}`, which is not a parameter of the model", mi.name),
+                )
+                .at(cx.span(v.span()), "unknown parameter");
+                if let Some(b) = closest(key, names.iter().copied()) {
+                    d = d.help(format!("did you mean `{b}`?"));
+                }
+                cx.diags.push(d);
+                continue;
+            };
+            let ty = model.params[p.index()].ty;
+            let what = format!("`{key}` of material `{}`", mi.name);
+            let value = match ty.shape {
+                Shape::Scalar => cx.scalar(v, ty.unit, &what).map(|x| vec![x]),
+                Shape::Vec => cx.vector(v, ty.unit, &what).map(|x| x[..dim].to_vec()),
+                other => {
+                    cx.err(
+                        v.span(),
+                        "C0008",
+                        format!("{what} is a {}; case files bind scalars and vecs", other.name()),
+                        "here",
+                    );
+                    None
+                }
+            };
+            if let Some(value) = value {
+                mi.values.insert(p, value);
+            }
+        }
+        materials.push(mi);
+    }
+    // Bodies.
+    let mut particles = ParticleInput::default();
+    let mut bodies: Vec<BodyInfo> = vec![];
+    for (b, body) in case.bodies.iter().enumerate() {
+        let name = body.name.get_ref().clone();
+        let Some(group) = model.group_id(body.group.get_ref()) else {
+            let names: Vec<&str> = model.groups.iter().map(|g| g.name.as_str()).collect();
+            let mut d =
+                Diagnostic::error("C0009", format!("body `{name}`: the model has no group `{}`", body.group.get_ref()))
+                    .at(cx.span(body.group.span()), "unknown group");
+            d = match closest(body.group.get_ref(), names.iter().copied()) {
+                Some(best) => d.help(format!("did you mean `{best}`?")),
+                None => d.note(format!("the model's groups: {}", names.join(", "))),
+            };
+            cx.diags.push(d);
+            continue;
+        };
+        let Some(material) = materials.iter().position(|m| m.name == *body.material.get_ref()) else {
+            cx.err(
+                body.material.span(),
+                "C0010",
+                format!("body `{name}`: no material `{}` in the case", body.material.get_ref()),
+                "unknown material",
+            );
+            continue;
+        };
+        let spacing = dx * body.spacing_factor.unwrap_or(1.0);
+        let Some(placed) = place(body, spacing, dx, dir, cx) else { continue };
+        let velocity = match &body.velocity {
+            Some(v) => cx.vector(v, unit("m/s"), &format!("velocity of body `{name}`"))?,
+            None => [0.0; 3],
+        };
+        let start = particles.len();
+        let rho0 = model.param_id("rho0").and_then(|p| materials[material].values.get(&p)).map(|v| v[0]).unwrap_or(0.0);
+        let mass = placed.volumes.iter().sum::<f64>() * rho0;
+        for k in 0..placed.len() {
+            particles.x.push(placed.positions[k]);
+            particles.v.push(velocity);
+            particles.vol.push(placed.volumes[k]);
+            particles.dx.push(placed.spacing[k]);
+            particles.body.push(b as u32);
+            particles.part.push(-1);
+            particles.group.push(group.0);
+            particles.material.push(material as u32);
+        }
+        bodies.push(BodyInfo { name, group, material, particles: start..particles.len(), mass });
+    }
+    if particles.is_empty() {
+        cx.diags.push(Diagnostic::error("C0011", "the case places no particles"));
+        return None;
+    }
+    let body_index = |cx: &mut Ctx, n: &toml::Spanned<String>| -> Option<usize> {
+        let found = case.bodies.iter().position(|b| b.name.get_ref() == n.get_ref());
+        if found.is_none() {
+            cx.err(n.span(), "C0012", format!("no body `{}` in the case", n.get_ref()), "unknown body");
+        }
+        found
+    };
+    // Loads and constraints act on a body, or on the part of it inside a region.
+    let rho0_of =
+        |mat: usize| model.param_id("rho0").and_then(|p| materials[mat].values.get(&p)).map(|v| v[0]).unwrap_or(0.0);
+    let mut parts = 0usize;
+    let mut target = |cx: &mut Ctx,
+                      particles: &mut ParticleInput,
+                      body: &toml::Spanned<String>,
+                      region: &Option<toml::Spanned<case::Shape>>|
+     -> Option<(Target, f64)> {
+        let b = body_index(cx, body)?;
+        let info = bodies.iter().find(|x| x.name == *case.bodies[b].name.get_ref())?;
+        let Some(region) = region else { return Some((Target::Body(b), info.mass)) };
+        let shape = primitive(region.get_ref(), cx)?;
+        let range = info.particles.clone();
+        let inside = match geometry::inside(&shape, dim, &particles.x[range.clone()]) {
+            Ok(v) => v,
+            Err(e) => {
+                cx.err(region.span(), "C0024", format!("region: {e}"), "here");
+                return None;
+            }
+        };
+        let id = parts;
+        parts += 1;
+        let mut mass = 0.0;
+        for (k, inside) in range.zip(inside) {
+            if inside {
+                particles.part[k] = id as i32;
+                mass += particles.vol[k] * rho0_of(particles.material[k] as usize);
+            }
+        }
+        if mass == 0.0 {
+            cx.err(
+                region.span(),
+                "C0024",
+                format!("this region holds no particle of body `{}`", body.get_ref()),
+                "empty region",
+            );
+            return None;
+        }
+        Some((Target::Part(id), mass))
+    };
+    let mut loads = vec![];
+    for l in &case.loads {
+        let Some((t, mass)) = target(cx, &mut particles, &l.body, &l.region) else { continue };
+        let Some(force) = cx.vector(&l.force, Unit::named("N").unwrap_or(Unit::ONE), "load force") else { continue };
+        let ramp = match &l.ramp {
+            Some(r) => time_scale * cx.scalar(r, s, "load ramp")?,
+            None => 0.0,
+        };
+        if mass <= 0.0 {
+            cx.err(l.body.span(), "C0013", "a load needs a body with mass (its material binds rho0)", "massless body");
+            continue;
+        }
+        loads.push(Load { target: t, accel: force[..dim].iter().map(|f| f / mass).collect(), ramp });
+    }
+    let mut constraints = vec![];
+    for c in &case.constraints {
+        let Some((t, _)) = target(cx, &mut particles, &c.body, &c.region) else { continue };
+        let velocity = match &c.velocity {
+            Some(v) => cx.vector(v, unit("m/s"), "constraint velocity")?,
+            None => [0.0; 3],
+        };
+        let ramp = match &c.ramp {
+            Some(r) => time_scale * cx.scalar(r, s, "constraint ramp")?,
+            None => 0.0,
+        };
+        constraints.push(Constraint { target: t, velocity: velocity[..dim].to_vec(), ramp });
+    }
+    let mut mirrors = vec![];
+    for sym in &case.symmetry {
+        let axis = match sym.axis.get_ref().as_str() {
+            "x" => 0,
+            "y" => 1,
+            "z" => 2,
+            other => {
+                cx.err(sym.axis.span(), "C0014", format!("symmetry axis is x, y or z, found `{other}`"), "here");
+                continue;
+            }
+        };
+        if axis >= dim || mirrors.iter().any(|m: &Mirror| m.axis == axis) {
+            cx.err(
+                sym.axis.span(),
+                "C0014",
+                format!("a {dim}D case has one symmetry plane per axis among the first {dim}"),
+                "here",
+            );
+            continue;
+        }
+        let at = match &sym.at {
+            Some(v) => cx.scalar(v, m, "symmetry plane position")?,
+            None => 0.0,
+        };
+        mirrors.push(Mirror { axis, offset: at });
+    }
+    let gravity = match &case.gravity {
+        Some(g) => Some(cx.vector(g, unit("m/s^2"), "gravity")?[..dim].to_vec()),
+        None => None,
+    };
+    // Outputs and probes.
+    let field = |cx: &mut Ctx, n: &toml::Spanned<String>| -> Option<FieldId> {
+        let f = model.field_id(n.get_ref()).filter(|f| model.field(*f).storage != crate::ir::Storage::Temp);
+        if f.is_none() {
+            let names: Vec<&str> = model.fields.iter().map(|f| f.name.as_str()).filter(|n| !n.contains('.')).collect();
+            let mut d = Diagnostic::error("C0015", format!("the model has no field `{}`", n.get_ref()))
+                .at(cx.span(n.span()), "unknown field");
+            if let Some(b) = closest(n.get_ref(), names.iter().copied()) {
+                d = d.help(format!("did you mean `{b}`?"));
+            }
+            cx.diags.push(d);
+        }
+        f
+    };
+    let mut output_fields = vec![];
+    let mut output_interval = None;
+    if let Some(o) = &case.output {
+        for f in &o.fields {
+            if let Some(id) = field(cx, f) {
+                output_fields.push(id);
+            }
+        }
+        if let Some(i) = &o.interval {
+            output_interval = cx.scalar(i, s, "output interval").map(|x| x * time_scale);
+        }
+    }
+    let mut probes = vec![];
+    for p in &case.probes {
+        let kind = if let Some(m) = &p.measure {
+            if !super::measure::NAMES.contains(&m.get_ref().as_str()) {
+                cx.err(
+                    m.span(),
+                    "C0016",
+                    format!("unknown measure `{}`; known: {}", m.get_ref(), super::measure::NAMES.join(", ")),
+                    "here",
+                );
+                continue;
+            }
+            ProbeKind::Measure(m.get_ref().clone())
+        } else {
+            let Some(fname) = &p.field else {
+                cx.err(
+                    p.name.span(),
+                    "C0016",
+                    "a probe needs a `field` (with `body`, `component`, `reduce`) or a `measure`",
+                    "here",
+                );
+                continue;
+            };
+            let Some(f) = field(cx, fname) else { continue };
+            let body = match &p.body {
+                Some(b) => Some(body_index(cx, b)?),
+                None => None,
+            };
+            let mut select: Option<Vec<bool>> = body.map(|b| particles.body.iter().map(|x| *x as usize == b).collect());
+            if let Some(region) = &p.region {
+                let shape = primitive(region.get_ref(), cx)?;
+                match geometry::inside(&shape, dim, &particles.x) {
+                    Ok(inside) => {
+                        let sel = select.get_or_insert_with(|| vec![true; particles.len()]);
+                        for (s, i) in sel.iter_mut().zip(inside) {
+                            *s &= i;
+                        }
+                    }
+                    Err(e) => {
+                        cx.err(region.span(), "C0024", format!("probe region: {e}"), "here");
+                        continue;
+                    }
+                }
+                if !select.as_ref().is_some_and(|s| s.iter().any(|x| *x)) {
+                    cx.err(region.span(), "C0024", "the probe's region holds no particle", "empty region");
+                    continue;
+                }
+            }
+            let shape = model.field(f).ty.shape;
+            let component = match &p.component {
+                None => 0,
+                Some(c) => match component_index(shape, dim, c.get_ref()) {
+                    Some(k) => k,
+                    None => {
+                        cx.err(
+                            c.span(),
+                            "C0017",
+                            format!("`{}` is not a component of a {dim}D {}", c.get_ref(), shape.name()),
+                            "here",
+                        );
+                        continue;
+                    }
+                },
+            };
+            let reduce = p.reduce.as_ref().map(|r| r.get_ref().clone()).unwrap_or_else(|| "mean".into());
+            if !["mean", "min", "max", "sum", "abs_max"].contains(&reduce.as_str()) {
+                let span = p.reduce.as_ref().map(|r| r.span()).unwrap_or(0..0);
+                cx.err(span, "C0017", format!("reduce is mean, min, max, sum or abs_max, found `{reduce}`"), "here");
+                continue;
+            }
+            ProbeKind::Field { select, field: f, component, reduce, relative: p.relative }
+        };
+        probes.push(ProbeSpec {
+            name: p.name.get_ref().clone(),
+            kind,
+            unit: p.unit.clone().unwrap_or_default(),
+            every: p.every.unwrap_or(1).max(1),
+        });
+    }
+    let mut results = vec![];
+    for r in &case.results {
+        let Some(probe) = probes.iter().position(|p| p.name == *r.probe.get_ref()) else {
+            cx.err(r.probe.span(), "C0018", format!("no probe `{}`", r.probe.get_ref()), "unknown probe");
+            continue;
+        };
+        let at = r.at.as_ref().map(|a| a.get_ref().clone()).unwrap_or_else(|| "end".into());
+        if !["end", "min", "max", "abs_max", "mean_after", "slope"].contains(&at.as_str()) {
+            let span = r.at.as_ref().map(|a| a.span()).unwrap_or(0..0);
+            cx.err(span, "C0019", format!("`at` is end, min, max, abs_max, mean_after or slope, found `{at}`"), "here");
+            continue;
+        }
+        let unit_text = r.unit.clone().unwrap_or_else(|| probes[probe].unit.clone());
+        let (_, runit) = quantity::parse_unit(&unit_text).unwrap_or((1.0, Unit::ONE));
+        let reference = match &r.reference {
+            Some(v) => Some(cx.scalar(v, runit, &format!("reference of `{}`", r.quantity.get_ref()))?),
+            None => None,
+        };
+        let from = match &r.from {
+            Some(v) => Some(time_scale * cx.scalar(v, s, "from")?),
+            None => None,
+        };
+        let to = match &r.to {
+            Some(v) => Some(time_scale * cx.scalar(v, s, "to")?),
+            None => None,
+        };
+        results.push(ResultSpec {
+            quantity: r.quantity.get_ref().clone(),
+            probe,
+            at,
+            from,
+            to,
+            scale: r.scale.unwrap_or(1.0),
+            unit: unit_text,
+            reference,
+            source: r.source.clone(),
+            tolerance: r.tolerance,
+            tolerance_why: r.tolerance_why.clone(),
+        });
+    }
+    // What the run needs of the model.
+    let integrator = match &case.integrator {
+        Some(i) => match IntegratorKind::parse(i.get_ref()) {
+            Some(k) => k,
+            None => {
+                cx.err(
+                    i.span(),
+                    "C0020",
+                    format!("unknown integrator `{}` (euler, predictor_corrector, symplectic)", i.get_ref()),
+                    "here",
+                );
+                return None;
+            }
+        },
+        None => IntegratorKind::PredictorCorrector,
+    };
+    let mut outputs = output_fields.clone();
+    for p in &probes {
+        if let ProbeKind::Field { field, .. } = p.kind {
+            outputs.push(field);
+        }
+        if let ProbeKind::Measure(m) = &p.kind {
+            for name in super::measure::fields_needed(m) {
+                if let Some(f) = model.field_id(name) {
+                    outputs.push(f);
+                }
+            }
+        }
+    }
+    outputs.sort();
+    outputs.dedup();
+    let groups = particles.groups();
+    let kernel = case.kernel.as_ref().map(|k| k.get_ref().clone());
+    let dt_max = match &case.dt_max {
+        Some(v) => cx.scalar(v, s, "dt_max")?,
+        None => f64::INFINITY,
+    };
+    let spec = SceneSpec { dim, groups, outputs, integrator, gravity, loads, constraints };
+    let config =
+        RunConfig { end_time, dt_max, reorder_every: case.reorder_every.unwrap_or(25), ..RunConfig::default() };
+    let _ = GroupSet::default();
+    Some(Scene {
+        name: case.name.get_ref().clone(),
+        title: case.title.clone().unwrap_or_default(),
+        path: path.to_path_buf(),
+        model,
+        spec,
+        kernel,
+        particles,
+        materials,
+        bodies,
+        mirrors,
+        config,
+        resolution: wanted,
+        dx,
+        time_scale,
+        tolerance: res_table.and_then(|t| t.tolerance),
+        output_interval,
+        output_fields,
+        probes,
+        results,
+        resolutions,
+    })
+}
+
+fn component_index(shape: Shape, dim: usize, name: &str) -> Option<usize> {
+    let axis = |c: char| "xyz".find(c).filter(|a| *a < dim);
+    let chars: Vec<char> = name.chars().collect();
+    match (shape, chars.as_slice()) {
+        (Shape::Scalar, _) => Some(0),
+        (Shape::Vec, [a]) => axis(*a),
+        (s, [a, b]) => {
+            let (r, c) = (axis(*a)?, axis(*b)?);
+            crate::ir::component_indices(s, dim)
+                .iter()
+                .position(|&(x, y)| (x, y) == (r.min(c), r.max(c)) || (x, y) == (r, c))
+        }
+        _ => None,
+    }
+}
+
+/// Particles of one body: a primitive filled at its spacing (graded if asked), or a node list.
+fn place(body: &case::Body, spacing: f64, dx: f64, dir: &Path, cx: &mut Ctx) -> Option<geometry::Particles> {
+    let name = body.name.get_ref();
+    let span = body.shape.span();
+    if let case::Shape::Nodes { file, scale } = body.shape.get_ref() {
+        let p = dir.join(file.get_ref());
+        let text = match std::fs::read_to_string(&p) {
+            Ok(t) => t,
+            Err(e) => {
+                cx.err(file.span(), "C0021", format!("body `{name}`: cannot read `{}`: {e}", p.display()), "here");
+                return None;
+            }
+        };
+        let display = check::load::display_path(&p);
+        let parsed = if p.extension().is_some_and(|e| e == "csv") {
+            geometry::read_csv_nodes(&text, &display)
+        } else {
+            geometry::read_lsdyna_nodes(&text, &display)
+        };
+        let mut nodes = match parsed {
+            Ok(n) => n,
+            Err(e) => {
+                cx.diags.push(Diagnostic::error("C0022", format!("{e}")).at(cx.span(file.span()), "in this node file"));
+                return None;
+            }
+        };
+        let k = scale.unwrap_or(1.0);
+        for q in &mut nodes.positions {
+            for c in q.iter_mut() {
+                *c *= k;
+            }
+        }
+        if let Some(v) = &mut nodes.volumes {
+            for x in v.iter_mut() {
+                *x *= k.powi(cx.dim as i32);
+            }
+        }
+        return match nodes.to_particles(cx.dim) {
+            Ok(p) => Some(p),
+            Err(e) => {
+                cx.err(span, "C0023", format!("body `{name}`: {e}"), "here");
+                None
+            }
+        };
+    }
+    let shape = primitive(body.shape.get_ref(), cx)?;
+    let filled = match &body.refine {
+        Some(r) => {
+            let region = primitive(r.region.get_ref(), cx)?;
+            geometry::fill_graded(&shape, dx * r.factor, spacing, &region, cx.dim)
+        }
+        None => geometry::fill(&shape, spacing, cx.dim),
+    };
+    match filled {
+        Ok(p) if !p.is_empty() => Some(p),
+        Ok(_) => {
+            cx.err(
+                span,
+                "C0023",
+                format!("body `{name}` holds no particle at spacing {spacing} m"),
+                "empty at this spacing",
+            );
+            None
+        }
+        Err(e) => {
+            cx.err(span, "C0023", format!("body `{name}`: {e}"), "here");
+            None
+        }
+    }
+}
+
+fn primitive(s: &case::Shape, cx: &mut Ctx) -> Option<Primitive> {
+    let m = Unit::M;
+    let one = Unit::ONE;
+    Some(match s {
+        case::Shape::Box { min, max } => {
+            Primitive::Box { min: cx.vector(min, m, "box min")?, max: cx.vector(max, m, "box max")? }
+        }
+        case::Shape::Sphere { center, radius } => Primitive::Sphere {
+            center: cx.vector(center, m, "sphere center")?,
+            radius: cx.scalar(radius, m, "sphere radius")?,
+        },
+        case::Shape::Cylinder { base, axis, radius, length } => Primitive::Cylinder {
+            base: cx.vector(base, m, "cylinder base")?,
+            axis: cx.vector(axis, one, "cylinder axis")?,
+            radius: cx.scalar(radius, m, "cylinder radius")?,
+            length: cx.scalar(length, m, "cylinder length")?,
+        },
+        case::Shape::HollowCylinder { base, axis, inner_radius, outer_radius, length } => Primitive::HollowCylinder {
+            base: cx.vector(base, m, "tube base")?,
+            axis: cx.vector(axis, one, "tube axis")?,
+            inner_radius: cx.scalar(inner_radius, m, "tube inner radius")?,
+            outer_radius: cx.scalar(outer_radius, m, "tube outer radius")?,
+            length: cx.scalar(length, m, "tube length")?,
+        },
+        case::Shape::Plate { center, normal, radius, thickness } => Primitive::Plate {
+            center: cx.vector(center, m, "plate center")?,
+            normal: cx.vector(normal, one, "plate normal")?,
+            radius: cx.scalar(radius, m, "plate radius")?,
+            thickness: cx.scalar(thickness, m, "plate thickness")?,
+        },
+        case::Shape::Nodes { .. } => return None,
+    })
+}

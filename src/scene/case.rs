@@ -1,0 +1,236 @@
+//! The case file (`cases/*.toml`) as written: serde structures that keep the span of every value,
+//! so that a wrong unit or an unknown name is reported at its line and column.
+
+use serde::Deserialize;
+use std::collections::BTreeMap;
+use toml::Spanned;
+
+/// A number, a quantity string (`"490 MPa"`), or a list of them.
+pub type Value = Spanned<toml::Value>;
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct CaseFile {
+    pub name: Spanned<String>,
+    #[serde(default)]
+    pub title: Option<String>,
+    /// The model: a file relative to the case, or a stdlib module path (`models::elastic_solid`).
+    pub model: Spanned<String>,
+    pub dim: Spanned<usize>,
+    #[serde(default)]
+    pub kernel: Option<Spanned<String>>,
+    #[serde(default)]
+    pub integrator: Option<Spanned<String>>,
+    pub end_time: Value,
+    #[serde(default)]
+    pub dt_max: Option<Value>,
+    #[serde(default)]
+    pub reorder_every: Option<u64>,
+    /// Named resolutions; each a spacing or a table with `dx` and overrides.
+    pub resolutions: BTreeMap<String, Spanned<Resolution>>,
+    /// The resolution used when none is asked for.
+    #[serde(default)]
+    pub default_resolution: Option<Spanned<String>>,
+    #[serde(default)]
+    pub gravity: Option<Value>,
+    /// Materials by name: `[materials.steel]` with parameter values.
+    #[serde(default)]
+    pub materials: BTreeMap<String, BTreeMap<String, Value>>,
+    pub bodies: Vec<Body>,
+    #[serde(default)]
+    pub loads: Vec<Load>,
+    #[serde(default)]
+    pub constraints: Vec<Constraint>,
+    #[serde(default)]
+    pub symmetry: Vec<Symmetry>,
+    #[serde(default)]
+    pub output: Option<Output>,
+    #[serde(default)]
+    pub probes: Vec<Probe>,
+    #[serde(default)]
+    pub results: Vec<ResultSpec>,
+}
+
+#[derive(Deserialize, Debug)]
+#[serde(untagged)]
+pub enum Resolution {
+    Table(ResolutionTable),
+    Spacing(toml::Value),
+}
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct ResolutionTable {
+    pub dx: toml::Value,
+    #[serde(default)]
+    pub end_time: Option<toml::Value>,
+    /// Relative tolerance of each result at this resolution (tests use it).
+    #[serde(default)]
+    pub tolerance: Option<f64>,
+    /// Runs the case this much faster in time: end time, load and constraint ramps, output
+    /// interval and result windows are multiplied by it.
+    #[serde(default)]
+    pub time_scale: Option<f64>,
+}
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct Body {
+    pub name: Spanned<String>,
+    pub group: Spanned<String>,
+    pub material: Spanned<String>,
+    pub shape: Spanned<Shape>,
+    #[serde(default)]
+    pub velocity: Option<Value>,
+    /// Spacing as a multiple of the resolution's dx (default 1).
+    #[serde(default)]
+    pub spacing_factor: Option<f64>,
+    /// A finer spacing (a multiple of dx) inside this region of the body.
+    #[serde(default)]
+    pub refine: Option<Refine>,
+}
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct Refine {
+    pub factor: f64,
+    pub region: Spanned<Shape>,
+}
+
+/// A prescribed velocity (zeros: clamped) on a body or on the part of it inside `region`,
+/// reached after `ramp`.
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct Constraint {
+    pub body: Spanned<String>,
+    #[serde(default)]
+    pub region: Option<Spanned<Shape>>,
+    #[serde(default)]
+    pub velocity: Option<Value>,
+    #[serde(default)]
+    pub ramp: Option<Value>,
+}
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields, rename_all = "snake_case")]
+pub enum Shape {
+    Box {
+        min: Value,
+        max: Value,
+    },
+    Sphere {
+        center: Value,
+        radius: Value,
+    },
+    Cylinder {
+        base: Value,
+        axis: Value,
+        radius: Value,
+        length: Value,
+    },
+    HollowCylinder {
+        base: Value,
+        axis: Value,
+        inner_radius: Value,
+        outer_radius: Value,
+        length: Value,
+    },
+    Plate {
+        center: Value,
+        normal: Value,
+        radius: Value,
+        thickness: Value,
+    },
+    /// Nodes from a file: `.csv` (x,y,z[,volume]) or an LS-DYNA keyword deck (`*NODE`).
+    Nodes {
+        file: Spanned<String>,
+        #[serde(default)]
+        scale: Option<f64>,
+    },
+}
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct Load {
+    pub body: Spanned<String>,
+    /// Only the part of the body inside this region (default: the whole body).
+    #[serde(default)]
+    pub region: Option<Spanned<Shape>>,
+    /// The total force, spread over the target's mass.
+    pub force: Value,
+    #[serde(default)]
+    pub ramp: Option<Value>,
+}
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct Symmetry {
+    pub axis: Spanned<String>,
+    #[serde(default)]
+    pub at: Option<Value>,
+}
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct Output {
+    /// Interval between VTK files (none: only the last state).
+    #[serde(default)]
+    pub interval: Option<Value>,
+    #[serde(default)]
+    pub fields: Vec<Spanned<String>>,
+}
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct Probe {
+    pub name: Spanned<String>,
+    /// What is measured: `field` (with `component` and `reduce` over a body), or a named measure.
+    #[serde(default)]
+    pub body: Option<Spanned<String>>,
+    /// Only the particles (of `body`, if given) inside this region at t = 0.
+    #[serde(default)]
+    pub region: Option<Spanned<Shape>>,
+    #[serde(default)]
+    pub field: Option<Spanned<String>>,
+    #[serde(default)]
+    pub component: Option<Spanned<String>>,
+    #[serde(default)]
+    pub reduce: Option<Spanned<String>>,
+    /// Subtract the value at t = 0.
+    #[serde(default)]
+    pub relative: bool,
+    #[serde(default)]
+    pub measure: Option<Spanned<String>>,
+    #[serde(default)]
+    pub unit: Option<String>,
+    /// Record every this many steps (default: 1).
+    #[serde(default)]
+    pub every: Option<u64>,
+}
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct ResultSpec {
+    pub quantity: Spanned<String>,
+    pub probe: Spanned<String>,
+    /// `end` (default), `min`, `max`, `mean_after` (with `from`), `abs_max`.
+    #[serde(default)]
+    pub at: Option<Spanned<String>>,
+    #[serde(default)]
+    pub from: Option<Value>,
+    #[serde(default)]
+    pub to: Option<Value>,
+    #[serde(default)]
+    pub scale: Option<f64>,
+    #[serde(default)]
+    pub reference: Option<Value>,
+    #[serde(default)]
+    pub source: Option<String>,
+    /// Relative tolerance the CI test asserts at the CI resolution, and why.
+    #[serde(default)]
+    pub tolerance: Option<f64>,
+    #[serde(default)]
+    pub tolerance_why: Option<String>,
+    #[serde(default)]
+    pub unit: Option<String>,
+}

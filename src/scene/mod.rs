@@ -1,0 +1,10 @@
+//! Case files and geometry: from a case file to particles, materials, loads, symmetry planes,
+//! outputs and the probes a run records.
+
+pub mod build;
+pub mod case;
+pub mod geometry;
+pub mod measure;
+pub mod quantity;
+
+pub use build::{load, Options, Scene};

@@ -1,0 +1,299 @@
+//! Integrators as generated IR: each stage is a list of per-particle statements that both backends
+//! compile like any particle equation.
+//!
+//! - Euler: S ← S + Δt Ṡ(S).
+//! - Predictor–corrector (FTLR19 Fig 5, Monaghan's midpoint form): S½ = S⁰ + Δt/2 Ṡ(S⁰);
+//!   S¹ = S⁰ + Δt Ṡ(S½) (equal to FTLR19's S¹ = 2 S½′ − S⁰ with S½′ = S⁰ + Δt/2 Ṡ(S½)).
+//! - Symplectic (DualSPHysics, Monaghan 2005): the same predictor, then v¹ = v⁰ + Δt v̇(S½),
+//!   x¹ = x⁰ + Δt (v⁰ + v¹)/2, ρ¹ = ρ⁰ (2 − ε)/(2 + ε) with ε = −(ρ̇/ρ)½ Δt, others midpoint.
+//!
+//! State that corrections change without a rate (plastic strain, damage) restarts every stage from
+//! its value at the start of the step, so a two-stage step counts its increment once.
+//! Gravity and body loads are added to the rate of `v`; prescribed velocities replace `v`.
+
+use super::live::Live;
+use super::{synthetic_param, Action, Block, Plan, SceneParam, SceneSpec, Stage};
+use crate::ir::{self, Expr, ExprKind, FieldId, Global, GroupSet, Model, Op, Shape, Stmt, Storage, Type};
+use crate::units::Unit;
+use std::collections::BTreeSet;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum IntegratorKind {
+    Euler,
+    PredictorCorrector,
+    Symplectic,
+}
+
+impl IntegratorKind {
+    pub fn name(self) -> &'static str {
+        match self {
+            IntegratorKind::Euler => "euler",
+            IntegratorKind::PredictorCorrector => "predictor_corrector",
+            IntegratorKind::Symplectic => "symplectic",
+        }
+    }
+    pub fn parse(s: &str) -> Option<IntegratorKind> {
+        match s {
+            "euler" => Some(IntegratorKind::Euler),
+            "predictor_corrector" | "pc" => Some(IntegratorKind::PredictorCorrector),
+            "symplectic" => Some(IntegratorKind::Symplectic),
+            _ => None,
+        }
+    }
+}
+
+fn accel_unit() -> Unit {
+    crate::units::parse_simple("m/s^2").unwrap_or(Unit::ONE)
+}
+
+fn speed_unit() -> Unit {
+    crate::units::parse_simple("m/s").unwrap_or(Unit::ONE)
+}
+
+/// Adds the scene's constants (gravity, loads, prescribed velocities) as parameters of the plan's
+/// model, with their values.
+pub fn scene_params(model: &mut Model, scene: &SceneSpec) -> Vec<SceneParam> {
+    let mut out = vec![];
+    if let Some(g) = &scene.gravity {
+        let p = synthetic_param(model, "@gravity", Shape::Vec, accel_unit());
+        out.push(SceneParam { param: p, value: g.clone() });
+    }
+    for (k, l) in scene.loads.iter().enumerate() {
+        let p = synthetic_param(model, &format!("@load{k}"), Shape::Vec, accel_unit());
+        out.push(SceneParam { param: p, value: l.accel.clone() });
+    }
+    for (k, c) in scene.constraints.iter().enumerate() {
+        let p = synthetic_param(model, &format!("@constraint{k}"), Shape::Vec, speed_unit());
+        out.push(SceneParam { param: p, value: c.velocity.clone() });
+    }
+    out
+}
+
+/// `min(t / ramp, 1)`, or 1 for a step.
+fn ramp(ramp: f64) -> Expr {
+    let one = Type::scalar(Unit::ONE);
+    if ramp <= 0.0 {
+        return Expr::constant(1.0, one);
+    }
+    let frac = Expr::global(Global::Time).divided_by(Expr::constant(ramp, Type::scalar(Unit::S)));
+    Expr::new(ExprKind::Call(ir::Builtin::Min, vec![frac, Expr::constant(1.0, one)]), one)
+}
+
+/// `body == k` or `part == k`: whether a particle is in a load's or a constraint's target.
+fn on_target(model: &Model, target: super::Target) -> Option<Expr> {
+    let (name, k) = match target {
+        super::Target::Body(b) => ("body", b),
+        super::Target::Part(p) => ("part", p),
+    };
+    let f = model.field_id(name)?;
+    let ty = model.field(f).ty;
+    Some(Expr::binary(Op::Eq, Expr::field(f, ty), Expr::constant(k as f64, ty), Type::BOOL))
+}
+
+fn zero_vec(unit: Unit) -> Expr {
+    Expr::constant(0.0, Type::new(Shape::Vec, unit))
+}
+
+/// The rate of `v` with gravity and loads added.
+fn velocity_rate(plan: &Plan, scene: &SceneSpec, rate: Expr) -> Expr {
+    let model = &plan.model;
+    let mut r = rate;
+    for sp in &plan.scene_params {
+        let name = &model.params[sp.param.index()].name;
+        let p = Expr::param(sp.param, model.params[sp.param.index()].ty);
+        if name == "@gravity" {
+            r = r.plus(p);
+        } else if let Some(k) = name.strip_prefix("@load").and_then(|k| k.parse::<usize>().ok()) {
+            let load = &scene.loads[k];
+            if let Some(cond) = on_target(model, load.target) {
+                let a = p.scaled_by(ramp(load.ramp));
+                r = r.plus(Expr::select(cond, a, zero_vec(accel_unit())));
+            }
+        }
+    }
+    r
+}
+
+/// Prescribed velocities, applied after `v` is updated.
+fn constrain(plan: &Plan, scene: &SceneSpec, v: FieldId) -> Vec<Stmt> {
+    let model = &plan.model;
+    let ty = model.field(v).ty;
+    let mut out = vec![];
+    for sp in &plan.scene_params {
+        let name = &model.params[sp.param.index()].name;
+        let Some(k) = name.strip_prefix("@constraint").and_then(|k| k.parse::<usize>().ok()) else { continue };
+        let c = &scene.constraints[k];
+        let Some(cond) = on_target(model, c.target) else { continue };
+        let target = Expr::param(sp.param, model.params[sp.param.index()].ty).scaled_by(ramp(c.ramp));
+        out.push(Stmt::Set(v, Expr::select(cond, target, Expr::field(v, ty))));
+    }
+    out
+}
+
+pub fn build(plan: &mut Plan, scene: &SceneSpec, live: &Live) {
+    let present = scene.groups;
+    let rates: Vec<ir::Rate> =
+        plan.model.rates.iter().filter(|r| !r.dest.intersect(present).is_empty()).cloned().collect();
+    // Evolving state: integrated, or changed by a live correction.
+    let mut evolving: BTreeSet<FieldId> = rates.iter().map(|r| r.state).collect();
+    for e in &plan.corrections {
+        for f in &plan.model.equations[e.index()].writes {
+            if plan.model.field(*f).storage == Storage::State {
+                evolving.insert(*f);
+            }
+        }
+    }
+    let _ = live;
+    let multi = scene.integrator != super::IntegratorKind::Euler;
+    if multi {
+        for f in &evolving {
+            let orig = plan.model.field(*f).clone();
+            plan.model.fields.push(ir::Field {
+                name: format!("{}@0", orig.name),
+                ty: orig.ty,
+                storage: Storage::State,
+                init: None,
+                span: orig.span,
+            });
+            plan.saved.push((*f, FieldId(plan.model.fields.len() as u32 - 1)));
+        }
+    }
+    let v = plan.model.field_id("v");
+    let stage_count = if multi { 2 } else { 1 };
+    for stage in 0..stage_count {
+        let (updates, locals) = stage_blocks(plan, scene, &rates, &evolving, stage);
+        plan.model.locals.extend(locals);
+        let name = match (scene.integrator, stage) {
+            (super::IntegratorKind::Euler, _) => "euler",
+            (_, 0) => "predict",
+            _ => "correct",
+        };
+        plan.stages.push(Stage { name, updates, corrections: plan.corrections.clone(), derived: plan.derived.clone() });
+    }
+    let _ = v;
+    plan.actions = if multi {
+        vec![
+            Action::Save,
+            Action::Evaluate,
+            Action::Timestep,
+            Action::Update { stage: 0, time_fraction: 0.5 },
+            Action::Evaluate,
+            Action::Update { stage: 1, time_fraction: 1.0 },
+        ]
+    } else {
+        vec![Action::Evaluate, Action::Timestep, Action::Update { stage: 0, time_fraction: 1.0 }]
+    };
+}
+
+/// The statements of one stage, one block per distinct set of groups the rates apply to.
+fn stage_blocks(
+    plan: &Plan,
+    scene: &SceneSpec,
+    rates: &[ir::Rate],
+    evolving: &BTreeSet<FieldId>,
+    stage: usize,
+) -> (Vec<Block>, Vec<ir::Local>) {
+    let model = &plan.model;
+    let saved = |f: FieldId| plan.saved.iter().find(|(o, _)| *o == f).map(|(_, s)| *s);
+    let dt = || Expr::global(Global::Dt);
+    let half = |e: Expr| e.scaled_by(Expr::constant(0.5, Type::scalar(Unit::ONE)));
+    let x = model.field_id("x");
+    let v = model.field_id("v");
+    let rho = model.field_id("rho");
+    let kind = scene.integrator;
+    let mut groupsets: Vec<GroupSet> = vec![];
+    for r in rates {
+        let g = r.dest.intersect(scene.groups);
+        if !groupsets.contains(&g) {
+            groupsets.push(g);
+        }
+    }
+    let mut blocks = vec![];
+    let mut new_locals = vec![];
+    for gs in groupsets {
+        let mut lets = vec![];
+        let mut sets = vec![];
+        // All rates are read at the evaluation state before any state changes.
+        let mut rate_locals: Vec<(FieldId, ir::LocalId, Type)> = vec![];
+        for r in rates.iter().filter(|r| r.dest.intersect(scene.groups) == gs) {
+            let mut rate = r.rate.clone();
+            if Some(r.state) == v {
+                rate = velocity_rate(plan, scene, rate);
+            }
+            let id = ir::LocalId((model.locals.len() + new_locals.len()) as u32);
+            new_locals.push(ir::Local { name: format!("rate of {}", model.field(r.state).name), ty: rate.ty });
+            rate_locals.push((r.state, id, rate.ty));
+            lets.push(Stmt::Let(id, rate));
+        }
+        let rate_of = |f: FieldId| {
+            rate_locals.iter().find(|(s, _, _)| *s == f).map(|(_, id, ty)| Expr::new(ExprKind::Local(*id), *ty))
+        };
+        // v first: the symplectic position update reads the new velocity.
+        let mut order: Vec<&(FieldId, ir::LocalId, Type)> = rate_locals.iter().collect();
+        order.sort_by_key(|(f, _, _)| if Some(*f) == v { 0 } else { 1 });
+        for (f, _, _) in order {
+            let f = *f;
+            let ty = model.field(f).ty;
+            let rate = rate_of(f).expect("rate bound above");
+            let base = match (kind, saved(f)) {
+                (super::IntegratorKind::Euler, _) | (_, None) => Expr::field(f, ty),
+                (_, Some(s)) => Expr::field(s, ty),
+            };
+            let value = match (kind, stage) {
+                (super::IntegratorKind::Euler, _) => base.plus(rate.scaled_by(dt())),
+                (_, 0) => base.plus(half(rate.scaled_by(dt()))),
+                (super::IntegratorKind::Symplectic, _) if Some(f) == x && is_field(&rate_expr(rates, f), v) => {
+                    // x¹ = x⁰ + Δt (v⁰ + v¹)/2
+                    let v = v.expect("x' = v names v");
+                    let vty = model.field(v).ty;
+                    let v0 = saved(v).map(|s| Expr::field(s, vty)).unwrap_or_else(|| Expr::field(v, vty));
+                    base.plus(half(v0.plus(Expr::field(v, vty)).scaled_by(dt())))
+                }
+                (super::IntegratorKind::Symplectic, _) if Some(f) == rho => {
+                    // ρ¹ = ρ⁰ (2 − ε)/(2 + ε), ε = −(ρ̇/ρ) Δt at the half step
+                    let one = Type::scalar(Unit::ONE);
+                    let eps = Expr::new(
+                        ExprKind::Unary(Op::Neg, Box::new(rate.divided_by(Expr::field(f, ty)).scaled_by(dt()))),
+                        one,
+                    );
+                    let two = || Expr::constant(2.0, one);
+                    let factor = Expr::binary(Op::Div, two().minus(eps.clone()), two().plus(eps), one);
+                    base.scaled_by(factor)
+                }
+                _ => base.plus(rate.scaled_by(dt())),
+            };
+            sets.push(Stmt::Set(f, value));
+            if Some(f) == v {
+                sets.extend(constrain(plan, scene, f));
+            }
+        }
+        lets.extend(sets);
+        blocks.push(Block { name: format!("integrate ({})", model.group_names(gs)), dest: gs, stmts: lets });
+    }
+    // Corrected state without a rate restarts from the step's start (multi-stage only), on the
+    // groups its corrections run on.
+    if stage > 0 {
+        let integrated: BTreeSet<FieldId> = rates.iter().map(|r| r.state).collect();
+        for f in evolving.iter().filter(|f| !integrated.contains(f)) {
+            let Some(s) = saved(*f) else { continue };
+            let dest = plan
+                .corrections
+                .iter()
+                .filter(|e| model.equations[e.index()].writes.contains(f))
+                .fold(GroupSet::default(), |a, e| a.union(model.equations[e.index()].dest))
+                .intersect(scene.groups);
+            let ty = model.field(*f).ty;
+            let name = format!("restore {}", model.field(*f).name);
+            blocks.push(Block { name, dest, stmts: vec![Stmt::Set(*f, Expr::field(s, ty))] });
+        }
+    }
+    (blocks, new_locals)
+}
+
+fn rate_expr(rates: &[ir::Rate], f: FieldId) -> Expr {
+    rates.iter().find(|r| r.state == f).map(|r| r.rate.clone()).unwrap_or_else(|| Expr::constant(0.0, Type::BOOL))
+}
+
+fn is_field(e: &Expr, f: Option<FieldId>) -> bool {
+    matches!(e.kind, ExprKind::Field(g, _) if Some(g) == f)
+}

@@ -1,0 +1,264 @@
+//! Dead-code elimination and storage: which (field, group) pairs the scene needs, which
+//! equations compute them on which groups, and from that where each field is stored.
+
+use super::{FieldLayout, Plan, PlanError, SceneSpec};
+use crate::ir::{self, EqId, Equation, EquationKind, ExprKind, FieldId, GroupSet, Model, Side, Storage};
+use std::collections::{BTreeMap, BTreeSet};
+
+/// The result of the analysis.
+pub struct Live {
+    /// Live equations and the groups each runs on.
+    pub dest: BTreeMap<EqId, GroupSet>,
+    /// State fields whose initial value is computed from their `= expr`, in dependency order.
+    pub initial: Vec<FieldId>,
+    pub timesteps: Vec<usize>,
+}
+
+pub fn stmts_of(e: &Equation) -> Vec<&[ir::Stmt]> {
+    match &e.kind {
+        EquationKind::PairSum { init, body, finally, .. } => vec![init, body, finally],
+        EquationKind::Particle { body } => vec![body],
+    }
+}
+
+fn expr_fields(e: &ir::Expr, out: &mut BTreeSet<FieldId>) {
+    ir::walk_expr(e, &mut |x| {
+        if let ExprKind::Field(f, _) = x.kind {
+            out.insert(f);
+        }
+    });
+}
+
+/// Fields the engine itself needs on every group: positions and smoothing lengths for the
+/// neighbour search, velocity for the integrator, the body index when the scene refers to bodies.
+pub fn engine_fields(model: &Model, scene: &SceneSpec) -> Vec<FieldId> {
+    let mut names = vec!["x", "h", "v"];
+    let targets = scene.loads.iter().map(|l| l.target).chain(scene.constraints.iter().map(|c| c.target));
+    for t in targets {
+        let name = match t {
+            super::Target::Body(_) => "body",
+            super::Target::Part(_) => "part",
+        };
+        if !names.contains(&name) {
+            names.push(name);
+        }
+    }
+    names.iter().filter_map(|n| model.field_id(n)).collect()
+}
+
+pub fn analyse(model: &Model, scene: &SceneSpec) -> Result<Live, PlanError> {
+    let present = scene.groups;
+    let mut needed: BTreeMap<FieldId, GroupSet> = BTreeMap::new();
+    let need = |needed: &mut BTreeMap<FieldId, GroupSet>, f: FieldId, g: GroupSet| -> bool {
+        if model.field(f).storage == Storage::Temp || g.is_empty() {
+            return false;
+        }
+        let e = needed.entry(f).or_default();
+        let before = *e;
+        *e = e.union(g);
+        *e != before
+    };
+    for f in engine_fields(model, scene) {
+        need(&mut needed, f, present);
+    }
+    for r in &model.rates {
+        let g = r.dest.intersect(present);
+        need(&mut needed, r.state, g);
+        for f in &r.reads {
+            need(&mut needed, *f, g);
+        }
+    }
+    let timesteps: Vec<usize> = (0..model.timesteps.len()).collect();
+    for t in &model.timesteps {
+        for f in &t.reads {
+            need(&mut needed, *f, present);
+        }
+    }
+    for f in &scene.outputs {
+        let writers =
+            model.equations.iter().filter(|e| e.writes.contains(f)).fold(GroupSet::default(), |a, e| a.union(e.dest));
+        let on = if model.field(*f).storage == Storage::State { present } else { writers.intersect(present) };
+        need(&mut needed, *f, on);
+    }
+    // Fixed point: an equation is live on a group where one of its outputs is needed; then what
+    // it reads is needed (at i on that group, at j on its sources).
+    let mut dest: BTreeMap<EqId, GroupSet> = BTreeMap::new();
+    loop {
+        let mut changed = false;
+        for (k, e) in model.equations.iter().enumerate() {
+            let id = EqId(k as u32);
+            let wanted =
+                e.writes.iter().fold(GroupSet::default(), |a, f| a.union(needed.get(f).copied().unwrap_or_default()));
+            let on = e.dest.intersect(present).intersect(wanted);
+            if on.is_empty() {
+                continue;
+            }
+            let entry = dest.entry(id).or_default();
+            if entry.union(on) != *entry {
+                *entry = entry.union(on);
+                changed = true;
+            }
+            let on = *entry;
+            for f in &e.writes {
+                changed |= need(&mut needed, *f, on);
+            }
+            for &(f, side) in &e.reads {
+                let g = if side == Side::I { on } else { e.sources().intersect(present) };
+                changed |= need(&mut needed, f, g);
+            }
+        }
+        if !changed {
+            break;
+        }
+    }
+    let initial = initial_order(model, &needed)?;
+    Ok(Live { dest, initial, timesteps })
+}
+
+/// State fields with an initial-value expression, ordered so that each comes after what it reads.
+fn initial_order(model: &Model, needed: &BTreeMap<FieldId, GroupSet>) -> Result<Vec<FieldId>, PlanError> {
+    let mut want: BTreeSet<FieldId> = needed.keys().copied().filter(|f| model.field(*f).init.is_some()).collect();
+    // Initial values read other state (m = rho0 * vol): those are computed first.
+    let mut grew = true;
+    while grew {
+        grew = false;
+        for f in want.clone() {
+            let mut reads = BTreeSet::new();
+            if let Some(init) = &model.field(f).init {
+                expr_fields(init, &mut reads);
+            }
+            for r in reads {
+                if model.field(r).init.is_some() && want.insert(r) {
+                    grew = true;
+                }
+            }
+        }
+    }
+    let mut order = vec![];
+    let mut done: BTreeSet<FieldId> = BTreeSet::new();
+    while order.len() < want.len() {
+        let before = order.len();
+        for &f in &want {
+            if done.contains(&f) {
+                continue;
+            }
+            let mut reads = BTreeSet::new();
+            if let Some(init) = &model.field(f).init {
+                expr_fields(init, &mut reads);
+            }
+            if reads.iter().all(|r| !want.contains(r) || done.contains(r) || *r == f) {
+                order.push(f);
+                done.insert(f);
+            }
+        }
+        if order.len() == before {
+            return Err(PlanError("the initial values of the state fields depend on each other".into()));
+        }
+    }
+    Ok(order)
+}
+
+/// Where each needed field is stored: on the groups that need it. Saved copies follow their
+/// originals.
+pub fn layout(plan: &Plan, _scene: &SceneSpec) -> Vec<FieldLayout> {
+    let mut out: Vec<FieldLayout> = vec![];
+    let mut add = |f: FieldId, groups: GroupSet| {
+        if groups.is_empty() {
+            return;
+        }
+        match out.iter_mut().find(|l| l.field == f) {
+            Some(l) => l.groups = l.groups.union(groups),
+            None => out.push(FieldLayout {
+                field: f,
+                comps: ir::components(plan.model.field(f).ty.shape, plan.dim),
+                groups,
+            }),
+        }
+    };
+    for (f, g) in &plan_needed(plan) {
+        add(*f, *g);
+    }
+    out.sort_by_key(|l| l.field);
+    out
+}
+
+/// Every (field, groups) the plan's blocks touch: recomputed from the plan itself so that the
+/// integrator's saved copies and any synthesised statements are included.
+fn plan_needed(plan: &Plan) -> BTreeMap<FieldId, GroupSet> {
+    let model = &plan.model;
+    let mut m: BTreeMap<FieldId, GroupSet> = BTreeMap::new();
+    let mut touch = |f: FieldId, g: GroupSet| {
+        if model.field(f).storage != Storage::Temp {
+            let e = m.entry(f).or_default();
+            *e = e.union(g.intersect(plan.groups));
+        }
+    };
+    for f in engine_fields_of_plan(plan) {
+        touch(f, plan.groups);
+    }
+    let stmt_fields = |stmts: &[ir::Stmt], touch: &mut dyn FnMut(FieldId, Side)| {
+        ir::walk_stmts(stmts, &mut |e| {
+            if let ExprKind::Field(f, side) = e.kind {
+                touch(f, side);
+            }
+        });
+        visit_sets(stmts, &mut |f| touch(f, Side::I));
+    };
+    for p in &plan.passes {
+        for v in &p.variants {
+            let g = GroupSet::default().with(v.group);
+            for e in &v.pair_sums {
+                let eq = plan.equation(*e);
+                for s in stmts_of(eq) {
+                    stmt_fields(s, &mut |f, side| touch(f, if side == Side::I { g } else { v.sources }));
+                }
+                for f in &eq.writes {
+                    touch(*f, g);
+                }
+            }
+            for b in plan.tail_blocks(&v.tail) {
+                stmt_fields(&b.stmts, &mut |f, _| touch(f, g));
+            }
+        }
+    }
+    for st in &plan.stages {
+        for b in &st.updates {
+            stmt_fields(&b.stmts, &mut |f, _| touch(f, b.dest));
+        }
+    }
+    for e in plan.corrections.iter().chain(&plan.derived) {
+        let eq = plan.equation(*e);
+        let dest = plan_dest(plan, *e);
+        for s in stmts_of(eq) {
+            stmt_fields(s, &mut |f, _| touch(f, dest));
+        }
+    }
+    for t in &plan.timesteps {
+        for f in &model.timesteps[*t].reads {
+            touch(*f, plan.groups);
+        }
+    }
+    m
+}
+
+/// Groups a live update-phase equation runs on.
+pub fn plan_dest(plan: &Plan, e: EqId) -> GroupSet {
+    plan.equation(e).dest.intersect(plan.groups)
+}
+
+fn engine_fields_of_plan(plan: &Plan) -> Vec<FieldId> {
+    ["x", "h", "v"].iter().filter_map(|n| plan.model.field_id(n)).collect()
+}
+
+fn visit_sets(stmts: &[ir::Stmt], f: &mut dyn FnMut(FieldId)) {
+    for s in stmts {
+        match s {
+            ir::Stmt::Set(x, _) | ir::Stmt::Accum(x, _, _) => f(*x),
+            ir::Stmt::If(_, a, b) => {
+                visit_sets(a, f);
+                visit_sets(b, f);
+            }
+            ir::Stmt::Let(..) => {}
+        }
+    }
+}

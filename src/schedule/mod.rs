@@ -1,0 +1,282 @@
+//! The scheduler: from a checked model and what a scene needs, the plan of one step.
+//!
+//! - **Dead code**: only the fields that a rate, a time step, a correction or an output needs are
+//!   kept, and only the equations that compute them (`live.rs`).
+//! - **Storage by group**: a field is stored only on the groups that read or write it.
+//! - **Fusion**: pair sums that do not depend on each other share one neighbour pass; per-particle
+//!   equations and `finally` blocks run in the tail of the pass that produces their inputs;
+//!   particle equations that need only state run in the per-particle update of the integrator
+//!   (`fuse.rs`).
+//! - **Group specialisation**: every pass has one variant per destination group present.
+//! - **Integrator stages** are generated as IR statements (`integrator.rs`), so both backends run
+//!   them with the same machinery as the model's own particle equations.
+
+mod fuse;
+mod integrator;
+mod live;
+mod print;
+
+pub use integrator::IntegratorKind;
+pub use live::stmts_of;
+
+use crate::ir::{self, EqId, FieldId, GroupId, GroupSet, Model, ParamId};
+use crate::units::Unit;
+
+/// What a scene asks of the model; the scene module fills it from a case file.
+#[derive(Clone, Debug)]
+pub struct SceneSpec {
+    pub dim: usize,
+    /// The groups that have particles.
+    pub groups: GroupSet,
+    /// Fields the case writes out or reports (beyond what the step itself needs).
+    pub outputs: Vec<FieldId>,
+    pub integrator: IntegratorKind,
+    /// Gravity (length `dim`), applied to the rate of `v`.
+    pub gravity: Option<Vec<f64>>,
+    /// Forces on whole bodies, spread over the body's mass and ramped linearly in time.
+    pub loads: Vec<Load>,
+    /// Bodies whose velocity is prescribed.
+    pub constraints: Vec<Constraint>,
+}
+
+/// The particles a load or a constraint acts on: a whole body, or a part (a region of a body).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Target {
+    Body(usize),
+    Part(usize),
+}
+
+#[derive(Clone, Debug)]
+pub struct Load {
+    pub target: Target,
+    /// Acceleration at full load: the force divided by the body's mass (length `dim`).
+    pub accel: Vec<f64>,
+    /// Time over which the load ramps from 0; 0 for a step load.
+    pub ramp: f64,
+}
+
+#[derive(Clone, Debug)]
+pub struct Constraint {
+    pub target: Target,
+    /// The velocity at the end of the ramp (zeros: a fixed body).
+    pub velocity: Vec<f64>,
+    pub ramp: f64,
+}
+
+/// A per-particle block: a particle equation, a pair sum's `finally`, or integrator statements.
+#[derive(Clone, Debug)]
+pub struct Block {
+    pub name: String,
+    pub dest: GroupSet,
+    pub stmts: Vec<ir::Stmt>,
+}
+
+/// What runs after a pass's neighbour loop, per particle, in this order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TailItem {
+    /// The `finally` block of a pair sum of this pass.
+    Finally(EqId),
+    /// A particle equation.
+    Particle(EqId),
+}
+
+/// A neighbour pass specialised for one destination group.
+#[derive(Clone, Debug)]
+pub struct PassVariant {
+    pub group: GroupId,
+    pub pair_sums: Vec<EqId>,
+    pub tail: Vec<TailItem>,
+    /// The groups any of the pair sums reads neighbours from.
+    pub sources: GroupSet,
+}
+
+/// One traversal of the neighbours of every particle, with the per-particle work fused after it.
+#[derive(Clone, Debug)]
+pub struct Pass {
+    pub pair_sums: Vec<EqId>,
+    pub tail: Vec<TailItem>,
+    pub variants: Vec<PassVariant>,
+    /// Fields read (either side) and written, for the plan's report.
+    pub reads: Vec<FieldId>,
+    pub writes: Vec<FieldId>,
+}
+
+/// One per-particle update of the integrator: rates applied to the state, constraints, then the
+/// corrections (return maps, damage) and the particle equations that need only state.
+#[derive(Clone, Debug)]
+pub struct Stage {
+    pub name: &'static str,
+    pub updates: Vec<Block>,
+    pub corrections: Vec<EqId>,
+    pub derived: Vec<EqId>,
+}
+
+/// The steps of the integrator, in order.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Action {
+    /// Copy the evolving state to its saved copy (start of a multi-stage step).
+    Save,
+    /// Build the neighbour search and run every pass: the rates at the current state.
+    Evaluate,
+    /// Compute the time step from the `timestep` limits (after the step's first evaluation).
+    Timestep,
+    /// Run stage k at time t + fraction × dt.
+    Update { stage: usize, time_fraction: f64 },
+}
+
+/// Where a live field is stored.
+#[derive(Clone, Debug)]
+pub struct FieldLayout {
+    pub field: FieldId,
+    pub comps: usize,
+    pub groups: GroupSet,
+}
+
+/// A synthesised scene constant: a value of the plan's own parameters (gravity, loads).
+#[derive(Clone, Debug)]
+pub struct SceneParam {
+    pub param: ParamId,
+    pub value: Vec<f64>,
+}
+
+#[derive(Clone, Debug)]
+pub struct Plan {
+    /// The model, extended with the plan's synthetic fields (saved state) and parameters.
+    pub model: Model,
+    pub dim: usize,
+    pub groups: GroupSet,
+    pub kernel: ir::KernelId,
+    pub layout: Vec<FieldLayout>,
+    pub passes: Vec<Pass>,
+    pub stages: Vec<Stage>,
+    pub actions: Vec<Action>,
+    pub integrator: IntegratorKind,
+    /// Live equations that run in the update (corrections, then state-only particle equations).
+    pub corrections: Vec<EqId>,
+    pub derived: Vec<EqId>,
+    /// State fields whose initial value the engine computes, in dependency order.
+    pub initial: Vec<FieldId>,
+    pub timesteps: Vec<usize>,
+    pub scene_params: Vec<SceneParam>,
+    /// Saved copies of the evolving state (multi-stage integrators): (field, copy).
+    pub saved: Vec<(FieldId, FieldId)>,
+}
+
+/// A reason the plan cannot be made for this scene.
+#[derive(Debug, Clone)]
+pub struct PlanError(pub String);
+
+impl std::fmt::Display for PlanError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl Plan {
+    pub fn build(model: &Model, scene: &SceneSpec, kernel: Option<&str>) -> Result<Plan, PlanError> {
+        let kernel = match kernel {
+            Some(name) => model.kernel_id(name).ok_or_else(|| {
+                let names: Vec<&str> = model.kernels.iter().map(|k| k.name.as_str()).collect();
+                PlanError(format!("unknown kernel `{name}`; the model defines: {}", names.join(", ")))
+            })?,
+            None => model.kernel.ok_or_else(|| {
+                PlanError("the model names no kernel (`kernel = name`) and the case sets none".into())
+            })?,
+        };
+        check_components(model, scene.dim)?;
+        let mut model = model.clone();
+        let scene_params = integrator::scene_params(&mut model, scene);
+        let live = live::analyse(&model, scene)?;
+        let fuse::Fused { passes, corrections, derived } = fuse::fuse(&model, scene, &live)?;
+        let mut plan = Plan {
+            dim: scene.dim,
+            groups: scene.groups,
+            kernel,
+            layout: vec![],
+            passes,
+            stages: vec![],
+            actions: vec![],
+            integrator: scene.integrator,
+            corrections,
+            derived,
+            initial: live.initial.clone(),
+            timesteps: live.timesteps.clone(),
+            scene_params,
+            saved: vec![],
+            model,
+        };
+        integrator::build(&mut plan, scene, &live);
+        plan.layout = live::layout(&plan, scene);
+        Ok(plan)
+    }
+
+    pub fn field_layout(&self, f: FieldId) -> Option<&FieldLayout> {
+        self.layout.iter().find(|l| l.field == f)
+    }
+
+    pub fn equation(&self, e: EqId) -> &ir::Equation {
+        &self.model.equations[e.index()]
+    }
+
+    /// The blocks a pass variant runs after its neighbour loop.
+    pub fn tail_blocks(&self, tail: &[TailItem]) -> Vec<Block> {
+        tail.iter()
+            .map(|t| match *t {
+                TailItem::Finally(e) | TailItem::Particle(e) => {
+                    let eq = self.equation(e);
+                    let stmts = match &eq.kind {
+                        ir::EquationKind::PairSum { finally, .. } => finally.clone(),
+                        ir::EquationKind::Particle { body } => body.clone(),
+                    };
+                    Block { name: eq.name.clone(), dest: eq.dest, stmts }
+                }
+            })
+            .collect()
+    }
+
+    /// Bytes of particle state per particle of a group (all live fields stored there).
+    pub fn bytes_per_particle(&self, g: GroupId, real_bytes: usize) -> usize {
+        self.layout.iter().filter(|l| l.groups.contains(g)).map(|l| l.comps * real_bytes).sum::<usize>()
+    }
+
+    pub fn describe(&self, real_bytes: usize) -> String {
+        print::describe(self, real_bytes)
+    }
+}
+
+/// Components `.z`, `.xz`… must exist in the scene's dimension.
+fn check_components(model: &Model, dim: usize) -> Result<(), PlanError> {
+    let mut bad = None;
+    let mut visit = |e: &ir::Expr| {
+        if let ir::ExprKind::Component(_, r, c) = e.kind {
+            if r as usize >= dim || c as usize >= dim {
+                bad = Some(e.span);
+            }
+        }
+    };
+    for e in &model.equations {
+        for s in live::stmts_of(e) {
+            ir::walk_stmts(s, &mut visit);
+        }
+    }
+    match bad {
+        Some(_) => {
+            Err(PlanError(format!("the model reads a component that a {dim}D scene does not have (`.z` in 2D?)")))
+        }
+        None => Ok(()),
+    }
+}
+
+/// A parameter added by the plan, if the model does not have it yet.
+pub(crate) fn synthetic_param(model: &mut Model, name: &str, shape: ir::Shape, unit: Unit) -> ParamId {
+    if let Some(p) = model.param_id(name) {
+        return p;
+    }
+    model.params.push(ir::Param {
+        name: name.into(),
+        ty: ir::Type::new(shape, unit),
+        default: None,
+        span: Default::default(),
+    });
+    ParamId(model.params.len() as u32 - 1)
+}

@@ -1,0 +1,111 @@
+//! `pairsum plan`: the passes, what each fuses, reads and writes, and bytes per particle.
+
+use super::{Action, Plan, TailItem};
+use crate::ir::{FieldId, Storage};
+use std::fmt::Write;
+
+fn names(plan: &Plan, ids: &[crate::ir::EqId]) -> String {
+    ids.iter().map(|e| plan.equation(*e).name.as_str()).collect::<Vec<_>>().join(", ")
+}
+
+fn bytes(plan: &Plan, fields: &[FieldId], real: usize) -> usize {
+    fields.iter().filter_map(|f| plan.field_layout(*f)).map(|l| l.comps * real).sum()
+}
+
+fn field_list(plan: &Plan, fields: &[FieldId]) -> String {
+    fields
+        .iter()
+        .filter(|f| plan.field_layout(**f).is_some())
+        .map(|f| plan.model.field(*f).name.as_str())
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+pub fn describe(plan: &Plan, real: usize) -> String {
+    let m = &plan.model;
+    let mut s = String::new();
+    let evals = plan.actions.iter().filter(|a| **a == Action::Evaluate).count();
+    let _ = writeln!(
+        s,
+        "plan: {}D, groups {}, kernel {}, integrator {} ({} evaluation(s) per step), {} byte reals",
+        plan.dim,
+        m.group_names(plan.groups),
+        m.kernels[plan.kernel.index()].name,
+        plan.integrator.name(),
+        evals,
+        real
+    );
+    let x_h: Vec<FieldId> = ["x", "h"].iter().filter_map(|n| m.field_id(n)).collect();
+    let mut total_r = 0;
+    let mut total_w = 0;
+    for (k, p) in plan.passes.iter().enumerate() {
+        let _ = writeln!(s, "pass {}: neighbour loop of {}", k + 1, names(plan, &p.pair_sums));
+        let tail: Vec<String> = p
+            .tail
+            .iter()
+            .map(|t| match t {
+                TailItem::Finally(e) => format!("finally {}", plan.equation(*e).name),
+                TailItem::Particle(e) => plan.equation(*e).name.clone(),
+            })
+            .collect();
+        if !tail.is_empty() {
+            let _ = writeln!(s, "  then per particle: {}", tail.join(", "));
+        }
+        for v in &p.variants {
+            let _ = writeln!(
+                s,
+                "  on {} from {}: {}",
+                m.groups[v.group.index()].name,
+                m.group_names(v.sources),
+                names(plan, &v.pair_sums)
+            );
+        }
+        let mut reads = p.reads.clone();
+        for f in &x_h {
+            if !reads.contains(f) {
+                reads.push(*f);
+            }
+        }
+        reads.sort();
+        let writes: Vec<FieldId> = p.writes.iter().copied().filter(|f| m.field(*f).storage != Storage::Temp).collect();
+        let (r, w) = (bytes(plan, &reads, real), bytes(plan, &writes, real));
+        total_r += r;
+        total_w += w;
+        let _ = writeln!(s, "  reads  {r:>4} B/particle: {}", field_list(plan, &reads));
+        let _ = writeln!(s, "  writes {w:>4} B/particle: {}", field_list(plan, &writes));
+    }
+    for (k, st) in plan.stages.iter().enumerate() {
+        let ups: Vec<&str> = st.updates.iter().map(|b| b.name.as_str()).collect();
+        let _ = writeln!(
+            s,
+            "update {} ({}): {}; corrections: {}; then: {}",
+            k + 1,
+            st.name,
+            ups.join(", "),
+            if st.corrections.is_empty() { "none".into() } else { names(plan, &st.corrections) },
+            if st.derived.is_empty() { "nothing".into() } else { names(plan, &st.derived) }
+        );
+    }
+    let _ = writeln!(s, "per step: passes read {total_r} B and write {total_w} B per particle, per evaluation");
+    let _ = writeln!(s, "stored fields:");
+    for l in &plan.layout {
+        let f = m.field(l.field);
+        let _ = writeln!(
+            s,
+            "  {:<12} {:<10} {:>3} B  on {}",
+            f.name,
+            f.ty.shape.name(),
+            l.comps * real,
+            m.group_names(l.groups)
+        );
+    }
+    for g in plan.groups.iter(m.groups.len()) {
+        let _ = writeln!(
+            s,
+            "particle state on {}: {} B/particle",
+            m.groups[g.index()].name,
+            plan.bytes_per_particle(g, real)
+        );
+    }
+    s
+}
