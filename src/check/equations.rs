@@ -27,6 +27,12 @@ struct EqState {
 }
 
 impl Checker {
+    /// A field's name as the user wrote it (`acc` temporaries are stored as `sum.name`).
+    fn display_name(&self, f: FieldId) -> String {
+        let name = &self.model.field(f).name;
+        name.rsplit('.').next().unwrap_or(name).to_string()
+    }
+
     /// Output declarations (`-> drho: scalar [...]`) declare fields before any body is checked, so
     /// that equations may read each other's results in any file order.
     pub(crate) fn declare_outputs(&mut self, items: &[&Item]) {
@@ -254,7 +260,7 @@ impl Checker {
             ast::Stmt::Assign { target, value, span } => {
                 let f = self.target(target, st)?;
                 if bk == Block::Loop {
-                    let fname = self.model.field(f).name.clone();
+                    let fname = self.display_name(f);
                     self.error(
                         Diagnostic::error(
                             "E0304",
@@ -271,7 +277,7 @@ impl Checker {
                     return None;
                 }
                 let ty = self.model.field(f).ty;
-                let fname = self.model.field(f).name.clone();
+                let fname = self.display_name(f);
                 let x = self.expr_as(value, cx, ty, &format!("the value of `{fname}`"))?;
                 Some(ir::Stmt::Set(f, x))
             }
@@ -296,7 +302,7 @@ impl Checker {
                 };
                 if let Some((prev, prev_span)) = st.reduce.get(&f) {
                     if *prev != reduce {
-                        let fname = self.model.field(f).name.clone();
+                        let fname = self.display_name(f);
                         self.error(
                             Diagnostic::error(
                                 "E0310",
@@ -311,7 +317,7 @@ impl Checker {
                     st.reduce.insert(f, (reduce, *span));
                 }
                 let ty = self.model.field(f).ty;
-                let fname = self.model.field(f).name.clone();
+                let fname = self.display_name(f);
                 let mut x = self.expr_as(value, cx, ty, &format!("what is added to `{fname}`"))?;
                 if *op == AccumOp::Sub {
                     let (t, sp) = (x.ty, x.span);

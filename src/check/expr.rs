@@ -221,7 +221,9 @@ impl Checker {
     }
 
     fn field_read(&mut self, f: FieldId, side: Side, span: Span, cx: &Cx) -> Option<Expr> {
-        let fld = self.model.field(f).clone();
+        let mut fld = self.model.field(f).clone();
+        // `acc` temporaries are stored as `sum.name`; messages use the name as written.
+        fld.name = fld.name.rsplit('.').next().unwrap_or(&fld.name).to_string();
         match cx.at {
             Where::Const | Where::Material | Where::Kernel => {
                 self.error(

@@ -179,11 +179,7 @@ pub fn load(path: &Path, sources: &mut Sources, opts: &Options) -> Result<Scene,
     let text = std::fs::read_to_string(path)
         .map_err(|e| vec![Diagnostic::error("C0001", format!("cannot read `{}`: {e}", path.display()))])?;
     let file = sources.add(check::load::display_path(path), text.clone());
-    let case: CaseFile = toml::from_str(&text).map_err(|e| {
-        let span = e.span().unwrap_or(0..0);
-        let msg = e.message().trim().to_string();
-        vec![Diagnostic::error("C0001", format!("case file: {msg}")).at(Span::new(file, span.start, span.end), msg)]
-    })?;
+    let case: CaseFile = toml::from_str(&text).map_err(|e| vec![toml_error(file, &e)])?;
     let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
     let mut diags = vec![];
     // The model.
@@ -203,6 +199,25 @@ pub fn load(path: &Path, sources: &mut Sources, opts: &Options) -> Result<Scene,
         Some(s) if !diags.iter().any(|d| d.is_error()) => Ok(s),
         _ => Err(diags),
     }
+}
+
+/// A TOML or shape error of the case file, with a suggestion for a misspelt key.
+fn toml_error(file: u32, e: &toml::de::Error) -> Diagnostic {
+    let span = e.span().unwrap_or(0..0);
+    let msg = e.message().trim().to_string();
+    let at = Span::new(file, span.start, span.end);
+    if let Some(rest) = msg.strip_prefix("unknown field `") {
+        let key = rest.split('`').next().unwrap_or("");
+        let expected: Vec<&str> =
+            rest.split("expected one of ").nth(1).unwrap_or("").split(", ").map(|k| k.trim_matches('`')).collect();
+        let mut d = Diagnostic::error("C0001", format!("case file: unknown key `{key}`")).at(at, "not a key here");
+        d = match closest(key, expected.iter().copied()) {
+            Some(best) => d.help(format!("did you mean `{best}`?")),
+            None => d.note(format!("the keys here are: {}", expected.join(", "))),
+        };
+        return d;
+    }
+    Diagnostic::error("C0001", format!("case file: {msg}")).at(at, msg)
 }
 
 fn load_model(

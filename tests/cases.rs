@@ -1,0 +1,174 @@
+//! The bundled cases at their CI resolution: each runs end to end on the CPU backend and every
+//! reported figure lies within the case's stated tolerance of its reference. Also restarts, the
+//! plan of a stdlib solid model, and what a broken case file gets.
+
+use pairsum::backend::cpu::CpuBackend;
+use pairsum::backend::Backend;
+use pairsum::engine::{checkpoint, setup, Engine};
+use pairsum::runner::{prepare, run_case, BackendChoice, Precision, RunOptions};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn case(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("cases").join(format!("{name}.toml"))
+}
+
+fn out_dir(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("pairsum-test-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+/// Runs a case on the CPU at CI resolution and checks every result against its tolerance.
+fn run_and_check(name: &str, precision: Precision) {
+    let opts =
+        RunOptions { backend: BackendChoice::Cpu, precision, out: out_dir(name), vtk: false, ..RunOptions::default() };
+    let (scene, _) = prepare(&case(name), &opts.scene).unwrap_or_else(|e| panic!("{e}"));
+    let outcome = run_case(&case(name), &opts).unwrap_or_else(|e| panic!("{name}: {e}"));
+    assert!(!outcome.report.results.is_empty(), "{name} reports nothing");
+    for (row, spec) in outcome.report.results.iter().zip(&scene.results) {
+        let tol =
+            spec.tolerance.or(scene.tolerance).unwrap_or_else(|| panic!("{name}: no tolerance for {}", row.quantity));
+        let err = row.rel_error.unwrap_or_else(|| panic!("{name}: {} has no reference", row.quantity));
+        assert!(
+            err.abs() <= tol,
+            "{name}: {} = {} vs {:?}: error {:+.2} % beyond ±{} %",
+            row.quantity,
+            row.value,
+            row.reference,
+            100.0 * err,
+            100.0 * tol
+        );
+    }
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(opts.out.join("report.json")).expect("report.json"))
+            .expect("json");
+    for key in ["case", "backend", "precision", "particles", "steps", "wall_s", "particle_steps_per_s", "results"] {
+        assert!(json.get(key).is_some(), "report.json lacks `{key}`");
+    }
+    let _ = std::fs::remove_dir_all(&opts.out);
+}
+
+#[test]
+fn elastic_wave_speed_is_within_3_percent_of_the_bar_speed() {
+    run_and_check("elastic_wave", Precision::F64);
+}
+
+#[test]
+fn elastic_wave_runs_in_f32_too() {
+    run_and_check("elastic_wave", Precision::F32);
+}
+
+#[test]
+fn cantilever_tip_deflection_is_within_10_percent_of_timoshenko() {
+    run_and_check("cantilever", Precision::F64);
+}
+
+fn engine_for(name: &str) -> Engine<CpuBackend<f64>> {
+    let (scene, plan) = prepare(&case(name), &Default::default()).unwrap_or_else(|e| panic!("{e}"));
+    let store = setup::build_store::<f64>(&plan, &scene.particles, &scene.materials).expect("store");
+    let b = CpuBackend::new(plan, store, scene.mirrors.clone()).expect("backend");
+    let mut e = Engine::new(b, scene.config.clone());
+    e.initialise().expect("initialise");
+    e
+}
+
+#[test]
+fn restart_from_a_checkpoint_equals_an_uninterrupted_run_bit_for_bit() {
+    // Straight through: 60 steps (two Morton reorders on the way).
+    let mut straight = engine_for("cantilever");
+    for _ in 0..60 {
+        straight.step().expect("step");
+    }
+    // Interrupted after 30 steps, checkpointed, resumed in a fresh engine.
+    let dir = out_dir("restart");
+    std::fs::create_dir_all(&dir).expect("dir");
+    let file = dir.join("checkpoint.bin");
+    let mut first = engine_for("cantilever");
+    for _ in 0..30 {
+        first.step().expect("step");
+    }
+    checkpoint::write(&first, &file).expect("write checkpoint");
+    drop(first);
+    let mut resumed = engine_for("cantilever");
+    checkpoint::read(&mut resumed, &file).expect("read checkpoint");
+    for _ in 0..30 {
+        resumed.step().expect("step");
+    }
+    assert_eq!(resumed.step, straight.step);
+    assert_eq!(resumed.time.to_bits(), straight.time.to_bits());
+    let (a, b) = (straight.backend.snapshot(), resumed.backend.snapshot());
+    assert_eq!(a.id, b.id, "particle order");
+    for (k, (x, y)) in a.columns.iter().zip(&b.columns).enumerate() {
+        if let (Some(x), Some(y)) = (x, y) {
+            let differ = x.iter().zip(y).filter(|(p, q)| p.to_bits() != q.to_bits()).count();
+            assert_eq!(differ, 0, "field {} differs in {differ} values", straight.backend.plan().model.fields[k].name);
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_case_file_with_a_wrong_unit_gets_a_spanned_diagnostic_and_exit_1() {
+    let dir = out_dir("badcase");
+    std::fs::create_dir_all(&dir).expect("dir");
+    let text =
+        std::fs::read_to_string(case("elastic_wave")).expect("case").replace("E = \"100 MPa\"", "E = \"100 m/s\"");
+    let bad = dir.join("bad.toml");
+    std::fs::write(&bad, text).expect("write");
+    let out = Command::new(env!("CARGO_BIN_EXE_pairsum"))
+        .args(["run", bad.to_str().unwrap(), "--backend", "cpu"])
+        .output()
+        .expect("runs");
+    assert_eq!(out.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("wrong unit for `E` of material `bar`: expected kg m^-1 s^-2 (Pa), found m s^-1 (m/s)"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("bad.toml:20:5"), "no line and column in:\n{stderr}");
+    // An unknown key is an error too, at its place.
+    let text = std::fs::read_to_string(case("elastic_wave"))
+        .expect("case")
+        .replace("dim = 1", "dim = 1\nintegrator_typo = \"euler\"");
+    std::fs::write(&bad, text).expect("write");
+    let out = Command::new(env!("CARGO_BIN_EXE_pairsum")).args(["run", bad.to_str().unwrap()]).output().expect("runs");
+    assert_eq!(out.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("unknown key `integrator_typo`") && stderr.contains("bad.toml:10:1"), "{stderr}");
+    assert!(stderr.contains("did you mean `integrator`?"), "{stderr}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn the_plan_of_the_corrected_solid_model_fuses_l_continuity_and_velocity_gradient() {
+    let out = Command::new(env!("CARGO_BIN_EXE_pairsum"))
+        .args([
+            "plan",
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("stdlib/models/elastic_solid_corrected.sph").to_str().unwrap(),
+        ])
+        .output()
+        .expect("runs");
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = String::from_utf8_lossy(&out.stdout);
+    let line = |prefix: &str| {
+        text.lines().find(|l| l.starts_with(prefix)).unwrap_or_else(|| panic!("no `{prefix}` in\n{text}")).to_string()
+    };
+    let p1 = line("pass 1:");
+    for eq in ["continuity", "gradient_correction", "velocity_gradient"] {
+        assert!(p1.contains(eq), "{p1}");
+    }
+    assert!(!p1.contains("momentum"), "{p1}");
+    assert_eq!(line("pass 2:"), "pass 2: neighbour loop of momentum");
+    assert!(!text.contains("pass 3:"), "{text}");
+    // The Jaumann rate runs in the tail of pass 1; the equation of state in the update.
+    assert!(
+        text.contains(
+            "then per particle: finally continuity, finally gradient_correction, finally velocity_gradient, jaumann"
+        ),
+        "{text}"
+    );
+    assert!(text.contains("then: eos"), "{text}");
+    // Bytes per particle are reported per pass.
+    assert!(line("  reads").contains("B/particle"));
+}
