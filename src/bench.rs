@@ -18,6 +18,24 @@ use std::time::Instant;
 
 /// The elastic model and a cubic block of about `n` particles with non-trivial velocity and stress.
 pub fn elastic_block(n: usize) -> Result<CpuBackend<f64>, String> {
+    let (plan, store) = elastic_store::<f64>(n)?;
+    let mut b = CpuBackend::new(plan, store, vec![]).map_err(|e| e.0)?;
+    b.initialise().map_err(|e| e.0)?;
+    b.reorder();
+    Ok(b)
+}
+
+/// The same block on the GPU (f32), if an adapter is found.
+pub fn elastic_block_gpu(n: usize) -> Result<crate::backend::gpu::GpuBackend, String> {
+    let gpu = crate::backend::gpu::device::Gpu::new().map_err(|e| e.to_string())?;
+    let (plan, store) = elastic_store::<f32>(n)?;
+    let mut b = crate::backend::gpu::GpuBackend::new(gpu, plan, store, &[]).map_err(|e| e.0)?;
+    b.initialise().map_err(|e| e.0)?;
+    b.reorder();
+    Ok(b)
+}
+
+fn elastic_store<T: crate::particles::Real>(n: usize) -> Result<(Plan, Store<T>), String> {
     let mut sources = Sources::new();
     let checked = check_stdlib_modules(&mut sources, &["models/elastic_solid.sph"], Stdlib::locate());
     if checked.has_errors() {
@@ -64,18 +82,15 @@ pub fn elastic_block(n: usize) -> Result<CpuBackend<f64>, String> {
         constraints: vec![],
     };
     let plan = Plan::build(&model, &scene, None).map_err(|e| e.0)?;
-    let mut store: Store<f64> = build_store(&plan, &input, &[mat]).map_err(|e| e.0)?;
+    let mut store: Store<T> = build_store(&plan, &input, &[mat]).map_err(|e| e.0)?;
     // A non-trivial stress state.
     let s = plan.model.field_id("s").expect("s");
     if let Some(col) = store.column_mut(s) {
         for (k, v) in col.data.iter_mut().enumerate() {
-            *v = 1e6 * ((k * 7919 % 1000) as f64 / 1000.0 - 0.5);
+            *v = T::from_f64(1e6 * ((k * 7919 % 1000) as f64 / 1000.0 - 0.5));
         }
     }
-    let mut b = CpuBackend::new(plan, store, vec![]).map_err(|e| e.0)?;
-    b.initialise().map_err(|e| e.0)?;
-    b.reorder();
-    Ok(b)
+    Ok((plan, store))
 }
 
 /// Outputs of the native step, per particle (same layouts as the store).
@@ -295,7 +310,7 @@ pub fn run(sizes: &[usize], reps: usize) -> Result<String, String> {
         if crate::backend::cpu::program::wide_simd() { ", AVX2 lane loops" } else { "" }
     ));
     out.push_str(
-        "particles   closure [ms]  native [ms]  closure/native  cell list share  steps/s (closure)  max rel diff\n",
+        "particles   closure [ms]  native [ms]  closure/native  cell list share  steps/s (closure)  max rel diff  steps/s (gpu, f32)\n",
     );
     for &n in sizes {
         let mut b = elastic_block(n)?;
@@ -313,8 +328,21 @@ pub fn run(sizes: &[usize], reps: usize) -> Result<String, String> {
         let native = native_step(&b, &grid);
         b.evaluate(Globals::default()).map_err(|e| e.0)?;
         let diff = compare(&b, &native);
+        let gpu = match elastic_block_gpu(n) {
+            Ok(mut g) => {
+                let mut best = f64::INFINITY;
+                for _ in 0..reps {
+                    let t = Instant::now();
+                    g.evaluate(Globals::default()).map_err(|e| e.0)?;
+                    g.gpu().wait().map_err(|e| e.to_string())?;
+                    best = best.min(t.elapsed().as_secs_f64());
+                }
+                format!("{:.1} ({})", 1.0 / best, g.describe())
+            }
+            Err(e) => format!("- ({})", e.lines().next().unwrap_or_default()),
+        };
         out.push_str(&format!(
-            "{:>9}   {:>11.2}  {:>11.2}  {:>14.2}  {:>14.1} %  {:>17.1}  {:>12.1e}\n",
+            "{:>9}   {:>11.2}  {:>11.2}  {:>14.2}  {:>14.1} %  {:>17.1}  {:>12.1e}  {gpu}\n",
             b.particles(),
             1e3 * t_closure,
             1e3 * (t_native + t_grid),

@@ -54,9 +54,29 @@ enum Command {
         /// No progress bar
         #[arg(long)]
         quiet: bool,
+        /// Set a case parameter (`${name}` in the case file): --set v_impact=250
+        #[arg(long = "set", value_parser = parse_set)]
+        set: Vec<(String, String)>,
     },
     /// List the bundled cases
     Cases,
+    /// Write the generated code of a model or a case
+    Emit {
+        /// A model (.sph) or a case (.toml); with --all, every stdlib model and bundled case
+        path: Option<PathBuf>,
+        /// wgsl
+        #[arg(long, default_value = "wgsl")]
+        target: String,
+        /// Output directory (default: print to stdout)
+        #[arg(short = 'o', long)]
+        out: Option<PathBuf>,
+        /// Dimension, for a model
+        #[arg(long, default_value_t = 3)]
+        dim: usize,
+        /// Regenerate shaders_gen/ for every stdlib model and bundled case
+        #[arg(long)]
+        all: bool,
+    },
     /// Benchmark the closure backend against a hand-written native step (ratios from one run)
     Bench {
         /// Particle counts
@@ -105,12 +125,24 @@ pub fn main() -> i32 {
             restart,
             max_steps,
             quiet,
+            set,
         } => {
-            let opts =
-                RunArgs { backend, precision, resolution, out, end_time, checkpoint_every, restart, max_steps, quiet };
+            let opts = RunArgs {
+                backend,
+                precision,
+                resolution,
+                out,
+                end_time,
+                checkpoint_every,
+                restart,
+                max_steps,
+                quiet,
+                set,
+            };
             run_run(&case, opts)
         }
         Command::Cases => run_cases(),
+        Command::Emit { path, target, out, dim, all } => run_emit(path.as_deref(), &target, out.as_deref(), dim, all),
         Command::Bench { particles, reps } => match crate::bench::run(&particles, reps.max(1)) {
             Ok(table) => {
                 print!("{table}");
@@ -244,7 +276,14 @@ fn run_cases() -> i32 {
     0
 }
 
+fn parse_set(s: &str) -> Result<(String, String), String> {
+    s.split_once('=')
+        .map(|(k, v)| (k.trim().to_string(), v.trim().to_string()))
+        .ok_or_else(|| format!("expected name=value, found `{s}`"))
+}
+
 struct RunArgs {
+    set: Vec<(String, String)>,
     backend: String,
     precision: String,
     resolution: Option<String>,
@@ -257,7 +296,7 @@ struct RunArgs {
 }
 
 fn run_run(case: &str, a: RunArgs) -> i32 {
-    use crate::runner::{run_case, BackendChoice, Precision, RunFailure, RunOptions};
+    use crate::runner::{run_file, BackendChoice, Precision, RunFailure, RunOptions};
     let backend = match a.backend.as_str() {
         "cpu" => BackendChoice::Cpu,
         "gpu" => BackendChoice::Gpu,
@@ -290,7 +329,7 @@ fn run_run(case: &str, a: RunArgs) -> i32 {
     let opts = RunOptions {
         backend,
         precision,
-        scene: crate::scene::Options { resolution: a.resolution, end_time: a.end_time },
+        scene: crate::scene::Options { resolution: a.resolution, end_time: a.end_time, set: a.set },
         out,
         progress: !a.quiet && std::io::IsTerminal::is_terminal(&std::io::stderr()),
         checkpoint_every: a.checkpoint_every,
@@ -298,7 +337,7 @@ fn run_run(case: &str, a: RunArgs) -> i32 {
         max_steps: a.max_steps,
         vtk: true,
     };
-    match run_case(&path, &opts) {
+    match run_file(&path, &opts) {
         Ok(o) => {
             let r = &o.report;
             eprintln!(
@@ -373,5 +412,104 @@ fn run_plan(path: &Path, dim: usize, integrator: &str, precision: &str) -> i32 {
             eprintln!("error: {e}");
             1
         }
+    }
+}
+
+/// The plan of a model file with a default scene (every group present), or of a case.
+pub fn plan_of(path: &Path, dim: usize) -> Result<crate::schedule::Plan, String> {
+    if path.extension().is_some_and(|e| e == "toml") {
+        return crate::runner::prepare(path, &crate::scene::Options::default())
+            .map(|(_, p)| p)
+            .map_err(|e| e.to_string());
+    }
+    let mut sources = Sources::new();
+    let checked = check::check_paths(&mut sources, &[path], Stdlib::locate());
+    if checked.has_errors() {
+        return Err(render(&sources, &checked.diags));
+    }
+    let scene = crate::schedule::SceneSpec {
+        dim,
+        groups: checked.model.all_groups(),
+        outputs: vec![],
+        integrator: crate::schedule::IntegratorKind::PredictorCorrector,
+        gravity: None,
+        loads: vec![],
+        constraints: vec![],
+    };
+    crate::schedule::Plan::build(&checked.model, &scene, None).map_err(|e| e.0)
+}
+
+/// Every (directory under shaders_gen, model or case path) that `emit --all` writes.
+pub fn shader_sources(root: &Path) -> Vec<(PathBuf, PathBuf)> {
+    let mut out = vec![];
+    for m in sph_files(&[root.join("stdlib/models")]) {
+        let stem = m.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+        out.push((PathBuf::from("models").join(stem), m));
+    }
+    for c in bundled_cases() {
+        let stem = c.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+        out.push((PathBuf::from("cases").join(stem), c));
+    }
+    out
+}
+
+/// Writes the WGSL of one model or case into `dir` (replacing what was there).
+pub fn write_wgsl(path: &Path, dim: usize, dir: &Path) -> Result<usize, String> {
+    let plan = plan_of(path, dim)?;
+    let files = crate::backend::wgsl::files(&plan)?;
+    let _ = std::fs::remove_dir_all(dir);
+    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    for (name, text) in &files {
+        std::fs::write(dir.join(name), text).map_err(|e| format!("{}: {e}", dir.join(name).display()))?;
+    }
+    Ok(files.len())
+}
+
+fn run_emit(path: Option<&Path>, target: &str, out: Option<&Path>, dim: usize, all: bool) -> i32 {
+    if target != "wgsl" {
+        eprintln!("error: the only target is wgsl");
+        return 2;
+    }
+    if all {
+        let root = Path::new(".");
+        let gen = out.map(Path::to_path_buf).unwrap_or_else(|| PathBuf::from("shaders_gen"));
+        for (sub, src) in shader_sources(root) {
+            match write_wgsl(&src, 3, &gen.join(&sub)) {
+                Ok(n) => eprintln!("{}: {n} kernels", gen.join(&sub).display()),
+                Err(e) => {
+                    eprintln!("error: {}: {e}", src.display());
+                    return 1;
+                }
+            }
+        }
+        return 0;
+    }
+    let Some(path) = path else {
+        eprintln!("error: name a model or a case, or use --all");
+        return 2;
+    };
+    match out {
+        Some(dir) => match write_wgsl(path, dim, dir) {
+            Ok(n) => {
+                eprintln!("{n} kernels in {}", dir.display());
+                0
+            }
+            Err(e) => {
+                eprint!("{e}");
+                1
+            }
+        },
+        None => match plan_of(path, dim).and_then(|p| crate::backend::wgsl::files(&p)) {
+            Ok(files) => {
+                for (name, text) in files {
+                    println!("// ===== {name}\n{text}");
+                }
+                0
+            }
+            Err(e) => {
+                eprint!("{e}");
+                1
+            }
+        },
     }
 }

@@ -172,7 +172,15 @@ pub struct Accumulator {
 pub enum EquationKind {
     /// Summed over the neighbours j (in `sources`) of each particle i: `init`, then `body` per
     /// neighbour, then `finally`.
-    PairSum { sources: GroupSet, accumulators: Vec<Accumulator>, init: Vec<Stmt>, body: Vec<Stmt>, finally: Vec<Stmt> },
+    PairSum {
+        sources: GroupSet,
+        accumulators: Vec<Accumulator>,
+        init: Vec<Stmt>,
+        body: Vec<Stmt>,
+        finally: Vec<Stmt>,
+        /// Sums with Kahan compensation.
+        compensated: bool,
+    },
     /// Per particle, no neighbours.
     Particle { body: Vec<Stmt> },
 }
@@ -188,6 +196,8 @@ pub struct Equation {
     pub reads: BTreeSet<(FieldId, Side)>,
     pub params: BTreeSet<(ParamId, Side)>,
     pub span: Span,
+    /// `file:line` of the definition, for generated code's comments.
+    pub location: String,
 }
 
 impl Equation {

@@ -216,13 +216,20 @@ impl<T: Real> Store<T> {
     /// A field's values for every particle as f64 (`n × comps`); NaN where the field is not stored.
     pub fn read_f64(&self, f: FieldId) -> Option<(usize, Vec<f64>)> {
         let c = self.column(f)?;
+        self.read_f64_from(f, &c.data)
+    }
+
+    /// Like `read_f64`, from column data held elsewhere (e.g. downloaded from a device) that has
+    /// this store's layout.
+    pub fn read_f64_from(&self, f: FieldId, data: &[T]) -> Option<(usize, Vec<f64>)> {
+        let c = self.column(f)?;
         let mut out = vec![f64::NAN; self.n * c.comps];
         for i in 0..self.n {
             let g = self.group[i] as usize;
             if c.has(g) {
                 let row = c.row(i, g);
                 for k in 0..c.comps {
-                    out[i * c.comps + k] = c.data[row * c.comps + k].to_f64();
+                    out[i * c.comps + k] = data[row * c.comps + k].to_f64();
                 }
             }
         }

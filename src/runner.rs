@@ -100,11 +100,44 @@ pub fn run_case(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailure
     let (scene, plan) = prepare(path, &opts.scene)?;
     std::fs::create_dir_all(&opts.out)
         .map_err(|e| RunFailure::Run(format!("cannot create `{}`: {e}", opts.out.display())))?;
-    match (opts.backend, opts.precision) {
-        (BackendChoice::Gpu, _) => Err(RunFailure::Run("the GPU backend is not available in this build".into())),
-        (_, Precision::F64) => run_cpu::<f64>(scene, plan, opts),
-        (_, Precision::F32) => run_cpu::<f32>(scene, plan, opts),
+    match opts.backend {
+        BackendChoice::Cpu => run_cpu_precision(scene, plan, opts),
+        BackendChoice::Gpu => match crate::backend::gpu::device::Gpu::new() {
+            Ok(gpu) => run_gpu(gpu, scene, plan, opts),
+            Err(e) => Err(RunFailure::Run(e.to_string())),
+        },
+        BackendChoice::Auto => match crate::backend::gpu::device::Gpu::new() {
+            Ok(gpu) => run_gpu(gpu, scene, plan, opts),
+            Err(e) => {
+                eprintln!("note: running on the CPU backend: {}", e.to_string().lines().next().unwrap_or_default());
+                run_cpu_precision(scene, plan, opts)
+            }
+        },
     }
+}
+
+fn run_cpu_precision(scene: Scene, plan: Plan, opts: &RunOptions) -> Result<RunOutcome, RunFailure> {
+    match opts.precision {
+        Precision::F64 => run_cpu::<f64>(scene, plan, opts),
+        Precision::F32 => run_cpu::<f32>(scene, plan, opts),
+    }
+}
+
+/// The GPU computes in f32 whatever precision was asked for (the report says so).
+fn run_gpu(
+    gpu: crate::backend::gpu::device::Gpu,
+    scene: Scene,
+    plan: Plan,
+    opts: &RunOptions,
+) -> Result<RunOutcome, RunFailure> {
+    if opts.precision == Precision::F64 && opts.backend == BackendChoice::Gpu {
+        eprintln!("note: the GPU backend computes in f32");
+    }
+    let store = setup::build_store::<f32>(&plan, &scene.particles, &scene.materials)
+        .map_err(|e| RunFailure::Input(format!("error: {e}\n")))?;
+    let backend =
+        crate::backend::gpu::GpuBackend::new(gpu, plan, store, &scene.mirrors).map_err(|e| RunFailure::Run(e.0))?;
+    drive(scene, backend, opts, "f32")
 }
 
 fn run_cpu<T: Real>(scene: Scene, plan: Plan, opts: &RunOptions) -> Result<RunOutcome, RunFailure> {
@@ -321,4 +354,148 @@ fn make_report<B: Backend>(
 /// For the GPU backend's caller: a backend error as a run failure.
 pub fn backend_failure(e: BackendError) -> RunFailure {
     RunFailure::Run(e.0)
+}
+
+/// Runs a study: every run of its case (the CI subset at the CI resolution), then the results
+/// across runs. Each run writes into `out/<run>/`, the study's report into `out/`.
+pub fn run_study(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailure> {
+    use crate::scene::study;
+    let mut sources = Sources::new();
+    let st = study::load(path, &mut sources).map_err(|d| input_error(&sources, &d))?;
+    let ci = opts.scene.resolution.as_deref().is_none_or(|r| r == "ci");
+    let runs: Vec<&study::RunSpec> =
+        st.file.runs.iter().filter(|r| !ci || st.file.ci_runs.as_ref().is_none_or(|c| c.contains(&r.name))).collect();
+    let mut outcomes: Vec<(study::RunSpec, RunOutcome)> = vec![];
+    for r in runs {
+        let mut o = opts.clone();
+        o.scene.set = r.set.iter().map(|(k, v)| (k.clone(), study::text_of(v))).collect();
+        o.out = opts.out.join(sanitize(&r.name));
+        eprintln!("{}: run `{}`", st.file.name, r.name);
+        let outcome = run_case(&st.case_path, &o)?;
+        outcomes.push((r.clone(), outcome));
+    }
+    let first = &outcomes
+        .first()
+        .ok_or_else(|| RunFailure::Input(format!("study `{}` has no runs to make\n", st.file.name)))?
+        .1
+        .report;
+    let (backend, precision) = (first.backend.clone(), first.precision.clone());
+    let mut results = vec![];
+    let mut histories = vec![];
+    let value_of = |run: &str, q: &str| -> Option<f64> {
+        outcomes.iter().find(|(r, _)| r.name == run)?.1.report.results.iter().find(|x| x.quantity == q).map(|x| x.value)
+    };
+    let wall_of = |run: &str| outcomes.iter().find(|(r, _)| r.name == run).map(|(_, o)| o.report.wall_s);
+    for sr in &st.file.results {
+        let reference = study::reference(&sr.reference);
+        let unit = sr.unit.clone().unwrap_or_default();
+        let value = if sr.fit.as_deref() == Some("recht_ipson") {
+            let (Some(x), Some(y)) = (&sr.x, &sr.y) else { continue };
+            let points: Vec<(f64, f64)> = outcomes
+                .iter()
+                .filter_map(|(r, o)| {
+                    let xv = r
+                        .set
+                        .get(x)
+                        .and_then(|v| crate::scene::quantity::parse(&study::text_of(v)).ok())
+                        .map(|q| q.value)?;
+                    let yv = o.report.results.iter().find(|q| &q.quantity == y)?.value;
+                    Some((xv, yv.max(0.0)))
+                })
+                .collect();
+            let fit = study::fit_recht_ipson(&points);
+            let mut series = vec![Curve::new(format!("{y} (pairsum)"), points.clone())];
+            if let Some(f) = fit {
+                let lo = points.iter().map(|p| p.0).fold(f64::INFINITY, f64::min);
+                let hi = points.iter().map(|p| p.0).fold(0.0, f64::max);
+                let curve = (0..=100).map(|k| lo + (hi - lo) * k as f64 / 100.0).map(|v| (v, f.residual(v))).collect();
+                series.push(Curve::new(
+                    format!("Recht–Ipson fit: a = {:.3}, p = {:.2}, v_bl = {:.1}", f.a, f.p, f.v_bl),
+                    curve,
+                ));
+            }
+            histories.push(History {
+                name: format!("{} ({})", sr.quantity, y),
+                x_label: format!("{x} [{unit}]"),
+                y_label: format!("{y} [{unit}]"),
+                series,
+                reference,
+            });
+            fit.map(|f| f.v_bl).unwrap_or(f64::NAN)
+        } else if let Some([a, b]) = &sr.ratio {
+            match (wall_of(a), wall_of(b)) {
+                (Some(x), Some(y)) if y > 0.0 => x / y,
+                _ => f64::NAN,
+            }
+        } else if let (Some([a, b]), Some(of)) = (&sr.difference, &sr.of) {
+            match (value_of(a, of), value_of(b, of)) {
+                (Some(x), Some(y)) => (y - x) / x.abs().max(1e-300),
+                _ => f64::NAN,
+            }
+        } else if let (Some(run), Some(of)) = (&sr.run, &sr.of) {
+            value_of(run, of).unwrap_or(f64::NAN)
+        } else {
+            continue;
+        };
+        let mut row = ResultRow::new(sr.quantity.clone(), unit, value, reference);
+        if let Some(s) = &sr.source {
+            row = row.with_source(s.clone());
+        }
+        results.push(row);
+    }
+    for (r, o) in &outcomes {
+        for row in &o.report.results {
+            let mut row = row.clone();
+            row.quantity = format!("{}: {}", r.name, row.quantity);
+            results.push(row);
+        }
+    }
+    let wall: f64 = outcomes.iter().map(|(_, o)| o.report.wall_s).sum();
+    let steps: u64 = outcomes.iter().map(|(_, o)| o.report.steps).sum();
+    let work: f64 = outcomes.iter().map(|(_, o)| o.report.particles as f64 * o.report.steps as f64).sum();
+    let mut notes = vec![format!("{} runs of `{}`", outcomes.len(), st.case_path.display())];
+    notes.extend(st.file.notes.iter().cloned());
+    for (r, o) in &outcomes {
+        notes.push(format!(
+            "run `{}`: {} particles, {} steps, {:.1} s; report in {}/",
+            r.name,
+            o.report.particles,
+            o.report.steps,
+            o.report.wall_s,
+            sanitize(&r.name)
+        ));
+    }
+    let report = RunReport {
+        case: st.file.name.clone(),
+        backend,
+        precision,
+        particles: outcomes.iter().map(|(_, o)| o.report.particles).max().unwrap_or(0),
+        steps,
+        wall_s: wall,
+        particle_steps_per_s: if wall > 0.0 { work / wall } else { 0.0 },
+        results,
+        bytes_per_particle: first.bytes_per_particle.clone(),
+        histories,
+        notes,
+        resolution: first.resolution.clone(),
+        end_time: first.end_time,
+    };
+    report::write(&opts.out, &report).map_err(|e| RunFailure::Run(format!("writing the report: {e}")))?;
+    Ok(RunOutcome { report, out: opts.out.clone(), histories: vec![] })
+}
+
+/// A name usable as a directory.
+fn sanitize(s: &str) -> String {
+    s.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '.' { c } else { '_' }).collect()
+}
+
+/// Runs a case or a study, whichever the file is.
+pub fn run_file(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailure> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| RunFailure::Input(format!("error: cannot read `{}`: {e}\n", path.display())))?;
+    if crate::scene::study::is_study(&text) {
+        run_study(path, opts)
+    } else {
+        run_case(path, opts)
+    }
 }

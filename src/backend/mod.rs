@@ -2,7 +2,9 @@
 //! wgpu. The engine drives either through `Backend`, one integrator action at a time.
 
 pub mod cpu;
+pub mod gpu;
 pub mod timestep;
+pub mod wgsl;
 
 use crate::ir::FieldId;
 use crate::schedule::Plan;
@@ -68,4 +70,17 @@ pub trait Backend {
     fn restore(&mut self, s: &Snapshot);
     /// The first particle and field that is NaN or infinite among `fields`.
     fn first_non_finite(&self, fields: &[FieldId]) -> Option<(usize, FieldId)>;
+    /// A whole step on the device in one submission, for backends that can (the GPU): from the
+    /// clock (time, last dt, step) to the new one. `None`: the engine runs the actions itself.
+    fn device_step(
+        &mut self,
+        time: f64,
+        dt_prev: f64,
+        step: u64,
+        end_time: f64,
+        dt_max: f64,
+    ) -> Option<Result<(f64, f64, u64), BackendError>> {
+        let _ = (time, dt_prev, step, end_time, dt_max);
+        None
+    }
 }

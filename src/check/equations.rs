@@ -168,7 +168,7 @@ impl Checker {
             .map(|f| Accumulator { field: *f, reduce: st.reduce.get(f).map(|r| r.0).unwrap_or(Reduce::Sum) })
             .collect();
         self.temps.clear();
-        let kind = EquationKind::PairSum { sources, accumulators, init, body, finally };
+        let kind = EquationKind::PairSum { sources, accumulators, init, body, finally, compensated: p.compensated };
         self.push_equation(&p.name.name, kind, dest, stored, p.span);
     }
 
@@ -217,7 +217,16 @@ impl Checker {
             }
             (reads, params)
         };
-        self.model.equations.push(Equation { name: name.to_string(), kind, dest, writes, reads, params, span });
+        self.model.equations.push(Equation {
+            name: name.to_string(),
+            kind,
+            dest,
+            writes,
+            reads,
+            params,
+            span,
+            location: String::new(),
+        });
     }
 
     fn stmts(&mut self, stmts: &[ast::Stmt], bk: Block, cx: &Cx, st: &mut EqState) -> Vec<ir::Stmt> {

@@ -69,7 +69,6 @@ pub fn check_stdlib_modules(sources: &mut Sources, modules: &[&str], stdlib: Std
 
 fn finish(loader: Loader<'_>) -> Checked {
     let Loader { sources, modules, diags, .. } = loader;
-    let _ = sources;
     let mut checker = Checker::new();
     checker.diags = diags;
     if checker.diags.iter().any(|d| d.is_error()) {
@@ -82,7 +81,12 @@ fn finish(loader: Loader<'_>) -> Checked {
     checker.run(&files, is_model);
     let mut diags = checker.diags;
     dedup(&mut diags);
-    Checked { model: checker.model, diags, is_model }
+    let mut model = checker.model;
+    for e in &mut model.equations {
+        let (line, _) = sources.line_col(e.span);
+        e.location = format!("{}:{line}", sources.name(e.span.file));
+    }
+    Checked { model, diags, is_model }
 }
 
 fn dedup(diags: &mut Vec<Diagnostic>) {

@@ -119,6 +119,19 @@ impl<B: Backend> Engine<B> {
 
     /// One step of the integrator.
     pub fn step(&mut self) -> Result<(), RunError> {
+        if let Some(r) =
+            self.backend.device_step(self.time, self.dt, self.step, self.config.end_time, self.config.dt_max)
+        {
+            let (time, dt, step) = r?;
+            if !(dt > 0.0 && dt.is_finite()) {
+                return Err(RunError::BadTimestep { step: self.step + 1, dt });
+            }
+            (self.time, self.dt, self.step) = (time, dt, step);
+            if self.config.reorder_every > 0 && self.step.is_multiple_of(self.config.reorder_every) {
+                self.backend.reorder();
+            }
+            return Ok(());
+        }
         let actions = self.backend.plan().actions.clone();
         let mut dt = self.dt;
         for a in actions {

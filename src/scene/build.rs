@@ -20,6 +20,8 @@ use std::path::{Path, PathBuf};
 pub struct Options {
     pub resolution: Option<String>,
     pub end_time: Option<f64>,
+    /// Values for the case's `[parameters]` (`${name}` in the case file), e.g. from a study.
+    pub set: Vec<(String, String)>,
 }
 
 #[derive(Clone, Debug)]
@@ -178,6 +180,13 @@ fn unit(s: &str) -> Unit {
 pub fn load(path: &Path, sources: &mut Sources, opts: &Options) -> Result<Scene, Vec<Diagnostic>> {
     let text = std::fs::read_to_string(path)
         .map_err(|e| vec![Diagnostic::error("C0001", format!("cannot read `{}`: {e}", path.display()))])?;
+    let text = match super::template::expand(&text, &opts.set) {
+        Ok(t) => t,
+        Err(e) => {
+            let file = sources.add(check::load::display_path(path), text.clone());
+            return Err(vec![e.diagnostic(file)]);
+        }
+    };
     let file = sources.add(check::load::display_path(path), text.clone());
     let case: CaseFile = toml::from_str(&text).map_err(|e| vec![toml_error(file, &e)])?;
     let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();

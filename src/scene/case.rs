@@ -49,6 +49,9 @@ pub struct CaseFile {
     pub probes: Vec<Probe>,
     #[serde(default)]
     pub results: Vec<ResultSpec>,
+    /// Defaults of the case's `${name}` placeholders (already substituted when this is parsed).
+    #[serde(default)]
+    pub parameters: Option<toml::Table>,
 }
 
 #[derive(Deserialize, Debug)]

@@ -6,5 +6,7 @@ pub mod case;
 pub mod geometry;
 pub mod measure;
 pub mod quantity;
+pub mod study;
+pub mod template;
 
 pub use build::{load, Options, Scene};

@@ -170,6 +170,8 @@ pub struct PairSumDef {
     pub outputs: Vec<Output>,
     /// `acc name: type`: accumulators local to this pair sum (summed, read in `finally`, not stored).
     pub temps: Vec<Output>,
+    /// `compensated`: sums use Kahan compensation.
+    pub compensated: bool,
     pub init: Vec<Stmt>,
     pub body: Vec<Stmt>,
     pub finally: Vec<Stmt>,

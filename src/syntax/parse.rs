@@ -77,6 +77,7 @@ fn rule_text(r: Rule) -> &'static str {
         accum_op => "`+=`, `-=`, `min=` or `max=`",
         group_list => "a group name",
         outputs | output => "an output field",
+        compensated => "`compensated`",
         rate => "a rate `x' = ...`",
         module_path | string | path_part => "a module path",
         storage => "`field` or `state`",
@@ -330,6 +331,7 @@ impl Builder {
             from: None,
             outputs: vec![],
             temps: vec![],
+            compensated: false,
             init: vec![],
             body: vec![],
             finally: vec![],
@@ -341,6 +343,7 @@ impl Builder {
                 Rule::on_clause => def.on = Some(self.groups(c)),
                 Rule::from_clause => def.from = Some(self.groups(c)),
                 Rule::outputs => def.outputs = self.outputs(c),
+                Rule::compensated => def.compensated = true,
                 Rule::pair_body => {
                     for s in kids(c) {
                         match s.as_rule() {

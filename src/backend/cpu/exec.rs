@@ -55,6 +55,8 @@ pub struct Scratch<T> {
     pub j: Vec<u32>,
     pub sign: Vec<T>,
     pub slots: Vec<T>,
+    /// Kahan compensation of each slot.
+    pub comp: Vec<T>,
     pub temps: Vec<Vec<T>>,
     pub ranges: Vec<(u32, u32)>,
 }
@@ -178,6 +180,17 @@ fn fold_t<T: Real>(r: Reduce, a: T, lanes: &[T]) -> T {
     }
 }
 
+/// Kahan summation: `sum` carries the total, `c` the low-order part lost so far.
+#[inline(always)]
+fn kahan<T: Real>(sum: &mut T, c: &mut T, lanes: &[T]) {
+    for x in lanes {
+        let y = *x - *c;
+        let t = *sum + y;
+        *c = (t - *sum) - y;
+        *sum = t;
+    }
+}
+
 /// What the neighbour batches of one pass need.
 pub struct Neighbours<'a, T> {
     pub grid: &'a Grid,
@@ -206,7 +219,7 @@ pub fn run_pass_chunk<T: Real>(
         buf.resize(LANES * comps, T::zero());
         temp_views[f.index()] = Some(ColView { ptr: buf.as_mut_ptr(), comps: *comps, base: vec![], uniform: None });
     }
-    let Scratch { a, b, c, j, sign, slots, ranges, .. } = scratch;
+    let Scratch { a, b, c, j, sign, slots, comp, ranges, .. } = scratch;
     let init_regs: &mut [T] = match &v.init {
         Some(p) => {
             let regs = frame(a, p);
@@ -223,6 +236,8 @@ pub fn run_pass_chunk<T: Real>(
     sign.resize(if with_sign { 3 * LANES } else { 0 }, T::one());
     let ns = v.slots.len();
     slots.resize(ns * chunk.len, T::zero());
+    comp.clear();
+    comp.resize(ns * chunk.len, T::zero());
     for k in 0..chunk.len {
         for (s, slot) in v.slots.iter().enumerate() {
             slots[k * ns + s] = match slot.init_reg {
@@ -234,8 +249,22 @@ pub fn run_pass_chunk<T: Real>(
     // Lanes hold the neighbours of several particles of the chunk one after another, so that the
     // cost of running an operation is shared by more pairs; `segs` marks whose lanes are whose.
     let all_sources = (0..64).filter(|g| v.sources >> g & 1 == 1).count() >= sh_groups(sh);
-    let mut w =
-        Writer { v, sh, temps: &temp_views, chunk, pair, dest, j, sign, with_sign, slots, n: 0, segs: vec![], k: 0 };
+    let mut w = Writer {
+        v,
+        sh,
+        temps: &temp_views,
+        chunk,
+        pair,
+        dest,
+        j,
+        sign,
+        with_sign,
+        slots,
+        comp,
+        n: 0,
+        segs: vec![],
+        k: 0,
+    };
     for k in 0..chunk.len {
         w.k = k;
         w.segs.push((k, w.n));
@@ -287,6 +316,7 @@ struct Writer<'a, 'b, T> {
     sign: &'a mut Vec<T>,
     with_sign: bool,
     slots: &'a mut Vec<T>,
+    comp: &'a mut Vec<T>,
     /// Lanes filled, and where each particle's lanes start: (particle in chunk, first lane).
     n: usize,
     segs: Vec<(usize, usize)>,
@@ -336,8 +366,13 @@ impl<T: Real> Writer<'_, '_, T> {
             for (q, &(k, start)) in segs.iter().enumerate() {
                 let end = seg_end(q);
                 if end > start {
+                    let lanes = &self.pair[a.reg * LANES + start..a.reg * LANES + end];
                     let slot = &mut self.slots[k * ns + s];
-                    *slot = fold_t(a.reduce, *slot, &self.pair[a.reg * LANES + start..a.reg * LANES + end]);
+                    if v.slots[*s].compensated {
+                        kahan(slot, &mut self.comp[k * ns + s], lanes);
+                    } else {
+                        *slot = fold_t(a.reduce, *slot, lanes);
+                    }
                 }
             }
         }

@@ -32,6 +32,8 @@ pub struct Slot {
     pub temp: bool,
     /// Register of its `init` value in the init program, if `init` sets it.
     pub init_reg: Option<usize>,
+    /// Summed with Kahan compensation (`compensated` pair sums).
+    pub compensated: bool,
 }
 
 /// A pass compiled for one destination group.
@@ -131,7 +133,9 @@ fn compile_variant<T: Real>(plan: &Plan, v: &crate::schedule::PassVariant) -> Va
     let mut temps = vec![];
     for e in &v.pair_sums {
         let eq = plan.equation(*e);
-        let crate::ir::EquationKind::PairSum { sources, accumulators, init, body, .. } = &eq.kind else { continue };
+        let crate::ir::EquationKind::PairSum { sources, accumulators, init, body, compensated, .. } = &eq.kind else {
+            continue;
+        };
         let mask = (sources.intersect(plan.groups) != v.sources).then(|| lw.sources_mask(*sources));
         lw.block(body, mask);
         init_blocks.push(Block { name: eq.name.clone(), dest: eq.dest, stmts: init.clone() });
@@ -145,7 +149,8 @@ fn compile_variant<T: Real>(plan: &Plan, v: &crate::schedule::PassVariant) -> Va
                 continue;
             }
             for c in 0..comps {
-                slots.push(Slot { field: a.field, comp: c, reduce: a.reduce, temp, init_reg: None });
+                let compensated = *compensated && a.reduce == Reduce::Sum;
+                slots.push(Slot { field: a.field, comp: c, reduce: a.reduce, temp, init_reg: None, compensated });
             }
         }
     }

@@ -1,0 +1,178 @@
+//! Studies: several runs of one case with different parameters (impact speeds, a switch on or
+//! off, two particle distributions), and results computed across them — a Recht–Ipson fit of
+//! residual velocities and its ballistic limit, a ratio of wall times, a difference between runs.
+
+use super::quantity;
+use crate::diag::{Diagnostic, Span};
+use serde::Deserialize;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct StudyFile {
+    pub name: String,
+    #[serde(default)]
+    pub title: Option<String>,
+    /// The case, relative to the study file.
+    pub case: String,
+    pub runs: Vec<RunSpec>,
+    #[serde(default)]
+    pub results: Vec<StudyResult>,
+    /// The runs the CI resolution makes (all when absent).
+    #[serde(default)]
+    pub ci_runs: Option<Vec<String>>,
+    #[serde(default)]
+    pub notes: Vec<String>,
+}
+
+#[derive(Deserialize, Debug, Clone)]
+#[serde(deny_unknown_fields)]
+pub struct RunSpec {
+    pub name: String,
+    #[serde(default)]
+    pub set: BTreeMap<String, toml::Value>,
+}
+
+#[derive(Deserialize, Debug, Clone)]
+#[serde(deny_unknown_fields)]
+pub struct StudyResult {
+    pub quantity: String,
+    #[serde(default)]
+    pub unit: Option<String>,
+    /// `recht_ipson`: fit y(x) over the runs (x a parameter, y a result of each run).
+    #[serde(default)]
+    pub fit: Option<String>,
+    #[serde(default)]
+    pub x: Option<String>,
+    #[serde(default)]
+    pub y: Option<String>,
+    /// Two runs: wall time of the first over the second.
+    #[serde(default)]
+    pub ratio: Option<[String; 2]>,
+    /// Two runs: (second − first) / |first| of the result `of`.
+    #[serde(default)]
+    pub difference: Option<[String; 2]>,
+    /// One run: its result `of`.
+    #[serde(default)]
+    pub run: Option<String>,
+    #[serde(default)]
+    pub of: Option<String>,
+    #[serde(default)]
+    pub reference: Option<toml::Value>,
+    #[serde(default)]
+    pub source: Option<String>,
+    #[serde(default)]
+    pub tolerance: Option<f64>,
+    #[serde(default)]
+    pub tolerance_why: Option<String>,
+}
+
+/// Whether a TOML file is a study (it has `runs` and a `case`) rather than a case.
+pub fn is_study(text: &str) -> bool {
+    toml::from_str::<toml::Table>(text).is_ok_and(|t| t.contains_key("runs") && t.contains_key("case"))
+}
+
+pub struct Study {
+    pub file: StudyFile,
+    pub case_path: PathBuf,
+}
+
+pub fn load(path: &Path, sources: &mut crate::diag::Sources) -> Result<Study, Vec<Diagnostic>> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| vec![Diagnostic::error("C0001", format!("cannot read `{}`: {e}", path.display()))])?;
+    let id = sources.add(crate::check::load::display_path(path), text.clone());
+    let file: StudyFile = toml::from_str(&text).map_err(|e| {
+        let span = e.span().unwrap_or(0..0);
+        vec![Diagnostic::error("C0030", format!("study file: {}", e.message().trim()))
+            .at(Span::new(id, span.start, span.end), "here")]
+    })?;
+    let case_path = path.parent().map(Path::to_path_buf).unwrap_or_default().join(&file.case);
+    Ok(Study { file, case_path })
+}
+
+/// A value as text for `--set`.
+pub fn text_of(v: &toml::Value) -> String {
+    match v {
+        toml::Value::String(s) => s.clone(),
+        other => other.to_string(),
+    }
+}
+
+/// A reference quantity (number or string with a unit) in SI.
+pub fn reference(v: &Option<toml::Value>) -> Option<f64> {
+    match v.as_ref()? {
+        toml::Value::Integer(i) => Some(*i as f64),
+        toml::Value::Float(f) => Some(*f),
+        toml::Value::String(s) => quantity::parse(s).ok().map(|q| q.value),
+        _ => None,
+    }
+}
+
+/// The Recht–Ipson fit `v_r = a (v_i^p − v_bl^p)^(1/p)` (0 below the ballistic limit v_bl).
+#[derive(Clone, Copy, Debug)]
+pub struct RechtIpson {
+    pub a: f64,
+    pub p: f64,
+    pub v_bl: f64,
+    pub rms: f64,
+}
+
+impl RechtIpson {
+    pub fn residual(&self, v: f64) -> f64 {
+        if v <= self.v_bl {
+            0.0
+        } else {
+            self.a * (v.powf(self.p) - self.v_bl.powf(self.p)).powf(1.0 / self.p)
+        }
+    }
+}
+
+/// Least-squares fit over (impact, residual) pairs. Runs that did not perforate (residual 0)
+/// bound the limit from below; `a` is linear and solved exactly for each (p, v_bl) of a search.
+pub fn fit_recht_ipson(points: &[(f64, f64)]) -> Option<RechtIpson> {
+    let stopped = points.iter().filter(|p| p.1 <= 0.0).map(|p| p.0).fold(0.0, f64::max);
+    let through: Vec<(f64, f64)> = points.iter().copied().filter(|p| p.1 > 0.0).collect();
+    let lowest = through.iter().map(|p| p.0).fold(f64::INFINITY, f64::min);
+    if through.len() < 2 {
+        return None;
+    }
+    let mut best: Option<RechtIpson> = None;
+    for pi in 0..=300 {
+        let p = 1.0 + pi as f64 * 0.01;
+        for bi in 0..=400 {
+            let v_bl = stopped + (lowest - stopped) * bi as f64 / 400.0;
+            if v_bl >= lowest {
+                continue;
+            }
+            let f: Vec<f64> = through.iter().map(|(v, _)| (v.powf(p) - v_bl.powf(p)).powf(1.0 / p)).collect();
+            let ff: f64 = f.iter().map(|x| x * x).sum();
+            let fy: f64 = f.iter().zip(&through).map(|(x, (_, y))| x * y).sum();
+            if ff <= 0.0 {
+                continue;
+            }
+            let a = (fy / ff).clamp(0.0, 1.0);
+            let sse: f64 = f.iter().zip(&through).map(|(x, (_, y))| (y - a * x).powi(2)).sum();
+            let rms = (sse / through.len() as f64).sqrt();
+            if best.is_none_or(|b| rms < b.rms) {
+                best = Some(RechtIpson { a, p, v_bl, rms });
+            }
+        }
+    }
+    best
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn recht_ipson_recovers_its_own_curve() {
+        let truth = RechtIpson { a: 0.79, p: 2.2, v_bl: 152.5, rms: 0.0 };
+        let pts: Vec<(f64, f64)> =
+            [137.4, 152.0, 156.0, 165.2, 190.7, 250.8, 298.0].iter().map(|v| (*v, truth.residual(*v))).collect();
+        let fit = fit_recht_ipson(&pts).expect("fits");
+        assert!((fit.v_bl - 152.5).abs() < 1.5, "{fit:?}");
+        assert!(fit.rms < 1.0, "{fit:?}");
+    }
+}

@@ -1,0 +1,90 @@
+//! Case-file parameters: a case may write `${name}` anywhere (inside strings, e.g.
+//! `velocity = [0, 0, "-${v_impact} m/s"]`) and give defaults in `[parameters]`; a study or
+//! `pairsum run --set name=value` changes them. Substitution is textual and keeps line numbers.
+
+use crate::diag::{Diagnostic, Span};
+
+pub struct TemplateError {
+    pub start: usize,
+    pub end: usize,
+    pub message: String,
+}
+
+impl TemplateError {
+    pub fn diagnostic(&self, file: u32) -> Diagnostic {
+        Diagnostic::error("C0025", self.message.clone()).at(Span::new(file, self.start, self.end), "here")
+    }
+}
+
+fn as_text(v: &toml::Value) -> String {
+    match v {
+        toml::Value::String(s) => s.clone(),
+        other => other.to_string(),
+    }
+}
+
+/// The case text with every `${name}` replaced by its value: `set` first, then `[parameters]`.
+pub fn expand(text: &str, set: &[(String, String)]) -> Result<String, TemplateError> {
+    if !text.contains("${") && set.is_empty() {
+        return Ok(text.to_string());
+    }
+    // The defaults, read from the unexpanded text (placeholders live inside strings, so it parses).
+    let defaults: toml::Table = toml::from_str::<toml::Table>(text)
+        .ok()
+        .and_then(|t| t.get("parameters").and_then(|p| p.as_table()).cloned())
+        .unwrap_or_default();
+    for (name, _) in set {
+        if !defaults.contains_key(name) {
+            let names: Vec<&String> = defaults.keys().collect();
+            return Err(TemplateError {
+                start: 0,
+                end: 0,
+                message: format!("the case has no parameter `{name}` to set (its parameters: {names:?})"),
+            });
+        }
+    }
+    let mut out = String::with_capacity(text.len());
+    let mut rest = text;
+    let mut at = 0;
+    while let Some(k) = rest.find("${") {
+        out.push_str(&rest[..k]);
+        let after = &rest[k + 2..];
+        let Some(close) = after.find('}') else {
+            return Err(TemplateError { start: at + k, end: at + k + 2, message: "`${` without a closing `}`".into() });
+        };
+        let name = &after[..close];
+        let value = match set.iter().rev().find(|(n, _)| n == name) {
+            Some((_, v)) => v.clone(),
+            None => match defaults.get(name) {
+                Some(v) => as_text(v),
+                None => {
+                    return Err(TemplateError {
+                        start: at + k,
+                        end: at + k + 3 + close,
+                        message: format!("`${{{name}}}` names no entry of `[parameters]`"),
+                    })
+                }
+            },
+        };
+        out.push_str(&value);
+        let consumed = k + 3 + close;
+        rest = &rest[consumed..];
+        at += consumed;
+    }
+    out.push_str(rest);
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn placeholders_take_set_values_then_defaults() {
+        let text = "[parameters]\nv = \"298\"\nt = 8\n[b]\nvelocity = \"-${v} m/s\"\nthick = \"${t} mm\"\n";
+        let out = expand(text, &[("v".into(), "250.8".into())]).ok().expect("expands");
+        assert!(out.contains("velocity = \"-250.8 m/s\"") && out.contains("thick = \"8 mm\""), "{out}");
+        assert_eq!(out.lines().count(), text.lines().count());
+        assert!(expand("x = \"${nope}\"", &[]).expect_err("error").message.contains("nope"));
+    }
+}

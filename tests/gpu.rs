@@ -1,0 +1,277 @@
+//! The GPU backend on whatever adapter wgpu finds (lavapipe in CI: Debian's mesa-vulkan-drivers,
+//! which `scripts/test.sh` installs). These tests never skip: without an adapter they fail with
+//! the message that says how to get one.
+
+mod common;
+use common::*;
+use pairsum::backend::cpu::CpuBackend;
+use pairsum::backend::gpu::device::Gpu;
+use pairsum::backend::gpu::GpuBackend;
+use pairsum::backend::{Backend, Globals};
+use pairsum::engine::setup::{build_store, MaterialInput, ParticleInput};
+use pairsum::ir::Model;
+use pairsum::schedule::{IntegratorKind, Plan, SceneSpec};
+
+fn gpu() -> Gpu {
+    Gpu::new().unwrap_or_else(|e| panic!("the GPU tests need a GPU adapter: {e}"))
+}
+
+fn rnd(seed: &mut u64) -> f64 {
+    *seed ^= *seed << 13;
+    *seed ^= *seed >> 7;
+    *seed ^= *seed << 17;
+    (*seed % 1_000_000) as f64 / 1_000_000.0
+}
+
+/// A random cloud with jittered spacing; with `variable_h`, spacings (so h) vary by ±30 %.
+fn cloud(dim: usize, n_side: usize, dx: f64, variable_h: bool, seed: u64) -> ParticleInput {
+    let mut s = seed;
+    let mut x = lattice(dim, n_side, dx);
+    for p in &mut x {
+        for c in p.iter_mut().take(dim) {
+            *c += 0.3 * dx * (rnd(&mut s) - 0.5);
+        }
+    }
+    let mut inp = input(dim, x, dx);
+    for k in 0..inp.len() {
+        for c in 0..dim {
+            inp.v[k][c] = 5.0 * (rnd(&mut s) - 0.5);
+        }
+        if variable_h {
+            inp.dx[k] = dx * (0.7 + 0.6 * rnd(&mut s));
+        }
+    }
+    inp
+}
+
+/// Both backends on the same f32 store, with a random deviatoric stress where the model has one.
+fn pair(
+    model: &Model,
+    dim: usize,
+    inp: &ParticleInput,
+    mats: &[MaterialInput],
+    outputs: &[&str],
+) -> (CpuBackend<f32>, GpuBackend) {
+    let scene = SceneSpec {
+        outputs: outputs.iter().map(|n| model.field_id(n).expect("field")).collect(),
+        ..scene(model, dim, &[], IntegratorKind::Euler)
+    };
+    let plan = Plan::build(model, &scene, None).expect("plan");
+    let mut store = build_store::<f32>(&plan, inp, mats).expect("store");
+    if let Some(s) = plan.model.field_id("s").and_then(|s| store.column_mut(s)) {
+        let mut seed = 99u64;
+        for v in s.data.iter_mut() {
+            *v = (1e6 * (rnd(&mut seed) - 0.5)) as f32;
+        }
+    }
+    let mut cpu = CpuBackend::new(plan.clone(), store.clone(), vec![]).expect("cpu");
+    let mut gpu = GpuBackend::new(gpu(), plan, store, &[]).expect("gpu backend");
+    cpu.initialise().expect("cpu init");
+    gpu.initialise().expect("gpu init");
+    (cpu, gpu)
+}
+
+/// Largest difference over the largest magnitude, per field.
+fn rel_diff(a: &[f64], b: &[f64]) -> f64 {
+    let scale = a.iter().chain(b).filter(|v| v.is_finite()).map(|v| v.abs()).fold(0.0, f64::max).max(1e-30);
+    a.iter().zip(b).filter(|(x, y)| !(x.is_nan() && y.is_nan())).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max) / scale
+}
+
+fn compare_fields(cpu: &CpuBackend<f32>, gpu: &GpuBackend, fields: &[&str], tol: f64, what: &str) {
+    for name in fields {
+        let f = cpu.plan().model.field_id(name).expect("field");
+        let (Some((_, a)), Some((_, b))) = (cpu.read(f), gpu.read(f)) else { panic!("{what}: `{name}` is not stored") };
+        let d = rel_diff(&a, &b);
+        assert!(d <= tol, "{what}: `{name}` differs between CPU (f32) and GPU by {d:e} of its largest value");
+    }
+}
+
+fn steel(m: &Model) -> MaterialInput {
+    material(m, &[("rho0", vec![7850.0]), ("E", vec![200e9]), ("nu", vec![0.3]), ("h_ratio", vec![1.3])])
+}
+
+#[test]
+fn every_pass_of_the_solid_models_matches_the_cpu_in_f32() {
+    for model_file in ["models::elastic_solid", "models::elastic_solid_corrected"] {
+        let m = model(&format!("use {model_file}\n"));
+        for dim in [2, 3] {
+            for variable_h in [false, true] {
+                let inp = cloud(dim, if dim == 2 { 14 } else { 7 }, 0.01, variable_h, 7 + dim as u64);
+                let (mut cpu, mut gpu) = pair(&m, dim, &inp, &[steel(&m)], &[]);
+                let g = Globals { time: 0.0, dt: 1e-7 };
+                cpu.evaluate(g).expect("cpu");
+                gpu.evaluate(g).expect("gpu");
+                let what = format!("{model_file} {dim}D variable h {variable_h}");
+                compare_fields(&cpu, &gpu, &["drho", "edot", "spin", "dv", "ds"], 1e-5, &what);
+            }
+        }
+    }
+}
+
+#[test]
+fn every_pass_of_the_fluid_model_matches_the_cpu_in_f32() {
+    let m = model("use models::wcsph_fluid\n");
+    for dim in [2, 3] {
+        let inp = cloud(dim, if dim == 2 { 14 } else { 7 }, 0.01, true, 3);
+        let mat = material(&m, &[("rho0", vec![1000.0]), ("c0", vec![30.0]), ("h_ratio", vec![1.3])]);
+        let (mut cpu, mut gpu) = pair(&m, dim, &inp, &[mat], &[]);
+        let g = Globals { time: 0.0, dt: 1e-5 };
+        cpu.evaluate(g).expect("cpu");
+        gpu.evaluate(g).expect("gpu");
+        compare_fields(&cpu, &gpu, &["drho", "dv"], 1e-5, &format!("wcsph fluid {dim}D"));
+        // The time-step reductions too.
+        let (a, b) = (cpu.reductions(g), gpu.reductions(g));
+        for (x, y) in a.iter().zip(&b) {
+            assert!((x - y).abs() <= 1e-5 * x.abs(), "reduction {x} vs {y}");
+        }
+    }
+}
+
+#[test]
+fn gpu_neighbour_counts_equal_the_cpu_ones_exactly() {
+    let m = model(
+        "use kernels\ngroup all\nkernel = wendland_c2\npairsum count -> nn: scalar [-] { nn += 1 }\nintegrate { }\n",
+    );
+    for dim in [2, 3] {
+        for variable_h in [false, true] {
+            let inp = cloud(dim, if dim == 2 { 20 } else { 9 }, 0.01, variable_h, 11);
+            let mat = material(&m, &[("rho0", vec![1000.0]), ("h_ratio", vec![1.3])]);
+            let (mut cpu, mut gpu) = pair(&m, dim, &inp, &[mat], &["nn"]);
+            cpu.evaluate(Globals::default()).expect("cpu");
+            gpu.evaluate(Globals::default()).expect("gpu");
+            let f = m.field_id("nn").expect("nn");
+            let (a, b) = (cpu.read(f).expect("cpu").1, gpu.read(f).expect("gpu").1);
+            assert_eq!(a, b, "{dim}D variable h {variable_h}: neighbour counts differ");
+            assert!(a.iter().any(|c| *c > 10.0), "too few neighbours to mean anything");
+        }
+    }
+}
+
+use std::path::Path;
+use std::process::Command;
+
+fn case(name: &str) -> String {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("cases").join(format!("{name}.toml")).to_string_lossy().into_owned()
+}
+
+#[test]
+fn two_hundred_steps_of_the_cantilever_match_the_cpu_in_positions_and_stress() {
+    use pairsum::engine::{Engine, RunConfig};
+    use pairsum::runner::prepare;
+    let (scene, plan) = prepare(Path::new(&case("cantilever")), &Default::default()).expect("case");
+    let store = build_store::<f32>(&plan, &scene.particles, &scene.materials).expect("store");
+    let config = RunConfig { reorder_every: 25, ..scene.config.clone() };
+    let mut cpu =
+        Engine::new(CpuBackend::new(plan.clone(), store.clone(), scene.mirrors.clone()).expect("cpu"), config.clone());
+    let mut gpu = Engine::new(GpuBackend::new(gpu(), plan, store, &scene.mirrors).expect("gpu"), config);
+    cpu.initialise().expect("cpu init");
+    gpu.initialise().expect("gpu init");
+    for _ in 0..200 {
+        cpu.step().expect("cpu step");
+        gpu.step().expect("gpu step");
+    }
+    assert!((cpu.time - gpu.time).abs() <= 1e-4 * cpu.time, "clocks: {} vs {}", cpu.time, gpu.time);
+    for name in ["x", "s"] {
+        let (_, a) = field_by_id(&cpu.backend, name);
+        let (_, b) = field_by_id(&gpu.backend, name);
+        let d = rel_diff(&a, &b);
+        assert!(d <= 1e-4, "`{name}` after 200 steps: CPU and GPU differ by {d:e} of its largest value");
+    }
+}
+
+fn pairsum(args: &[&str], env: &[(&str, &str)]) -> (Option<i32>, String) {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_pairsum"));
+    c.args(args);
+    for (k, v) in env {
+        c.env(k, v);
+    }
+    let out = c.output().expect("runs");
+    (out.status.code(), String::from_utf8_lossy(&out.stderr).into_owned())
+}
+
+#[test]
+fn pairsum_run_on_the_gpu_writes_the_same_report_format() {
+    let dir = std::env::temp_dir().join(format!("pairsum-gpu-run-{}", std::process::id()));
+    let (code, err) =
+        pairsum(&["run", &case("elastic_wave"), "--backend", "gpu", "--out", dir.to_str().unwrap(), "--quiet"], &[]);
+    assert_eq!(code, Some(0), "{err}");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("report.json")).expect("report")).expect("json");
+    assert!(json["backend"].as_str().unwrap_or("").starts_with("gpu ("), "{json}");
+    assert_eq!(json["precision"], "f32");
+    let speed = json["results"][0]["rel_error"].as_f64().expect("error");
+    assert!(speed.abs() < 0.03, "wave speed error {speed} on the GPU");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn gpu_failures_give_clear_errors_and_a_non_zero_exit() {
+    let dir = std::env::temp_dir().join(format!("pairsum-gpu-err-{}", std::process::id()));
+    let out = dir.to_str().unwrap();
+    // No adapter of that name.
+    let (code, err) = pairsum(
+        &["run", &case("elastic_wave"), "--backend", "gpu", "--out", out],
+        &[("PAIRSUM_ADAPTER", "no-such-gpu")],
+    );
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("no-such-gpu"), "{err}");
+    // A scene too large for the device (a 1 kB cap on buffers).
+    let (code, err) = pairsum(
+        &["run", &case("elastic_wave"), "--backend", "gpu", "--out", out],
+        &[("PAIRSUM_GPU_MEMORY_LIMIT", "1000")],
+    );
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("particle data") && err.contains("1000"), "{err}");
+    // WGSL that naga rejects is a compiler bug, reported with naga's message, never a driver crash.
+    let (code, err) =
+        pairsum(&["run", &case("elastic_wave"), "--backend", "gpu", "--out", out], &[("PAIRSUM_WGSL_FAULT", "1")]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("naga rejects") && err.contains("undefined_name"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn every_committed_shader_is_accepted_by_naga_and_by_the_driver() {
+    let g = gpu();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("shaders_gen");
+    let mut n = 0;
+    for sub in ["models", "cases"] {
+        for dir in std::fs::read_dir(root.join(sub)).expect("shaders_gen").flatten() {
+            for f in std::fs::read_dir(dir.path()).expect("dir").flatten() {
+                let text = std::fs::read_to_string(f.path()).expect("wgsl");
+                g.compile(&f.path().display().to_string(), &text, "main").unwrap_or_else(|e| panic!("{e}"));
+                n += 1;
+            }
+        }
+    }
+    assert!(n >= 30, "only {n} shaders");
+}
+
+#[test]
+fn compensated_sums_on_the_gpu_stay_close_to_f64() {
+    let m = model(
+        "use kernels\ngroup all\nkernel = wendland_c2\n\
+         pairsum plain -> sum_plain: scalar [-] { sum_plain += vol[j] * W_ij }\n\
+         pairsum kahan -> sum_kahan: scalar [-] compensated { sum_kahan += vol[j] * W_ij }\n\
+         integrate { }\n",
+    );
+    let dim = 3;
+    let inp = input(dim, lattice(dim, 16, 0.01), 0.01);
+    let mat = material(&m, &[("rho0", vec![1000.0]), ("h_ratio", vec![3.9])]);
+    let sc = scene(&m, dim, &["sum_plain", "sum_kahan"], IntegratorKind::Euler);
+    let mut exact = backend::<f64>(&m, &sc, &inp, std::slice::from_ref(&mat), vec![]);
+    exact.evaluate(Globals::default()).expect("f64");
+    let (_, gpu_b) = pair(&m, dim, &inp, &[mat], &["sum_plain", "sum_kahan"]);
+    let mut gpu_b = gpu_b;
+    gpu_b.evaluate(Globals::default()).expect("gpu");
+    let (_, reference) = field_by_id(&exact, "sum_plain");
+    let (_, kahan) = field_by_id(&gpu_b, "sum_kahan");
+    let (_, plain) = field_by_id(&gpu_b, "sum_plain");
+    let err = |v: &[f64]| v.iter().zip(&reference).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+    eprintln!("gpu plain {:e} compensated {:e}", err(&plain), err(&kahan));
+    // The sums are ≈ 1, where one f32 ulp is 1.19e-7. A compensated sum is left with the rounding
+    // of its terms and of the stored result: two ulps. The plain sum loses far more (≈ 16 ulps).
+    let ulp = f32::EPSILON as f64;
+    assert!(err(&kahan) < 2.0 * ulp, "compensated sum off by {:e}", err(&kahan));
+    assert!(err(&plain) > 5.0 * err(&kahan), "plain {:e} vs compensated {:e}", err(&plain), err(&kahan));
+}
