@@ -174,6 +174,8 @@ pub enum EquationKind {
     /// neighbour, then `finally`.
     PairSum {
         sources: GroupSet,
+        /// `from own`: of `sources`, only the destination particle's own group.
+        own: bool,
         accumulators: Vec<Accumulator>,
         init: Vec<Stmt>,
         body: Vec<Stmt>,
@@ -204,10 +206,19 @@ impl Equation {
     pub fn is_pair(&self) -> bool {
         matches!(self.kind, EquationKind::PairSum { .. })
     }
+    /// Every group a neighbour j may belong to (over all destination groups).
     pub fn sources(&self) -> GroupSet {
         match &self.kind {
-            EquationKind::PairSum { sources, .. } => *sources,
+            EquationKind::PairSum { sources, own: false, .. } => *sources,
+            EquationKind::PairSum { sources, own: true, .. } => sources.intersect(self.dest),
             EquationKind::Particle { .. } => GroupSet::default(),
+        }
+    }
+    /// The groups a neighbour j may belong to when i is in group `g`.
+    pub fn sources_for(&self, g: GroupId) -> GroupSet {
+        match &self.kind {
+            EquationKind::PairSum { sources, own: true, .. } => sources.intersect(GroupSet::default().with(g)),
+            _ => self.sources(),
         }
     }
     pub fn reads_field(&self, f: FieldId) -> bool {

@@ -53,3 +53,28 @@ fn pairsum_check_exits_1_on_errors_and_never_panics() {
     assert_eq!(missing.status.code(), Some(1));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `use m on G from S` restricts m's equations, and the modules m uses unless another path reaches
+/// them unrestricted: the damage model on `target` pulls the radial return onto `target` only, while
+/// the Jaumann rate it also uses stays on every group because the model uses it directly.
+#[test]
+fn use_on_restricts_a_module_and_what_it_pulls_in() {
+    let text = "use kernels\ngroup projectile, target\nkernel = wendland_c2\n\
+                use solid::strain_rate\nuse solid::jaumann\nuse eos::linear\n\
+                use momentum::total_stress on target from target\n\
+                use damage::simplified on target\n\
+                param E: scalar [Pa]\nparam nu: scalar [-]\nparam bulk: scalar [Pa] = E / (3 * (1 - 2 * nu))\n\
+                integrate { x' = v  s' = ds  rho' = 0 [kg/m^3/s] }\nintegrate on target { v' = dv }\n";
+    let mut sources = Sources::new();
+    let checked = pairsum::check::check_text(&mut sources, "m.sph", text, Stdlib::Dir(stdlib_dir()));
+    assert!(!checked.has_errors(), "{}", render(&sources, &checked.diags));
+    let m = &checked.model;
+    let eq = |name: &str| m.equations.iter().find(|e| e.name == name).unwrap_or_else(|| panic!("no `{name}`"));
+    let groups = |set| m.group_names(set);
+    assert_eq!(groups(eq("radial_return").dest), "target");
+    assert_eq!(groups(eq("damage").dest), "target");
+    assert_eq!(groups(eq("jaumann").dest), "projectile|target");
+    assert_eq!(groups(eq("momentum").dest), "target");
+    let pairsum::ir::EquationKind::PairSum { sources: from, .. } = &eq("momentum").kind else { panic!("a pair sum") };
+    assert_eq!(groups(*from), "target");
+}

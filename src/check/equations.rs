@@ -118,8 +118,8 @@ impl Checker {
 
     pub(crate) fn pairsum(&mut self, p: &ast::PairSumDef) {
         let what = format!("pairsum `{}`", p.name.name);
-        let dest = self.groups(p.on.as_ref());
-        let sources = self.groups(p.from.as_ref());
+        let dest = self.scoped_groups(p.on.as_ref(), false, p.name.span, &what);
+        let sources = self.scoped_groups(p.from.as_ref(), true, p.name.span, &what);
         let Some(stored) = self.resolve_outputs(&p.outputs, true, &what) else {
             return;
         };
@@ -168,13 +168,14 @@ impl Checker {
             .map(|f| Accumulator { field: *f, reduce: st.reduce.get(f).map(|r| r.0).unwrap_or(Reduce::Sum) })
             .collect();
         self.temps.clear();
-        let kind = EquationKind::PairSum { sources, accumulators, init, body, finally, compensated: p.compensated };
+        let own = p.own || self.module_scope.2;
+        let kind = EquationKind::PairSum { sources, own, accumulators, init, body, finally, compensated: p.compensated };
         self.push_equation(&p.name.name, kind, dest, stored, p.span);
     }
 
     pub(crate) fn particle(&mut self, p: &ast::ParticleDef) {
         let what = format!("particle equation `{}`", p.name.name);
-        let dest = self.groups(p.on.as_ref());
+        let dest = self.scoped_groups(p.on.as_ref(), false, p.name.span, &what);
         let Some(outputs) = self.resolve_outputs(&p.outputs, false, &what) else {
             return;
         };
@@ -403,7 +404,7 @@ impl Checker {
     }
 
     pub(crate) fn integrate(&mut self, def: &ast::IntegrateDef) {
-        let dest = self.groups(def.on.as_ref());
+        let dest = self.scoped_groups(def.on.as_ref(), false, def.span, "this `integrate` block");
         for r in &def.rates {
             let Some(f) = self.model.field_id(&r.state.name) else {
                 self.unknown_field(&r.state, "this rate");

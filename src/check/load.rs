@@ -4,7 +4,8 @@
 use crate::diag::{Diagnostic, Sources, Span};
 use crate::syntax::ast::{File, Item, UsePath};
 use crate::syntax::parse_file;
-use std::collections::HashSet;
+use crate::syntax::ast::Ident;
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 mod embedded {
@@ -104,12 +105,23 @@ pub struct Module {
     pub ast: File,
     /// Whether the user named it (rather than it being reached through `use` or the prelude).
     pub root: bool,
+    /// The modules it uses, with the groups it restricts them to.
+    pub uses: Vec<UseEdge>,
+}
+
+/// `use m on G from S`, resolved: m's index among the loaded modules.
+pub struct UseEdge {
+    pub target: usize,
+    pub on: Option<Vec<Ident>>,
+    pub from: Option<Vec<Ident>>,
+    pub own: bool,
 }
 
 pub struct Loader<'s> {
     pub sources: &'s mut Sources,
     stdlib: Stdlib,
-    seen: HashSet<String>,
+    /// Modules by identity; `None`: read but did not parse.
+    seen: HashMap<String, Option<usize>>,
     pub modules: Vec<Module>,
     pub diags: Vec<Diagnostic>,
 }
@@ -124,8 +136,8 @@ struct Found {
 
 impl<'s> Loader<'s> {
     pub fn new(sources: &'s mut Sources, stdlib: Stdlib) -> Loader<'s> {
-        let mut l = Loader { sources, stdlib, seen: HashSet::new(), modules: vec![], diags: vec![] };
-        l.load_stdlib_module("prelude.sph", None, false);
+        let mut l = Loader { sources, stdlib, seen: HashMap::new(), modules: vec![], diags: vec![] };
+        let _ = l.load_stdlib_module("prelude.sph", None, false);
         l
     }
 
@@ -139,7 +151,7 @@ impl<'s> Loader<'s> {
                     text,
                     dir: path.parent().map(Path::to_path_buf),
                 };
-                self.add(found, true);
+                let _ = self.add(found, true);
             }
             Err(e) => self.diags.push(Diagnostic::error("E0002", format!("cannot read `{}`: {e}", path.display()))),
         }
@@ -149,11 +161,11 @@ impl<'s> Loader<'s> {
     /// against `dir` and the stdlib.
     pub fn load_text(&mut self, name: &str, text: &str, dir: Option<PathBuf>) {
         let found = Found { key: format!("<text>/{name}"), name: name.to_string(), text: text.to_string(), dir };
-        self.add(found, true);
+        let _ = self.add(found, true);
     }
 
     /// Loads a stdlib module by its relative path (`solid/jaumann.sph`).
-    pub fn load_stdlib_module(&mut self, rel: &str, from: Option<Span>, root: bool) {
+    pub fn load_stdlib_module(&mut self, rel: &str, from: Option<Span>, root: bool) -> Option<usize> {
         match self.stdlib.read(rel) {
             Some((key, text)) => {
                 let dir = match &self.stdlib {
@@ -161,7 +173,7 @@ impl<'s> Loader<'s> {
                     Stdlib::Embedded => None,
                 };
                 let name = self.stdlib.display(rel);
-                self.add(Found { key, name, text, dir }, root);
+                self.add(Found { key, name, text, dir }, root)
             }
             None => {
                 let mut d = Diagnostic::error("E0003", format!("cannot find stdlib module `{rel}`"));
@@ -169,19 +181,20 @@ impl<'s> Loader<'s> {
                     d = d.at(span, "imported here");
                 }
                 self.diags.push(d);
+                None
             }
         }
     }
 
-    fn add(&mut self, found: Found, root: bool) {
-        if !self.seen.insert(found.key.clone()) {
-            if root {
-                if let Some(m) = self.modules.iter_mut().find(|m| self.sources.name(m.file) == found.name) {
-                    m.root = true;
-                }
+    /// Loads a module once; its index among the modules (`None` if it does not parse).
+    fn add(&mut self, found: Found, root: bool) -> Option<usize> {
+        if let Some(known) = self.seen.get(&found.key) {
+            if let (true, Some(k)) = (root, known) {
+                self.modules[*k].root = true;
             }
-            return;
+            return *known;
         }
+        self.seen.insert(found.key.clone(), None);
         let file = self.sources.add(found.name, found.text.clone());
         match parse_file(file, &found.text) {
             Ok(ast) => {
@@ -193,16 +206,24 @@ impl<'s> Loader<'s> {
                         _ => None,
                     })
                     .collect();
-                self.modules.push(Module { file, ast, root });
+                let index = self.modules.len();
+                self.modules.push(Module { file, ast, root, uses: vec![] });
+                self.seen.insert(found.key, Some(index));
                 for u in uses {
-                    self.resolve_use(&u.path, u.span, found.dir.as_deref());
+                    if let Some(target) = self.resolve_use(&u.path, u.span, found.dir.as_deref()) {
+                        self.modules[index].uses.push(UseEdge { target, on: u.on, from: u.from, own: u.own });
+                    }
                 }
+                Some(index)
             }
-            Err(d) => self.diags.push(*d),
+            Err(d) => {
+                self.diags.push(*d);
+                None
+            }
         }
     }
 
-    fn resolve_use(&mut self, path: &UsePath, span: Span, dir: Option<&Path>) {
+    fn resolve_use(&mut self, path: &UsePath, span: Span, dir: Option<&Path>) -> Option<usize> {
         let rel = match path {
             UsePath::Module(parts) => parts.iter().map(|p| p.name.as_str()).collect::<Vec<_>>().join("/") + ".sph",
             UsePath::File(f) => f.clone(),
@@ -214,14 +235,12 @@ impl<'s> Loader<'s> {
                 let text = std::fs::read_to_string(&p).unwrap_or_default();
                 let found =
                     Found { key: key_of(&p), name: display_path(&p), text, dir: p.parent().map(Path::to_path_buf) };
-                self.add(found, false);
-                return;
+                return self.add(found, false);
             }
             looked.push(display_path(&p));
         }
         if self.stdlib.read(&rel).is_some() {
-            self.load_stdlib_module(&rel, Some(span), false);
-            return;
+            return self.load_stdlib_module(&rel, Some(span), false);
         }
         looked.push(self.stdlib.display(&rel));
         let shown = match path {
@@ -241,5 +260,6 @@ impl<'s> Loader<'s> {
             d = d.help(format!("the stdlib has `use {m}`"));
         }
         self.diags.push(d);
+        None
     }
 }

@@ -62,7 +62,7 @@ pub fn check_text(sources: &mut Sources, name: &str, text: &str, stdlib: Stdlib)
 pub fn check_stdlib_modules(sources: &mut Sources, modules: &[&str], stdlib: Stdlib) -> Checked {
     let mut loader = Loader::new(sources, stdlib);
     for m in modules {
-        loader.load_stdlib_module(m, None, true);
+        let _ = loader.load_stdlib_module(m, None, true);
     }
     finish(loader)
 }
@@ -76,9 +76,8 @@ fn finish(loader: Loader<'_>) -> Checked {
         // pile consequences on the real error.
         return Checked { model: checker.model, diags: checker.diags, is_model: false };
     }
-    let files: Vec<&ast::File> = modules.iter().map(|m| &m.ast).collect();
-    let is_model = files.iter().any(|f| f.items.iter().any(|i| matches!(i, Item::Integrate(_))));
-    checker.run(&files, is_model);
+    let is_model = modules.iter().any(|m| m.ast.items.iter().any(|i| matches!(i, Item::Integrate(_))));
+    checker.run(&modules, is_model);
     let mut diags = checker.diags;
     dedup(&mut diags);
     let mut model = checker.model;
@@ -97,6 +96,10 @@ fn dedup(diags: &mut Vec<Diagnostic>) {
 /// Names no declaration may take: the language's own.
 pub const RESERVED: [&str; 15] =
     ["t", "dt", "dim", "I", "pi", "inf", "x_ij", "r_ij", "v_ij", "h_ij", "W_ij", "gradW_ij", "true", "false", "R"];
+
+/// A module's scope: the groups its equations run on, the groups its pair sums see, and whether
+/// they see only the destination's own group.
+pub(crate) type Scope = (GroupSet, GroupSet, bool);
 
 /// The binding of a `let` whose value had an error: later uses stay quiet instead of reporting an
 /// unknown name.
@@ -122,6 +125,9 @@ pub(crate) struct Checker {
     temps: Vec<(String, FieldId)>,
     /// Helpers being inlined (to catch recursion and to say "called from").
     fn_stack: Vec<(String, Span)>,
+    /// The groups the module being checked may run on and see as neighbours (`use m on G from S`),
+    /// and whether its pair sums see only the destination's own group (`from own`).
+    module_scope: Scope,
 }
 
 impl Checker {
@@ -137,6 +143,7 @@ impl Checker {
             scope: vec![],
             temps: vec![],
             fn_stack: vec![],
+            module_scope: (GroupSet::ALL, GroupSet::ALL, false),
         }
     }
 
@@ -144,9 +151,11 @@ impl Checker {
         self.diags.push(d);
     }
 
-    fn run(&mut self, files: &[&ast::File], is_model: bool) {
-        let items: Vec<&Item> = files.iter().flat_map(|f| f.items.iter()).collect();
+    fn run(&mut self, modules: &[load::Module], is_model: bool) {
+        let items: Vec<&Item> = modules.iter().flat_map(|m| m.ast.items.iter()).collect();
+        let owner: Vec<usize> = modules.iter().enumerate().flat_map(|(k, m)| m.ast.items.iter().map(move |_| k)).collect();
         self.collect_groups(&items);
+        let scopes = self.module_scopes(modules);
         for it in &items {
             if let Item::Const(c) = it {
                 if self.const_defs.insert(c.name.name.clone(), c.clone()).is_some() {
@@ -182,7 +191,8 @@ impl Checker {
         }
         self.declare_outputs(&items);
         self.check_declaration_values(&items);
-        for it in &items {
+        for (it, k) in items.iter().zip(&owner) {
+            self.module_scope = scopes[*k];
             match it {
                 Item::PairSum(p) => self.pairsum(p),
                 Item::Particle(p) => self.particle(p),
@@ -205,11 +215,67 @@ impl Checker {
                 _ => {}
             }
         }
+        self.module_scope = (GroupSet::ALL, GroupSet::ALL, false);
         self.check_unchecked_helpers();
         self.check_writers();
         if is_model && !self.diags.iter().any(|d| d.is_error()) {
             self.model_checks();
         }
+    }
+
+    /// The groups each module's equations may run on and see, from the `use … on G from S` along
+    /// every path from a module the user named: the union over paths of the intersection along
+    /// each. Restrictions reach the modules a restricted module uses, unless another path frees them.
+    /// `from own` holds for a module when it holds on every path (some `use` on each says it).
+    fn module_scopes(&mut self, modules: &[load::Module]) -> Vec<Scope> {
+        let all = self.model.all_groups();
+        let none: Scope = (GroupSet::default(), GroupSet::default(), true);
+        let mut scopes: Vec<Scope> =
+            modules.iter().enumerate().map(|(k, m)| if m.root || k == 0 { (all, all, false) } else { none }).collect();
+        let mut edges = vec![];
+        for (k, m) in modules.iter().enumerate() {
+            for e in &m.uses {
+                let on = self.groups(e.on.as_ref());
+                let from = self.groups(e.from.as_ref());
+                edges.push((k, e.target, on, from, e.own));
+            }
+        }
+        loop {
+            let mut changed = false;
+            for &(a, b, on, from, own) in &edges {
+                let (sa, sb) = (scopes[a], scopes[b]);
+                if sa.0.intersect(on).is_empty() {
+                    continue;
+                }
+                let reach = (sb.0.union(sa.0.intersect(on)), sb.1.union(sa.1.intersect(from)), sb.2 && (sa.2 || own));
+                if reach != sb {
+                    scopes[b] = reach;
+                    changed = true;
+                }
+            }
+            if !changed {
+                return scopes;
+            }
+        }
+    }
+
+    /// An equation's groups (`on`/`from`, default all) within the module's scope.
+    pub(crate) fn scoped_groups(&mut self, list: Option<&Vec<ast::Ident>>, sources: bool, span: Span, what: &str) -> GroupSet {
+        let scope = if sources { self.module_scope.1 } else { self.module_scope.0 };
+        let set = self.groups(list).intersect(scope);
+        if set.is_empty() && scope != GroupSet::ALL && scope != self.model.all_groups() {
+            let word = if sources { "neighbour" } else { "particle" };
+            self.error(
+                Diagnostic::error("E0110", format!("{what} is left no {word} group to run on"))
+                    .at(span, "defined here")
+                    .note(format!(
+                        "the `use … {}` clauses that reach its module allow only: {}",
+                        if sources { "from" } else { "on" },
+                        self.model.group_names(scope)
+                    )),
+            );
+        }
+        set
     }
 
     fn collect_groups(&mut self, items: &[&Item]) {

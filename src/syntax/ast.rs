@@ -41,6 +41,11 @@ pub enum UsePath {
 #[derive(Clone, Debug)]
 pub struct Use {
     pub path: UsePath,
+    /// `use m on G from S`: m's equations run only on G (pair sums see only neighbours in S).
+    pub on: Option<Vec<Ident>>,
+    pub from: Option<Vec<Ident>>,
+    /// `from own`: m's pair sums see only neighbours of particle i's own group.
+    pub own: bool,
     pub span: Span,
 }
 
@@ -167,6 +172,8 @@ pub struct PairSumDef {
     pub name: Ident,
     pub on: Option<Vec<Ident>>,
     pub from: Option<Vec<Ident>>,
+    /// `from own`: only neighbours of particle i's own group.
+    pub own: bool,
     pub outputs: Vec<Output>,
     /// `acc name: type`: accumulators local to this pair sum (summed, read in `finally`, not stored).
     pub temps: Vec<Output>,

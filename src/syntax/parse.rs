@@ -86,6 +86,7 @@ fn rule_text(r: Rule) -> &'static str {
         kernel_entry | kernel_key => "a kernel entry (support, norm1, norm2, norm3, w, dw)",
         on_clause => "`on`",
         from_clause => "`from`",
+        K_own => "`own`",
         fn_param => "a parameter",
         K_use => "`use`",
         K_group => "`group`",
@@ -188,12 +189,22 @@ impl Builder {
         let span = self.span(&p);
         match p.as_rule() {
             Rule::use_item => {
-                let target = kids(p).next().expect("use has a path");
+                let mut it = kids(p);
+                let target = it.next().expect("use has a path");
                 let path = match target.as_rule() {
                     Rule::string => UsePath::File(target.as_str().trim_matches('"').to_string()),
                     _ => UsePath::Module(kids(target).map(|i| self.ident(i)).collect()),
                 };
-                Item::Use(Use { path, span })
+                let (mut on, mut from, mut own) = (None, None, false);
+                for c in it {
+                    match c.as_rule() {
+                        Rule::on_clause => on = Some(self.groups(c)),
+                        Rule::from_clause if self.is_own(&c) => own = true,
+                        Rule::from_clause => from = Some(self.groups(c)),
+                        _ => {}
+                    }
+                }
+                Item::Use(Use { path, on, from, own, span })
             }
             Rule::group_decl => Item::Groups(kids(p).map(|i| self.ident(i)).collect()),
             Rule::field_decl => {
@@ -329,6 +340,7 @@ impl Builder {
             name: Ident { name: String::new(), span },
             on: None,
             from: None,
+            own: false,
             outputs: vec![],
             temps: vec![],
             compensated: false,
@@ -341,6 +353,7 @@ impl Builder {
             match c.as_rule() {
                 Rule::ident => def.name = self.ident(c),
                 Rule::on_clause => def.on = Some(self.groups(c)),
+                Rule::from_clause if self.is_own(&c) => def.own = true,
                 Rule::from_clause => def.from = Some(self.groups(c)),
                 Rule::outputs => def.outputs = self.outputs(c),
                 Rule::compensated => def.compensated = true,
@@ -363,6 +376,11 @@ impl Builder {
             }
         }
         def
+    }
+
+    /// `from own` rather than `from a | b`.
+    fn is_own(&self, clause: &Pair<Rule>) -> bool {
+        clause.clone().into_inner().any(|k| k.as_rule() == Rule::K_own)
     }
 
     fn groups(&self, clause: Pair<Rule>) -> Vec<Ident> {
