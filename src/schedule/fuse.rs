@@ -154,7 +154,7 @@ pub fn fuse(model: &Model, scene: &SceneSpec, live: &Live) -> Result<Fused, Plan
                 }
                 let sources = ps
                     .iter()
-                    .fold(GroupSet::default(), |a, e| a.union(model.equations[e.index()].sources()))
+                    .fold(GroupSet::default(), |a, e| a.union(model.equations[e.index()].sources_for(g)))
                     .intersect(scene.groups);
                 Some(PassVariant { group: g, pair_sums: ps, tail: tl, sources })
             })

@@ -134,11 +134,14 @@ pub fn build(plan: &mut Plan, scene: &SceneSpec, live: &Live) {
     let present = scene.groups;
     let rates: Vec<ir::Rate> =
         plan.model.rates.iter().filter(|r| !r.dest.intersect(present).is_empty()).cloned().collect();
-    // Evolving state: integrated, or changed by a live correction.
+    // Evolving state: integrated, or changed by a live correction from its own value (`eps_p =
+    // eps_p + d` must restart from the step's start in a second stage; `T = T_room + e / C_v`
+    // need not).
     let mut evolving: BTreeSet<FieldId> = rates.iter().map(|r| r.state).collect();
     for e in &plan.corrections {
-        for f in &plan.model.equations[e.index()].writes {
-            if plan.model.field(*f).storage == Storage::State {
+        let eq = &plan.model.equations[e.index()];
+        for f in &eq.writes {
+            if plan.model.field(*f).storage == Storage::State && reads_own(eq, *f) {
                 evolving.insert(*f);
             }
         }
@@ -288,6 +291,15 @@ fn stage_blocks(
         }
     }
     (blocks, new_locals)
+}
+
+/// Whether an equation reads the value of a field it writes.
+fn reads_own(eq: &ir::Equation, f: FieldId) -> bool {
+    let mut found = false;
+    for s in super::live::stmts_of(eq) {
+        ir::walk_stmts(s, &mut |x| found |= matches!(x.kind, ir::ExprKind::Field(g, _) if g == f));
+    }
+    found
 }
 
 fn rate_expr(rates: &[ir::Rate], f: FieldId) -> Expr {

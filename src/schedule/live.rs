@@ -12,6 +12,8 @@ pub struct Live {
     /// State fields whose initial value is computed from their `= expr`, in dependency order.
     pub initial: Vec<FieldId>,
     pub timesteps: Vec<usize>,
+    /// Outputs of live equations that nothing needs: their statements are removed (`pruned`).
+    pub unneeded: BTreeMap<EqId, BTreeSet<FieldId>>,
 }
 
 pub fn stmts_of(e: &Equation) -> Vec<&[ir::Stmt]> {
@@ -99,10 +101,14 @@ pub fn analyse(model: &Model, scene: &SceneSpec) -> Result<Live, PlanError> {
                 changed = true;
             }
             let on = *entry;
-            for f in &e.writes {
+            // Only the outputs something needs are computed (and then on every group the
+            // equation runs on); the statements of the others are dropped, with what they read.
+            let unneeded = unneeded_outputs(e, &needed, on);
+            for f in e.writes.iter().filter(|f| !unneeded.contains(f)) {
                 changed |= need(&mut needed, *f, on);
             }
-            for &(f, side) in &e.reads {
+            let kept = if unneeded.is_empty() { e.clone() } else { pruned(e, model, &unneeded) };
+            for (f, side) in live_reads(model, &kept) {
                 let g = if side == Side::I { on } else { e.sources().intersect(present) };
                 changed |= need(&mut needed, f, g);
             }
@@ -111,8 +117,118 @@ pub fn analyse(model: &Model, scene: &SceneSpec) -> Result<Live, PlanError> {
             break;
         }
     }
+    let unneeded = dest
+        .iter()
+        .map(|(id, on)| (*id, unneeded_outputs(&model.equations[id.index()], &needed, *on)))
+        .filter(|(_, u)| !u.is_empty())
+        .collect();
     let initial = initial_order(model, &needed)?;
-    Ok(Live { dest, initial, timesteps })
+    Ok(Live { dest, initial, timesteps, unneeded })
+}
+
+fn unneeded_outputs(e: &Equation, needed: &BTreeMap<FieldId, GroupSet>, on: GroupSet) -> BTreeSet<FieldId> {
+    e.writes.iter().copied().filter(|f| needed.get(f).is_none_or(|g| g.intersect(on).is_empty())).collect()
+}
+
+/// What an equation needs stored: its reads, and the state it updates from its own value
+/// (`eps_p = eps_p + d`).
+fn live_reads(model: &Model, e: &Equation) -> BTreeSet<(FieldId, Side)> {
+    let mut reads = e.reads.clone();
+    for s in stmts_of(e) {
+        ir::walk_stmts(s, &mut |x| {
+            if let ExprKind::Field(f, side) = x.kind {
+                if e.writes.contains(&f) && model.field(f).storage == Storage::State {
+                    reads.insert((f, side));
+                }
+            }
+        });
+    }
+    reads
+}
+
+/// The equation without the statements that compute `drop` (and the `let`s only they used), with
+/// its writes, reads and parameters recomputed.
+pub fn pruned(e: &Equation, model: &Model, drop: &BTreeSet<FieldId>) -> Equation {
+    let mut out = e.clone();
+    let prune = |stmts: &mut Vec<ir::Stmt>| {
+        drop_writes(stmts, drop);
+        drop_unused_lets(stmts);
+    };
+    match &mut out.kind {
+        EquationKind::PairSum { init, body, finally, .. } => {
+            prune(init);
+            prune(body);
+            prune(finally);
+        }
+        EquationKind::Particle { body } => prune(body),
+    }
+    out.writes.retain(|f| !drop.contains(f));
+    let (mut reads, mut params) = (BTreeSet::new(), BTreeSet::new());
+    for s in stmts_of(&out) {
+        ir::walk_stmts(s, &mut |x| match x.kind {
+            ExprKind::Field(f, side) if !out.writes.contains(&f) && model.field(f).storage != Storage::Temp => {
+                reads.insert((f, side));
+            }
+            ExprKind::Param(p, side) => {
+                params.insert((p, side));
+            }
+            _ => {}
+        });
+    }
+    out.reads = reads;
+    out.params = params;
+    out
+}
+
+fn drop_writes(stmts: &mut Vec<ir::Stmt>, drop: &BTreeSet<FieldId>) {
+    stmts.retain_mut(|s| match s {
+        ir::Stmt::Set(f, _) | ir::Stmt::Accum(f, _, _) => !drop.contains(f),
+        ir::Stmt::If(_, a, b) => {
+            drop_writes(a, drop);
+            drop_writes(b, drop);
+            !(a.is_empty() && b.is_empty())
+        }
+        ir::Stmt::Let(..) => true,
+    });
+}
+
+fn drop_unused_lets(stmts: &mut Vec<ir::Stmt>) {
+    loop {
+        let mut used = BTreeSet::new();
+        ir::walk_stmts(stmts, &mut |x| {
+            if let ExprKind::Local(l) = x.kind {
+                used.insert(l);
+            }
+        });
+        let before = count_lets(stmts);
+        remove_lets(stmts, &used);
+        if count_lets(stmts) == before {
+            return;
+        }
+    }
+}
+
+fn count_lets(stmts: &[ir::Stmt]) -> usize {
+    stmts
+        .iter()
+        .map(|s| match s {
+            ir::Stmt::Let(..) => 1,
+            ir::Stmt::If(_, a, b) => count_lets(a) + count_lets(b),
+            _ => 0,
+        })
+        .sum()
+}
+
+fn remove_lets(stmts: &mut Vec<ir::Stmt>, used: &BTreeSet<ir::LocalId>) {
+    stmts.retain_mut(|s| match s {
+        ir::Stmt::Let(l, _) => used.contains(l),
+        ir::Stmt::If(_, a, b) => {
+            remove_lets(a, used);
+            remove_lets(b, used);
+            !(a.is_empty() && b.is_empty())
+        }
+        _ => true,
+    });
 }
 
 /// State fields with an initial-value expression, ordered so that each comes after what it reads.
@@ -160,7 +276,7 @@ fn initial_order(model: &Model, needed: &BTreeMap<FieldId, GroupSet>) -> Result<
 
 /// Where each needed field is stored: on the groups that need it. Saved copies follow their
 /// originals.
-pub fn layout(plan: &Plan, _scene: &SceneSpec) -> Vec<FieldLayout> {
+pub fn layout(plan: &Plan, scene: &SceneSpec) -> Vec<FieldLayout> {
     let mut out: Vec<FieldLayout> = vec![];
     let mut add = |f: FieldId, groups: GroupSet| {
         if groups.is_empty() {
@@ -177,6 +293,23 @@ pub fn layout(plan: &Plan, _scene: &SceneSpec) -> Vec<FieldLayout> {
     };
     for (f, g) in &plan_needed(plan) {
         add(*f, *g);
+    }
+    // What the case writes out or measures, though no equation of the step reads it.
+    for f in &scene.outputs {
+        let field = plan.model.field(*f);
+        let on = match field.storage {
+            Storage::State => plan.groups,
+            _ => plan
+                .model
+                .equations
+                .iter()
+                .filter(|e| e.writes.contains(f))
+                .fold(GroupSet::default(), |a, e| a.union(e.dest))
+                .intersect(plan.groups),
+        };
+        if field.storage != Storage::Temp {
+            add(*f, on);
+        }
     }
     out.sort_by_key(|l| l.field);
     out

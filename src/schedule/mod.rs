@@ -187,6 +187,9 @@ impl Plan {
         let mut model = model.clone();
         let scene_params = integrator::scene_params(&mut model, scene);
         let live = live::analyse(&model, scene)?;
+        for (id, drop) in &live.unneeded {
+            model.equations[id.index()] = live::pruned(&model.equations[id.index()], &model, drop);
+        }
         let fuse::Fused { passes, corrections, derived } = fuse::fuse(&model, scene, &live)?;
         let mut plan = Plan {
             dim: scene.dim,
