@@ -79,8 +79,8 @@ enum Command {
     },
     /// Benchmark the closure backend against a hand-written native step (ratios from one run)
     Bench {
-        /// Particle counts
-        #[arg(long, value_delimiter = ',', default_values_t = vec![10_000, 100_000])]
+        /// Particle counts (`--particles 10000 100000` or `--particles 10000,100000`)
+        #[arg(long, num_args = 1.., value_delimiter = ',', default_values_t = vec![10_000, 100_000])]
         particles: Vec<usize>,
         /// Repetitions per measurement (the best is kept)
         #[arg(long, default_value_t = 5)]
@@ -99,6 +99,12 @@ enum Command {
         /// Precision of the reals: f32 or f64
         #[arg(long, default_value = "f64")]
         precision: String,
+        /// For a case: the resolution (a name from the case, or a spacing)
+        #[arg(long)]
+        resolution: Option<String>,
+        /// For a case: set a parameter (`${name}` in the case file): --set v_impact=250
+        #[arg(long = "set", value_parser = parse_set)]
+        set: Vec<(String, String)>,
     },
 }
 
@@ -113,7 +119,10 @@ pub fn main() -> i32 {
     };
     match cli.command {
         Command::Check { paths, deny_warnings } => run_check(&paths, deny_warnings),
-        Command::Plan { path, dim, integrator, precision } => run_plan(&path, dim, &integrator, &precision),
+        Command::Plan { path, dim, integrator, precision, resolution, set } => {
+            let opts = crate::scene::Options { resolution, set, ..Default::default() };
+            run_plan(&path, dim, &integrator, &precision, &opts)
+        }
         Command::Run {
             case,
             backend,
@@ -367,7 +376,7 @@ fn run_run(case: &str, a: RunArgs) -> i32 {
     }
 }
 
-fn run_plan(path: &Path, dim: usize, integrator: &str, precision: &str) -> i32 {
+fn run_plan(path: &Path, dim: usize, integrator: &str, precision: &str, opts: &crate::scene::Options) -> i32 {
     let Some(real) = real_bytes(precision) else {
         eprintln!("error: --precision is f32 or f64, not `{precision}`");
         return 2;
@@ -381,7 +390,7 @@ fn run_plan(path: &Path, dim: usize, integrator: &str, precision: &str) -> i32 {
         return 2;
     }
     if path.extension().is_some_and(|e| e == "toml") {
-        return match crate::runner::prepare(path, &crate::scene::Options::default()) {
+        return match crate::runner::prepare(path, opts) {
             Ok((_, plan)) => {
                 print!("{}", plan.describe(real));
                 0
@@ -446,7 +455,9 @@ pub fn shader_sources(root: &Path) -> Vec<(PathBuf, PathBuf)> {
         let stem = m.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
         out.push((PathBuf::from("models").join(stem), m));
     }
-    for c in bundled_cases() {
+    // A study runs its case's shaders; it has none of its own.
+    let is_study = |c: &Path| std::fs::read_to_string(c).is_ok_and(|t| crate::scene::study::is_study(&t));
+    for c in bundled_cases().into_iter().filter(|c| !is_study(c)) {
         let stem = c.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
         out.push((PathBuf::from("cases").join(stem), c));
     }

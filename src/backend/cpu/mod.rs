@@ -133,7 +133,8 @@ fn compile_variant<T: Real>(plan: &Plan, v: &crate::schedule::PassVariant) -> Va
     let mut temps = vec![];
     for e in &v.pair_sums {
         let eq = plan.equation(*e);
-        let crate::ir::EquationKind::PairSum { sources, accumulators, init, body, compensated, .. } = &eq.kind else {
+        let sources = &eq.sources_for(v.group);
+        let crate::ir::EquationKind::PairSum { accumulators, init, body, compensated, .. } = &eq.kind else {
             continue;
         };
         let mask = (sources.intersect(plan.groups) != v.sources).then(|| lw.sources_mask(*sources));

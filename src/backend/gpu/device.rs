@@ -195,6 +195,12 @@ impl Gpu {
         Ok(Gpu { device, queue, adapter_info: infos[k].clone(), limits, lost, errors })
     }
 
+    /// Whether the adapter is a software rasteriser on the CPU (lavapipe, SwiftShader): right for
+    /// testing the GPU backend, slower than the CPU backend for running.
+    pub fn is_software(&self) -> bool {
+        self.adapter_info.device_type == wgpu::DeviceType::Cpu
+    }
+
     /// "llvmpipe (LLVM 15.0.6, 256 bits) (Vulkan, Cpu)".
     pub fn describe(&self) -> String {
         describe_adapter(&self.adapter_info)

@@ -276,7 +276,11 @@ impl<'a> Writer<'a> {
     }
 
     fn fresh(&mut self, base: &str) -> String {
-        let base = sanitize(base);
+        let mut base = sanitize(base);
+        // A DSL name may be a WGSL keyword or reserved word (`smooth`, `filter`, `target`).
+        if naga::keywords::wgsl::RESERVED.contains(&base.as_str()) {
+            base.push('_');
+        }
         let mut name = base.clone();
         let mut k = 2;
         while !self.used.insert(name.clone()) {
@@ -666,7 +670,8 @@ impl<'a> Writer<'a> {
             let shape = par.ty.shape;
             let t = ty(shape, d);
             let who = if side == Side::I { "i" } else { "j" };
-            if s.contains(&format!("fn prm_{name}({who}")) {
+            // One accessor serves both sides: it reads the parameters of the particle it is given.
+            if s.contains(&format!("fn prm_{name}(")) {
                 continue;
             }
             let _ = writeln!(s, "fn prm_{name}({who}: u32) -> {t} {{");
@@ -990,7 +995,8 @@ fn pass_kernel(plan: &Plan, lay: &Layout, pass: usize, v: &PassVariant, cell_hel
     let body_start = w.out.len();
     for e in &v.pair_sums {
         let eq = plan.equation(*e);
-        let EquationKind::PairSum { sources, body, .. } = &eq.kind else { continue };
+        let sources = &eq.sources_for(v.group);
+        let EquationKind::PairSum { body, .. } = &eq.kind else { continue };
         w.line(format!("// pairsum {} ({})", eq.name, eq.location));
         let masked = sources.intersect(plan.groups) != v.sources;
         if masked {
