@@ -277,6 +277,8 @@ pub fn bundled_cases() -> Vec<PathBuf> {
 fn run_cases() -> i32 {
     for p in bundled_cases() {
         let text = std::fs::read_to_string(&p).unwrap_or_default();
+        // A template case is listed with its parameters' defaults.
+        let text = crate::scene::template::expand(&text, &[]).unwrap_or(text);
         let table: toml::Table = toml::from_str(&text).unwrap_or_default();
         let name = table.get("name").and_then(|v| v.as_str()).unwrap_or("?").to_string();
         let title = table.get("title").and_then(|v| v.as_str()).unwrap_or("").to_string();

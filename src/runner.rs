@@ -107,6 +107,13 @@ pub fn run_case(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailure
             Err(e) => Err(RunFailure::Run(e.to_string())),
         },
         BackendChoice::Auto => match crate::backend::gpu::device::Gpu::new() {
+            Ok(gpu) if gpu.is_software() && std::env::var_os("PAIRSUM_ADAPTER").is_none() => {
+                eprintln!(
+                    "note: running on the CPU backend: the only GPU adapter, {}, is a software one (`--backend gpu` uses it)",
+                    gpu.describe()
+                );
+                run_cpu_precision(scene, plan, opts)
+            }
             Ok(gpu) => run_gpu(gpu, scene, plan, opts),
             Err(e) => {
                 eprintln!("note: running on the CPU backend: {}", e.to_string().lines().next().unwrap_or_default());
@@ -368,7 +375,8 @@ pub fn run_study(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailur
     let mut outcomes: Vec<(study::RunSpec, RunOutcome)> = vec![];
     for r in runs {
         let mut o = opts.clone();
-        o.scene.set = r.set.iter().map(|(k, v)| (k.clone(), study::text_of(v))).collect();
+        // `--set` applies to every run; what a run sets itself wins.
+        o.scene.set.extend(r.set.iter().map(|(k, v)| (k.clone(), study::text_of(v))));
         o.out = opts.out.join(sanitize(&r.name));
         eprintln!("{}: run `{}`", st.file.name, r.name);
         let outcome = run_case(&st.case_path, &o)?;
@@ -390,7 +398,12 @@ pub fn run_study(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailur
         let reference = study::reference(&sr.reference);
         let unit = sr.unit.clone().unwrap_or_default();
         let value = if sr.fit.as_deref() == Some("recht_ipson") {
-            let (Some(x), Some(y)) = (&sr.x, &sr.y) else { continue };
+            let (Some(x), Some(y)) = (&sr.x, &sr.y) else {
+                return Err(RunFailure::Input(format!(
+                    "study `{}`: result `{}`: a Recht–Ipson fit needs `x` and `y`\n",
+                    st.file.name, sr.quantity
+                )));
+            };
             let points: Vec<(f64, f64)> = outcomes
                 .iter()
                 .filter_map(|(r, o)| {
@@ -414,12 +427,18 @@ pub fn run_study(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailur
                     curve,
                 ));
             }
+            if let Some(v_bl) = reference {
+                // The reference limit is an impact speed: a vertical line.
+                let top = points.iter().map(|p| p.1).fold(0.0, f64::max).max(1.0);
+                let label = format!("{} (reference): {v_bl}", sr.quantity);
+                series.push(Curve::new(label, vec![(v_bl, 0.0), (v_bl, top)]));
+            }
             histories.push(History {
                 name: format!("{} ({})", sr.quantity, y),
                 x_label: format!("{x} [{unit}]"),
                 y_label: format!("{y} [{unit}]"),
                 series,
-                reference,
+                reference: None,
             });
             fit.map(|f| f.v_bl).unwrap_or(f64::NAN)
         } else if let Some([a, b]) = &sr.ratio {
@@ -435,13 +454,36 @@ pub fn run_study(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailur
         } else if let (Some(run), Some(of)) = (&sr.run, &sr.of) {
             value_of(run, of).unwrap_or(f64::NAN)
         } else {
-            continue;
+            return Err(RunFailure::Input(format!(
+                "study `{}`: result `{}` says neither `fit = \"recht_ipson\"` (with x, y), `ratio`, `difference` (with `of`) nor `run` (with `of`)\n",
+                st.file.name, sr.quantity
+            )));
         };
         let mut row = ResultRow::new(sr.quantity.clone(), unit, value, reference);
         if let Some(s) = &sr.source {
             row = row.with_source(s.clone());
         }
         results.push(row);
+    }
+    for probe in &st.file.plots {
+        let series: Vec<Curve> = outcomes
+            .iter()
+            .filter_map(|(r, o)| {
+                let (_, pts) = o.histories.iter().find(|(n, _)| n == probe)?;
+                Some(Curve::new(r.name.clone(), pts.clone()))
+            })
+            .collect();
+        if series.is_empty() {
+            return Err(RunFailure::Input(format!("study `{}`: no run has a probe `{probe}` to plot\n", st.file.name)));
+        }
+        let unit = first.histories.iter().find(|h| h.name == *probe).map(|h| h.y_label.clone());
+        histories.push(History {
+            name: format!("{probe}, every run"),
+            x_label: "t [s]".into(),
+            y_label: unit.unwrap_or_else(|| probe.clone()),
+            series,
+            reference: None,
+        });
     }
     for (r, o) in &outcomes {
         for row in &o.report.results {

@@ -172,3 +172,61 @@ fn the_plan_of_the_corrected_solid_model_fuses_l_continuity_and_velocity_gradien
     // Bytes per particle are reported per pass.
     assert!(line("  reads").contains("B/particle"));
 }
+
+#[test]
+fn template_parameters_resolutions_and_measures_are_checked_with_clear_errors() {
+    let run = |args: &[&str]| {
+        let out = Command::new(env!("CARGO_BIN_EXE_pairsum")).args(args).output().expect("runs");
+        (out.status.code(), String::from_utf8_lossy(&out.stderr).into_owned())
+    };
+    let cube = case("cube_on_cube");
+    let cube = cube.to_str().unwrap();
+    // A parameter the case does not have: the error lists the ones it has.
+    let (code, err) = run(&["run", cube, "--backend", "cpu", "--set", "nope=3"]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("C0026") && err.contains("no parameter `nope`") && err.contains("\"model\""), "{err}");
+    // A resolution the case does not define: the error lists the ones it does.
+    let (code, err) = run(&["run", cube, "--backend", "cpu", "--resolution", "finest"]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("unknown resolution `finest`") && err.contains("ci, paper"), "{err}");
+    // A misspelt measure, at its line and column, with the known ones.
+    let dir = out_dir("badmeasure");
+    std::fs::create_dir_all(&dir).expect("dir");
+    let bad = dir.join("bad.toml");
+    let text = std::fs::read_to_string(case("cube_on_cube")).expect("case");
+    let line = text.lines().position(|l| l.contains("\"min_interbody_distance\"")).expect("measure line") + 1;
+    std::fs::write(&bad, text.replace("\"min_interbody_distance\"", "\"min_interbody_distanse\"")).expect("write");
+    let (code, err) = run(&["run", bad.to_str().unwrap(), "--backend", "cpu"]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("unknown measure `min_interbody_distanse`"), "{err}");
+    assert!(err.contains(&format!("bad.toml:{line}:11")), "no line and column in:\n{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn the_perforation_plan_keeps_plasticity_and_damage_off_the_elastic_projectile() {
+    let out = Command::new(env!("CARGO_BIN_EXE_pairsum"))
+        .args(["plan", case("borvik_perforation").to_str().unwrap()])
+        .output()
+        .expect("runs");
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = String::from_utf8_lossy(&out.stdout);
+    let stored = |name: &str| {
+        text.lines()
+            .find(|l| l.split_whitespace().next() == Some(name))
+            .map(|l| l.rsplit(" on ").next().unwrap_or("").to_string())
+    };
+    // Plasticity, damage and temperature (and their saved copies) live on the target only,
+    // though the case writes D and eps_p out.
+    for f in ["eps_p", "D", "T", "eps_p@0", "D@0"] {
+        assert_eq!(stored(f).as_deref(), Some("target"), "`{f}` in\n{text}");
+    }
+    // Both bodies carry what both integrate.
+    assert_eq!(stored("s").as_deref(), Some("projectile|target"), "{text}");
+    let bytes = |g: &str| {
+        let l = text.lines().find(|l| l.starts_with(&format!("particle state on {g}:"))).expect("bytes line");
+        l.split_whitespace().rev().nth(1).and_then(|w| w.parse::<u32>().ok())
+    };
+    let (p, t) = (bytes("projectile"), bytes("target"));
+    assert!(p.is_some() && t.is_some() && p < t, "projectile {p:?} vs target {t:?} B/particle in\n{text}");
+}

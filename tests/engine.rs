@@ -147,3 +147,41 @@ fn the_watchdog_names_step_particle_group_and_field_and_keeps_the_last_good_stat
     let col = u.last_good.columns[q.index()].as_ref().expect("q stored");
     assert!(col.iter().all(|v| v.is_finite()));
 }
+
+/// `from own`: a sum over neighbours of the particle's own group only. Two touching blocks, one
+/// per group, give with `from own` exactly the sums each block has alone; without it they differ.
+#[test]
+fn a_sum_from_own_sees_only_the_particles_own_group() {
+    let text = |from: &str| {
+        format!(
+            "use kernels\ngroup left, right\nkernel = wendland_c2\n\
+             pairsum shepard {from} -> w_sum: scalar [1/m^3] {{ w_sum += W_ij }}\n\
+             integrate {{ }}\n"
+        )
+    };
+    let (n, dx) = (6, 0.01);
+    let blocks = |gap: f64| {
+        let mut x = lattice(2, n, dx);
+        let mut shifted: Vec<[f64; 3]> = x.iter().map(|p| [p[0] + n as f64 * dx + gap, p[1], 0.0]).collect();
+        let half = x.len();
+        x.append(&mut shifted);
+        let mut input = input(2, x, dx);
+        input.body[half..].iter_mut().for_each(|b| *b = 1);
+        input.group[half..].iter_mut().for_each(|g| *g = 1);
+        input
+    };
+    let sums = |text: &str, gap: f64| {
+        let m = model(text);
+        let mat = material(&m, &[("rho0", vec![1000.0]), ("h_ratio", vec![1.3])]);
+        let mut b = backend::<f64>(&m, &scene(&m, 2, &["w_sum"], IntegratorKind::Euler), &blocks(gap), &[mat], vec![]);
+        b.evaluate(Default::default()).expect("evaluate");
+        field_by_id(&b, "w_sum").1
+    };
+    let apart = sums(&text(""), 10.0 * dx);
+    let own_touching = sums(&text("from own"), 0.0);
+    let all_touching = sums(&text(""), 0.0);
+    let worst = apart.iter().zip(&own_touching).map(|(a, b)| (a - b).abs() / a).fold(0.0, f64::max);
+    assert!(worst < 1e-12, "from own, touching vs apart: relative difference {worst:e}");
+    let cross = apart.iter().zip(&all_touching).map(|(a, b)| (a - b).abs() / a).fold(0.0, f64::max);
+    assert!(cross > 0.1, "without `from own` the touching blocks should see each other ({cross:e})");
+}

@@ -43,7 +43,12 @@ fn corrected_gradient_of_a_linear_field_is_exact_to_round_off() {
         // so that every particle, corners included, is corrected.
         let mat = material(
             &m,
-            &[("rho0", vec![1000.0]), ("h_ratio", vec![1.3]), ("slope", slope[..dim].to_vec()), ("det_min", vec![1e-3])],
+            &[
+                ("rho0", vec![1000.0]),
+                ("h_ratio", vec![1.3]),
+                ("slope", slope[..dim].to_vec()),
+                ("det_min", vec![1e-3]),
+            ],
         );
         let mut b = backend::<f64>(
             &m,

@@ -169,7 +169,8 @@ impl Checker {
             .collect();
         self.temps.clear();
         let own = p.own || self.module_scope.2;
-        let kind = EquationKind::PairSum { sources, own, accumulators, init, body, finally, compensated: p.compensated };
+        let kind =
+            EquationKind::PairSum { sources, own, accumulators, init, body, finally, compensated: p.compensated };
         self.push_equation(&p.name.name, kind, dest, stored, p.span);
     }
 

@@ -2,9 +2,9 @@
 //! `use a::b` from a file in directory D looks for `D/a/b.sph`, then `<stdlib>/a/b.sph`.
 
 use crate::diag::{Diagnostic, Sources, Span};
+use crate::syntax::ast::Ident;
 use crate::syntax::ast::{File, Item, UsePath};
 use crate::syntax::parse_file;
-use crate::syntax::ast::Ident;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 

@@ -153,7 +153,8 @@ impl Checker {
 
     fn run(&mut self, modules: &[load::Module], is_model: bool) {
         let items: Vec<&Item> = modules.iter().flat_map(|m| m.ast.items.iter()).collect();
-        let owner: Vec<usize> = modules.iter().enumerate().flat_map(|(k, m)| m.ast.items.iter().map(move |_| k)).collect();
+        let owner: Vec<usize> =
+            modules.iter().enumerate().flat_map(|(k, m)| m.ast.items.iter().map(move |_| k)).collect();
         self.collect_groups(&items);
         let scopes = self.module_scopes(modules);
         for it in &items {
@@ -260,7 +261,13 @@ impl Checker {
     }
 
     /// An equation's groups (`on`/`from`, default all) within the module's scope.
-    pub(crate) fn scoped_groups(&mut self, list: Option<&Vec<ast::Ident>>, sources: bool, span: Span, what: &str) -> GroupSet {
+    pub(crate) fn scoped_groups(
+        &mut self,
+        list: Option<&Vec<ast::Ident>>,
+        sources: bool,
+        span: Span,
+        what: &str,
+    ) -> GroupSet {
         let scope = if sources { self.module_scope.1 } else { self.module_scope.0 };
         let set = self.groups(list).intersect(scope);
         if set.is_empty() && scope != GroupSet::ALL && scope != self.model.all_groups() {

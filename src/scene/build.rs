@@ -37,9 +37,29 @@ pub struct BodyInfo {
 #[derive(Clone, Debug)]
 pub enum ProbeKind {
     /// A field component reduced over a set of particles (by their index in the scene).
-    Field { select: Option<Vec<bool>>, field: FieldId, component: usize, reduce: String, relative: bool },
+    Field {
+        select: Option<Vec<bool>>,
+        field: FieldId,
+        pick: Pick,
+        reduce: String,
+        relative: bool,
+        /// Report this coordinate of the particle where `reduce` (min, max, abs_max) is reached.
+        locate: Option<usize>,
+    },
     /// A named measurement (`scene::measure`).
     Measure(String),
+}
+
+/// What a field probe reads of each particle's value.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Pick {
+    /// One stored component (`v.z` → `component = "z"`, `s.xy`, a scalar).
+    Component(usize),
+    /// The length of a vec (`component = "norm"`).
+    Norm,
+    /// √(3/2 s:s) of a deviatoric symtensor (`component = "von_mises"`), with the out-of-plane
+    /// diagonal of 1D and 2D implied by a zero trace.
+    VonMises,
 }
 
 #[derive(Clone, Debug)]
@@ -176,11 +196,27 @@ fn unit(s: &str) -> Unit {
     crate::units::parse_simple(s).unwrap_or(Unit::ONE)
 }
 
+/// The parameter values the chosen resolution sets (`[resolutions] ci = { dx = …, set = { … } }`),
+/// read from the unexpanded text (placeholders live inside strings, so it parses).
+fn resolution_set(text: &str, opts: &Options) -> Vec<(String, String)> {
+    let Ok(table) = super::template::skeleton(text) else { return vec![] };
+    let wanted = opts
+        .resolution
+        .clone()
+        .or_else(|| table.get("default_resolution").and_then(|r| r.as_str()).map(str::to_string))
+        .unwrap_or_else(|| "ci".into());
+    let set =
+        table.get("resolutions").and_then(|r| r.get(&wanted)).and_then(|r| r.get("set")).and_then(|s| s.as_table());
+    set.map(|s| s.iter().map(|(k, v)| (k.clone(), super::study::text_of(v))).collect()).unwrap_or_default()
+}
+
 /// Reads and builds a case. Diagnostics (DSL and case file) are returned on failure.
 pub fn load(path: &Path, sources: &mut Sources, opts: &Options) -> Result<Scene, Vec<Diagnostic>> {
     let text = std::fs::read_to_string(path)
         .map_err(|e| vec![Diagnostic::error("C0001", format!("cannot read `{}`: {e}", path.display()))])?;
-    let text = match super::template::expand(&text, &opts.set) {
+    let mut set = resolution_set(&text, opts);
+    set.extend(opts.set.iter().cloned());
+    let text = match super::template::expand(&text, &set) {
         Ok(t) => t,
         Err(e) => {
             let file = sources.add(check::load::display_path(path), text.clone());
@@ -359,6 +395,33 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
         }
         materials.push(mi);
     }
+    // Symmetry planes: the scene is the part of space on their positive side.
+    let mut mirrors = vec![];
+    for sym in &case.symmetry {
+        let axis = match sym.axis.get_ref().as_str() {
+            "x" => 0,
+            "y" => 1,
+            "z" => 2,
+            other => {
+                cx.err(sym.axis.span(), "C0014", format!("symmetry axis is x, y or z, found `{other}`"), "here");
+                continue;
+            }
+        };
+        if axis >= dim || mirrors.iter().any(|m: &Mirror| m.axis == axis) {
+            cx.err(
+                sym.axis.span(),
+                "C0014",
+                format!("a {dim}D case has one symmetry plane per axis among the first {dim}"),
+                "here",
+            );
+            continue;
+        }
+        let at = match &sym.at {
+            Some(v) => cx.scalar(v, m, "symmetry plane position")?,
+            None => 0.0,
+        };
+        mirrors.push(Mirror { axis, offset: at });
+    }
     // Bodies.
     let mut particles = ParticleInput::default();
     let mut bodies: Vec<BodyInfo> = vec![];
@@ -386,7 +449,7 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
             continue;
         };
         let spacing = dx * body.spacing_factor.unwrap_or(1.0);
-        let Some(placed) = place(body, spacing, dx, dir, cx) else { continue };
+        let Some(placed) = place(body, spacing, dx, dir, &mirrors, cx) else { continue };
         let velocity = match &body.velocity {
             Some(v) => cx.vector(v, unit("m/s"), &format!("velocity of body `{name}`"))?,
             None => [0.0; 3],
@@ -483,33 +546,9 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
             Some(r) => time_scale * cx.scalar(r, s, "constraint ramp")?,
             None => 0.0,
         };
-        constraints.push(Constraint { target: t, velocity: velocity[..dim].to_vec(), ramp });
-    }
-    let mut mirrors = vec![];
-    for sym in &case.symmetry {
-        let axis = match sym.axis.get_ref().as_str() {
-            "x" => 0,
-            "y" => 1,
-            "z" => 2,
-            other => {
-                cx.err(sym.axis.span(), "C0014", format!("symmetry axis is x, y or z, found `{other}`"), "here");
-                continue;
-            }
-        };
-        if axis >= dim || mirrors.iter().any(|m: &Mirror| m.axis == axis) {
-            cx.err(
-                sym.axis.span(),
-                "C0014",
-                format!("a {dim}D case has one symmetry plane per axis among the first {dim}"),
-                "here",
-            );
-            continue;
-        }
-        let at = match &sym.at {
-            Some(v) => cx.scalar(v, m, "symmetry plane position")?,
-            None => 0.0,
-        };
-        mirrors.push(Mirror { axis, offset: at });
+        // A faster clock keeps prescribed displacements: velocities grow as the times shrink.
+        let velocity = velocity[..dim].iter().map(|v| v / time_scale).collect();
+        constraints.push(Constraint { target: t, velocity, ramp });
     }
     let gravity = match &case.gravity {
         Some(g) => Some(cx.vector(g, unit("m/s^2"), "gravity")?[..dim].to_vec()),
@@ -590,19 +629,27 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
                 }
             }
             let shape = model.field(f).ty.shape;
-            let component = match &p.component {
-                None => 0,
-                Some(c) => match component_index(shape, dim, c.get_ref()) {
-                    Some(k) => k,
-                    None => {
-                        cx.err(
-                            c.span(),
-                            "C0017",
-                            format!("`{}` is not a component of a {dim}D {}", c.get_ref(), shape.name()),
-                            "here",
-                        );
-                        continue;
-                    }
+            let pick = match &p.component {
+                None => Pick::Component(0),
+                Some(c) => match (c.get_ref().as_str(), shape) {
+                    ("norm", Shape::Vec) => Pick::Norm,
+                    ("von_mises", Shape::SymTensor) => Pick::VonMises,
+                    (name, _) => match component_index(shape, dim, name) {
+                        Some(k) => Pick::Component(k),
+                        None => {
+                            cx.err(
+                                c.span(),
+                                "C0017",
+                                format!(
+                                    "`{name}` is not a component of a {dim}D {} (components such as `x` or `xy`, \
+                                     `norm` of a vec, `von_mises` of a symtensor)",
+                                    shape.name()
+                                ),
+                                "here",
+                            );
+                            continue;
+                        }
+                    },
                 },
             };
             let reduce = p.reduce.as_ref().map(|r| r.get_ref().clone()).unwrap_or_else(|| "mean".into());
@@ -611,7 +658,22 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
                 cx.err(span, "C0017", format!("reduce is mean, min, max, sum or abs_max, found `{reduce}`"), "here");
                 continue;
             }
-            ProbeKind::Field { select, field: f, component, reduce, relative: p.relative }
+            let locate = match &p.locate {
+                None => None,
+                Some(a) => match ("xyz".find(a.get_ref().as_str()).filter(|k| *k < dim), reduce.as_str()) {
+                    (Some(k), "min" | "max" | "abs_max") if a.get_ref().len() == 1 => Some(k),
+                    _ => {
+                        cx.err(
+                            a.span(),
+                            "C0017",
+                            format!("`locate` is an axis (x, y, z) of a {dim}D case, with reduce min, max or abs_max"),
+                            "here",
+                        );
+                        continue;
+                    }
+                },
+            };
+            ProbeKind::Field { select, field: f, pick, reduce, relative: p.relative, locate }
         };
         probes.push(ProbeSpec {
             name: p.name.get_ref().clone(),
@@ -678,8 +740,11 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
     };
     let mut outputs = output_fields.clone();
     for p in &probes {
-        if let ProbeKind::Field { field, .. } = p.kind {
+        if let ProbeKind::Field { field, locate, .. } = p.kind {
             outputs.push(field);
+            if locate.is_some() {
+                outputs.extend(model.field_id("x"));
+            }
         }
         if let ProbeKind::Measure(m) = &p.kind {
             for name in super::measure::fields_needed(m) {
@@ -742,7 +807,59 @@ fn component_index(shape: Shape, dim: usize, name: &str) -> Option<usize> {
 }
 
 /// Particles of one body: a primitive filled at its spacing (graded if asked), or a node list.
-fn place(body: &case::Body, spacing: f64, dx: f64, dir: &Path, cx: &mut Ctx) -> Option<geometry::Particles> {
+/// With symmetry planes, a uniform fill's lattice is anchored half a spacing off each plane, and
+/// only the particles on the planes' positive side are kept.
+fn place(
+    body: &case::Body,
+    spacing: f64,
+    dx: f64,
+    dir: &Path,
+    mirrors: &[Mirror],
+    cx: &mut Ctx,
+) -> Option<geometry::Particles> {
+    let placed = place_whole(body, spacing, dx, dir, mirrors, cx)?;
+    if mirrors.is_empty() {
+        return Some(placed);
+    }
+    let keep: Vec<usize> =
+        (0..placed.len()).filter(|k| mirrors.iter().all(|m| placed.positions[*k][m.axis] > m.offset)).collect();
+    let name = body.name.get_ref();
+    if keep.is_empty() {
+        cx.err(body.shape.span(), "C0025", format!("body `{name}` lies behind a symmetry plane"), "no particle kept");
+        return None;
+    }
+    if let Some(k) = keep
+        .iter()
+        .find(|k| mirrors.iter().any(|m| placed.positions[**k][m.axis] - m.offset < 0.25 * placed.spacing[**k]))
+    {
+        cx.err(
+            body.shape.span(),
+            "C0025",
+            format!(
+                "body `{name}`: a particle at {:?} lies within a quarter spacing of a symmetry plane, too close to its mirror image",
+                placed.positions[*k]
+            ),
+            "make the shape's extent across the plane a whole number of spacings",
+        );
+        return None;
+    }
+    let pick = |v: &[f64]| keep.iter().map(|k| v[*k]).collect::<Vec<f64>>();
+    Some(geometry::Particles {
+        positions: keep.iter().map(|k| placed.positions[*k]).collect(),
+        volumes: pick(&placed.volumes),
+        spacing: pick(&placed.spacing),
+        volume_scale: placed.volume_scale,
+    })
+}
+
+fn place_whole(
+    body: &case::Body,
+    spacing: f64,
+    dx: f64,
+    dir: &Path,
+    mirrors: &[Mirror],
+    cx: &mut Ctx,
+) -> Option<geometry::Particles> {
     let name = body.name.get_ref();
     let span = body.shape.span();
     if let case::Shape::Nodes { file, scale } = body.shape.get_ref() {
@@ -792,7 +909,26 @@ fn place(body: &case::Body, spacing: f64, dx: f64, dir: &Path, cx: &mut Ctx) -> 
             let region = primitive(r.region.get_ref(), cx)?;
             geometry::fill_graded(&shape, dx * r.factor, spacing, &region, cx.dim)
         }
-        None => geometry::fill(&shape, spacing, cx.dim),
+        None if mirrors.is_empty() => geometry::fill(&shape, spacing, cx.dim),
+        None => {
+            let mut origin = match shape.bbox(cx.dim) {
+                Ok((min, _)) => {
+                    let mut o = [0.0; 3];
+                    for c in 0..cx.dim {
+                        o[c] = min[c] + 0.5 * spacing;
+                    }
+                    o
+                }
+                Err(e) => {
+                    cx.err(span, "C0023", format!("body `{name}`: {e}"), "here");
+                    return None;
+                }
+            };
+            for m in mirrors {
+                origin[m.axis] = m.offset + 0.5 * spacing;
+            }
+            geometry::fill_with(&shape, &geometry::Fill { spacing, origin: Some(origin) }, cx.dim)
+        }
     };
     match filled {
         Ok(p) if !p.is_empty() => Some(p),

@@ -71,9 +71,14 @@ pub struct ResolutionTable {
     #[serde(default)]
     pub tolerance: Option<f64>,
     /// Runs the case this much faster in time: end time, load and constraint ramps, output
-    /// interval and result windows are multiplied by it.
+    /// interval and result windows are multiplied by it, prescribed (constraint) velocities divided
+    /// by it, so that a quasi-static load reaches the same forces and displacements sooner.
     #[serde(default)]
     pub time_scale: Option<f64>,
+    /// Values of the case's `${name}` parameters at this resolution (a smaller domain for CI, a
+    /// different time-step factor); `--set` and studies still override them.
+    #[serde(default)]
+    pub set: Option<toml::Table>,
 }
 
 #[derive(Deserialize, Debug)]
@@ -202,6 +207,9 @@ pub struct Probe {
     /// Subtract the value at t = 0.
     #[serde(default)]
     pub relative: bool,
+    /// Report this coordinate (`x`, `y`, `z`) of the particle where `reduce` is reached.
+    #[serde(default)]
+    pub locate: Option<Spanned<String>>,
     #[serde(default)]
     pub measure: Option<Spanned<String>>,
     #[serde(default)]

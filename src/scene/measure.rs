@@ -1,16 +1,34 @@
 //! Probes: what a case measures during a run — a field component reduced over a body, or a named
 //! measurement with a documented, automatic definition — and the results taken from them.
 
-use super::build::{ProbeKind, ProbeSpec, ResultSpec, Scene};
+use super::build::{Pick, ProbeKind, ProbeSpec, ResultSpec, Scene};
 use crate::backend::Backend;
+use crate::ir::{component_indices, Shape};
 
 /// Named measurements and what each reads.
-pub const NAMES: [&str; 3] = ["min_interbody_distance", "interpenetrated", "front_position"];
+pub const NAMES: [&str; 12] = [
+    "min_pair_distance",
+    "max_neighbour_gap",
+    "min_interbody_distance",
+    "interpenetrated",
+    "front_position",
+    "kinetic_energy",
+    "max_speed",
+    "crater_diameter",
+    "debris_length",
+    "debris_width",
+    "debris_length_to_width",
+    "plug_velocity",
+];
 
 pub fn fields_needed(name: &str) -> Vec<&'static str> {
     match name {
-        "min_interbody_distance" | "interpenetrated" => vec!["x"],
-        "front_position" => vec!["x", "v"],
+        "min_interbody_distance" | "interpenetrated" | "crater_diameter" => vec!["x"],
+        "min_pair_distance" | "max_neighbour_gap" => vec!["x", "dx"],
+        "debris_length" | "debris_width" | "debris_length_to_width" => vec!["x"],
+        "front_position" | "plug_velocity" => vec!["x", "v"],
+        "kinetic_energy" => vec!["v", "m"],
+        "max_speed" => vec!["v"],
         _ => vec![],
     }
 }
@@ -45,18 +63,60 @@ pub fn positions(b: &dyn Backend) -> Option<Vec<[f64; 3]>> {
 /// The value of a probe now.
 pub fn evaluate(p: &ProbeSpec, scene: &Scene, b: &dyn Backend) -> f64 {
     match &p.kind {
-        ProbeKind::Field { select, field, component, reduce, .. } => {
+        ProbeKind::Field { select, field, pick, reduce, locate, .. } => {
             let Some((comps, values)) = b.read(*field) else { return f64::NAN };
+            let shape = b.plan().model.field(*field).ty.shape;
+            let dim = b.plan().dim;
             let ids = b.ids();
-            let selected: Vec<f64> = (0..ids.len())
+            let selected: Vec<(usize, f64)> = (0..ids.len())
                 .filter(|k| select.as_ref().is_none_or(|s| s[ids[*k] as usize]))
-                .map(|k| values[k * comps + component])
-                .filter(|v| !v.is_nan())
+                .map(|k| (k, picked(*pick, shape, dim, &values[k * comps..(k + 1) * comps])))
+                .filter(|(_, v)| !v.is_nan())
                 .collect();
-            reduce_values(reduce, &selected)
+            match locate {
+                Some(axis) => locate_extreme(reduce, &selected, *axis, b),
+                None => reduce_values(reduce, &selected.iter().map(|p| p.1).collect::<Vec<_>>()),
+            }
         }
         ProbeKind::Measure(name) => measure(name, scene, b),
     }
+}
+
+/// One particle's value of a field as a probe reads it.
+fn picked(pick: Pick, shape: Shape, dim: usize, v: &[f64]) -> f64 {
+    match pick {
+        Pick::Component(c) => v[c],
+        Pick::Norm => v.iter().map(|x| x * x).sum::<f64>().sqrt(),
+        Pick::VonMises => {
+            // s:s over the full tensor: off-diagonal components count twice; the diagonal
+            // components a 1D or 2D tensor does not store follow from tr(s) = 0 (1D: equal halves).
+            let mut ss = 0.0;
+            let mut trace = 0.0;
+            for (k, (r, c)) in component_indices(shape, dim).into_iter().enumerate() {
+                ss += if r == c { v[k] * v[k] } else { 2.0 * v[k] * v[k] };
+                if r == c {
+                    trace += v[k];
+                }
+            }
+            ss += match dim {
+                1 => 2.0 * (0.5 * trace).powi(2),
+                2 => trace * trace,
+                _ => 0.0,
+            };
+            (1.5 * ss).sqrt()
+        }
+    }
+}
+
+/// The `axis` coordinate of the particle where the reduction is reached.
+fn locate_extreme(reduce: &str, values: &[(usize, f64)], axis: usize, b: &dyn Backend) -> f64 {
+    let key = |v: f64| match reduce {
+        "min" => -v,
+        "abs_max" => v.abs(),
+        _ => v,
+    };
+    let Some(&(k, _)) = values.iter().max_by(|p, q| key(p.1).total_cmp(&key(q.1))) else { return f64::NAN };
+    positions(b).map(|x| x[k][axis]).unwrap_or(f64::NAN)
 }
 
 fn reduce_values(reduce: &str, v: &[f64]) -> f64 {
@@ -83,8 +143,180 @@ fn measure(name: &str, scene: &Scene, b: &dyn Backend) -> f64 {
         "interpenetrated" => interbody(&x, &which, dim, scene.dx).1 as f64,
         // Where a wave front driven by the first body has got to.
         "front_position" => front_position(&x, &which, b),
+        "min_pair_distance" => spacing_extremes(&x, b).0,
+        "max_neighbour_gap" => spacing_extremes(&x, b).1,
+        "kinetic_energy" => kinetic_energy(b),
+        "max_speed" => speeds(b).into_iter().fold(0.0, f64::max),
+        "crater_diameter" => crater_diameter(&x, &which, scene),
+        "debris_length" => debris(&x, scene).0,
+        "debris_width" => debris(&x, scene).1,
+        "debris_length_to_width" => {
+            let (l, w) = debris(&x, scene);
+            l / w
+        }
+        "plug_velocity" => plug_velocity(&x, &which, scene, b),
         _ => f64::NAN,
     }
+}
+
+/// The speed of the plug a projectile (the first body) pushes out of a plate (the second): the
+/// mean velocity along the impact axis of the plate's particles now more than Δx beyond its
+/// initial rear face and within the projectile's initial radius (plus Δx) of the axis. Zero while
+/// none is out (below the ballistic limit, or before the plug leaves).
+fn plug_velocity(x: &[[f64; 3]], body: &[u32], scene: &Scene, b: &dyn Backend) -> f64 {
+    let (Some(axis), Some(projectile), Some(plate)) = (Axis::of(scene), scene.bodies.first(), scene.bodies.get(1))
+    else {
+        return f64::NAN;
+    };
+    let Some(vf) = b.plan().model.field_id("v") else { return f64::NAN };
+    let Some((c, v)) = b.read(vf) else { return f64::NAN };
+    let rear = plate.particles.clone().map(|k| axis.coords(scene.particles.x[k]).0).fold(f64::NEG_INFINITY, f64::max);
+    let radius =
+        projectile.particles.clone().map(|k| axis.coords(scene.particles.x[k]).1).fold(0.0, f64::max) + scene.dx;
+    let speeds: Vec<f64> = (0..x.len())
+        .filter(|k| body[*k] == 1)
+        .filter(|k| {
+            let (s, r) = axis.coords(x[*k]);
+            s > rear + scene.dx && r < radius
+        })
+        .map(|k| (0..c).map(|d| v[k * c + d] * axis.dir[d]).sum::<f64>())
+        .collect();
+    if speeds.is_empty() {
+        return 0.0;
+    }
+    speeds.iter().sum::<f64>() / speeds.len() as f64
+}
+
+/// Over every particle, relative to its own spacing Δx_i: the least distance to another particle
+/// (clumping: the tensile instability pulls particles together) and the largest distance to its
+/// nearest neighbour (a crack or a particle left alone). Neighbours within 3 Δx_i are searched.
+fn spacing_extremes(x: &[[f64; 3]], b: &dyn Backend) -> (f64, f64) {
+    let dim = b.plan().dim;
+    let Some(dxf) = b.plan().model.field_id("dx") else { return (f64::NAN, f64::NAN) };
+    let Some((_, dx)) = b.read(dxf) else { return (f64::NAN, f64::NAN) };
+    let reach = 3.0 * dx.iter().copied().fold(0.0, f64::max);
+    let flat: Vec<f64> = x.iter().flat_map(|p| p[..dim].to_vec()).collect();
+    let grid = crate::grid::Grid::build(&flat, dim, reach);
+    let (mut least, mut gap) = (f64::INFINITY, 0.0f64);
+    for (i, p) in x.iter().enumerate() {
+        let mut nearest = f64::INFINITY;
+        grid.for_each_candidate(*p, |j| {
+            if j as usize != i {
+                let r = (0..dim).map(|c| (p[c] - x[j as usize][c]).powi(2)).sum::<f64>().sqrt();
+                nearest = nearest.min(r);
+            }
+        });
+        let nearest = nearest.min(3.0 * dx[i]) / dx[i];
+        least = least.min(nearest);
+        gap = gap.max(nearest);
+    }
+    (least, gap)
+}
+
+fn speeds(b: &dyn Backend) -> Vec<f64> {
+    let Some(v) = b.plan().model.field_id("v") else { return vec![] };
+    let Some((c, v)) = b.read(v) else { return vec![] };
+    v.chunks(c).map(|u| u.iter().map(|x| x * x).sum::<f64>().sqrt()).collect()
+}
+
+/// Σ ½ m |v|² over every particle.
+fn kinetic_energy(b: &dyn Backend) -> f64 {
+    let Some(m) = b.plan().model.field_id("m") else { return f64::NAN };
+    let Some((_, m)) = b.read(m) else { return f64::NAN };
+    speeds(b).iter().zip(&m).map(|(s, m)| 0.5 * m * s * s).sum()
+}
+
+/// The impact axis: through the first body's centroid at t = 0, along its initial velocity.
+struct Axis {
+    origin: [f64; 3],
+    dir: [f64; 3],
+}
+
+impl Axis {
+    fn of(scene: &Scene) -> Option<Axis> {
+        let first = scene.bodies.first()?.particles.clone();
+        let n = first.len() as f64;
+        let mut origin = [0.0; 3];
+        let mut dir = [0.0; 3];
+        for k in first {
+            for c in 0..3 {
+                origin[c] += scene.particles.x[k][c] / n;
+                dir[c] += scene.particles.v[k][c] / n;
+            }
+        }
+        // A body cut by symmetry planes is centred on them.
+        for m in &scene.mirrors {
+            origin[m.axis] = m.offset;
+        }
+        let len = dir.iter().map(|d| d * d).sum::<f64>().sqrt();
+        (len > 0.0).then(|| Axis { origin, dir: dir.map(|d| d / len) })
+    }
+    /// (distance along the axis, distance from it).
+    fn coords(&self, p: [f64; 3]) -> (f64, f64) {
+        let d: Vec<f64> = (0..3).map(|c| p[c] - self.origin[c]).collect();
+        let s: f64 = (0..3).map(|c| d[c] * self.dir[c]).sum();
+        let r2: f64 = (0..3).map(|c| (d[c] - s * self.dir[c]).powi(2)).sum();
+        (s, r2.max(0.0).sqrt())
+    }
+}
+
+/// The diameter of the hole the first body makes in the second (a plate across the impact axis).
+/// The plate's material is counted in rings of width Δx around the axis, at t = 0 and now, now
+/// only within the plate's initial slab widened by its thickness on each side (so that bent or
+/// lipped material still counts, and ejected material does not). The crater's radius is where the
+/// ring's share of its initial count first reaches one half, interpolated between rings.
+fn crater_diameter(x: &[[f64; 3]], body: &[u32], scene: &Scene) -> f64 {
+    let (Some(axis), Some(plate)) = (Axis::of(scene), scene.bodies.get(1)) else { return f64::NAN };
+    let initial: Vec<(f64, f64)> = plate.particles.clone().map(|k| axis.coords(scene.particles.x[k])).collect();
+    let (lo, hi) = initial.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, p| (a.0.min(p.0), a.1.max(p.0)));
+    let t = hi - lo;
+    let ring = scene.dx;
+    let r_max = initial.iter().map(|p| p.1).fold(0.0, f64::max);
+    let n = (r_max / ring).ceil() as usize + 1;
+    let mut before = vec![0.0; n];
+    for p in &initial {
+        before[((p.1 / ring) as usize).min(n - 1)] += 1.0;
+    }
+    let mut now = vec![0.0; n];
+    for (k, p) in x.iter().enumerate() {
+        if body[k] != 1 {
+            continue;
+        }
+        let (s, r) = axis.coords(*p);
+        if s >= lo - t && s <= hi + t && r < r_max {
+            now[((r / ring) as usize).min(n - 1)] += 1.0;
+        }
+    }
+    let share: Vec<f64> = before.iter().zip(&now).map(|(b, a)| if *b > 0.0 { a / b } else { 1.0 }).collect();
+    match share.iter().position(|s| *s >= 0.5) {
+        Some(0) => 0.0,
+        Some(k) => {
+            // Ring k − 1 (centre (k − ½)Δx) is below one half, ring k (centre (k + ½)Δx) above.
+            let (a, c) = (share[k - 1], share[k]);
+            2.0 * ring * (k as f64 - 0.5 + (0.5 - a) / (c - a))
+        }
+        None => f64::NAN,
+    }
+}
+
+/// The debris cloud behind the plate: every particle more than Δx beyond the second body's
+/// initial rear face (along the impact axis). Its length is how far beyond the rear face it
+/// reaches, its width twice its reach from the axis, both as the 99th percentile over its
+/// particles so that a few stray particles do not set them.
+fn debris(x: &[[f64; 3]], scene: &Scene) -> (f64, f64) {
+    let (Some(axis), Some(plate)) = (Axis::of(scene), scene.bodies.get(1)) else { return (f64::NAN, f64::NAN) };
+    let rear = plate.particles.clone().map(|k| axis.coords(scene.particles.x[k]).0).fold(f64::NEG_INFINITY, f64::max);
+    let (mut along, mut across): (Vec<f64>, Vec<f64>) =
+        x.iter().map(|p| axis.coords(*p)).filter(|(s, _)| *s > rear + scene.dx).map(|(s, r)| (s - rear, r)).unzip();
+    if along.len() < 10 {
+        return (f64::NAN, f64::NAN);
+    }
+    (percentile(&mut along, 0.99), 2.0 * percentile(&mut across, 0.99))
+}
+
+fn percentile(v: &mut [f64], q: f64) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[((v.len() - 1) as f64 * q).round() as usize]
 }
 
 /// Where a wave front driven by the first body has got to: along the first axis, the position at

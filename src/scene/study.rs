@@ -24,6 +24,9 @@ pub struct StudyFile {
     pub ci_runs: Option<Vec<String>>,
     #[serde(default)]
     pub notes: Vec<String>,
+    /// Probes whose histories are plotted together, one curve per run.
+    #[serde(default)]
+    pub plots: Vec<String>,
 }
 
 #[derive(Deserialize, Debug, Clone)]

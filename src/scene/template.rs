@@ -12,7 +12,7 @@ pub struct TemplateError {
 
 impl TemplateError {
     pub fn diagnostic(&self, file: u32) -> Diagnostic {
-        Diagnostic::error("C0025", self.message.clone()).at(Span::new(file, self.start, self.end), "here")
+        Diagnostic::error("C0026", self.message.clone()).at(Span::new(file, self.start, self.end), "here")
     }
 }
 
@@ -23,16 +23,35 @@ fn as_text(v: &toml::Value) -> String {
     }
 }
 
+/// The case text read as TOML with every `${name}` replaced by 0, so that the `[parameters]` and
+/// the resolutions can be read before the values are known (a placeholder may stand for a number).
+pub fn skeleton(text: &str) -> Result<toml::Table, toml::de::Error> {
+    let mut out = String::with_capacity(text.len());
+    let mut rest = text;
+    while let Some(k) = rest.find("${") {
+        out.push_str(&rest[..k]);
+        match rest[k..].find('}') {
+            Some(close) => {
+                out.push('0');
+                rest = &rest[k + close + 1..];
+            }
+            None => {
+                rest = &rest[k..];
+                break;
+            }
+        }
+    }
+    out.push_str(rest);
+    toml::from_str::<toml::Table>(&out)
+}
+
 /// The case text with every `${name}` replaced by its value: `set` first, then `[parameters]`.
 pub fn expand(text: &str, set: &[(String, String)]) -> Result<String, TemplateError> {
     if !text.contains("${") && set.is_empty() {
         return Ok(text.to_string());
     }
-    // The defaults, read from the unexpanded text (placeholders live inside strings, so it parses).
-    let defaults: toml::Table = toml::from_str::<toml::Table>(text)
-        .ok()
-        .and_then(|t| t.get("parameters").and_then(|p| p.as_table()).cloned())
-        .unwrap_or_default();
+    let defaults: toml::Table =
+        skeleton(text).ok().and_then(|t| t.get("parameters").and_then(|p| p.as_table()).cloned()).unwrap_or_default();
     for (name, _) in set {
         if !defaults.contains_key(name) {
             let names: Vec<&String> = defaults.keys().collect();

@@ -77,10 +77,7 @@ pub fn analyse(model: &Model, scene: &SceneSpec) -> Result<Live, PlanError> {
         }
     }
     for f in &scene.outputs {
-        let writers =
-            model.equations.iter().filter(|e| e.writes.contains(f)).fold(GroupSet::default(), |a, e| a.union(e.dest));
-        let on = if model.field(*f).storage == Storage::State { present } else { writers.intersect(present) };
-        need(&mut needed, *f, on);
+        need(&mut needed, *f, output_groups(model, *f, present));
     }
     // Fixed point: an equation is live on a group where one of its outputs is needed; then what
     // it reads is needed (at i on that group, at j on its sources).
@@ -124,6 +121,19 @@ pub fn analyse(model: &Model, scene: &SceneSpec) -> Result<Live, PlanError> {
         .collect();
     let initial = initial_order(model, &needed)?;
     Ok(Live { dest, initial, timesteps, unneeded })
+}
+
+/// The groups on which a field the case writes out or measures is stored: where an equation
+/// writes it or a rate integrates it; a state nothing updates (set by the scene) everywhere.
+fn output_groups(model: &Model, f: FieldId, present: GroupSet) -> GroupSet {
+    let writers = model.equations.iter().filter(|e| e.writes.contains(&f)).map(|e| e.dest);
+    let rates = model.rates.iter().filter(|r| r.state == f).map(|r| r.dest);
+    let on = writers.chain(rates).fold(GroupSet::default(), |a, g| a.union(g)).intersect(present);
+    if on.is_empty() && model.field(f).storage == Storage::State {
+        present
+    } else {
+        on
+    }
 }
 
 fn unneeded_outputs(e: &Equation, needed: &BTreeMap<FieldId, GroupSet>, on: GroupSet) -> BTreeSet<FieldId> {
@@ -296,19 +306,8 @@ pub fn layout(plan: &Plan, scene: &SceneSpec) -> Vec<FieldLayout> {
     }
     // What the case writes out or measures, though no equation of the step reads it.
     for f in &scene.outputs {
-        let field = plan.model.field(*f);
-        let on = match field.storage {
-            Storage::State => plan.groups,
-            _ => plan
-                .model
-                .equations
-                .iter()
-                .filter(|e| e.writes.contains(f))
-                .fold(GroupSet::default(), |a, e| a.union(e.dest))
-                .intersect(plan.groups),
-        };
-        if field.storage != Storage::Temp {
-            add(*f, on);
+        if plan.model.field(*f).storage != Storage::Temp {
+            add(*f, output_groups(&plan.model, *f, plan.groups));
         }
     }
     out.sort_by_key(|l| l.field);

@@ -454,7 +454,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let gradW_ij = kernel_grad(r_ij, h_ij) * x_ij;
             // pairsum continuity (stdlib/continuity/plain.sph:3)
             div_v = div_v + ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * ((v_i - ldj_v(j, sgn)) * gradW_ij));
-            // pairsum gradient_correction (stdlib/correction/kernel_gradient.sph:12)
+            // pairsum gradient_correction (stdlib/correction/kernel_gradient.sph:15)
             L = L + (-((ldj_m(j, sgn) / ldj_rho(j, sgn)) * (gradW_ij * x_ij)));
             // pairsum velocity_gradient (stdlib/solid/strain_rate_corrected.sph:8)
             grad_v = grad_v + ((ldj_v(j, sgn) - v_i) * ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * gradW_ij));

@@ -169,6 +169,13 @@ fn ball(d: usize, r: f64) -> f64 {
     }
 }
 
+impl Primitive {
+    /// The bounding box of the shape in `dim` dimensions (unused coordinates 0).
+    pub fn bbox(&self, dim: usize) -> Result<([f64; 3], [f64; 3]), GeometryError> {
+        Shape::resolve(self, dim).map(|s| s.bbox())
+    }
+}
+
 impl Shape {
     /// Checks `p`'s parameters and reduces it to a [`Region`] in `dim` dimensions.
     pub fn resolve(p: &Primitive, dim: usize) -> Result<Shape, GeometryError> {
