@@ -160,25 +160,19 @@ fn measure(name: &str, scene: &Scene, b: &dyn Backend) -> f64 {
 }
 
 /// The speed of the plug a projectile (the first body) pushes out of a plate (the second): the
-/// mean velocity along the impact axis of the plate's particles now more than Δx beyond its
-/// initial rear face and within the projectile's initial radius (plus Δx) of the axis. Zero while
-/// none is out (below the ballistic limit, or before the plug leaves).
+/// mean velocity along the impact axis of the plate's particles now beyond both the plate's
+/// initial rear face (by more than Δx) and the projectile's nose. Whether the plug leaves whole
+/// or breaks up and spreads sideways, that is the plate material ahead of the projectile; zero
+/// while there is none (below the ballistic limit, or before the plug leaves).
 fn plug_velocity(x: &[[f64; 3]], body: &[u32], scene: &Scene, b: &dyn Backend) -> f64 {
-    let (Some(axis), Some(projectile), Some(plate)) = (Axis::of(scene), scene.bodies.first(), scene.bodies.get(1))
-    else {
-        return f64::NAN;
-    };
+    let (Some(axis), Some(plate)) = (Axis::of(scene), scene.bodies.get(1)) else { return f64::NAN };
     let Some(vf) = b.plan().model.field_id("v") else { return f64::NAN };
     let Some((c, v)) = b.read(vf) else { return f64::NAN };
     let rear = plate.particles.clone().map(|k| axis.coords(scene.particles.x[k]).0).fold(f64::NEG_INFINITY, f64::max);
-    let radius =
-        projectile.particles.clone().map(|k| axis.coords(scene.particles.x[k]).1).fold(0.0, f64::max) + scene.dx;
+    let nose = (0..x.len()).filter(|k| body[*k] == 0).map(|k| axis.coords(x[k]).0).fold(f64::NEG_INFINITY, f64::max);
+    let beyond = (rear + scene.dx).max(nose);
     let speeds: Vec<f64> = (0..x.len())
-        .filter(|k| body[*k] == 1)
-        .filter(|k| {
-            let (s, r) = axis.coords(x[*k]);
-            s > rear + scene.dx && r < radius
-        })
+        .filter(|k| body[*k] == 1 && axis.coords(x[*k]).0 > beyond)
         .map(|k| (0..c).map(|d| v[k * c + d] * axis.dir[d]).sum::<f64>())
         .collect();
     if speeds.is_empty() {
