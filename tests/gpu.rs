@@ -337,3 +337,79 @@ fn cube_on_cube_on_the_gpu_matches_the_cpu_at_the_interface() {
 fn graded_sphere_plate_on_the_gpu_matches_the_cpu_with_variable_h() {
     case_matches_cpu("sphere_plate_graded", &[("plate_coarse", "2")], 60, &["p", "h"], 2e-3);
 }
+
+/// The Morton code of cell coordinates as the GPU reorder builds it: 10 bits per axis in 3D and
+/// 16 in 2D, after dropping the low bits of every axis when the largest needs more.
+fn coarse_morton(c: [u32; 3], dims: [usize; 3], dim: usize) -> u32 {
+    let largest = dims.iter().copied().max().unwrap_or(1).max(1) as u32;
+    let needed = 32 - (largest - 1).leading_zeros();
+    let bits = [32, 32, 16, 10][dim];
+    let s = needed.saturating_sub(bits);
+    let mut code = 0u32;
+    for b in 0..bits.min(32 / dim as u32) {
+        for (k, ck) in c.iter().take(dim).enumerate() {
+            code |= ((ck >> s >> b) & 1) << (b * dim as u32 + k as u32);
+        }
+    }
+    code
+}
+
+#[test]
+fn reordering_on_the_gpu_sorts_by_cell_within_groups_and_keeps_every_value() {
+    use pairsum::grid::Grid;
+    use pairsum::runner::prepare;
+    // Two groups (an elastic projectile and a plastic plate), columns stored on one group only.
+    let opts = pairsum::scene::Options { set: vec![("gap".into(), "0.2".into())], ..Default::default() };
+    let (scene, plan) = prepare(Path::new(&case("borvik_perforation")), &opts).expect("case");
+    let store = build_store::<f32>(&plan, &scene.particles, &scene.materials).expect("store");
+    let mut gpu = GpuBackend::new(gpu(), plan.clone(), store, &scene.mirrors).expect("gpu");
+    gpu.initialise().expect("init");
+    gpu.evaluate(Globals { time: 0.0, dt: 1e-8 }).expect("evaluate");
+    let fields: Vec<&str> = plan.layout.iter().map(|l| plan.model.fields[l.field.index()].name.as_str()).collect();
+    let before: Vec<Vec<f64>> = fields.iter().map(|f| field_by_id(&gpu, f).1).collect();
+    let (groups, snap) = (gpu.groups(), gpu.snapshot());
+    let x = plan.model.field_id("x").expect("x");
+    let h = plan.model.field_id("h").expect("h");
+    let (dim, pos) = (plan.dim, gpu.read(x).expect("x").1);
+    let h_max = gpu.read(h).expect("h").1.iter().fold(0f32, |a, v| a.max(*v as f32));
+
+    gpu.reorder();
+
+    // The order the cell list of the same positions gives (bit-identical on both sides).
+    let pos32: Vec<f32> = pos.iter().map(|v| *v as f32).collect();
+    let support = plan.model.kernels[plan.kernel.index()].support as f32;
+    let grid = Grid::build(&pos32, dim, support as f64 * h_max as f64);
+    let keys: Vec<(u32, u32, usize, usize)> = (0..groups.len())
+        .map(|i| {
+            let mut p = [0.0; 3];
+            for c in 0..dim {
+                p[c] = pos32[i * dim + c] as f64;
+            }
+            let c = grid.cell_coords(p);
+            (groups[i], coarse_morton(c, grid.cells_per_axis(), dim), grid.linear_index(c), i)
+        })
+        .collect();
+    let mut sorted = keys.clone();
+    sorted.sort();
+    let want_ids: Vec<u32> = sorted.iter().map(|k| snap.id[k.3]).collect();
+    let want_materials: Vec<u32> = sorted.iter().map(|k| snap.material[k.3]).collect();
+    assert_ne!(want_ids, snap.id, "the scene is already in cell order: the test would prove nothing");
+    let first_difference = |a: &[u32], b: &[u32]| a.iter().zip(b).position(|(x, y)| x != y);
+    let ids = gpu.ids();
+    assert_eq!(ids.len(), want_ids.len());
+    if let Some(k) = first_difference(&ids, &want_ids) {
+        panic!("rows are not in the order of their cells: row {k} holds particle {}, not {}", ids[k], want_ids[k]);
+    }
+    assert!(first_difference(&gpu.snapshot().material, &want_materials).is_none(), "materials did not move");
+    assert!(gpu.groups() == groups, "a group's rows moved");
+    for (f, old) in fields.iter().zip(&before) {
+        let new = field_by_id(&gpu, f).1;
+        assert!(
+            old.iter().zip(&new).all(|(a, b)| a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan())),
+            "`{f}` changed in the reorder"
+        );
+    }
+    // Sorted data stays as it is.
+    gpu.reorder();
+    assert!(gpu.ids() == want_ids, "a second reorder of unmoved particles changed the order");
+}

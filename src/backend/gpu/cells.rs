@@ -857,6 +857,11 @@ impl CellList {
         &self.cells
     }
 
+    /// The linear index of each particle's cell (`n` words), as of the last build.
+    pub fn cell_of_buffer(&self) -> &wgpu::Buffer {
+        &self.cell_of
+    }
+
     /// Records the construction of the cell list into `encoder`. Positions are `n × dim` f32,
     /// interleaved, from element `x_offset` of the f32 storage buffer `data`; smoothing lengths
     /// `n` f32 from element `h_offset`. The cell size is that of

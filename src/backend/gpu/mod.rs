@@ -1,7 +1,8 @@
-//! The GPU backend: wgpu device and buffers, the GPU cell list and reductions.
+//! The GPU backend: wgpu device and buffers, the GPU cell list, reductions and reordering.
 pub mod cells;
 pub mod device;
 pub mod reduce;
+pub mod reorder;
 pub mod runtime;
 
 pub use runtime::GpuBackend;

@@ -7,6 +7,7 @@
 use super::cells::CellList;
 use super::device::{Gpu, GpuError};
 use super::reduce::{ReduceOp, Reducer, Segment, SegmentList, ALL_FINITE};
+use super::reorder::{Particles, Reorder};
 use crate::backend::wgsl::{self, globals as gl, Binding, Kernel, KernelKind, Layout, ABSENT};
 use crate::backend::{Backend, BackendError, Globals, Mirror, Snapshot};
 use crate::ir::{FieldId, GroupId, Reduce};
@@ -30,8 +31,11 @@ pub struct GpuBackend {
     scratch: usize,
     data: wgpu::Buffer,
     ints: wgpu::Buffer,
+    /// The id of the particle in each row (rows move when the data is reordered).
+    ids: wgpu::Buffer,
     globals: wgpu::Buffer,
     cells: CellList,
+    reorder: Reorder,
     reducer: Reducer,
     kernels: Vec<Compiled>,
     watch: SegmentList,
@@ -66,8 +70,13 @@ impl GpuBackend {
             crate::backend::timestep::reductions(&plan.model, &plan.timesteps).into_iter().map(|(r, _)| r).collect();
         let scratch = len;
         len += n * reductions.len().max(1);
-        let mut planned = vec![("particle data", 4 * len as u64), ("groups and materials", 8 * n as u64)];
+        let mut planned = vec![
+            ("particle data", 4 * len as u64),
+            ("groups and materials", 8 * n as u64),
+            ("particle ids", 4 * n as u64),
+        ];
         planned.extend(CellList::planned_buffers(n));
+        planned.extend(Reorder::planned_buffers(n, scratch as u64));
         // `PAIRSUM_GPU_MEMORY_LIMIT` (bytes) caps what a buffer may use, below the device's limits.
         if let Some(cap) = std::env::var("PAIRSUM_GPU_MEMORY_LIMIT").ok().and_then(|v| v.parse::<u64>().ok()) {
             if let Some((what, needed)) = planned.iter().find(|(_, b)| *b > cap) {
@@ -78,6 +87,7 @@ impl GpuBackend {
         let storage = wgpu::BufferUsages::empty();
         let data = gpu.storage_buffer("particle data", 4 * len as u64, storage).map_err(err)?;
         let ints = gpu.storage_buffer("groups and materials", 8 * n as u64, storage).map_err(err)?;
+        let ids = gpu.storage_buffer("particle ids", 4 * n as u64, storage).map_err(err)?;
         let params = gpu
             .storage_buffer("material parameters", 4 * store.params.values.len().max(1) as u64, storage)
             .map_err(err)?;
@@ -109,6 +119,23 @@ impl GpuBackend {
         let mut ints_host: Vec<u32> = store.group.clone();
         ints_host.extend(&store.material);
         gpu.upload(&ints, 0, &ints_host).map_err(err)?;
+        gpu.upload(&ids, 0, &store.id).map_err(err)?;
+        // Every stored column per group, for the reordering: (word of particle 0, components).
+        let columns: Vec<Vec<(i64, u32)>> = (0..lay.n_groups)
+            .map(|g| {
+                store
+                    .columns
+                    .iter()
+                    .enumerate()
+                    .filter_map(|(f, c)| {
+                        let c = c.as_ref().filter(|c| c.has(g))?;
+                        Some((offset[f]? as i64 + c.base[g] as i64 * c.comps as i64, c.comps as u32))
+                    })
+                    .collect()
+            })
+            .collect();
+        let particles = Particles { data: &data, words: scratch as u64, ints: &ints, ids: &ids };
+        let reorder = Reorder::new(&gpu, &particles, &cells, &columns).map_err(err)?;
         gpu.upload(&params, 0, &store.params.values).map_err(err)?;
         let mut g = vec![0f32; gl::SIZE];
         g[gl::MIRRORS] = mirrors.len() as f32;
@@ -175,8 +202,10 @@ impl GpuBackend {
             scratch,
             data,
             ints,
+            ids,
             globals,
             cells,
+            reorder,
             reducer,
             kernels,
             watch,
@@ -198,6 +227,10 @@ impl GpuBackend {
         self.kernels.iter().map(|k| k.kernel.name.clone()).collect()
     }
 
+    fn particle_buffers(&self) -> Particles<'_> {
+        Particles { data: &self.data, words: self.scratch as u64, ints: &self.ints, ids: &self.ids }
+    }
+
     fn upload_data(&mut self) -> Result<(), BackendError> {
         let mut all = vec![0f32; self.scratch];
         for (f, c) in self.host.columns.iter().enumerate() {
@@ -209,17 +242,6 @@ impl GpuBackend {
     }
 
     /// Brings the device's particle data into the host store.
-    fn download_data(&mut self) -> Result<(), BackendError> {
-        let all: Vec<f32> = self.gpu.download(&self.data, 0, self.scratch).map_err(err)?;
-        for (f, c) in self.host.columns.iter_mut().enumerate() {
-            if let (Some(c), Some(o)) = (c, self.offset[f]) {
-                let len = c.data.len();
-                c.data.copy_from_slice(&all[o..o + len]);
-            }
-        }
-        Ok(())
-    }
-
     fn set_globals(&self, values: &[(usize, f32)]) -> Result<(), BackendError> {
         for (k, v) in values {
             self.gpu.upload(&self.globals, 4 * *k as u64, &[*v]).map_err(err)?;
@@ -390,27 +412,10 @@ impl Backend for GpuBackend {
     }
 
     fn reorder(&mut self) {
-        if self.download_data().is_err() {
-            return;
-        }
-        let dim = self.plan.dim;
-        let h = self.plan.model.field_id("h").expect("h");
-        let h_max = self.host.column(h).map(|c| c.data.iter().fold(0f32, |a, b| a.max(*b))).unwrap_or(0.0) as f64;
-        if h_max.is_nan() || h_max <= 0.0 {
-            return;
-        }
-        let x = self.plan.model.field_id("x").expect("x");
-        let cell = self.support as f64 * h_max;
-        let mut perm: Vec<u32> = Vec::with_capacity(self.host.n);
-        for (_, r) in self.host.ranges.clone() {
-            let pos = &self.host.column(x).expect("x").data[r.start * dim..r.end * dim];
-            perm.extend(crate::grid::morton_permutation(pos, dim, cell).into_iter().map(|p| p + r.start as u32));
-        }
-        self.host.permute(&perm);
-        let mut ints: Vec<u32> = self.host.group.clone();
-        ints.extend(&self.host.material);
-        let _ = self.gpu.upload(&self.ints, 0, &ints);
-        let _ = self.upload_data();
+        let mut encoder = self.gpu.encoder("reorder");
+        self.cells.record(&self.gpu, &mut encoder, &self.data, self.x_offset, self.h_offset, self.support);
+        self.reorder.record(&self.gpu, &mut encoder, &self.particle_buffers());
+        let _ = self.submit(encoder);
     }
 
     fn read(&self, f: FieldId) -> Option<(usize, Vec<f64>)> {
@@ -421,7 +426,7 @@ impl Backend for GpuBackend {
     }
 
     fn ids(&self) -> Vec<u32> {
-        self.host.id.clone()
+        self.gpu.download(&self.ids, 0, self.host.n).unwrap_or_default()
     }
 
     fn groups(&self) -> Vec<u32> {
@@ -442,8 +447,8 @@ impl Backend for GpuBackend {
                     })
                 })
                 .collect(),
-            id: self.host.id.clone(),
-            material: self.host.material.clone(),
+            id: self.ids(),
+            material: self.gpu.download(&self.ints, 4 * self.host.n as u64, self.host.n).unwrap_or_default(),
         }
     }
 
@@ -455,11 +460,10 @@ impl Backend for GpuBackend {
                 }
             }
         }
-        self.host.id = s.id.clone();
-        self.host.material = s.material.clone();
         let mut ints: Vec<u32> = self.host.group.clone();
-        ints.extend(&self.host.material);
+        ints.extend(&s.material);
         let _ = self.gpu.upload(&self.ints, 0, &ints);
+        let _ = self.gpu.upload(&self.ids, 0, &s.id);
         let _ = self.upload_data();
     }
 
