@@ -14,7 +14,8 @@ use super::device::{Gpu, GpuError};
 
 const WG: u32 = 64;
 
-const KEYS_WGSL: &str = r#"
+/// The uniform of the key and gather kernels.
+const PARAMS_WGSL: &str = r#"
 struct Params {
     n: u32,
     n_pad: u32,
@@ -25,6 +26,9 @@ struct Params {
     pad1: u32,
     pad2: u32,
 }
+"#;
+
+const KEYS_WGSL: &str = r#"
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> ints: array<u32>;
 @group(0) @binding(2) var<storage, read> grid: array<u32>;
@@ -109,16 +113,6 @@ fn main(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wg: ve
 "#;
 
 const GATHER_WGSL: &str = r#"
-struct Params {
-    n: u32,
-    n_pad: u32,
-    dim: u32,
-    words: u32,
-    starts: u32,
-    pad0: u32,
-    pad1: u32,
-    pad2: u32,
-}
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> keys: array<vec4<u32>>;
 @group(0) @binding(2) var<storage, read> old: array<u32>;
@@ -227,9 +221,9 @@ impl Reorder {
         })?;
         let params = gpu.uniform_buffer("reorder: params", &[n, n_pad, cells.dim() as u32, words_u32, starts, 0, 0, 0]);
 
-        let keys_pipeline = gpu.compile("reorder: keys", KEYS_WGSL, "main")?;
+        let keys_pipeline = gpu.compile("reorder: keys", &format!("{PARAMS_WGSL}{KEYS_WGSL}"), "main")?;
         let sort_pipeline = gpu.compile("reorder: sort", SORT_WGSL, "main")?;
-        let gather_pipeline = gpu.compile("reorder: gather", GATHER_WGSL, "main")?;
+        let gather_pipeline = gpu.compile("reorder: gather", &format!("{PARAMS_WGSL}{GATHER_WGSL}"), "main")?;
 
         let keys_bind = gpu.bind(
             "reorder: keys",
