@@ -185,3 +185,50 @@ fn a_sum_from_own_sees_only_the_particles_own_group() {
     let cross = apart.iter().zip(&all_touching).map(|(a, b)| (a - b).abs() / a).fold(0.0, f64::max);
     assert!(cross > 0.1, "without `from own` the touching blocks should see each other ({cross:e})");
 }
+
+/// Particles that accelerate as k |v| v run away in finite time: the time step they set collapses
+/// while every value stays finite. The engine stops, naming the fastest particle; a run whose last
+/// step is merely cut short to land on the end time is not flagged.
+#[test]
+fn a_collapsing_time_step_stops_the_run_naming_the_fastest_particle() {
+    let m = model(
+        "use kernels\ngroup metal\nkernel = wendland_c2\n\
+         param c0: scalar [m/s] = 10 [m/s]\nparam k: scalar [1/m]\n\
+         timestep cfl = min_over(0.3 * h / (c0 + norm(v)))\n\
+         integrate { x' = v  v' = k * norm(v) * v }\n",
+    );
+    let mut inp = input(2, lattice(2, 4, 0.01), 0.01);
+    for v in inp.v.iter_mut() {
+        *v = [1.0, 0.0, 0.0];
+    }
+    inp.v[7] = [0.0, 1.5, 0.0];
+    let run = |k: f64, end_time: Option<f64>| {
+        let mat = material(&m, &[("rho0", vec![1000.0]), ("k", vec![k])]);
+        let b = backend::<f64>(&m, &scene(&m, 2, &["v"], IntegratorKind::Euler), &inp, &[mat], vec![]);
+        let mut e = Engine::new(b, RunConfig { end_time: 1.0, watch_every: 5, ..RunConfig::default() });
+        e.initialise().expect("initialise");
+        if let Some(t) = end_time {
+            e.config.end_time = t * e.dt;
+        }
+        let r = e.run(&mut |_| Ok(()));
+        (r, e)
+    };
+    let (r, e) = run(128.0, None);
+    let err = r.expect_err("the run must stop");
+    let message = err.to_string();
+    let RunError::Unstable(u) = err else { panic!("expected an instability, got {message}") };
+    let pairsum::engine::Cause::TimestepCollapse { dt, dt0, speed } = u.cause else { panic!("{message}") };
+    assert!(dt < 1e-4 * dt0 && dt > 0.0, "{message}");
+    assert!(speed > 1e4, "{message}");
+    assert_eq!((u.particle, u.group.as_str(), u.field.as_str()), (7, "metal", "v"), "{message}");
+    assert!(message.contains("time step fell"), "{message}");
+    assert!(u.step == e.step && u.step < 1000, "{message}");
+    assert!(u.last_good_time <= u.time && u.last_good_time > 0.0, "{message}");
+    let v = m.field_id("v").expect("v");
+    let kept = u.last_good.columns[v.index()].as_ref().expect("v stored");
+    assert!(kept.iter().all(|x| x.is_finite()) && kept.iter().any(|x| x.abs() > 1.5), "last good state {kept:?}");
+    // No runaway: three steps and a last one of a millionth of a step are a clean run.
+    let (r, e) = run(0.0, Some(3.000001));
+    r.unwrap_or_else(|e| panic!("a short last step is no collapse: {e}"));
+    assert_eq!(e.step, 4);
+}

@@ -1,6 +1,7 @@
 //! The engine: the time loop around a backend. It runs the integrator's actions (save, evaluate,
 //! time step, update), reorders particles for locality, watches for NaN/Inf (and then finds the
-//! exact step, particle, group and field, and keeps the last good state), and writes and reads
+//! exact step, particle, group and field, and keeps the last good state) and for a time step that
+//! collapses (a particle running away at finite but absurd speed), and writes and reads
 //! checkpoints. It knows nothing of how a backend computes.
 
 pub mod checkpoint;
@@ -20,11 +21,20 @@ pub struct RunConfig {
     /// Check for NaN/Inf every this many steps.
     pub watch_every: u64,
     pub max_steps: Option<u64>,
+    /// The run is unstable when the time step falls below this fraction of the initial one.
+    pub min_dt_ratio: f64,
 }
 
 impl Default for RunConfig {
     fn default() -> Self {
-        RunConfig { end_time: 1.0, dt_max: f64::INFINITY, reorder_every: 25, watch_every: 10, max_steps: None }
+        RunConfig {
+            end_time: 1.0,
+            dt_max: f64::INFINITY,
+            reorder_every: 25,
+            watch_every: 10,
+            max_steps: None,
+            min_dt_ratio: 1e-4,
+        }
     }
 }
 
@@ -37,9 +47,21 @@ pub struct Instability {
     pub particle: u32,
     pub group: String,
     pub field: String,
-    /// The state before that step.
+    pub cause: Cause,
+    /// The last state the watchdog found finite (for a non-finite value: the state before that
+    /// step).
     pub last_good: Snapshot,
     pub last_good_time: f64,
+}
+
+/// What made a run unstable.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Cause {
+    /// The field of the particle is NaN or infinite.
+    NonFinite,
+    /// The time step fell to `dt`, below `RunConfig::min_dt_ratio` of the initial `dt0`; the
+    /// particle is the fastest one, at `speed`.
+    TimestepCollapse { dt: f64, dt0: f64, speed: f64 },
 }
 
 #[derive(Debug)]
@@ -56,14 +78,27 @@ pub enum RunError {
 impl std::fmt::Display for RunError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            RunError::Unstable(u) => write!(
-                f,
-                "the run went unstable at step {} (t = {:.6e} s): field `{}` of particle {} (group {}) is not finite; the last good state (t = {:.6e} s) was kept",
-                u.step, u.time, u.field, u.particle, u.group, u.last_good_time
-            ),
+            RunError::Unstable(u) => {
+                write!(f, "the run went unstable at step {} (t = {:.6e} s): ", u.step, u.time)?;
+                match u.cause {
+                    Cause::NonFinite => {
+                        write!(f, "field `{}` of particle {} (group {}) is not finite", u.field, u.particle, u.group)?
+                    }
+                    Cause::TimestepCollapse { dt, dt0, speed } => write!(
+                        f,
+                        "the time step fell to {dt:.3e} s from {dt0:.3e} s at the start; the fastest particle, {} \
+                         (group {}), has `{}` = {speed:.3e} m/s",
+                        u.particle, u.group, u.field
+                    )?,
+                }
+                write!(f, "; the last good state (t = {:.6e} s) was kept", u.last_good_time)
+            }
             RunError::Backend(e) => write!(f, "{e}"),
             RunError::BadTimestep { step, dt } => {
-                write!(f, "the time step at step {step} is {dt:e} s: the `timestep` limits gave no positive finite value")
+                write!(
+                    f,
+                    "the time step at step {step} is {dt:e} s: the `timestep` limits gave no positive finite value"
+                )
             }
         }
     }
@@ -84,6 +119,8 @@ pub struct Engine<B: Backend> {
     pub dt: f64,
     watched: Vec<FieldId>,
     good: Option<(Snapshot, f64, u64, f64)>,
+    /// The first time step, against which a collapse is measured.
+    dt0: f64,
 }
 
 impl<B: Backend> Engine<B> {
@@ -91,7 +128,7 @@ impl<B: Backend> Engine<B> {
         let plan = backend.plan();
         let watched =
             plan.layout.iter().map(|l| l.field).filter(|f| plan.model.field(*f).storage != Storage::Temp).collect();
-        Engine { backend, config, time: 0.0, step: 0, dt: 0.0, watched, good: None }
+        Engine { backend, config, time: 0.0, step: 0, dt: 0.0, watched, good: None, dt0: 0.0 }
     }
 
     /// Initial values, state-only equations, and a first time step for equations that read `dt`.
@@ -101,6 +138,7 @@ impl<B: Backend> Engine<B> {
         if !(self.dt > 0.0 && self.dt.is_finite()) {
             return Err(RunError::BadTimestep { step: 0, dt: self.dt });
         }
+        self.dt0 = self.dt;
         self.keep_good();
         Ok(())
     }
@@ -178,6 +216,10 @@ impl<B: Backend> Engine<B> {
                 break;
             }
             self.step()?;
+            let finished = self.time >= self.config.end_time * (1.0 - 1e-12);
+            if !finished && self.dt < self.config.min_dt_ratio * self.dt0 {
+                return Err(RunError::Unstable(Box::new(self.timestep_collapse())));
+            }
             let watch = self.config.watch_every.max(1);
             if self.step.is_multiple_of(watch) || self.time >= self.config.end_time * (1.0 - 1e-12) {
                 if self.bad().is_some() {
@@ -188,6 +230,35 @@ impl<B: Backend> Engine<B> {
             after_step(self).map_err(|e| RunError::Backend(BackendError(e)))?;
         }
         Ok(())
+    }
+
+    /// The instability of a collapsed time step, named after the fastest particle (a particle
+    /// running away is what usually drives the step down).
+    fn timestep_collapse(&self) -> Instability {
+        let (last_good, last_good_time) =
+            self.good.as_ref().map(|g| (g.0.clone(), g.1)).expect("kept at initialisation");
+        let plan = self.backend.plan();
+        let speeds = plan.model.field_id("v").and_then(|v| self.backend.read(v)).map(|(c, v)| {
+            v.chunks(c.max(1)).map(|u| u.iter().map(|x| x * x).sum::<f64>().sqrt()).collect::<Vec<f64>>()
+        });
+        let (i, speed) = speeds.unwrap_or_default().into_iter().enumerate().fold((0, f64::NAN), |best, (i, s)| {
+            if s > best.1 || best.1.is_nan() {
+                (i, s)
+            } else {
+                best
+            }
+        });
+        let group = self.backend.groups().get(i).map(|g| plan.model.groups[*g as usize].name.clone());
+        Instability {
+            step: self.step,
+            time: self.time,
+            particle: self.backend.ids().get(i).copied().unwrap_or(0),
+            group: group.unwrap_or_default(),
+            field: "v".into(),
+            cause: Cause::TimestepCollapse { dt: self.dt, dt0: self.dt0, speed },
+            last_good,
+            last_good_time,
+        }
     }
 
     /// Replays from the last good state one step at a time to the first step that produces a
@@ -209,6 +280,7 @@ impl<B: Backend> Engine<B> {
                     particle: self.backend.ids()[i],
                     group: plan.model.groups[group].name.clone(),
                     field: plan.model.field(f).name.clone(),
+                    cause: Cause::NonFinite,
                     last_good: before,
                     last_good_time: before_time,
                 });

@@ -763,8 +763,16 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
         None => f64::INFINITY,
     };
     let spec = SceneSpec { dim, groups, outputs, integrator, gravity, loads, constraints };
-    let config =
+    let mut config =
         RunConfig { end_time, dt_max, reorder_every: case.reorder_every.unwrap_or(25), ..RunConfig::default() };
+    if let Some(r) = &case.min_dt_ratio {
+        if !(*r.get_ref() > 0.0 && *r.get_ref() < 1.0) {
+            let msg = format!("`min_dt_ratio` must lie between 0 and 1, found {}", r.get_ref());
+            cx.err(r.span(), "C0027", msg, "not a fraction of the first time step");
+            return None;
+        }
+        config.min_dt_ratio = *r.get_ref();
+    }
     let _ = GroupSet::default();
     Some(Scene {
         name: case.name.get_ref().clone(),

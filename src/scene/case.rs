@@ -26,6 +26,9 @@ pub struct CaseFile {
     pub dt_max: Option<Value>,
     #[serde(default)]
     pub reorder_every: Option<u64>,
+    /// The run stops as unstable when its time step falls below this fraction of the first.
+    #[serde(default)]
+    pub min_dt_ratio: Option<Spanned<f64>>,
     /// Named resolutions; each a spacing or a table with `dx` and overrides.
     pub resolutions: BTreeMap<String, Spanned<Resolution>>,
     /// The resolution used when none is asked for.
