@@ -80,6 +80,7 @@ fn elastic_store<T: crate::particles::Real>(n: usize) -> Result<(Plan, Store<T>)
         gravity: None,
         loads: vec![],
         constraints: vec![],
+        symmetry: vec![],
     };
     let plan = Plan::build(&model, &scene, None).map_err(|e| e.0)?;
     let mut store: Store<T> = build_store(&plan, &input, &[mat]).map_err(|e| e.0)?;

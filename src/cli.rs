@@ -413,6 +413,7 @@ fn run_plan(path: &Path, dim: usize, integrator: &str, precision: &str, opts: &c
         gravity: None,
         loads: vec![],
         constraints: vec![],
+        symmetry: vec![],
     };
     match crate::schedule::Plan::build(&model, &scene, None) {
         Ok(plan) => {
@@ -446,6 +447,7 @@ pub fn plan_of(path: &Path, dim: usize) -> Result<crate::schedule::Plan, String>
         gravity: None,
         loads: vec![],
         constraints: vec![],
+        symmetry: vec![],
     };
     crate::schedule::Plan::build(&checked.model, &scene, None).map_err(|e| e.0)
 }

@@ -232,3 +232,46 @@ fn a_collapsing_time_step_stops_the_run_naming_the_fastest_particle() {
     r.unwrap_or_else(|e| panic!("a short last step is no collapse: {e}"));
     assert_eq!(e.step, 4);
 }
+
+/// A particle that crosses a symmetry plane comes back on the model's side with its normal
+/// velocity reversed, as its mirror image would have: |x₀ − v t| along the normal, the tangential
+/// motion untouched.
+#[test]
+fn a_particle_crossing_a_symmetry_plane_is_reflected_back() {
+    for rates in ["x' = v", "x' = v  v' = 0"] {
+        reflected_at_a_plane(&model(&format!(
+            "use kernels\ngroup metal\nkernel = wendland_c2\nintegrate {{ {rates} }}\n"
+        )));
+    }
+}
+
+fn reflected_at_a_plane(m: &pairsum::ir::Model) {
+    let m = m.clone();
+    let mut inp = input(2, vec![[0.005, 0.02, 0.0], [0.03, 0.02, 0.0]], 0.01);
+    inp.v = vec![[-1.0, 0.5, 0.0], [-1.0, 0.5, 0.0]];
+    let mat = material(&m, &[("rho0", vec![1000.0])]);
+    for integrator in [IntegratorKind::Euler, IntegratorKind::PredictorCorrector, IntegratorKind::Symplectic] {
+        let spec = pairsum::schedule::SceneSpec { symmetry: vec![(0, 0.0)], ..scene(&m, 2, &["v"], integrator) };
+        let mirrors = vec![Mirror { axis: 0, offset: 0.0 }];
+        let b = backend::<f64>(&m, &spec, &inp, std::slice::from_ref(&mat), mirrors);
+        let mut e = Engine::new(b, RunConfig { end_time: 0.02, dt_max: 1e-3, ..RunConfig::default() });
+        e.initialise().expect("initialise");
+        e.run(&mut |e| {
+            let (_, x) = field_by_id(&e.backend, "x");
+            if x.iter().step_by(2).all(|c| *c >= 0.0) {
+                Ok(())
+            } else {
+                Err(format!("a particle is behind the plane at t = {}: {x:?}", e.time))
+            }
+        })
+        .unwrap_or_else(|err| panic!("{integrator:?}: {err}"));
+        let (_, x) = field_by_id(&e.backend, "x");
+        let (_, v) = field_by_id(&e.backend, "v");
+        let want_x = [0.015, 0.02 + 0.5 * 0.02, 0.01, 0.02 + 0.5 * 0.02];
+        let want_v = [1.0, 0.5, -1.0, 0.5];
+        for k in 0..4 {
+            assert!((x[k] - want_x[k]).abs() < 1e-12, "{integrator:?}: x = {x:?}, want {want_x:?}");
+            assert!((v[k] - want_v[k]).abs() < 1e-12, "{integrator:?}: v = {v:?}, want {want_v:?}");
+        }
+    }
+}

@@ -762,7 +762,8 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
         Some(v) => cx.scalar(v, s, "dt_max")?,
         None => f64::INFINITY,
     };
-    let spec = SceneSpec { dim, groups, outputs, integrator, gravity, loads, constraints };
+    let symmetry = mirrors.iter().map(|m| (m.axis, m.offset)).collect();
+    let spec = SceneSpec { dim, groups, outputs, integrator, gravity, loads, constraints, symmetry };
     let mut config =
         RunConfig { end_time, dt_max, reorder_every: case.reorder_every.unwrap_or(25), ..RunConfig::default() };
     if let Some(r) = &case.min_dt_ratio {

@@ -9,7 +9,8 @@
 //!
 //! State that corrections change without a rate (plastic strain, damage) restarts every stage from
 //! its value at the start of the step, so a two-stage step counts its increment once.
-//! Gravity and body loads are added to the rate of `v`; prescribed velocities replace `v`.
+//! Gravity and body loads are added to the rate of `v`; prescribed velocities replace `v`; a
+//! particle that crosses a symmetry plane is reflected back with its normal velocity reversed.
 
 use super::live::Live;
 use super::{synthetic_param, Action, Block, Plan, SceneParam, SceneSpec, Stage};
@@ -65,6 +66,10 @@ pub fn scene_params(model: &mut Model, scene: &SceneSpec) -> Vec<SceneParam> {
     for (k, c) in scene.constraints.iter().enumerate() {
         let p = synthetic_param(model, &format!("@constraint{k}"), Shape::Vec, speed_unit());
         out.push(SceneParam { param: p, value: c.velocity.clone() });
+    }
+    for (k, (axis, _)) in scene.symmetry.iter().enumerate() {
+        let p = synthetic_param(model, &format!("@symmetry{k}"), Shape::Vec, Unit::ONE);
+        out.push(SceneParam { param: p, value: (0..scene.dim).map(|c| if c == *axis { 1.0 } else { 0.0 }).collect() });
     }
     out
 }
@@ -126,6 +131,37 @@ fn constrain(plan: &Plan, scene: &SceneSpec, v: FieldId) -> Vec<Stmt> {
         let Some(cond) = on_target(model, c.target) else { continue };
         let target = Expr::param(sp.param, model.params[sp.param.index()].ty).scaled_by(ramp(c.ramp));
         out.push(Stmt::Set(v, Expr::select(cond, target, Expr::field(v, ty))));
+    }
+    out
+}
+
+/// Reflection at the symmetry planes, after `x` and `v` are updated in the step's last stage
+/// (a predictor may leave a particle behind a plane for half a step): where `x[axis] < offset`,
+/// `v[axis]` changes sign and `x[axis]` becomes `2 offset − x[axis]` (`n` is the plane's unit
+/// normal, the parameter `@symmetry{k}`).
+fn reflect(plan: &Plan, scene: &SceneSpec, x: FieldId, v: Option<FieldId>) -> Vec<Stmt> {
+    let model = &plan.model;
+    let mut out = vec![];
+    for sp in &plan.scene_params {
+        let name = &model.params[sp.param.index()].name;
+        let Some(k) = name.strip_prefix("@symmetry").and_then(|k| k.parse::<usize>().ok()) else { continue };
+        let (axis, offset) = scene.symmetry[k];
+        let n = Expr::param(sp.param, model.params[sp.param.index()].ty);
+        let component = |f: FieldId| {
+            let ty = model.field(f).ty;
+            Expr::new(ExprKind::Component(Box::new(Expr::field(f, ty)), axis as u8, 0), Type::scalar(ty.unit))
+        };
+        let x_ty = model.field(x).ty;
+        let depth = Expr::constant(offset, Type::scalar(x_ty.unit)).minus(component(x));
+        let crossed = || Expr::binary(Op::Gt, depth.clone(), Expr::constant(0.0, depth.ty), Type::BOOL);
+        let two = || Expr::constant(2.0, Type::scalar(Unit::ONE));
+        if let Some(v) = v {
+            let ty = model.field(v).ty;
+            let flipped = Expr::field(v, ty).minus(n.clone().scaled_by(component(v).scaled_by(two())));
+            out.push(Stmt::Set(v, Expr::select(crossed(), flipped, Expr::field(v, ty))));
+        }
+        let back = Expr::field(x, x_ty).plus(n.scaled_by(depth.clone().scaled_by(two())));
+        out.push(Stmt::Set(x, Expr::select(crossed(), back, Expr::field(x, x_ty))));
     }
     out
 }
@@ -269,6 +305,11 @@ fn stage_blocks(
             if Some(f) == v {
                 sets.extend(constrain(plan, scene, f));
             }
+        }
+        // At the end of the step only: a two-stage step restarts from the saved state.
+        let last_stage = kind == super::IntegratorKind::Euler || stage == 1;
+        if let Some(x) = x.filter(|x| last_stage && rate_locals.iter().any(|(f, _, _)| f == x)) {
+            sets.extend(reflect(plan, scene, x, v));
         }
         lets.extend(sets);
         blocks.push(Block { name: format!("integrate ({})", model.group_names(gs)), dest: gs, stmts: lets });

@@ -37,6 +37,9 @@ pub struct SceneSpec {
     pub loads: Vec<Load>,
     /// Bodies whose velocity is prescribed.
     pub constraints: Vec<Constraint>,
+    /// Symmetry planes `(axis, offset)`: the particles live on the side `x[axis] > offset`, and
+    /// one that crosses a plane is reflected back, its normal velocity reversed.
+    pub symmetry: Vec<(usize, f64)>,
 }
 
 /// The particles a load or a constraint acts on: a whole body, or a part (a region of a body).

@@ -71,6 +71,7 @@ pub fn scene(model: &Model, dim: usize, outputs: &[&str], integrator: Integrator
         gravity: None,
         loads: vec![],
         constraints: vec![],
+        symmetry: vec![],
     }
 }
 

@@ -205,23 +205,31 @@ fn st_e_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 0u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 4u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 4u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 6u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 7u;
     return params[b];
 }
 fn prm__constraint0(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 22u;
+    return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
+}
+fn prm__symmetry0(i: u32) -> vec3<f32> {
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 25u;
+    return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
+}
+fn prm__symmetry1(i: u32) -> vec3<f32> {
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 28u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 @compute @workgroup_size(64)
@@ -250,6 +258,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     rho_i = (ld_rho_0(i) + (dt * rate_of_rho));
     s_i = (ld_s_0(i) + (dt * rate_of_s));
     e_i = (ld_e_0(i) + (dt * rate_of_e));
+    v_i = select(v_i, (v_i - ((2.0 * v_i[0]) * prm__symmetry0(i))), ((0.0 - x_i[0]) > 0.0));
+    x_i = select(x_i, (x_i + ((2.0 * (0.0 - x_i[0])) * prm__symmetry0(i))), ((0.0 - x_i[0]) > 0.0));
+    v_i = select(v_i, (v_i - ((2.0 * v_i[1]) * prm__symmetry1(i))), ((0.0 - x_i[1]) > 0.0));
+    x_i = select(x_i, (x_i + ((2.0 * (0.0 - x_i[1])) * prm__symmetry1(i))), ((0.0 - x_i[1]) > 0.0));
     // eos
     var p_i: f32 = ld_p(i);
     var c_i: f32 = ld_c(i);

@@ -226,35 +226,43 @@ fn st_sigma_y_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 0u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 3u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 3u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 4u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 4u;
     return params[b];
 }
 fn prm_art_eps(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 5u;
     return params[b];
 }
 fn prm_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 10u;
     return params[b];
 }
 fn prm_E_T(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 11u;
     return params[b];
 }
 fn prm__constraint0(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 15u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm__constraint1(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 18u;
+    return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
+}
+fn prm__symmetry0(i: u32) -> vec3<f32> {
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 21u;
+    return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
+}
+fn prm__symmetry1(i: u32) -> vec3<f32> {
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 24u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 @compute @workgroup_size(64)
@@ -281,6 +289,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     x_i = (ld_x_0(i) + (dt * rate_of_x));
     rho_i = (ld_rho_0(i) + (dt * rate_of_rho));
     s_i = (ld_s_0(i) + (dt * rate_of_s));
+    v_i = select(v_i, (v_i - ((2.0 * v_i[0]) * prm__symmetry0(i))), ((0.0 - x_i[0]) > 0.0));
+    x_i = select(x_i, (x_i + ((2.0 * (0.0 - x_i[0])) * prm__symmetry0(i))), ((0.0 - x_i[0]) > 0.0));
+    v_i = select(v_i, (v_i - ((2.0 * v_i[1]) * prm__symmetry1(i))), ((0.0 - x_i[1]) > 0.0));
+    x_i = select(x_i, (x_i + ((2.0 * (0.0 - x_i[1])) * prm__symmetry1(i))), ((0.0 - x_i[1]) > 0.0));
     // restore eps_p
     var eps_p_i: f32 = ld_eps_p(i);
     eps_p_i = ld_eps_p_0(i);

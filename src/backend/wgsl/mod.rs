@@ -179,6 +179,7 @@ mod tests {
                     gravity: None,
                     loads: vec![],
                     constraints: vec![],
+                    symmetry: vec![],
                 };
                 let plan = Plan::build(&checked.model, &scene, None).expect("plan");
                 let kernels = generate(&plan, cells).unwrap_or_else(|e| panic!("{m} {dim}D: {e}"));
