@@ -24,7 +24,8 @@ struct Compiled {
 pub struct GpuBackend {
     gpu: Gpu,
     plan: Plan,
-    /// The host copy of the store: its layout, and the values at the last download.
+    /// The host copy of the store: its layout and group ranges, and staging for uploads (its
+    /// values are not kept current: the device's data is read back only on demand).
     host: Store<f32>,
     /// Element offset of each stored column in `data`.
     offset: Vec<Option<usize>>,
@@ -241,7 +242,7 @@ impl GpuBackend {
         self.gpu.upload(&self.data, 0, &all).map_err(err)
     }
 
-    /// Brings the device's particle data into the host store.
+    /// Writes clock values into `globals` (queued before the next submission).
     fn set_globals(&self, values: &[(usize, f32)]) -> Result<(), BackendError> {
         for (k, v) in values {
             self.gpu.upload(&self.globals, 4 * *k as u64, &[*v]).map_err(err)?;
