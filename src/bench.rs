@@ -21,7 +21,7 @@ pub fn elastic_block(n: usize) -> Result<CpuBackend<f64>, String> {
     let (plan, store) = elastic_store::<f64>(n)?;
     let mut b = CpuBackend::new(plan, store, vec![]).map_err(|e| e.0)?;
     b.initialise().map_err(|e| e.0)?;
-    b.reorder();
+    b.reorder().map_err(|e| e.0)?;
     Ok(b)
 }
 
@@ -31,7 +31,7 @@ pub fn elastic_block_gpu(n: usize) -> Result<crate::backend::gpu::GpuBackend, St
     let (plan, store) = elastic_store::<f32>(n)?;
     let mut b = crate::backend::gpu::GpuBackend::new(gpu, plan, store, &[]).map_err(|e| e.0)?;
     b.initialise().map_err(|e| e.0)?;
-    b.reorder();
+    b.reorder().map_err(|e| e.0)?;
     Ok(b)
 }
 

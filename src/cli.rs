@@ -14,9 +14,10 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Check model files (or every .sph file under a directory); each file is checked with what it uses.
+    /// Check model files (or every .sph file under a directory; a directory holding `prelude.sph` is
+    /// checked as the stdlib, replacing the built-in one) and case files (or bundled cases' names)
     Check {
-        /// Files or directories
+        /// Files, directories, cases
         #[arg(required = true)]
         paths: Vec<PathBuf>,
         /// Treat warnings as errors
@@ -54,6 +55,10 @@ enum Command {
         /// No progress bar
         #[arg(long)]
         quiet: bool,
+        /// Write into an output directory that holds files pairsum did not write (it replaces only
+        /// its own outputs and deletes nothing)
+        #[arg(long)]
+        force: bool,
         /// Set a case parameter (`${name}` in the case file): --set v_impact=250
         #[arg(long = "set", value_parser = parse_set)]
         set: Vec<(String, String)>,
@@ -62,7 +67,8 @@ enum Command {
     Cases,
     /// Write the generated code of a model or a case
     Emit {
-        /// A model (.sph) or a case (.toml); with --all, every stdlib model and bundled case
+        /// A model (.sph), a case (.toml) or a bundled case's name; with --all, every stdlib model
+        /// and bundled case
         path: Option<PathBuf>,
         /// wgsl
         #[arg(long, default_value = "wgsl")]
@@ -76,6 +82,10 @@ enum Command {
         /// Regenerate shaders_gen/ for every stdlib model and bundled case
         #[arg(long)]
         all: bool,
+        /// Write into a directory that holds files other than generated WGSL (nothing of them is
+        /// deleted; a file with the name of a generated kernel is replaced)
+        #[arg(long)]
+        force: bool,
     },
     /// Benchmark the closure backend against a hand-written native step (ratios from one run)
     Bench {
@@ -88,7 +98,7 @@ enum Command {
     },
     /// Print the plan of a step: passes, fused equations, fields read and written, bytes per particle
     Plan {
-        /// A model (.sph) or a case (.toml)
+        /// A model (.sph), a case (.toml) or a bundled case's name
         path: PathBuf,
         /// Dimension, for a model
         #[arg(long, default_value_t = 3)]
@@ -121,7 +131,7 @@ pub fn main() -> i32 {
         Command::Check { paths, deny_warnings } => run_check(&paths, deny_warnings),
         Command::Plan { path, dim, integrator, precision, resolution, set } => {
             let opts = crate::scene::Options { resolution, set, ..Default::default() };
-            run_plan(&path, dim, &integrator, &precision, &opts)
+            run_plan(&find_input(&path), dim, &integrator, &precision, &opts)
         }
         Command::Run {
             case,
@@ -134,6 +144,7 @@ pub fn main() -> i32 {
             restart,
             max_steps,
             quiet,
+            force,
             set,
         } => {
             let opts = RunArgs {
@@ -146,12 +157,16 @@ pub fn main() -> i32 {
                 restart,
                 max_steps,
                 quiet,
+                force,
                 set,
             };
             run_run(&case, opts)
         }
         Command::Cases => run_cases(),
-        Command::Emit { path, target, out, dim, all } => run_emit(path.as_deref(), &target, out.as_deref(), dim, all),
+        Command::Emit { path, target, out, dim, all, force } => {
+            let path = path.map(|p| find_input(&p));
+            run_emit(path.as_deref(), &target, out.as_deref(), dim, all, force)
+        }
         Command::Bench { particles, reps } => match crate::bench::run(&particles, reps.max(1)) {
             Ok(table) => {
                 print!("{table}");
@@ -189,19 +204,28 @@ pub fn sph_files(paths: &[PathBuf]) -> Vec<PathBuf> {
 }
 
 fn run_check(paths: &[PathBuf], deny_warnings: bool) -> i32 {
-    let files = sph_files(paths);
+    let (cases, models): (Vec<PathBuf>, Vec<PathBuf>) =
+        paths.iter().map(|p| find_input(p)).partition(|p| p.extension().is_some_and(|e| e == "toml"));
     let mut errors = 0;
     let mut warnings = 0;
-    for f in &files {
+    let mut n = 0;
+    for (f, stdlib) in model_files(&models) {
+        n += 1;
         let mut sources = Sources::new();
-        let checked = check::check_paths(&mut sources, &[f.as_path()], Stdlib::locate());
+        let checked = check::check_paths(&mut sources, &[f.as_path()], stdlib);
         if !checked.diags.is_empty() {
             eprint!("{}", render(&sources, &checked.diags));
         }
         errors += checked.diags.iter().filter(|d| d.is_error()).count();
         warnings += checked.diags.iter().filter(|d| !d.is_error()).count();
     }
-    let n = files.len();
+    for case in &cases {
+        n += 1;
+        if let Err(e) = crate::runner::check_file(case, &crate::scene::Options::default()) {
+            eprint!("{e}");
+            errors += 1;
+        }
+    }
     if errors > 0 {
         eprintln!("checked {n} file(s): {errors} error(s), {warnings} warning(s)");
         1
@@ -212,6 +236,17 @@ fn run_check(paths: &[PathBuf], deny_warnings: bool) -> i32 {
         eprintln!("checked {n} file(s): ok ({warnings} warning(s))");
         0
     }
+}
+
+/// Every .sph file under the given paths, each with the stdlib it is checked against: a directory
+/// that holds `prelude.sph` is a stdlib and replaces the built-in one for the files under it.
+fn model_files(paths: &[PathBuf]) -> Vec<(PathBuf, Stdlib)> {
+    let mut out = vec![];
+    for p in paths {
+        let stdlib = if p.join("prelude.sph").is_file() { Stdlib::Dir(p.clone()) } else { Stdlib::locate() };
+        out.extend(sph_files(std::slice::from_ref(p)).into_iter().map(|f| (f, stdlib.clone())));
+    }
+    out
 }
 
 fn real_bytes(precision: &str) -> Option<usize> {
@@ -241,6 +276,19 @@ pub fn cases_dir() -> PathBuf {
         return local;
     }
     Path::new(env!("CARGO_MANIFEST_DIR")).join("cases")
+}
+
+/// A model or case file as given, or else a bundled case of that name (`pairsum plan cantilever`).
+pub fn find_input(path: &Path) -> PathBuf {
+    if path.exists() {
+        return path.to_path_buf();
+    }
+    let case = find_case(&path.to_string_lossy());
+    if case.is_file() {
+        case
+    } else {
+        path.to_path_buf()
+    }
 }
 
 /// A case by path, or a bundled case by name.
@@ -304,6 +352,7 @@ struct RunArgs {
     restart: Option<PathBuf>,
     max_steps: Option<u64>,
     quiet: bool,
+    force: bool,
 }
 
 fn run_run(case: &str, a: RunArgs) -> i32 {
@@ -347,6 +396,7 @@ fn run_run(case: &str, a: RunArgs) -> i32 {
         restart: a.restart,
         max_steps: a.max_steps,
         vtk: true,
+        force: a.force,
     };
     match run_file(&path, &opts) {
         Ok(o) => {
@@ -468,19 +518,16 @@ pub fn shader_sources(root: &Path) -> Vec<(PathBuf, PathBuf)> {
     out
 }
 
-/// Writes the WGSL of one model or case into `dir` (replacing what was there).
-pub fn write_wgsl(path: &Path, dim: usize, dir: &Path) -> Result<usize, String> {
+/// Writes the WGSL of one model or case into `dir`: its generated kernels are replaced, nothing
+/// else is touched, and a directory holding anything but generated kernels is refused unless
+/// `force` (see [`crate::output_dir`]).
+pub fn write_wgsl(path: &Path, dim: usize, dir: &Path, force: bool) -> Result<usize, String> {
     let plan = plan_of(path, dim)?;
     let files = crate::backend::wgsl::files(&plan)?;
-    let _ = std::fs::remove_dir_all(dir);
-    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    for (name, text) in &files {
-        std::fs::write(dir.join(name), text).map_err(|e| format!("{}: {e}", dir.join(name).display()))?;
-    }
-    Ok(files.len())
+    crate::output_dir::write_wgsl_dir(dir, &files, force).map_err(|e| format!("error: {e}\n"))
 }
 
-fn run_emit(path: Option<&Path>, target: &str, out: Option<&Path>, dim: usize, all: bool) -> i32 {
+fn run_emit(path: Option<&Path>, target: &str, out: Option<&Path>, dim: usize, all: bool, force: bool) -> i32 {
     if target != "wgsl" {
         eprintln!("error: the only target is wgsl");
         return 2;
@@ -489,7 +536,7 @@ fn run_emit(path: Option<&Path>, target: &str, out: Option<&Path>, dim: usize, a
         let root = Path::new(".");
         let gen = out.map(Path::to_path_buf).unwrap_or_else(|| PathBuf::from("shaders_gen"));
         for (sub, src) in shader_sources(root) {
-            match write_wgsl(&src, 3, &gen.join(&sub)) {
+            match write_wgsl(&src, 3, &gen.join(&sub), force) {
                 Ok(n) => eprintln!("{}: {n} kernels", gen.join(&sub).display()),
                 Err(e) => {
                     eprintln!("error: {}: {e}", src.display());
@@ -504,7 +551,7 @@ fn run_emit(path: Option<&Path>, target: &str, out: Option<&Path>, dim: usize, a
         return 2;
     };
     match out {
-        Some(dir) => match write_wgsl(path, dim, dir) {
+        Some(dir) => match write_wgsl(path, dim, dir, force) {
             Ok(n) => {
                 eprintln!("{n} kernels in {}", dir.display());
                 0

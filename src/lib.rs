@@ -11,6 +11,7 @@ pub mod diag;
 pub mod engine;
 pub mod grid;
 pub mod ir;
+pub mod output_dir;
 pub mod particles;
 pub mod report;
 pub mod runner;

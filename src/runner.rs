@@ -40,6 +40,8 @@ pub struct RunOptions {
     pub max_steps: Option<u64>,
     /// Write VTK files (off for tests that only need the report).
     pub vtk: bool,
+    /// Write into an output directory that holds files pairsum did not write.
+    pub force: bool,
 }
 
 impl Default for RunOptions {
@@ -54,6 +56,7 @@ impl Default for RunOptions {
             restart: None,
             max_steps: None,
             vtk: true,
+            force: false,
         }
     }
 }
@@ -98,8 +101,7 @@ pub fn prepare(path: &Path, opts: &scene::Options) -> Result<(Scene, Plan), RunF
 /// Runs a case on the chosen backend and writes its outputs and report into `opts.out`.
 pub fn run_case(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailure> {
     let (scene, plan) = prepare(path, &opts.scene)?;
-    std::fs::create_dir_all(&opts.out)
-        .map_err(|e| RunFailure::Run(format!("cannot create `{}`: {e}", opts.out.display())))?;
+    claim_out(opts)?;
     match opts.backend {
         BackendChoice::Cpu => run_cpu_precision(scene, plan, opts),
         BackendChoice::Gpu => match crate::backend::gpu::device::Gpu::new() {
@@ -121,6 +123,11 @@ pub fn run_case(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailure
             }
         },
     }
+}
+
+/// Claims `opts.out` for this run's outputs (see [`crate::output_dir`]).
+fn claim_out(opts: &RunOptions) -> Result<(), RunFailure> {
+    crate::output_dir::claim_run_dir(&opts.out, opts.force).map_err(|e| RunFailure::Input(format!("error: {e}\n")))
 }
 
 fn run_cpu_precision(scene: Scene, plan: Plan, opts: &RunOptions) -> Result<RunOutcome, RunFailure> {
@@ -169,7 +176,7 @@ impl Recorder<'_> {
     fn observe<B: Backend>(&mut self, e: &Engine<B>) -> Result<(), String> {
         for (p, h) in self.scene.probes.iter().zip(&mut self.histories) {
             if e.step.is_multiple_of(p.every) {
-                let v = measure::evaluate(p, self.scene, &e.backend);
+                let v = measure::evaluate(p, self.scene, &e.backend).map_err(|e| format!("probe `{}`: {e}", p.name))?;
                 h.record(p, e.time, v);
             }
         }
@@ -194,27 +201,27 @@ impl Recorder<'_> {
 
     fn write_vtk<B: Backend>(&mut self, b: &B, time: f64) -> Result<(), String> {
         let Some(series) = &mut self.series else { return Ok(()) };
-        let (positions, fields) = vtk_data(self.scene, b);
+        let (positions, fields) = vtk_data(self.scene, b).map_err(|e| e.0)?;
         series.add(time, &positions, &fields).map_err(|e| format!("writing VTK: {e}"))?;
         Ok(())
     }
 }
 
 /// Positions and output fields of every particle, for a VTK file.
-pub fn vtk_data<B: Backend>(scene: &Scene, b: &B) -> (Vec<[f64; 3]>, Vec<PointField>) {
-    let positions = measure::positions(b).unwrap_or_default();
-    let ids = b.ids();
+pub fn vtk_data<B: Backend>(scene: &Scene, b: &B) -> Result<(Vec<[f64; 3]>, Vec<PointField>), BackendError> {
+    let positions = measure::positions(b)?.unwrap_or_default();
+    let ids = b.ids()?;
     let mut fields = vec![
         PointField::scalar("id", ids.iter().map(|i| *i as f64).collect()),
         PointField::scalar("body", ids.iter().map(|i| scene.particles.body[*i as usize] as f64).collect()),
     ];
     let plan = b.plan();
     for f in &scene.output_fields {
-        if let Some((comps, data)) = b.read(*f) {
+        if let Some((comps, data)) = b.read(*f)? {
             fields.push(PointField::new(plan.model.field(*f).name.clone(), comps, data));
         }
     }
-    (positions, fields)
+    Ok((positions, fields))
 }
 
 fn drive<B: Backend>(scene: Scene, backend: B, opts: &RunOptions, precision: &str) -> Result<RunOutcome, RunFailure> {
@@ -270,11 +277,19 @@ fn drive<B: Backend>(scene: Scene, backend: B, opts: &RunOptions, precision: &st
         }
         Err(RunError::Unstable(u)) => {
             // Keep the last good state where the user will look for it.
-            engine.backend.restore(&u.last_good);
-            let (positions, fields) = vtk_data(&scene, &engine.backend);
-            let _ = report::write_vtu(&opts.out.join("last_good.vtu"), &positions, &fields);
-            failure =
-                Some(format!("{}; written to {}", RunError::Unstable(u), opts.out.join("last_good.vtu").display()));
+            let path = opts.out.join("last_good.vtu");
+            let kept = engine
+                .backend
+                .restore(&u.last_good)
+                .and_then(|()| vtk_data(&scene, &engine.backend))
+                .map_err(|e| e.0)
+                .and_then(|(positions, fields)| {
+                    report::write_vtu(&path, &positions, &fields).map_err(|e| format!("{}: {e}", path.display()))
+                });
+            failure = Some(match kept {
+                Ok(()) => format!("{}; written to {}", RunError::Unstable(u), path.display()),
+                Err(e) => format!("{}; the last good state could not be written: {e}", RunError::Unstable(u)),
+            });
         }
         Err(e) => failure = Some(e.to_string()),
     }
@@ -367,20 +382,13 @@ pub fn backend_failure(e: BackendError) -> RunFailure {
 /// across runs. Each run writes into `out/<run>/`, the study's report into `out/`.
 pub fn run_study(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailure> {
     use crate::scene::study;
-    let mut sources = Sources::new();
-    let st = study::load(path, &mut sources).map_err(|d| input_error(&sources, &d))?;
-    let ci = opts.scene.resolution.as_deref().is_none_or(|r| r == "ci");
-    let runs: Vec<&study::RunSpec> =
-        st.file.runs.iter().filter(|r| !ci || st.file.ci_runs.as_ref().is_none_or(|c| c.contains(&r.name))).collect();
+    let (st, runs) = prepare_study(path, opts)?;
+    claim_out(opts)?;
     let mut outcomes: Vec<(study::RunSpec, RunOutcome)> = vec![];
-    for r in runs {
-        let mut o = opts.clone();
-        // `--set` applies to every run; what a run sets itself wins.
-        o.scene.set.extend(r.set.iter().map(|(k, v)| (k.clone(), study::text_of(v))));
-        o.out = opts.out.join(sanitize(&r.name));
+    for (r, o) in runs {
         eprintln!("{}: run `{}`", st.file.name, r.name);
         let outcome = run_case(&st.case_path, &o)?;
-        outcomes.push((r.clone(), outcome));
+        outcomes.push((r, outcome));
     }
     let first = &outcomes
         .first()
@@ -397,69 +405,38 @@ pub fn run_study(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailur
     for sr in &st.file.results {
         let reference = study::reference(&sr.reference);
         let unit = sr.unit.clone().unwrap_or_default();
-        let value = if sr.fit.as_deref() == Some("recht_ipson") {
-            let (Some(x), Some(y)) = (&sr.x, &sr.y) else {
-                return Err(RunFailure::Input(format!(
-                    "study `{}`: result `{}`: a Recht–Ipson fit needs `x` and `y`\n",
-                    st.file.name, sr.quantity
-                )));
-            };
-            let points: Vec<(f64, f64)> = outcomes
-                .iter()
-                .filter_map(|(r, o)| {
-                    let xv = r
-                        .set
-                        .get(x)
-                        .and_then(|v| crate::scene::quantity::parse(&study::text_of(v)).ok())
-                        .map(|q| q.value)?;
-                    let yv = o.report.results.iter().find(|q| &q.quantity == y)?.value;
-                    Some((xv, yv.max(0.0)))
-                })
-                .collect();
-            let fit = study::fit_recht_ipson(&points);
-            let mut series = vec![Curve::new(format!("{y} (pairsum)"), points.clone())];
-            if let Some(f) = fit {
-                let lo = points.iter().map(|p| p.0).fold(f64::INFINITY, f64::min);
-                let hi = points.iter().map(|p| p.0).fold(0.0, f64::max);
-                let curve = (0..=100).map(|k| lo + (hi - lo) * k as f64 / 100.0).map(|v| (v, f.residual(v))).collect();
-                series.push(Curve::new(
-                    format!("Recht–Ipson fit: a = {:.3}, p = {:.2}, v_bl = {:.1}", f.a, f.p, f.v_bl),
-                    curve,
-                ));
+        let quantity = sr.quantity.get_ref();
+        // `study::validate` has checked every result before the runs.
+        let Some(across) = sr.across() else { continue };
+        let value = match across {
+            study::Across::RechtIpson { x, y } => {
+                let points: Vec<(f64, f64)> = outcomes
+                    .iter()
+                    .filter_map(|(r, o)| {
+                        let xv = r
+                            .set
+                            .get(&x)
+                            .and_then(|v| crate::scene::quantity::parse(&study::text_of(v)).ok())
+                            .map(|q| q.value)?;
+                        let yv = o.report.results.iter().find(|q| q.quantity == y)?.value;
+                        Some((xv, yv.max(0.0)))
+                    })
+                    .collect();
+                let fit = study::fit_recht_ipson(&points);
+                histories.push(recht_ipson_plot(quantity, &x, &y, &unit, &points, fit, reference));
+                fit.map(|f| f.v_bl).unwrap_or(f64::NAN)
             }
-            if let Some(v_bl) = reference {
-                // The reference limit is an impact speed: a vertical line.
-                let top = points.iter().map(|p| p.1).fold(0.0, f64::max).max(1.0);
-                let label = format!("{} (reference): {v_bl}", sr.quantity);
-                series.push(Curve::new(label, vec![(v_bl, 0.0), (v_bl, top)]));
-            }
-            histories.push(History {
-                name: format!("{} ({})", sr.quantity, y),
-                x_label: format!("{x} [{unit}]"),
-                y_label: format!("{y} [{unit}]"),
-                series,
-                reference: None,
-            });
-            fit.map(|f| f.v_bl).unwrap_or(f64::NAN)
-        } else if let Some([a, b]) = &sr.ratio {
-            match (wall_of(a), wall_of(b)) {
+            study::Across::Ratio([a, b]) => match (wall_of(&a), wall_of(&b)) {
                 (Some(x), Some(y)) if y > 0.0 => x / y,
                 _ => f64::NAN,
-            }
-        } else if let (Some([a, b]), Some(of)) = (&sr.difference, &sr.of) {
-            match (value_of(a, of), value_of(b, of)) {
+            },
+            study::Across::Difference([a, b], of) => match (value_of(&a, &of), value_of(&b, &of)) {
                 (Some(x), Some(y)) => (y - x) / x.abs().max(1e-300),
                 _ => f64::NAN,
-            }
-        } else if let (Some(run), Some(of)) = (&sr.run, &sr.of) {
-            value_of(run, of).unwrap_or(f64::NAN)
-        } else {
-            return Err(RunFailure::Input(format!(
-                "study `{}`: result `{}` says neither `fit = \"recht_ipson\"` (with x, y), `ratio`, `difference` (with `of`) nor `run` (with `of`)\n",
-                st.file.name, sr.quantity
-            )));
+            },
+            study::Across::Run(run, of) => value_of(&run, &of).unwrap_or(f64::NAN),
         };
-        let mut row = ResultRow::new(sr.quantity.clone(), unit, value, reference);
+        let mut row = ResultRow::new(quantity.clone(), unit, value, reference);
         if let Some(s) = &sr.source {
             row = row.with_source(s.clone());
         }
@@ -473,9 +450,6 @@ pub fn run_study(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailur
                 Some(Curve::new(r.name.clone(), pts.clone()))
             })
             .collect();
-        if series.is_empty() {
-            return Err(RunFailure::Input(format!("study `{}`: no run has a probe `{probe}` to plot\n", st.file.name)));
-        }
         let unit = first.histories.iter().find(|h| h.name == *probe).map(|h| h.y_label.clone());
         histories.push(History {
             name: format!("{probe}, every run"),
@@ -526,9 +500,89 @@ pub fn run_study(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailur
     Ok(RunOutcome { report, out: opts.out.clone(), histories: vec![] })
 }
 
+/// The plot of a Recht–Ipson fit: the runs' points, the fitted curve, the reference limit.
+fn recht_ipson_plot(
+    quantity: &str,
+    x: &str,
+    y: &str,
+    unit: &str,
+    points: &[(f64, f64)],
+    fit: Option<crate::scene::study::RechtIpson>,
+    reference: Option<f64>,
+) -> History {
+    let mut series = vec![Curve::new(format!("{y} (pairsum)"), points.to_vec())];
+    if let Some(f) = fit {
+        let lo = points.iter().map(|p| p.0).fold(f64::INFINITY, f64::min);
+        let hi = points.iter().map(|p| p.0).fold(0.0, f64::max);
+        let curve = (0..=100).map(|k| lo + (hi - lo) * k as f64 / 100.0).map(|v| (v, f.residual(v))).collect();
+        series
+            .push(Curve::new(format!("Recht–Ipson fit: a = {:.3}, p = {:.2}, v_bl = {:.1}", f.a, f.p, f.v_bl), curve));
+    }
+    if let Some(v_bl) = reference {
+        // The reference limit is an impact speed: a vertical line.
+        let top = points.iter().map(|p| p.1).fold(0.0, f64::max).max(1.0);
+        series.push(Curve::new(format!("{quantity} (reference): {v_bl}"), vec![(v_bl, 0.0), (v_bl, top)]));
+    }
+    History {
+        name: format!("{quantity} ({y})"),
+        x_label: format!("{x} [{unit}]"),
+        y_label: format!("{y} [{unit}]"),
+        series,
+        reference: None,
+    }
+}
+
+/// Loads a study and checks everything it needs before its first run: every run's case loads and
+/// plans, and the results and plots name what the case reports. Returns the study and the runs to
+/// make (the CI subset at the CI resolution), each with its options.
+fn prepare_study(
+    path: &Path,
+    opts: &RunOptions,
+) -> Result<(crate::scene::study::Study, Vec<(crate::scene::study::RunSpec, RunOptions)>), RunFailure> {
+    use crate::scene::study;
+    let mut sources = Sources::new();
+    let st = study::load(path, &mut sources).map_err(|d| input_error(&sources, &d))?;
+    let ci = opts.scene.resolution.as_deref().is_none_or(|r| r == "ci");
+    let mut runs = vec![];
+    for r in st.file.runs.iter().filter(|r| !ci || st.file.ci_runs.as_ref().is_none_or(|c| c.contains(&r.name))) {
+        let mut o = opts.clone();
+        // `--set` applies to every run; what a run sets itself wins.
+        o.scene.set.extend(r.set.iter().map(|(k, v)| (k.clone(), study::text_of(v))));
+        o.out = opts.out.join(sanitize(&r.name));
+        runs.push((r.clone(), o));
+    }
+    let mut case = None;
+    for (r, o) in &runs {
+        let (scene, _) = prepare(&st.case_path, &o.scene)
+            .map_err(|e| RunFailure::Input(format!("study `{}`, run `{}`:\n{e}", st.file.name, r.name)))?;
+        case.get_or_insert(scene);
+    }
+    let case = case.ok_or_else(|| RunFailure::Input(format!("study `{}` has no runs to make\n", st.file.name)))?;
+    let case_results: Vec<String> = case.results.iter().map(|r| r.quantity.clone()).collect();
+    let case_probes: Vec<String> = case.probes.iter().map(|p| p.name.clone()).collect();
+    let problems = study::validate(&st, &case_results, &case_probes);
+    if !problems.is_empty() {
+        return Err(input_error(&sources, &problems));
+    }
+    Ok((st, runs))
+}
+
 /// A name usable as a directory.
 fn sanitize(s: &str) -> String {
     s.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '.' { c } else { '_' }).collect()
+}
+
+/// Checks a case or a study without running it: the case loads and plans; a study's every run
+/// loads and plans, and its results name what its case reports.
+pub fn check_file(path: &Path, opts: &scene::Options) -> Result<(), RunFailure> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| RunFailure::Input(format!("error: cannot read `{}`: {e}\n", path.display())))?;
+    if crate::scene::study::is_study(&text) {
+        let o = RunOptions { scene: opts.clone(), ..RunOptions::default() };
+        prepare_study(path, &o).map(|_| ())
+    } else {
+        prepare(path, opts).map(|_| ())
+    }
 }
 
 /// Runs a case or a study, whichever the file is.

@@ -97,7 +97,7 @@ fn restart_from_a_checkpoint_equals_an_uninterrupted_run_bit_for_bit() {
     }
     assert_eq!(resumed.step, straight.step);
     assert_eq!(resumed.time.to_bits(), straight.time.to_bits());
-    let (a, b) = (straight.backend.snapshot(), resumed.backend.snapshot());
+    let (a, b) = (straight.backend.snapshot().expect("snapshot"), resumed.backend.snapshot().expect("snapshot"));
     assert_eq!(a.id, b.id, "particle order");
     for (k, (x, y)) in a.columns.iter().zip(&b.columns).enumerate() {
         if let (Some(x), Some(y)) = (x, y) {

@@ -80,7 +80,9 @@ fn rel_diff(a: &[f64], b: &[f64]) -> f64 {
 fn compare_fields(cpu: &CpuBackend<f32>, gpu: &GpuBackend, fields: &[&str], tol: f64, what: &str) {
     for name in fields {
         let f = cpu.plan().model.field_id(name).expect("field");
-        let (Some((_, a)), Some((_, b))) = (cpu.read(f), gpu.read(f)) else { panic!("{what}: `{name}` is not stored") };
+        let (Some((_, a)), Some((_, b))) = (cpu.read(f).expect("cpu read"), gpu.read(f).expect("gpu read")) else {
+            panic!("{what}: `{name}` is not stored")
+        };
         let d = rel_diff(&a, &b);
         assert!(d <= tol, "{what}: `{name}` differs between CPU (f32) and GPU by {d:e} of its largest value");
     }
@@ -120,7 +122,7 @@ fn every_pass_of_the_fluid_model_matches_the_cpu_in_f32() {
         gpu.evaluate(g).expect("gpu");
         compare_fields(&cpu, &gpu, &["drho", "dv"], 1e-5, &format!("wcsph fluid {dim}D"));
         // The time-step reductions too.
-        let (a, b) = (cpu.reductions(g), gpu.reductions(g));
+        let (a, b) = (cpu.reductions(g).expect("cpu"), gpu.reductions(g).expect("gpu"));
         for (x, y) in a.iter().zip(&b) {
             assert!((x - y).abs() <= 1e-5 * x.abs(), "reduction {x} vs {y}");
         }
@@ -140,7 +142,7 @@ fn gpu_neighbour_counts_equal_the_cpu_ones_exactly() {
             cpu.evaluate(Globals::default()).expect("cpu");
             gpu.evaluate(Globals::default()).expect("gpu");
             let f = m.field_id("nn").expect("nn");
-            let (a, b) = (cpu.read(f).expect("cpu").1, gpu.read(f).expect("gpu").1);
+            let (a, b) = (cpu.read(f).unwrap().expect("cpu").1, gpu.read(f).unwrap().expect("gpu").1);
             assert_eq!(a, b, "{dim}D variable h {variable_h}: neighbour counts differ");
             assert!(a.iter().any(|c| *c > 10.0), "too few neighbours to mean anything");
         }
@@ -367,13 +369,13 @@ fn reordering_on_the_gpu_sorts_by_cell_within_groups_and_keeps_every_value() {
     gpu.evaluate(Globals { time: 0.0, dt: 1e-8 }).expect("evaluate");
     let fields: Vec<&str> = plan.layout.iter().map(|l| plan.model.fields[l.field.index()].name.as_str()).collect();
     let before: Vec<Vec<f64>> = fields.iter().map(|f| field_by_id(&gpu, f).1).collect();
-    let (groups, snap) = (gpu.groups(), gpu.snapshot());
+    let (groups, snap) = (gpu.groups(), gpu.snapshot().expect("snapshot"));
     let x = plan.model.field_id("x").expect("x");
     let h = plan.model.field_id("h").expect("h");
-    let (dim, pos) = (plan.dim, gpu.read(x).expect("x").1);
-    let h_max = gpu.read(h).expect("h").1.iter().fold(0f32, |a, v| a.max(*v as f32));
+    let (dim, pos) = (plan.dim, gpu.read(x).unwrap().expect("x").1);
+    let h_max = gpu.read(h).unwrap().expect("h").1.iter().fold(0f32, |a, v| a.max(*v as f32));
 
-    gpu.reorder();
+    gpu.reorder().expect("reorder");
 
     // The order the cell list of the same positions gives (bit-identical on both sides).
     let pos32: Vec<f32> = pos.iter().map(|v| *v as f32).collect();
@@ -395,12 +397,15 @@ fn reordering_on_the_gpu_sorts_by_cell_within_groups_and_keeps_every_value() {
     let want_materials: Vec<u32> = sorted.iter().map(|k| snap.material[k.3]).collect();
     assert_ne!(want_ids, snap.id, "the scene is already in cell order: the test would prove nothing");
     let first_difference = |a: &[u32], b: &[u32]| a.iter().zip(b).position(|(x, y)| x != y);
-    let ids = gpu.ids();
+    let ids = gpu.ids().expect("ids");
     assert_eq!(ids.len(), want_ids.len());
     if let Some(k) = first_difference(&ids, &want_ids) {
         panic!("rows are not in the order of their cells: row {k} holds particle {}, not {}", ids[k], want_ids[k]);
     }
-    assert!(first_difference(&gpu.snapshot().material, &want_materials).is_none(), "materials did not move");
+    assert!(
+        first_difference(&gpu.snapshot().expect("snapshot").material, &want_materials).is_none(),
+        "materials did not move"
+    );
     assert!(gpu.groups() == groups, "a group's rows moved");
     for (f, old) in fields.iter().zip(&before) {
         let new = field_by_id(&gpu, f).1;
@@ -410,6 +415,27 @@ fn reordering_on_the_gpu_sorts_by_cell_within_groups_and_keeps_every_value() {
         );
     }
     // Sorted data stays as it is.
-    gpu.reorder();
-    assert!(gpu.ids() == want_ids, "a second reorder of unmoved particles changed the order");
+    gpu.reorder().expect("reorder");
+    assert!(gpu.ids().expect("ids") == want_ids, "a second reorder of unmoved particles changed the order");
+}
+
+/// The watchdog looks at the fields it is asked about, and finds the same particle and field as
+/// the CPU backend does.
+#[test]
+fn the_first_non_finite_value_is_found_only_among_the_watched_fields() {
+    let m = model("use models::elastic_solid\n");
+    let inp = cloud(2, 10, 0.01, false, 5);
+    let (mut cpu, mut gpu) = pair(&m, 2, &inp, &[steel(&m)], &[]);
+    let (rho, v) = (m.field_id("rho").expect("rho"), m.field_id("v").expect("v"));
+    let mut snap = cpu.snapshot().expect("snapshot");
+    let k = 37;
+    snap.columns[rho.index()].as_mut().expect("rho is stored")[k] = f64::NAN;
+    cpu.restore(&snap).expect("cpu restore");
+    gpu.restore(&snap).expect("gpu restore");
+    let at = |ids: Vec<u32>, hit: Option<(usize, pairsum::ir::FieldId)>| hit.map(|(i, f)| (ids[i], f));
+    for b in [&mut cpu as &mut dyn Backend, &mut gpu] {
+        assert_eq!(b.first_non_finite(&[v]).expect("scan"), None, "{}: only v is watched", b.describe());
+        let hit = b.first_non_finite(&[v, rho]).expect("scan");
+        assert_eq!(at(b.ids().expect("ids"), hit), Some((k as u32, rho)), "{}", b.describe());
+    }
 }

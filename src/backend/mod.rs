@@ -50,26 +50,27 @@ pub trait Backend {
     /// `engine::setup`).
     fn initialise(&mut self) -> Result<(), BackendError>;
     /// Copies the evolving state to its saved copy.
-    fn save(&mut self);
+    fn save(&mut self) -> Result<(), BackendError>;
     /// Builds the neighbour search and runs every pass.
     fn evaluate(&mut self, g: Globals) -> Result<(), BackendError>;
     /// The values of the time-step reductions (`min_over` …), in the order of
     /// `timestep::reductions`.
-    fn reductions(&mut self, g: Globals) -> Vec<f64>;
+    fn reductions(&mut self, g: Globals) -> Result<Vec<f64>, BackendError>;
     /// Runs integrator stage `stage`.
-    fn update(&mut self, stage: usize, g: Globals);
+    fn update(&mut self, stage: usize, g: Globals) -> Result<(), BackendError>;
     /// Reorders particles along a space-filling curve for memory locality.
-    fn reorder(&mut self);
-    /// A field for every particle in the current order (`n × comps`, NaN where not stored).
-    fn read(&self, f: FieldId) -> Option<(usize, Vec<f64>)>;
+    fn reorder(&mut self) -> Result<(), BackendError>;
+    /// A field for every particle in the current order (`n × comps`, NaN where not stored);
+    /// `None` when the field is stored nowhere.
+    fn read(&self, f: FieldId) -> Result<Option<(usize, Vec<f64>)>, BackendError>;
     /// Each particle's index at creation, in the current order.
-    fn ids(&self) -> Vec<u32>;
+    fn ids(&self) -> Result<Vec<u32>, BackendError>;
     /// Each particle's group, in the current order.
     fn groups(&self) -> Vec<u32>;
-    fn snapshot(&self) -> Snapshot;
-    fn restore(&mut self, s: &Snapshot);
-    /// The first particle and field that is NaN or infinite among `fields`.
-    fn first_non_finite(&self, fields: &[FieldId]) -> Option<(usize, FieldId)>;
+    fn snapshot(&self) -> Result<Snapshot, BackendError>;
+    fn restore(&mut self, s: &Snapshot) -> Result<(), BackendError>;
+    /// The first particle (in the current order) and field that is NaN or infinite among `fields`.
+    fn first_non_finite(&mut self, fields: &[FieldId]) -> Result<Option<(usize, FieldId)>, BackendError>;
     /// A whole step on the device in one submission, for backends that can (the GPU): from the
     /// clock (time, last dt, step) to the new one. `None`: the engine runs the actions itself.
     fn device_step(

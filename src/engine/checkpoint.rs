@@ -22,7 +22,7 @@ struct Header {
 const FORMAT: &str = "pairsum-checkpoint-1";
 
 pub fn write<B: Backend>(engine: &Engine<B>, path: &Path) -> std::io::Result<()> {
-    let s = engine.backend.snapshot();
+    let s = engine.backend.snapshot().map_err(backend_failed)?;
     let header = Header {
         format: FORMAT.into(),
         time: engine.time,
@@ -50,6 +50,10 @@ pub fn write<B: Backend>(engine: &Engine<B>, path: &Path) -> std::io::Result<()>
     std::fs::rename(tmp, path)
 }
 
+fn backend_failed(e: crate::backend::BackendError) -> std::io::Error {
+    std::io::Error::other(e.0)
+}
+
 fn bad(msg: impl Into<String>) -> std::io::Error {
     std::io::Error::new(std::io::ErrorKind::InvalidData, msg.into())
 }
@@ -63,7 +67,7 @@ pub fn read<B: Backend>(engine: &mut Engine<B>, path: &Path) -> std::io::Result<
     if header.format != FORMAT {
         return Err(bad(format!("unknown checkpoint format `{}`", header.format)));
     }
-    let current = engine.backend.snapshot();
+    let current = engine.backend.snapshot().map_err(backend_failed)?;
     let shapes: Vec<Option<usize>> = current.columns.iter().map(|c| c.as_ref().map(Vec::len)).collect();
     if shapes != header.columns || current.id.len() != header.particles {
         return Err(bad("the checkpoint was written by a different case or plan"));
@@ -86,7 +90,7 @@ pub fn read<B: Backend>(engine: &mut Engine<B>, path: &Path) -> std::io::Result<
     let u32s = data.get(at..at + 8 * n).ok_or_else(|| bad("truncated checkpoint"))?;
     let all: Vec<u32> = u32s.chunks_exact(4).map(|b| u32::from_le_bytes(b.try_into().expect("4 bytes"))).collect();
     let snapshot = Snapshot { columns, id: all[..n].to_vec(), material: all[n..].to_vec() };
-    engine.backend.restore(&snapshot);
+    engine.backend.restore(&snapshot).map_err(backend_failed)?;
     engine.time = header.time;
     engine.step = header.step;
     engine.dt = header.dt;

@@ -8,7 +8,7 @@ pub mod checkpoint;
 pub mod setup;
 
 use crate::backend::{timestep, Backend, BackendError, Globals, Snapshot};
-use crate::ir::{FieldId, Storage};
+use crate::ir::FieldId;
 use crate::schedule::Action;
 
 #[derive(Clone, Debug)]
@@ -126,33 +126,32 @@ pub struct Engine<B: Backend> {
 impl<B: Backend> Engine<B> {
     pub fn new(backend: B, config: RunConfig) -> Engine<B> {
         let plan = backend.plan();
-        let watched =
-            plan.layout.iter().map(|l| l.field).filter(|f| plan.model.field(*f).storage != Storage::Temp).collect();
+        let watched = plan.watched_fields();
         Engine { backend, config, time: 0.0, step: 0, dt: 0.0, watched, good: None, dt0: 0.0 }
     }
 
     /// Initial values, state-only equations, and a first time step for equations that read `dt`.
     pub fn initialise(&mut self) -> Result<(), RunError> {
         self.backend.initialise()?;
-        self.dt = self.next_dt(Globals { time: 0.0, dt: 0.0 });
+        self.dt = self.next_dt(Globals { time: 0.0, dt: 0.0 })?;
         if !(self.dt > 0.0 && self.dt.is_finite()) {
             return Err(RunError::BadTimestep { step: 0, dt: self.dt });
         }
         self.dt0 = self.dt;
-        self.keep_good();
+        self.keep_good()?;
         Ok(())
     }
 
-    fn next_dt(&mut self, g: Globals) -> f64 {
+    fn next_dt(&mut self, g: Globals) -> Result<f64, RunError> {
         let plan = self.backend.plan();
         let limit = if plan.timesteps.is_empty() {
             f64::INFINITY
         } else {
             let timesteps = plan.timesteps.clone();
-            let values = self.backend.reductions(g);
+            let values = self.backend.reductions(g)?;
             timestep::value(&self.backend.plan().model, &timesteps, &values, g.time, g.dt)
         };
-        limit.min(self.config.dt_max)
+        Ok(limit.min(self.config.dt_max))
     }
 
     /// One step of the integrator.
@@ -166,7 +165,7 @@ impl<B: Backend> Engine<B> {
             }
             (self.time, self.dt, self.step) = (time, dt, step);
             if self.config.reorder_every > 0 && self.step.is_multiple_of(self.config.reorder_every) {
-                self.backend.reorder();
+                self.backend.reorder()?;
             }
             return Ok(());
         }
@@ -174,10 +173,10 @@ impl<B: Backend> Engine<B> {
         let mut dt = self.dt;
         for a in actions {
             match a {
-                Action::Save => self.backend.save(),
+                Action::Save => self.backend.save()?,
                 Action::Evaluate => self.backend.evaluate(Globals { time: self.time, dt })?,
                 Action::Timestep => {
-                    dt = self.next_dt(Globals { time: self.time, dt: self.dt });
+                    dt = self.next_dt(Globals { time: self.time, dt: self.dt })?;
                     let remaining = self.config.end_time - self.time;
                     if remaining > 0.0 && remaining < dt * 1.000001 {
                         dt = remaining;
@@ -187,7 +186,7 @@ impl<B: Backend> Engine<B> {
                     }
                 }
                 Action::Update { stage, time_fraction } => {
-                    self.backend.update(stage, Globals { time: self.time + time_fraction * dt, dt })
+                    self.backend.update(stage, Globals { time: self.time + time_fraction * dt, dt })?
                 }
             }
         }
@@ -195,17 +194,18 @@ impl<B: Backend> Engine<B> {
         self.dt = dt;
         self.step += 1;
         if self.config.reorder_every > 0 && self.step.is_multiple_of(self.config.reorder_every) {
-            self.backend.reorder();
+            self.backend.reorder()?;
         }
         Ok(())
     }
 
-    fn keep_good(&mut self) {
-        self.good = Some((self.backend.snapshot(), self.time, self.step, self.dt));
+    fn keep_good(&mut self) -> Result<(), RunError> {
+        self.good = Some((self.backend.snapshot()?, self.time, self.step, self.dt));
+        Ok(())
     }
 
-    fn bad(&self) -> Option<(usize, FieldId)> {
-        self.backend.first_non_finite(&self.watched)
+    fn bad(&mut self) -> Result<Option<(usize, FieldId)>, RunError> {
+        Ok(self.backend.first_non_finite(&self.watched)?)
     }
 
     /// Steps until the end time (or `max_steps`), calling `after_step` after each step; stops with
@@ -218,14 +218,14 @@ impl<B: Backend> Engine<B> {
             self.step()?;
             let finished = self.time >= self.config.end_time * (1.0 - 1e-12);
             if !finished && self.dt < self.config.min_dt_ratio * self.dt0 {
-                return Err(RunError::Unstable(Box::new(self.timestep_collapse())));
+                return Err(RunError::Unstable(Box::new(self.timestep_collapse()?)));
             }
             let watch = self.config.watch_every.max(1);
             if self.step.is_multiple_of(watch) || self.time >= self.config.end_time * (1.0 - 1e-12) {
-                if self.bad().is_some() {
+                if self.bad()?.is_some() {
                     return Err(RunError::Unstable(Box::new(self.locate_instability()?)));
                 }
-                self.keep_good();
+                self.keep_good()?;
             }
             after_step(self).map_err(|e| RunError::Backend(BackendError(e)))?;
         }
@@ -234,11 +234,15 @@ impl<B: Backend> Engine<B> {
 
     /// The instability of a collapsed time step, named after the fastest particle (a particle
     /// running away is what usually drives the step down).
-    fn timestep_collapse(&self) -> Instability {
+    fn timestep_collapse(&self) -> Result<Instability, RunError> {
         let (last_good, last_good_time) =
             self.good.as_ref().map(|g| (g.0.clone(), g.1)).expect("kept at initialisation");
         let plan = self.backend.plan();
-        let speeds = plan.model.field_id("v").and_then(|v| self.backend.read(v)).map(|(c, v)| {
+        let velocities = match plan.model.field_id("v") {
+            Some(v) => self.backend.read(v)?,
+            None => None,
+        };
+        let speeds = velocities.map(|(c, v)| {
             v.chunks(c.max(1)).map(|u| u.iter().map(|x| x * x).sum::<f64>().sqrt()).collect::<Vec<f64>>()
         });
         let (i, speed) = speeds.unwrap_or_default().into_iter().enumerate().fold((0, f64::NAN), |best, (i, s)| {
@@ -249,35 +253,35 @@ impl<B: Backend> Engine<B> {
             }
         });
         let group = self.backend.groups().get(i).map(|g| plan.model.groups[*g as usize].name.clone());
-        Instability {
+        Ok(Instability {
             step: self.step,
             time: self.time,
-            particle: self.backend.ids().get(i).copied().unwrap_or(0),
+            particle: self.backend.ids()?.get(i).copied().unwrap_or(0),
             group: group.unwrap_or_default(),
             field: "v".into(),
             cause: Cause::TimestepCollapse { dt: self.dt, dt0: self.dt0, speed },
             last_good,
             last_good_time,
-        }
+        })
     }
 
     /// Replays from the last good state one step at a time to the first step that produces a
     /// non-finite value.
     fn locate_instability(&mut self) -> Result<Instability, RunError> {
         let (snap, time, step, dt) = self.good.clone().expect("a good state is kept at initialisation");
-        self.backend.restore(&snap);
+        self.backend.restore(&snap)?;
         (self.time, self.step, self.dt) = (time, step, dt);
         loop {
-            let before = self.backend.snapshot();
+            let before = self.backend.snapshot()?;
             let before_time = self.time;
             self.step()?;
-            if let Some((i, f)) = self.bad() {
+            if let Some((i, f)) = self.bad()? {
                 let plan = self.backend.plan();
                 let group = self.backend.groups()[i] as usize;
                 return Ok(Instability {
                     step: self.step,
                     time: self.time,
-                    particle: self.backend.ids()[i],
+                    particle: self.backend.ids()?[i],
                     group: plan.model.groups[group].name.clone(),
                     field: plan.model.field(f).name.clone(),
                     cause: Cause::NonFinite,

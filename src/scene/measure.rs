@@ -2,7 +2,7 @@
 //! measurement with a documented, automatic definition — and the results taken from them.
 
 use super::build::{Pick, ProbeKind, ProbeSpec, ResultSpec, Scene};
-use crate::backend::Backend;
+use crate::backend::{Backend, BackendError};
 use crate::ir::{component_indices, Shape};
 
 /// Named measurements and what each reads.
@@ -46,10 +46,10 @@ fn bodies_now(scene: &Scene, ids: &[u32]) -> Vec<u32> {
 }
 
 /// Positions in the backend's current order.
-pub fn positions(b: &dyn Backend) -> Option<Vec<[f64; 3]>> {
-    let x = b.plan().model.field_id("x")?;
-    let (c, v) = b.read(x)?;
-    Some(
+pub fn positions(b: &dyn Backend) -> Result<Option<Vec<[f64; 3]>>, BackendError> {
+    let Some(x) = b.plan().model.field_id("x") else { return Ok(None) };
+    let Some((c, v)) = b.read(x)? else { return Ok(None) };
+    Ok(Some(
         (0..v.len() / c)
             .map(|k| {
                 let mut p = [0.0; 3];
@@ -57,17 +57,17 @@ pub fn positions(b: &dyn Backend) -> Option<Vec<[f64; 3]>> {
                 p
             })
             .collect(),
-    )
+    ))
 }
 
-/// The value of a probe now.
-pub fn evaluate(p: &ProbeSpec, scene: &Scene, b: &dyn Backend) -> f64 {
+/// The value of a probe now (NaN where it has none); an error only when the backend fails.
+pub fn evaluate(p: &ProbeSpec, scene: &Scene, b: &dyn Backend) -> Result<f64, BackendError> {
     match &p.kind {
         ProbeKind::Field { select, field, pick, reduce, locate, .. } => {
-            let Some((comps, values)) = b.read(*field) else { return f64::NAN };
+            let Some((comps, values)) = b.read(*field)? else { return Ok(f64::NAN) };
             let shape = b.plan().model.field(*field).ty.shape;
             let dim = b.plan().dim;
-            let ids = b.ids();
+            let ids = b.ids()?;
             let selected: Vec<(usize, f64)> = (0..ids.len())
                 .filter(|k| select.as_ref().is_none_or(|s| s[ids[*k] as usize]))
                 .map(|k| (k, picked(*pick, shape, dim, &values[k * comps..(k + 1) * comps])))
@@ -75,7 +75,7 @@ pub fn evaluate(p: &ProbeSpec, scene: &Scene, b: &dyn Backend) -> f64 {
                 .collect();
             match locate {
                 Some(axis) => locate_extreme(reduce, &selected, *axis, b),
-                None => reduce_values(reduce, &selected.iter().map(|p| p.1).collect::<Vec<_>>()),
+                None => Ok(reduce_values(reduce, &selected.iter().map(|p| p.1).collect::<Vec<_>>())),
             }
         }
         ProbeKind::Measure(name) => measure(name, scene, b),
@@ -109,14 +109,14 @@ fn picked(pick: Pick, shape: Shape, dim: usize, v: &[f64]) -> f64 {
 }
 
 /// The `axis` coordinate of the particle where the reduction is reached.
-fn locate_extreme(reduce: &str, values: &[(usize, f64)], axis: usize, b: &dyn Backend) -> f64 {
+fn locate_extreme(reduce: &str, values: &[(usize, f64)], axis: usize, b: &dyn Backend) -> Result<f64, BackendError> {
     let key = |v: f64| match reduce {
         "min" => -v,
         "abs_max" => v.abs(),
         _ => v,
     };
-    let Some(&(k, _)) = values.iter().max_by(|p, q| key(p.1).total_cmp(&key(q.1))) else { return f64::NAN };
-    positions(b).map(|x| x[k][axis]).unwrap_or(f64::NAN)
+    let Some(&(k, _)) = values.iter().max_by(|p, q| key(p.1).total_cmp(&key(q.1))) else { return Ok(f64::NAN) };
+    Ok(positions(b)?.map(|x| x[k][axis]).unwrap_or(f64::NAN))
 }
 
 fn reduce_values(reduce: &str, v: &[f64]) -> f64 {
@@ -132,21 +132,21 @@ fn reduce_values(reduce: &str, v: &[f64]) -> f64 {
     }
 }
 
-fn measure(name: &str, scene: &Scene, b: &dyn Backend) -> f64 {
-    let Some(x) = positions(b) else { return f64::NAN };
-    let which = bodies_now(scene, &b.ids());
+fn measure(name: &str, scene: &Scene, b: &dyn Backend) -> Result<f64, BackendError> {
+    let Some(x) = positions(b)? else { return Ok(f64::NAN) };
+    let which = bodies_now(scene, &b.ids()?);
     let dim = b.plan().dim;
-    match name {
+    Ok(match name {
         // The least distance between a particle of the first body and one of the second, over Δx.
         "min_interbody_distance" => interbody(&x, &which, dim, scene.dx).0 / scene.dx,
         // Particles of the first two bodies closer than Δx/2 to a particle of the other body.
         "interpenetrated" => interbody(&x, &which, dim, scene.dx).1 as f64,
         // Where a wave front driven by the first body has got to.
-        "front_position" => front_position(&x, &which, b),
-        "min_pair_distance" => spacing_extremes(&x, b).0,
-        "max_neighbour_gap" => spacing_extremes(&x, b).1,
-        "kinetic_energy" => kinetic_energy(b),
-        "max_speed" => speeds(b).into_iter().fold(0.0, f64::max),
+        "front_position" => front_position(&x, &which, b)?,
+        "min_pair_distance" => spacing_extremes(&x, b)?.0,
+        "max_neighbour_gap" => spacing_extremes(&x, b)?.1,
+        "kinetic_energy" => kinetic_energy(b)?,
+        "max_speed" => speeds(b)?.into_iter().fold(0.0, f64::max),
         "crater_diameter" => crater_diameter(&x, &which, scene),
         "debris_length" => debris(&x, scene).0,
         "debris_width" => debris(&x, scene).1,
@@ -154,9 +154,9 @@ fn measure(name: &str, scene: &Scene, b: &dyn Backend) -> f64 {
             let (l, w) = debris(&x, scene);
             l / w
         }
-        "plug_velocity" => plug_velocity(&x, &which, scene, b),
+        "plug_velocity" => plug_velocity(&x, &which, scene, b)?,
         _ => f64::NAN,
-    }
+    })
 }
 
 /// The speed of the plug a projectile (the first body) pushes out of a plate (the second): the
@@ -164,10 +164,10 @@ fn measure(name: &str, scene: &Scene, b: &dyn Backend) -> f64 {
 /// initial rear face (by more than Δx) and the projectile's nose. Whether the plug leaves whole
 /// or breaks up and spreads sideways, that is the plate material ahead of the projectile; zero
 /// while there is none (below the ballistic limit, or before the plug leaves).
-fn plug_velocity(x: &[[f64; 3]], body: &[u32], scene: &Scene, b: &dyn Backend) -> f64 {
-    let (Some(axis), Some(plate)) = (Axis::of(scene), scene.bodies.get(1)) else { return f64::NAN };
-    let Some(vf) = b.plan().model.field_id("v") else { return f64::NAN };
-    let Some((c, v)) = b.read(vf) else { return f64::NAN };
+fn plug_velocity(x: &[[f64; 3]], body: &[u32], scene: &Scene, b: &dyn Backend) -> Result<f64, BackendError> {
+    let (Some(axis), Some(plate)) = (Axis::of(scene), scene.bodies.get(1)) else { return Ok(f64::NAN) };
+    let Some(vf) = b.plan().model.field_id("v") else { return Ok(f64::NAN) };
+    let Some((c, v)) = b.read(vf)? else { return Ok(f64::NAN) };
     let rear = plate.particles.clone().map(|k| axis.coords(scene.particles.x[k]).0).fold(f64::NEG_INFINITY, f64::max);
     let nose = (0..x.len()).filter(|k| body[*k] == 0).map(|k| axis.coords(x[k]).0).fold(f64::NEG_INFINITY, f64::max);
     let beyond = (rear + scene.dx).max(nose);
@@ -176,18 +176,18 @@ fn plug_velocity(x: &[[f64; 3]], body: &[u32], scene: &Scene, b: &dyn Backend) -
         .map(|k| (0..c).map(|d| v[k * c + d] * axis.dir[d]).sum::<f64>())
         .collect();
     if speeds.is_empty() {
-        return 0.0;
+        return Ok(0.0);
     }
-    speeds.iter().sum::<f64>() / speeds.len() as f64
+    Ok(speeds.iter().sum::<f64>() / speeds.len() as f64)
 }
 
 /// Over every particle, relative to its own spacing Δx_i: the least distance to another particle
 /// (clumping: the tensile instability pulls particles together) and the largest distance to its
 /// nearest neighbour (a crack or a particle left alone). Neighbours within 3 Δx_i are searched.
-fn spacing_extremes(x: &[[f64; 3]], b: &dyn Backend) -> (f64, f64) {
+fn spacing_extremes(x: &[[f64; 3]], b: &dyn Backend) -> Result<(f64, f64), BackendError> {
     let dim = b.plan().dim;
-    let Some(dxf) = b.plan().model.field_id("dx") else { return (f64::NAN, f64::NAN) };
-    let Some((_, dx)) = b.read(dxf) else { return (f64::NAN, f64::NAN) };
+    let Some(dxf) = b.plan().model.field_id("dx") else { return Ok((f64::NAN, f64::NAN)) };
+    let Some((_, dx)) = b.read(dxf)? else { return Ok((f64::NAN, f64::NAN)) };
     let reach = 3.0 * dx.iter().copied().fold(0.0, f64::max);
     let flat: Vec<f64> = x.iter().flat_map(|p| p[..dim].to_vec()).collect();
     let grid = crate::grid::Grid::build(&flat, dim, reach);
@@ -204,20 +204,20 @@ fn spacing_extremes(x: &[[f64; 3]], b: &dyn Backend) -> (f64, f64) {
         least = least.min(nearest);
         gap = gap.max(nearest);
     }
-    (least, gap)
+    Ok((least, gap))
 }
 
-fn speeds(b: &dyn Backend) -> Vec<f64> {
-    let Some(v) = b.plan().model.field_id("v") else { return vec![] };
-    let Some((c, v)) = b.read(v) else { return vec![] };
-    v.chunks(c).map(|u| u.iter().map(|x| x * x).sum::<f64>().sqrt()).collect()
+fn speeds(b: &dyn Backend) -> Result<Vec<f64>, BackendError> {
+    let Some(v) = b.plan().model.field_id("v") else { return Ok(vec![]) };
+    let Some((c, v)) = b.read(v)? else { return Ok(vec![]) };
+    Ok(v.chunks(c).map(|u| u.iter().map(|x| x * x).sum::<f64>().sqrt()).collect())
 }
 
 /// Σ ½ m |v|² over every particle.
-fn kinetic_energy(b: &dyn Backend) -> f64 {
-    let Some(m) = b.plan().model.field_id("m") else { return f64::NAN };
-    let Some((_, m)) = b.read(m) else { return f64::NAN };
-    speeds(b).iter().zip(&m).map(|(s, m)| 0.5 * m * s * s).sum()
+fn kinetic_energy(b: &dyn Backend) -> Result<f64, BackendError> {
+    let Some(m) = b.plan().model.field_id("m") else { return Ok(f64::NAN) };
+    let Some((_, m)) = b.read(m)? else { return Ok(f64::NAN) };
+    Ok(speeds(b)?.iter().zip(&m).map(|(s, m)| 0.5 * m * s * s).sum())
 }
 
 /// The impact axis: through the first body's centroid at t = 0, along its initial velocity.
@@ -316,20 +316,20 @@ fn percentile(v: &mut [f64], q: f64) -> f64 {
 /// Where a wave front driven by the first body has got to: along the first axis, the position at
 /// which the speed falls through half the driver's mean speed, interpolated linearly between the
 /// last particle above and the next one below (particles ordered by position).
-fn front_position(x: &[[f64; 3]], body: &[u32], b: &dyn Backend) -> f64 {
-    let Some(v) = b.plan().model.field_id("v") else { return f64::NAN };
-    let Some((c, v)) = b.read(v) else { return f64::NAN };
+fn front_position(x: &[[f64; 3]], body: &[u32], b: &dyn Backend) -> Result<f64, BackendError> {
+    let Some(v) = b.plan().model.field_id("v") else { return Ok(f64::NAN) };
+    let Some((c, v)) = b.read(v)? else { return Ok(f64::NAN) };
     let speed: Vec<f64> =
         (0..x.len()).map(|k| v[k * c..(k + 1) * c].iter().map(|u| u * u).sum::<f64>().sqrt()).collect();
     let driver: Vec<f64> = (0..x.len()).filter(|k| body[*k] == 0).map(|k| speed[k]).collect();
     if driver.is_empty() {
-        return f64::NAN;
+        return Ok(f64::NAN);
     }
     let half = 0.5 * driver.iter().sum::<f64>() / driver.len() as f64;
     let mut order: Vec<usize> = (0..x.len()).collect();
     order.sort_by(|a, b| x[*a][0].total_cmp(&x[*b][0]));
     let last_above = order.iter().rposition(|k| speed[*k] > half);
-    match last_above {
+    Ok(match last_above {
         Some(p) if p + 1 < order.len() => {
             let (a, b) = (order[p], order[p + 1]);
             let t = (speed[a] - half) / (speed[a] - speed[b]);
@@ -337,7 +337,7 @@ fn front_position(x: &[[f64; 3]], body: &[u32], b: &dyn Backend) -> f64 {
         }
         Some(p) => x[order[p]][0],
         None => f64::NAN,
-    }
+    })
 }
 
 /// (least distance between bodies 0 and 1, number of particles of either closer than Δx/2 to the

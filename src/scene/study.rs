@@ -40,7 +40,7 @@ pub struct RunSpec {
 #[derive(Deserialize, Debug, Clone)]
 #[serde(deny_unknown_fields)]
 pub struct StudyResult {
-    pub quantity: String,
+    pub quantity: toml::Spanned<String>,
     #[serde(default)]
     pub unit: Option<String>,
     /// `recht_ipson`: fit y(x) over the runs (x a parameter, y a result of each run).
@@ -79,6 +79,119 @@ pub fn is_study(text: &str) -> bool {
 pub struct Study {
     pub file: StudyFile,
     pub case_path: PathBuf,
+    /// The study file's id in the source map.
+    pub source: u32,
+}
+
+/// What a study result computes across its runs.
+#[derive(Clone, Debug)]
+pub enum Across {
+    /// A Recht–Ipson fit of the case's result `y` against the run parameter `x`.
+    RechtIpson { x: String, y: String },
+    /// The wall time of the first run over the second's.
+    Ratio([String; 2]),
+    /// (second − first) / |first| of the case's result `of`.
+    Difference([String; 2], String),
+    /// One run's value of the case's result `of`.
+    Run(String, String),
+}
+
+impl StudyResult {
+    /// What this result computes; `None` when its keys say nothing complete.
+    pub fn across(&self) -> Option<Across> {
+        if self.fit.is_some() {
+            return match (self.fit.as_deref(), &self.x, &self.y) {
+                (Some("recht_ipson"), Some(x), Some(y)) => Some(Across::RechtIpson { x: x.clone(), y: y.clone() }),
+                _ => None,
+            };
+        }
+        match (&self.ratio, &self.difference, &self.run, &self.of) {
+            (Some(r), None, None, None) => Some(Across::Ratio(r.clone())),
+            (None, Some(d), None, Some(of)) => Some(Across::Difference(d.clone(), of.clone())),
+            (None, None, Some(run), Some(of)) => Some(Across::Run(run.clone(), of.clone())),
+            _ => None,
+        }
+    }
+}
+
+/// Everything a study needs that can be known before its first run, checked against its case
+/// (loaded with the first run's parameters): each result says what it computes, names runs of the
+/// study and results of the case, with a reference that parses; plots name probes of the case.
+pub fn validate(study: &Study, case_results: &[String], case_probes: &[String]) -> Vec<Diagnostic> {
+    let mut out = vec![];
+    let runs: Vec<&str> = study.file.runs.iter().map(|r| r.name.as_str()).collect();
+    for sr in &study.file.results {
+        let q = &sr.quantity;
+        let span = Span::new(study.source, q.span().start, q.span().end);
+        let mut err = |msg: String, help: String| {
+            out.push(
+                Diagnostic::error("C0031", format!("study result `{}`: {msg}", q.get_ref()))
+                    .at(span, "here")
+                    .help(help),
+            )
+        };
+        let named_runs: Vec<String> = match sr.across() {
+            None => {
+                err(
+                    "says neither `fit = \"recht_ipson\"` (with `x`, `y`), `ratio`, `difference` (with `of`) nor `run` (with `of`)".into(),
+                    "give exactly one of these".into(),
+                );
+                continue;
+            }
+            Some(Across::RechtIpson { x, y }) => {
+                if let Some(r) = study
+                    .file
+                    .runs
+                    .iter()
+                    .find(|r| r.set.get(&x).and_then(|v| quantity::parse(&text_of(v)).ok()).is_none())
+                {
+                    err(
+                        format!("run `{}` sets no number for `{x}`", r.name),
+                        format!("every run sets `{x}` in its `set`"),
+                    );
+                }
+                if !case_results.contains(&y) {
+                    err(
+                        format!("the case has no result `{y}`"),
+                        format!("the case's results: {}", case_results.join(", ")),
+                    );
+                }
+                vec![]
+            }
+            Some(Across::Ratio(r)) => r.to_vec(),
+            Some(Across::Difference(_, of)) | Some(Across::Run(_, of)) if !case_results.contains(&of) => {
+                err(
+                    format!("the case has no result `{of}`"),
+                    format!("the case's results: {}", case_results.join(", ")),
+                );
+                vec![]
+            }
+            Some(Across::Difference(d, _)) => d.to_vec(),
+            Some(Across::Run(r, _)) => vec![r],
+        };
+        for r in named_runs.into_iter().filter(|r| !runs.contains(&r.as_str())) {
+            err(format!("no run is named `{r}`"), format!("the runs: {}", runs.join(", ")));
+        }
+        if sr.reference.is_some() && reference(&sr.reference).is_none() {
+            err("its reference is not a quantity".into(), "a number, or a string such as \"152.5 m/s\"".into());
+        }
+    }
+    for p in study.file.plots.iter().filter(|p| !case_probes.contains(p)) {
+        out.push(
+            Diagnostic::error(
+                "C0031",
+                format!("study `{}` plots `{p}`, which is no probe of its case", study.file.name),
+            )
+            .help(format!("the case's probes: {}", case_probes.join(", "))),
+        );
+    }
+    for c in study.file.ci_runs.iter().flatten().filter(|c| !runs.contains(&c.as_str())) {
+        out.push(Diagnostic::error(
+            "C0031",
+            format!("study `{}`: `ci_runs` names `{c}`, which is no run", study.file.name),
+        ));
+    }
+    out
 }
 
 pub fn load(path: &Path, sources: &mut crate::diag::Sources) -> Result<Study, Vec<Diagnostic>> {
@@ -91,7 +204,7 @@ pub fn load(path: &Path, sources: &mut crate::diag::Sources) -> Result<Study, Ve
             .at(Span::new(id, span.start, span.end), "here")]
     })?;
     let case_path = path.parent().map(Path::to_path_buf).unwrap_or_default().join(&file.case);
-    Ok(Study { file, case_path })
+    Ok(Study { file, case_path, source: id })
 }
 
 /// A value as text for `--set`.

@@ -19,7 +19,7 @@ mod print;
 pub use integrator::IntegratorKind;
 pub use live::stmts_of;
 
-use crate::ir::{self, EqId, FieldId, GroupId, GroupSet, Model, ParamId};
+use crate::ir::{self, EqId, FieldId, GroupId, GroupSet, Model, ParamId, Storage};
 use crate::units::Unit;
 
 /// What a scene asks of the model; the scene module fills it from a case file.
@@ -238,6 +238,11 @@ impl Plan {
                 }
             })
             .collect()
+    }
+
+    /// The stored fields a NaN/Inf watchdog scans: every one but the saved copies of a step.
+    pub fn watched_fields(&self) -> Vec<FieldId> {
+        self.layout.iter().map(|l| l.field).filter(|f| self.model.field(*f).storage != Storage::Temp).collect()
     }
 
     /// Bytes of particle state per particle of a group (all live fields stored there).

@@ -92,8 +92,8 @@ pub fn backend<T: Real>(
 /// A field of every particle in the scene's original order.
 pub fn field_by_id<B: Backend>(b: &B, name: &str) -> (usize, Vec<f64>) {
     let f = b.plan().model.field_id(name).expect("field");
-    let (comps, data) = b.read(f).expect("stored");
-    let ids = b.ids();
+    let (comps, data) = b.read(f).expect("read").expect("stored");
+    let ids = b.ids().expect("ids");
     let mut out = vec![0.0; data.len()];
     for (k, id) in ids.iter().enumerate() {
         out[*id as usize * comps..(*id as usize + 1) * comps].copy_from_slice(&data[k * comps..(k + 1) * comps]);

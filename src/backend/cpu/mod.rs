@@ -398,7 +398,7 @@ impl<T: Real> Backend for CpuBackend<T> {
         Ok(())
     }
 
-    fn save(&mut self) {
+    fn save(&mut self) -> Result<(), BackendError> {
         for (f, s) in self.plan.saved.clone() {
             let (Some(src), Some(_)) = (self.store.column(f).cloned(), self.store.column(s)) else { continue };
             let n = self.store.n;
@@ -414,6 +414,7 @@ impl<T: Real> Backend for CpuBackend<T> {
                     .copy_from_slice(&src.data[a * src.comps..(a + 1) * src.comps]);
             }
         }
+        Ok(())
     }
 
     fn evaluate(&mut self, g: Globals) -> Result<(), BackendError> {
@@ -459,10 +460,10 @@ impl<T: Real> Backend for CpuBackend<T> {
         Ok(())
     }
 
-    fn reductions(&mut self, g: Globals) -> Vec<f64> {
+    fn reductions(&mut self, g: Globals) -> Result<Vec<f64>, BackendError> {
         let n = self.n_reductions;
         if n == 0 {
-            return vec![];
+            return Ok(vec![]);
         }
         let reds = timestep::reductions(&self.plan.model, &self.plan.timesteps);
         let identity: Vec<f64> = reds.iter().map(|(r, _)| r.identity()).collect();
@@ -502,20 +503,21 @@ impl<T: Real> Backend for CpuBackend<T> {
                 };
             }
         }
-        out
+        Ok(out)
     }
 
-    fn update(&mut self, stage: usize, g: Globals) {
+    fn update(&mut self, stage: usize, g: Globals) -> Result<(), BackendError> {
         let programs = std::mem::take(&mut self.stages[stage]);
         self.run_programs(&programs, g);
         self.stages[stage] = programs;
+        Ok(())
     }
 
-    fn reorder(&mut self) {
+    fn reorder(&mut self) -> Result<(), BackendError> {
         let dim = self.plan.dim;
         let h_max = self.h_max();
         if h_max.is_nan() || h_max <= 0.0 {
-            return;
+            return Ok(());
         }
         let cell = self.support * h_max;
         let mut perm: Vec<u32> = Vec::with_capacity(self.store.n);
@@ -524,22 +526,23 @@ impl<T: Real> Backend for CpuBackend<T> {
             perm.extend(morton_permutation(x, dim, cell).into_iter().map(|p| p + r.start as u32));
         }
         self.store.permute(&perm);
+        Ok(())
     }
 
-    fn read(&self, f: FieldId) -> Option<(usize, Vec<f64>)> {
-        self.store.read_f64(f)
+    fn read(&self, f: FieldId) -> Result<Option<(usize, Vec<f64>)>, BackendError> {
+        Ok(self.store.read_f64(f))
     }
 
-    fn ids(&self) -> Vec<u32> {
-        self.store.id.clone()
+    fn ids(&self) -> Result<Vec<u32>, BackendError> {
+        Ok(self.store.id.clone())
     }
 
     fn groups(&self) -> Vec<u32> {
         self.store.group.clone()
     }
 
-    fn snapshot(&self) -> Snapshot {
-        Snapshot {
+    fn snapshot(&self) -> Result<Snapshot, BackendError> {
+        Ok(Snapshot {
             columns: self
                 .store
                 .columns
@@ -548,10 +551,10 @@ impl<T: Real> Backend for CpuBackend<T> {
                 .collect(),
             id: self.store.id.clone(),
             material: self.store.material.clone(),
-        }
+        })
     }
 
-    fn restore(&mut self, s: &Snapshot) {
+    fn restore(&mut self, s: &Snapshot) -> Result<(), BackendError> {
         for (c, d) in self.store.columns.iter_mut().zip(&s.columns) {
             if let (Some(c), Some(d)) = (c.as_mut(), d) {
                 for (x, v) in c.data.iter_mut().zip(d) {
@@ -561,9 +564,10 @@ impl<T: Real> Backend for CpuBackend<T> {
         }
         self.store.id = s.id.clone();
         self.store.material = s.material.clone();
+        Ok(())
     }
 
-    fn first_non_finite(&self, fields: &[FieldId]) -> Option<(usize, FieldId)> {
+    fn first_non_finite(&mut self, fields: &[FieldId]) -> Result<Option<(usize, FieldId)>, BackendError> {
         let mut best: Option<(usize, FieldId)> = None;
         for f in fields {
             let Some(c) = self.store.column(*f) else { continue };
@@ -581,7 +585,7 @@ impl<T: Real> Backend for CpuBackend<T> {
                 }
             }
         }
-        best
+        Ok(best)
     }
 }
 

@@ -39,7 +39,8 @@ pub struct GpuBackend {
     reorder: Reorder,
     reducer: Reducer,
     kernels: Vec<Compiled>,
-    watch: SegmentList,
+    /// The segments of the fields `first_non_finite` was last asked about.
+    watched: Option<(Vec<FieldId>, SegmentList)>,
     /// Reductions of the time-step limits: (op, index in `globals`).
     reductions: Vec<Reduce>,
     support: f32,
@@ -50,6 +51,31 @@ pub struct GpuBackend {
 
 fn err(e: GpuError) -> BackendError {
     BackendError(e.to_string())
+}
+
+/// A GPU error with what was being done when it happened.
+fn failed(what: &str) -> impl Fn(GpuError) -> BackendError + '_ {
+    move |e| BackendError(format!("the GPU failed while {what}: {e}"))
+}
+
+/// The device ranges of `fields` on every group that stores them, for the first-non-finite scan.
+fn watch_segments(store: &Store<f32>, offset: &[Option<usize>], fields: &[FieldId]) -> Vec<Segment> {
+    let mut segments = vec![];
+    for f in fields {
+        let (Some(col), Some(o)) = (store.column(*f), offset[f.index()]) else { continue };
+        for (g, r) in &store.ranges {
+            if col.has(g.index()) {
+                let first_elem = o as isize + (r.start as isize + col.base[g.index()]) * col.comps as isize;
+                segments.push(Segment {
+                    offset: first_elem as u32,
+                    first: r.start as u32,
+                    count: r.len() as u32,
+                    comps: col.comps as u32,
+                });
+            }
+        }
+    }
+    segments
 }
 
 impl GpuBackend {
@@ -172,24 +198,6 @@ impl GpuBackend {
             let bind = gpu.bind_at(&k.name, &pipeline, &entries);
             kernels.push(Compiled { kernel: k, pipeline, bind });
         }
-        // The watchdog scans every stored column except the saved copies.
-        let mut segments = vec![];
-        for l in &plan.layout {
-            let col = store.column(l.field).expect("stored");
-            for (g, r) in &store.ranges {
-                if col.has(g.index()) && !plan.saved.iter().any(|(_, s)| *s == l.field) {
-                    let first_elem = offset[l.field.index()].expect("stored") as isize
-                        + (r.start as isize + col.base[g.index()]) * col.comps as isize;
-                    segments.push(Segment {
-                        offset: first_elem as u32,
-                        first: r.start as u32,
-                        count: r.len() as u32,
-                        comps: col.comps as u32,
-                    });
-                }
-            }
-        }
-        let watch = reducer.segments(&gpu, &segments).map_err(err)?;
         let x = plan.model.field_id("x").ok_or_else(|| BackendError("the model has no position field `x`".into()))?;
         let h = plan.model.field_id("h").ok_or_else(|| BackendError("the model has no smoothing length `h`".into()))?;
         let x_offset = offset[x.index()].ok_or_else(|| BackendError("positions are not stored".into()))? as u32;
@@ -209,7 +217,7 @@ impl GpuBackend {
             reorder,
             reducer,
             kernels,
-            watch,
+            watched: None,
             reductions,
             x_offset,
             h_offset,
@@ -295,9 +303,9 @@ impl GpuBackend {
         }
     }
 
-    fn submit(&self, encoder: wgpu::CommandEncoder) -> Result<(), BackendError> {
+    fn submit(&self, encoder: wgpu::CommandEncoder, what: &str) -> Result<(), BackendError> {
         self.gpu.submit(encoder);
-        self.gpu.check().map_err(err)
+        self.gpu.check().map_err(failed(what))
     }
 
     fn frac(&self, stage: usize) -> f64 {
@@ -343,8 +351,8 @@ impl GpuBackend {
             }
         }
         self.dispatch_where(&mut encoder, |k| *k == KernelKind::Advance);
-        self.submit(encoder)?;
-        let clock: Vec<f32> = self.gpu.download(&self.globals, 0, gl::STEP + 1).map_err(err)?;
+        self.submit(encoder, "running a step")?;
+        let clock: Vec<f32> = self.gpu.download(&self.globals, 0, gl::STEP + 1).map_err(failed("reading the clock"))?;
         // Time accumulates on the host in f64 from the device's f32 step.
         let dt = clock[gl::DT] as f64;
         Ok((time + dt, dt, step + 1))
@@ -367,76 +375,72 @@ impl Backend for GpuBackend {
     fn initialise(&mut self) -> Result<(), BackendError> {
         let mut encoder = self.gpu.encoder("initialise");
         self.dispatch_where(&mut encoder, |k| matches!(k, KernelKind::Initialise { .. }));
-        self.submit(encoder)
+        self.submit(encoder, "initialising the particles")
     }
 
-    fn save(&mut self) {
+    fn save(&mut self) -> Result<(), BackendError> {
         let mut encoder = self.gpu.encoder("save");
         self.dispatch_where(&mut encoder, |k| matches!(k, KernelKind::Save { .. }));
-        let _ = self.submit(encoder);
+        self.submit(encoder, "saving the state at the start of the step")
     }
 
     fn evaluate(&mut self, g: Globals) -> Result<(), BackendError> {
         self.set_globals(&[(gl::TIME, g.time as f32), (gl::DT_PREV, g.dt as f32)])?;
         let mut encoder = self.gpu.encoder("evaluate");
         self.record_evaluate(&mut encoder);
-        self.submit(encoder)
+        self.submit(encoder, "running the neighbour passes")
     }
 
-    fn reductions(&mut self, g: Globals) -> Vec<f64> {
+    fn reductions(&mut self, g: Globals) -> Result<Vec<f64>, BackendError> {
         if self.reductions.is_empty() {
-            return vec![];
+            return Ok(vec![]);
         }
-        if self.set_globals(&[(gl::TIME, g.time as f32), (gl::DT_PREV, g.dt as f32)]).is_err() {
-            return vec![f64::NAN; self.reductions.len()];
-        }
+        self.set_globals(&[(gl::TIME, g.time as f32), (gl::DT_PREV, g.dt as f32)])?;
         let mut encoder = self.gpu.encoder("reductions");
         self.record_reductions(&mut encoder);
-        if self.submit(encoder).is_err() {
-            return vec![f64::NAN; self.reductions.len()];
-        }
-        match self.gpu.download::<f32>(&self.globals, 4 * gl::REDUCTIONS as u64, self.reductions.len()) {
-            Ok(v) => v.into_iter().map(|x| x as f64).collect(),
-            Err(_) => vec![f64::NAN; self.reductions.len()],
-        }
+        self.submit(encoder, "reducing the time-step limits")?;
+        let v: Vec<f32> = self
+            .gpu
+            .download(&self.globals, 4 * gl::REDUCTIONS as u64, self.reductions.len())
+            .map_err(failed("reading the time-step limits"))?;
+        Ok(v.into_iter().map(|x| x as f64).collect())
     }
 
-    fn update(&mut self, stage: usize, g: Globals) {
+    fn update(&mut self, stage: usize, g: Globals) -> Result<(), BackendError> {
         // The update kernel reads t = time + fraction × dt: give it the step's start.
         let start = g.time - self.frac(stage) * g.dt;
-        if self.set_globals(&[(gl::TIME, start as f32), (gl::DT, g.dt as f32)]).is_err() {
-            return;
-        }
+        self.set_globals(&[(gl::TIME, start as f32), (gl::DT, g.dt as f32)])?;
         let mut encoder = self.gpu.encoder("update");
         self.dispatch_where(&mut encoder, |k| matches!(k, KernelKind::Update { stage: s, .. } if *s == stage));
-        let _ = self.submit(encoder);
+        self.submit(encoder, &format!("running integrator stage {}", stage + 1))
     }
 
-    fn reorder(&mut self) {
+    fn reorder(&mut self) -> Result<(), BackendError> {
         let mut encoder = self.gpu.encoder("reorder");
         self.cells.record(&self.gpu, &mut encoder, &self.data, self.x_offset, self.h_offset, self.support);
         self.reorder.record(&self.gpu, &mut encoder, &self.particle_buffers());
-        let _ = self.submit(encoder);
+        self.submit(encoder, "reordering the particles")
     }
 
-    fn read(&self, f: FieldId) -> Option<(usize, Vec<f64>)> {
-        let o = self.offset[f.index()]?;
-        let col = self.host.column(f)?;
-        let data: Vec<f32> = self.gpu.download(&self.data, 4 * o as u64, col.data.len()).ok()?;
-        self.host.read_f64_from(f, &data)
+    fn read(&self, f: FieldId) -> Result<Option<(usize, Vec<f64>)>, BackendError> {
+        let (Some(o), Some(col)) = (self.offset[f.index()], self.host.column(f)) else { return Ok(None) };
+        let what = format!("reading `{}`", self.plan.model.field(f).name);
+        let data: Vec<f32> = self.gpu.download(&self.data, 4 * o as u64, col.data.len()).map_err(failed(&what))?;
+        Ok(self.host.read_f64_from(f, &data))
     }
 
-    fn ids(&self) -> Vec<u32> {
-        self.gpu.download(&self.ids, 0, self.host.n).unwrap_or_default()
+    fn ids(&self) -> Result<Vec<u32>, BackendError> {
+        self.gpu.download(&self.ids, 0, self.host.n).map_err(failed("reading the particle ids"))
     }
 
     fn groups(&self) -> Vec<u32> {
         self.host.group.clone()
     }
 
-    fn snapshot(&self) -> Snapshot {
-        let all: Vec<f32> = self.gpu.download(&self.data, 0, self.scratch).unwrap_or_default();
-        Snapshot {
+    fn snapshot(&self) -> Result<Snapshot, BackendError> {
+        let all: Vec<f32> =
+            self.gpu.download(&self.data, 0, self.scratch).map_err(failed("reading the particle state"))?;
+        Ok(Snapshot {
             columns: self
                 .host
                 .columns
@@ -448,12 +452,15 @@ impl Backend for GpuBackend {
                     })
                 })
                 .collect(),
-            id: self.ids(),
-            material: self.gpu.download(&self.ints, 4 * self.host.n as u64, self.host.n).unwrap_or_default(),
-        }
+            id: self.ids()?,
+            material: self
+                .gpu
+                .download(&self.ints, 4 * self.host.n as u64, self.host.n)
+                .map_err(failed("reading the materials"))?,
+        })
     }
 
-    fn restore(&mut self, s: &Snapshot) {
+    fn restore(&mut self, s: &Snapshot) -> Result<(), BackendError> {
         for (c, d) in self.host.columns.iter_mut().zip(&s.columns) {
             if let (Some(c), Some(d)) = (c.as_mut(), d) {
                 for (x, v) in c.data.iter_mut().zip(d) {
@@ -463,42 +470,51 @@ impl Backend for GpuBackend {
         }
         let mut ints: Vec<u32> = self.host.group.clone();
         ints.extend(&s.material);
-        let _ = self.gpu.upload(&self.ints, 0, &ints);
-        let _ = self.gpu.upload(&self.ids, 0, &s.id);
-        let _ = self.upload_data();
+        self.gpu.upload(&self.ints, 0, &ints).map_err(failed("restoring the materials"))?;
+        self.gpu.upload(&self.ids, 0, &s.id).map_err(failed("restoring the particle ids"))?;
+        self.upload_data()
     }
 
-    fn first_non_finite(&self, fields: &[FieldId]) -> Option<(usize, FieldId)> {
-        let _ = fields;
+    fn first_non_finite(&mut self, fields: &[FieldId]) -> Result<Option<(usize, FieldId)>, BackendError> {
+        if self.watched.as_ref().is_none_or(|(f, _)| f != fields) {
+            let segments = watch_segments(&self.host, &self.offset, fields);
+            let list = self.reducer.segments(&self.gpu, &segments).map_err(failed("listing the watched fields"))?;
+            self.watched = Some((fields.to_vec(), list));
+        }
+        let Some((_, list)) = &self.watched else { return Ok(None) };
         let mut encoder = self.gpu.encoder("watchdog");
         self.reducer.record_first_non_finite(
             &self.gpu,
             &mut encoder,
             &self.data,
-            &self.watch,
+            list,
             &self.globals,
             (gl::SIZE - 1) as u32,
         );
-        self.gpu.submit(encoder);
-        let found: Vec<u32> = self.gpu.download(&self.globals, 4 * (gl::SIZE - 1) as u64, 1).ok()?;
+        self.submit(encoder, "scanning for NaN or infinite values")?;
+        let found: Vec<u32> =
+            self.gpu.download(&self.globals, 4 * (gl::SIZE - 1) as u64, 1).map_err(failed("reading the scan"))?;
         if found[0] == ALL_FINITE {
-            return None;
+            return Ok(None);
         }
         let i = found[0] as usize;
         // Which field: read the particle's values on the host.
-        let all: Vec<f32> = self.gpu.download(&self.data, 0, self.scratch).ok()?;
+        let all: Vec<f32> =
+            self.gpu.download(&self.data, 0, self.scratch).map_err(failed("reading the particle state"))?;
         let g = self.host.group[i] as usize;
-        for l in &self.plan.layout {
-            let c = self.host.column(l.field)?;
+        for f in fields {
+            let (Some(c), Some(o)) = (self.host.column(*f), self.offset[f.index()]) else { continue };
             if !c.has(g) {
                 continue;
             }
-            let o = self.offset[l.field.index()]? + c.row(i, g) * c.comps;
+            let o = o + c.row(i, g) * c.comps;
             if all[o..o + c.comps].iter().any(|v| !v.is_finite()) {
-                return Some((i, l.field));
+                return Ok(Some((i, *f)));
             }
         }
-        Some((i, self.plan.layout[0].field))
+        Err(BackendError(format!(
+            "the GPU scan found a non-finite value at particle {i}, but no watched field of it holds one"
+        )))
     }
 
     fn device_step(
