@@ -1,13 +1,14 @@
 //! The WGSL writer: IR statements and expressions as WGSL with vector and matrix types, field
 //! and parameter accessors named after what they read, a comment per equation with its source.
 
+use super::names::{Namer, Names};
 use super::{globals as gl, prelude, validate, Binding, Kernel, KernelKind, Layout};
 use crate::ir::{
     self, Builtin, EqId, EquationKind, Expr, ExprKind, FieldId, Global, GroupId, LocalId, Op, PairValue, ParamId,
     Reduce, Shape, Side, Stmt, Storage,
 };
 use crate::schedule::{Block, PassVariant, Plan, TailItem};
-use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::fmt::Write;
 
 /// Workgroup size of every per-particle kernel.
@@ -173,8 +174,11 @@ struct Writer<'a> {
     mode: Mode,
     out: String,
     indent: usize,
-    names: HashMap<LocalId, String>,
-    used: HashSet<String>,
+    local_names: HashMap<LocalId, String>,
+    /// The identifiers of fields and parameters (the same in every kernel of a plan).
+    names: Names,
+    /// Gives out the kernel's local names.
+    namer: Namer,
     /// The variable holding each field's current value for particle i (set, or accumulated).
     current: BTreeMap<FieldId, String>,
     /// Accessors the kernel needs: (field, side), (param, side).
@@ -190,63 +194,8 @@ struct Writer<'a> {
 
 impl<'a> Writer<'a> {
     fn new(plan: &'a Plan, lay: &'a Layout, mode: Mode) -> Writer<'a> {
-        let mut used = HashSet::new();
-        // Names the generated scaffolding uses; user `let`s get other names.
-        for reserved in [
-            "i",
-            "j",
-            "t",
-            "dt",
-            "x_ij",
-            "r_ij",
-            "h_ij",
-            "W_ij",
-            "gradW_ij",
-            "sgn",
-            "first",
-            "count",
-            "k",
-            "wg",
-            "nwg",
-            "li",
-            "G",
-            "xi",
-            "hi",
-            "yi",
-            "tr",
-            "skip",
-            "m",
-            "axis",
-            "at",
-            "c",
-            "dims",
-            "lo",
-            "hi_c",
-            "x",
-            "y",
-            "z",
-            "cell",
-            "s",
-            "dxv",
-            "r2",
-            "rc",
-            "mirrors",
-            "h_max",
-            "n",
-            "scratch",
-            "best",
-            "remaining",
-            "R",
-            "data",
-            "ints",
-            "params",
-            "info",
-            "grid",
-            "cells",
-            "globals",
-        ] {
-            used.insert(reserved.to_string());
-        }
+        let names = Names::new(&plan.model);
+        let namer = names.locals();
         Writer {
             plan,
             lay,
@@ -254,8 +203,9 @@ impl<'a> Writer<'a> {
             mode,
             out: String::new(),
             indent: 1,
-            names: HashMap::new(),
-            used,
+            local_names: HashMap::new(),
+            names,
+            namer,
             current: BTreeMap::new(),
             fields: BTreeSet::new(),
             params: BTreeSet::new(),
@@ -276,33 +226,21 @@ impl<'a> Writer<'a> {
     }
 
     fn fresh(&mut self, base: &str) -> String {
-        let mut base = sanitize(base);
-        // A DSL name may be a WGSL keyword or reserved word (`smooth`, `filter`, `target`).
-        if naga::keywords::wgsl::RESERVED.contains(&base.as_str()) {
-            base.push('_');
-        }
-        let mut name = base.clone();
-        let mut k = 2;
-        while !self.used.insert(name.clone()) {
-            name = format!("{base}_{k}");
-            k += 1;
-        }
-        name
+        self.namer.call(base)
     }
 
     fn local(&mut self, id: LocalId) -> String {
-        if let Some(n) = self.names.get(&id) {
+        if let Some(n) = self.local_names.get(&id) {
             return n.clone();
         }
         let base = self.plan.model.locals.get(id.index()).map(|l| l.name.clone()).unwrap_or_else(|| "v".into());
         let n = self.fresh(&base);
-        self.names.insert(id, n.clone());
+        self.local_names.insert(id, n.clone());
         n
     }
 
     fn field_name(&self, f: FieldId) -> String {
-        let name = &self.plan.model.field(f).name;
-        sanitize(name.rsplit('.').next().unwrap_or(name))
+        self.names.field(f).to_string()
     }
 
     fn shape_of(&self, f: FieldId) -> Shape {
@@ -333,7 +271,7 @@ impl<'a> Writer<'a> {
             }
             ExprKind::Param(p, side) => {
                 self.params.insert((*p, *side));
-                let name = sanitize(&self.plan.model.params[p.index()].name);
+                let name = self.names.param(*p);
                 if *side == Side::I {
                     format!("prm_{name}(i)")
                 } else {
@@ -666,7 +604,7 @@ impl<'a> Writer<'a> {
         }
         for &(p, side) in &self.params {
             let par = &self.plan.model.params[p.index()];
-            let name = sanitize(&par.name);
+            let name = self.names.param(p);
             let shape = par.ty.shape;
             let t = ty(shape, d);
             let who = if side == Side::I { "i" } else { "j" };
@@ -833,7 +771,7 @@ fn kernel_functions(plan: &Plan, lay: &Layout) -> String {
     let d = plan.dim;
     let mut w = Writer::new(plan, lay, Mode::None);
     w.indent = 1;
-    w.names.insert(k.arg, "R".into());
+    w.local_names.insert(k.arg, "R".into());
     let wv = w.expr(&k.w);
     let w_lets = std::mem::take(&mut w.out);
     let dwv = w.expr(&k.dw);

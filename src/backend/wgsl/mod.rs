@@ -13,6 +13,7 @@
 //! - `grid`, `cells`: the GPU cell list (`backend::gpu::cells`).
 
 mod emit;
+pub mod names;
 pub use emit::WORKGROUP;
 pub mod prelude;
 
