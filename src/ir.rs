@@ -200,6 +200,8 @@ pub struct Equation {
     pub span: Span,
     /// `file:line` of the definition, for generated code's comments.
     pub location: String,
+    /// The source files of the modules this equation's module uses, directly or not.
+    pub builds_on: BTreeSet<u32>,
 }
 
 impl Equation {
@@ -223,6 +225,10 @@ impl Equation {
     }
     pub fn reads_field(&self, f: FieldId) -> bool {
         self.reads.contains(&(f, Side::I)) || self.reads.contains(&(f, Side::J))
+    }
+    /// Whether this equation's module uses (directly or not) the module that defines `other`.
+    pub fn builds_on(&self, other: &Equation) -> bool {
+        self.span.file != other.span.file && self.builds_on.contains(&other.span.file)
     }
 }
 
@@ -464,6 +470,22 @@ pub struct Model {
 }
 
 impl Model {
+    /// Whether correction `w` must run before correction `r` within a stage. Corrections update
+    /// state, whose old and new values are both well defined, so their order is a choice: a
+    /// module that uses another runs its corrections after that module's (the heating by plastic
+    /// work after the radial return that gives the plastic strain); otherwise `w` runs first when
+    /// `r` reads state that `w` writes on `groups` (the groups where `r` reads it).
+    pub fn correction_before(&self, w: EqId, r: EqId, writes_read: impl Fn(&Equation, &Equation) -> bool) -> bool {
+        let (ew, er) = (&self.equations[w.index()], &self.equations[r.index()]);
+        if ew.builds_on(er) {
+            false
+        } else if er.builds_on(ew) {
+            writes_read(ew, er) || writes_read(er, ew)
+        } else {
+            writes_read(ew, er)
+        }
+    }
+
     pub fn field(&self, id: FieldId) -> &Field {
         &self.fields[id.index()]
     }

@@ -78,3 +78,58 @@ fn use_on_restricts_a_module_and_what_it_pulls_in() {
     let pairsum::ir::EquationKind::PairSum { sources: from, .. } = &eq("momentum").kind else { panic!("a pair sum") };
     assert_eq!(groups(*from), "target");
 }
+
+/// Every plasticity module with every thermal module (and none) and every equation of state, in a
+/// solid model with the energy equation: each combination whose physics makes sense checks clean
+/// and schedules, with the radial return before the heating it causes.
+#[test]
+fn every_plasticity_thermal_and_eos_module_compose() {
+    // thermal::plastic_work heats by σ_y Δε_p of the Johnson–Cook return (FTLR19 Eq 3.14): it is
+    // written for that return and uses it itself.
+    let pairs = [
+        ("radial_return_jc", ""),
+        ("radial_return_jc", "thermal::from_energy"),
+        ("radial_return_jc", "thermal::plastic_work"),
+        ("radial_return_linear", ""),
+        ("radial_return_linear", "thermal::from_energy"),
+    ];
+    let mut checked_models = 0;
+    for (plasticity, thermal) in pairs {
+        for eos in ["linear", "linear_free_surface", "mie_gruneisen", "tait"] {
+            let thermal_use = if thermal.is_empty() { String::new() } else { format!("use {thermal}\n") };
+            let text = format!(
+                "use kernels\nuse continuity::plain\nuse solid::strain_rate\nuse solid::jaumann\nuse eos::{eos}\n\
+                 use energy::solid\nuse momentum::total_stress\nuse plasticity::{plasticity}\n{thermal_use}\
+                 use timestep::acoustic\ngroup solid\nkernel = wendland_c2\n\
+                 integrate {{ x' = v  v' = dv  rho' = drho  s' = ds  e' = de }}\n"
+            );
+            let what = format!(
+                "plasticity::{plasticity} + {} + eos::{eos}",
+                if thermal.is_empty() { "no thermal" } else { thermal }
+            );
+            let mut sources = Sources::new();
+            let checked = pairsum::check::check_text(&mut sources, "pairing.sph", &text, Stdlib::Dir(stdlib_dir()));
+            let errors: Vec<_> = checked.diags.iter().filter(|d| d.is_error()).cloned().collect();
+            assert!(errors.is_empty(), "{what}:\n{}", render(&sources, &errors));
+            let m = checked.model;
+            let scene = pairsum::schedule::SceneSpec {
+                dim: 3,
+                groups: m.all_groups(),
+                outputs: vec![],
+                integrator: pairsum::schedule::IntegratorKind::PredictorCorrector,
+                gravity: None,
+                loads: vec![],
+                constraints: vec![],
+                symmetry: vec![],
+            };
+            let plan = pairsum::schedule::Plan::build(&m, &scene, None).unwrap_or_else(|e| panic!("{what}: {e}"));
+            let order: Vec<&str> =
+                plan.stages[0].corrections.iter().map(|e| m.equations[e.index()].name.as_str()).collect();
+            if thermal == "thermal::plastic_work" {
+                assert_eq!(order, ["radial_return", "plastic_heating"], "{what}");
+            }
+            checked_models += 1;
+        }
+    }
+    assert_eq!(checked_models, 20);
+}

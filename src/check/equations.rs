@@ -228,6 +228,7 @@ impl Checker {
             params,
             span,
             location: String::new(),
+            builds_on: self.builds_on.get(&span.file).cloned().unwrap_or_default(),
         });
     }
 

@@ -15,7 +15,7 @@ use crate::diag::{closest, Diagnostic, Diagnostics, Sources, Span};
 use crate::ir::{self, FieldId, GroupSet, Model, Type};
 use crate::syntax::ast::{self, Item, Shape, Storage};
 use crate::units::{Ratio, Unit};
-use std::collections::HashMap;
+use std::collections::{BTreeSet, HashMap};
 use std::path::Path;
 use std::rc::Rc;
 
@@ -77,6 +77,7 @@ fn finish(loader: Loader<'_>) -> Checked {
         return Checked { model: checker.model, diags: checker.diags, is_model: false };
     }
     let is_model = modules.iter().any(|m| m.ast.items.iter().any(|i| matches!(i, Item::Integrate(_))));
+    checker.builds_on = modules_used(&modules);
     checker.run(&modules, is_model);
     let mut diags = checker.diags;
     dedup(&mut diags);
@@ -86,6 +87,24 @@ fn finish(loader: Loader<'_>) -> Checked {
         e.location = format!("{}:{line}", sources.name(e.span.file));
     }
     Checked { model, diags, is_model }
+}
+
+/// For each module's source file, the files of every module it uses, directly or not.
+fn modules_used(modules: &[load::Module]) -> HashMap<u32, BTreeSet<u32>> {
+    fn reach(modules: &[load::Module], k: usize, out: &mut BTreeSet<u32>) {
+        for u in &modules[k].uses {
+            if out.insert(modules[u.target].file) {
+                reach(modules, u.target, out);
+            }
+        }
+    }
+    (0..modules.len())
+        .map(|k| {
+            let mut used = BTreeSet::new();
+            reach(modules, k, &mut used);
+            (modules[k].file, used)
+        })
+        .collect()
 }
 
 fn dedup(diags: &mut Vec<Diagnostic>) {
@@ -119,6 +138,8 @@ pub(crate) struct Checker {
     fns: HashMap<String, Rc<ast::FnDef>>,
     /// Which equation declared each accumulator (for "writes another equation's accumulator").
     accumulator_of: HashMap<FieldId, String>,
+    /// For each module's source file, the files of every module it uses, directly or not.
+    pub(crate) builds_on: HashMap<u32, BTreeSet<u32>>,
     /// Active `let` and helper-parameter bindings, innermost last.
     scope: Vec<(String, ir::LocalId)>,
     /// The `acc` temporaries of the pair sum being checked, by their short name.
@@ -140,6 +161,7 @@ impl Checker {
             const_busy: vec![],
             fns: HashMap::new(),
             accumulator_of: HashMap::new(),
+            builds_on: HashMap::new(),
             scope: vec![],
             temps: vec![],
             fn_stack: vec![],

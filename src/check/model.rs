@@ -112,17 +112,28 @@ impl Checker {
         let writes_state: Vec<bool> =
             self.model.equations.iter().map(|e| e.writes.iter().any(|f| self.is_state(*f))).collect();
         let mut edges: Vec<Vec<(usize, FieldId)>> = vec![vec![]; n];
+        // What `ew` writes that `er` reads on groups where both run, among fields of its class.
+        let link = |ew: &ir::Equation, er: &ir::Equation, state: bool| -> Option<FieldId> {
+            er.reads.iter().find_map(|&(f, side)| {
+                let reader_groups = if side == Side::I { er.dest } else { er.sources() };
+                let relevant = self.is_state(f) == state;
+                (relevant && ew.writes.contains(&f) && !ew.dest.intersect(reader_groups).is_empty()).then_some(f)
+            })
+        };
         for (w, ew) in self.model.equations.iter().enumerate() {
             for (r, er) in self.model.equations.iter().enumerate() {
                 if w == r || writes_state[w] != writes_state[r] {
                     continue;
                 }
-                for &(f, side) in &er.reads {
-                    let reader_groups = if side == Side::I { er.dest } else { er.sources() };
-                    let relevant = if writes_state[w] { self.is_state(f) } else { !self.is_state(f) };
-                    if relevant && ew.writes.contains(&f) && !ew.dest.intersect(reader_groups).is_empty() {
-                        edges[w].push((r, f));
-                    }
+                let Some(f) = link(ew, er, writes_state[w]).or_else(|| link(er, ew, writes_state[w])) else { continue };
+                let before = if writes_state[w] {
+                    let (we, re) = (ir::EqId(w as u32), ir::EqId(r as u32));
+                    self.model.correction_before(we, re, |a, b| link(a, b, true).is_some())
+                } else {
+                    link(ew, er, false).is_some()
+                };
+                if before {
+                    edges[w].push((r, f));
                 }
             }
         }

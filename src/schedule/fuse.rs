@@ -179,12 +179,12 @@ pub fn fuse(model: &Model, scene: &SceneSpec, live: &Live) -> Result<Fused, Plan
         });
     }
     let derived: Vec<EqId> = order.iter().map(|(e, _)| *e).filter(|e| !is_pair(*e) && level[e] == 0).collect();
+    let writes_read = |a: &ir::Equation, b: &ir::Equation| b.reads.iter().any(|(f, _)| a.writes.contains(f));
     let corrections = topological(&corrections_unordered, |e| {
-        let r = &reads[&e];
         corrections_unordered
             .iter()
             .copied()
-            .filter(|w| *w != e && r.early.iter().any(|(f, _)| model.equations[w.index()].writes.contains(f)))
+            .filter(|w| *w != e && model.correction_before(*w, e, writes_read))
             .collect()
     })
     .ok_or_else(|| PlanError("the corrections form a cycle".into()))?

@@ -552,7 +552,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             div_v = div_v + ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * dot((v_i - ldj_v(j, sgn)), gradW_ij));
             // pairsum velocity_gradient (stdlib/solid/strain_rate.sph:6)
             grad_v = grad_v + outer((ldj_v(j, sgn) - v_i), ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * gradW_ij));
-            // pairsum energy (stdlib/energy/solid.sph:15)
+            // pairsum energy (stdlib/energy/solid.sph:16)
             let sig_i = (s_i - (p_i * eye()));
             let sig_j = (ldj_s(j, sgn) - (ldj_p(j, sgn) * eye()));
             let c_i_2 = c_i;

@@ -275,11 +275,11 @@ fn prm_eps_rate0(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 19u + 14u;
     return params[b];
 }
-fn prm_T_room(i: u32) -> f32 {
+fn prm_T_melt(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 19u + 15u;
     return params[b];
 }
-fn prm_T_melt(i: u32) -> f32 {
+fn prm_T_room(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 19u + 16u;
     return params[b];
 }

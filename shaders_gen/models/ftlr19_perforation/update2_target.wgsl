@@ -293,11 +293,11 @@ fn prm_eps_rate0(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 22u + 17u;
     return params[b];
 }
-fn prm_T_room(i: u32) -> f32 {
+fn prm_T_melt(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 22u + 18u;
     return params[b];
 }
-fn prm_T_melt(i: u32) -> f32 {
+fn prm_T_room(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 22u + 19u;
     return params[b];
 }
