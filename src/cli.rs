@@ -2,6 +2,7 @@
 
 use crate::check::{self, Stdlib};
 use crate::diag::{render, Sources};
+use crate::runner::{BackendChoice, Precision};
 use clap::{Parser, Subcommand};
 use std::path::{Path, PathBuf};
 
@@ -29,11 +30,11 @@ enum Command {
         /// The case file (cases/<name>.toml or a bundled case's name)
         case: String,
         /// cpu, gpu, or auto (the GPU when one is found, else the CPU)
-        #[arg(long, default_value = "auto")]
-        backend: String,
+        #[arg(long, value_enum, default_value_t = BackendChoice::Auto)]
+        backend: BackendChoice,
         /// f32 or f64
-        #[arg(long, default_value = "f64")]
-        precision: String,
+        #[arg(long, value_enum, default_value_t = Precision::F64)]
+        precision: Precision,
         /// A resolution the case defines (ci, paper) or a particle spacing (0.005, "5 mm")
         #[arg(long)]
         resolution: Option<String>,
@@ -107,8 +108,8 @@ enum Command {
         #[arg(long, default_value = "predictor_corrector")]
         integrator: String,
         /// Precision of the reals: f32 or f64
-        #[arg(long, default_value = "f64")]
-        precision: String,
+        #[arg(long, value_enum, default_value_t = Precision::F64)]
+        precision: Precision,
         /// For a case: the resolution (a name from the case, or a spacing)
         #[arg(long)]
         resolution: Option<String>,
@@ -131,7 +132,7 @@ pub fn main() -> i32 {
         Command::Check { paths, deny_warnings } => run_check(&paths, deny_warnings),
         Command::Plan { path, dim, integrator, precision, resolution, set } => {
             let opts = crate::scene::Options { resolution, set, ..Default::default() };
-            run_plan(&find_input(&path), dim, &integrator, &precision, &opts)
+            run_plan(&find_input(&path), dim, &integrator, precision, &opts)
         }
         Command::Run {
             case,
@@ -249,11 +250,10 @@ fn model_files(paths: &[PathBuf]) -> Vec<(PathBuf, Stdlib)> {
     out
 }
 
-fn real_bytes(precision: &str) -> Option<usize> {
+fn real_bytes(precision: Precision) -> usize {
     match precision {
-        "f32" => Some(4),
-        "f64" => Some(8),
-        _ => None,
+        Precision::F32 => 4,
+        Precision::F64 => 8,
     }
 }
 
@@ -268,8 +268,8 @@ pub fn load_model(path: &Path, sources: &mut Sources) -> Option<crate::ir::Model
 
 /// The directory of the bundled cases.
 pub fn cases_dir() -> PathBuf {
-    if let Some(d) = std::env::var_os("PAIRSUM_CASES") {
-        return PathBuf::from(d);
+    if let Some(d) = &crate::config::env().cases {
+        return d.clone();
     }
     let local = PathBuf::from("cases");
     if local.is_dir() {
@@ -343,8 +343,8 @@ fn parse_set(s: &str) -> Result<(String, String), String> {
 
 struct RunArgs {
     set: Vec<(String, String)>,
-    backend: String,
-    precision: String,
+    backend: BackendChoice,
+    precision: Precision,
     resolution: Option<String>,
     out: Option<PathBuf>,
     end_time: Option<f64>,
@@ -356,24 +356,8 @@ struct RunArgs {
 }
 
 fn run_run(case: &str, a: RunArgs) -> i32 {
-    use crate::runner::{run_file, BackendChoice, Precision, RunFailure, RunOptions};
-    let backend = match a.backend.as_str() {
-        "cpu" => BackendChoice::Cpu,
-        "gpu" => BackendChoice::Gpu,
-        "auto" => BackendChoice::Auto,
-        other => {
-            eprintln!("error: --backend is cpu, gpu or auto, not `{other}`");
-            return 2;
-        }
-    };
-    let precision = match a.precision.as_str() {
-        "f32" => Precision::F32,
-        "f64" => Precision::F64,
-        other => {
-            eprintln!("error: --precision is f32 or f64, not `{other}`");
-            return 2;
-        }
-    };
+    use crate::runner::{run_file, RunFailure, RunOptions};
+    let (backend, precision) = (a.backend, a.precision);
     let path = find_case(case);
     if !path.is_file() {
         eprintln!("error: no case `{case}` (a .toml file, or one of the bundled cases: pairsum cases)");
@@ -428,11 +412,8 @@ fn run_run(case: &str, a: RunArgs) -> i32 {
     }
 }
 
-fn run_plan(path: &Path, dim: usize, integrator: &str, precision: &str, opts: &crate::scene::Options) -> i32 {
-    let Some(real) = real_bytes(precision) else {
-        eprintln!("error: --precision is f32 or f64, not `{precision}`");
-        return 2;
-    };
+fn run_plan(path: &Path, dim: usize, integrator: &str, precision: Precision, opts: &crate::scene::Options) -> i32 {
+    let real = real_bytes(precision);
     let Some(integrator) = crate::schedule::IntegratorKind::parse(integrator) else {
         eprintln!("error: unknown integrator `{integrator}` (euler, predictor_corrector, symplectic)");
         return 2;

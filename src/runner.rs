@@ -13,14 +13,16 @@ use crate::schedule::Plan;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// Where a run computes: `--backend cpu|gpu|auto`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum BackendChoice {
     Cpu,
     Gpu,
     Auto,
 }
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// The CPU backend's reals: `--precision f32|f64`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Precision {
     F32,
     F64,
@@ -109,7 +111,7 @@ pub fn run_case(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailure
             Err(e) => Err(RunFailure::Run(e.to_string())),
         },
         BackendChoice::Auto => match crate::backend::gpu::device::Gpu::new() {
-            Ok(gpu) if gpu.is_software() && std::env::var_os("PAIRSUM_ADAPTER").is_none() => {
+            Ok(gpu) if gpu.is_software() && crate::config::env().adapter.is_none() => {
                 eprintln!(
                     "note: running on the CPU backend: the only GPU adapter, {}, is a software one (`--backend gpu` uses it)",
                     gpu.describe()

@@ -23,8 +23,8 @@ pub enum Stdlib {
 impl Stdlib {
     /// `$PAIRSUM_STDLIB`, else the source tree's `stdlib/` when it exists, else the embedded copy.
     pub fn locate() -> Stdlib {
-        if let Some(dir) = std::env::var_os("PAIRSUM_STDLIB") {
-            return Stdlib::Dir(PathBuf::from(dir));
+        if let Some(dir) = &crate::config::env().stdlib {
+            return Stdlib::Dir(dir.clone());
         }
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("stdlib");
         if dir.join("prelude.sph").is_file() {

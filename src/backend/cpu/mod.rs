@@ -234,7 +234,7 @@ fn compile_variant<T: Real>(plan: &Plan, v: &crate::schedule::PassVariant) -> Va
         // Keep the fixed registers reserved even when no node reads them.
         preset_regs.push((Id::MAX, dim + 1));
     }
-    if std::env::var("PAIRSUM_DEBUG").is_ok_and(|v| v == "2") {
+    if crate::config::env().debug >= 2 {
         for id in &pair_nodes {
             eprintln!("  v{id} = {:?}", graph.nodes[*id as usize]);
         }
@@ -309,7 +309,7 @@ impl<T: Real> CpuBackend<T> {
         });
         let support = kernel.support;
         let chunks = chunks(&store);
-        if std::env::var_os("PAIRSUM_DEBUG").is_some() {
+        if crate::config::env().debug >= 1 {
             for (k, p) in passes.iter().enumerate() {
                 for v in p {
                     let v: &Variant<T> = v;

@@ -121,9 +121,7 @@ pub fn wide_simd() -> bool {
     {
         static WIDE: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
         *WIDE.get_or_init(|| {
-            std::env::var_os("PAIRSUM_NO_WIDE_SIMD").is_none()
-                && is_x86_feature_detected!("avx2")
-                && is_x86_feature_detected!("fma")
+            !crate::config::env().no_wide_simd && is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma")
         })
     }
     #[cfg(not(target_arch = "x86_64"))]

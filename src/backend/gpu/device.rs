@@ -150,7 +150,7 @@ impl Gpu {
     /// Opens the preferred adapter (see [`choose_adapter`]; `PAIRSUM_ADAPTER` overrides) and
     /// creates a device with the adapter's own limits and no optional features.
     pub fn new() -> Result<Gpu, GpuError> {
-        let wanted = std::env::var(ADAPTER_ENV).ok().filter(|s| !s.trim().is_empty());
+        let wanted = crate::config::env().adapter.clone().filter(|s| !s.trim().is_empty());
         // wgpu may panic inside driver or loader code; a failure to start is never a crash.
         std::panic::catch_unwind(move || Gpu::open(wanted.as_deref()))
             .unwrap_or_else(|p| Err(GpuError::Device(format!("wgpu panicked: {}", panic_message(p)))))

@@ -105,7 +105,7 @@ impl GpuBackend {
         planned.extend(CellList::planned_buffers(n));
         planned.extend(Reorder::planned_buffers(n, scratch as u64));
         // `PAIRSUM_GPU_MEMORY_LIMIT` (bytes) caps what a buffer may use, below the device's limits.
-        if let Some(cap) = std::env::var("PAIRSUM_GPU_MEMORY_LIMIT").ok().and_then(|v| v.parse::<u64>().ok()) {
+        if let Some(cap) = crate::config::env().gpu_memory_limit {
             if let Some((what, needed)) = planned.iter().find(|(_, b)| *b > cap) {
                 return Err(err(GpuError::TooLarge { what: what.to_string(), needed: *needed, limit: cap }));
             }

@@ -88,7 +88,7 @@ pub fn generate(plan: &Plan, cell_helpers: &str) -> Result<Vec<Kernel>, String> 
     out.push(advance_kernel());
     // A test seam: `PAIRSUM_WGSL_FAULT` breaks the first kernel, so that the path of a module
     // naga rejects can be exercised end to end.
-    if std::env::var_os("PAIRSUM_WGSL_FAULT").is_some() {
+    if crate::config::env().wgsl_fault {
         if let Some(k) = out.first_mut() {
             k.wgsl.push_str("fn broken() -> f32 { return undefined_name; }\n");
         }

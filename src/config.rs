@@ -1,0 +1,49 @@
+//! The environment variables pairsum reads, read once (the first time any is asked for) and
+//! documented in one place (`docs/ARCHITECTURE.md`, "Configuration").
+
+use std::path::PathBuf;
+use std::sync::OnceLock;
+
+/// Everything pairsum takes from its environment.
+#[derive(Clone, Debug, Default)]
+pub struct Env {
+    /// `PAIRSUM_ADAPTER`: the GPU adapter to use (a part of its name); also lets `--backend auto`
+    /// take a software adapter.
+    pub adapter: Option<String>,
+    /// `PAIRSUM_CASES`: the directory of the bundled cases.
+    pub cases: Option<PathBuf>,
+    /// `PAIRSUM_STDLIB`: the stdlib directory (else the source tree's, else the embedded copy).
+    pub stdlib: Option<PathBuf>,
+    /// `PAIRSUM_DEBUG`: 1 prints the CPU backend's programs, 2 also their SSA.
+    pub debug: u8,
+    /// `PAIRSUM_NO_WIDE_SIMD`: the CPU backend keeps to its portable lane loops.
+    pub no_wide_simd: bool,
+    /// `PAIRSUM_GPU_MEMORY_LIMIT`: bytes the GPU backend may use (tests its out-of-memory path).
+    pub gpu_memory_limit: Option<u64>,
+    /// `PAIRSUM_WGSL_FAULT`: breaks the first generated kernel (tests the path of a rejected module).
+    pub wgsl_fault: bool,
+}
+
+fn var(name: &str) -> Option<String> {
+    std::env::var(name).ok().filter(|v| !v.is_empty())
+}
+
+impl Env {
+    fn read() -> Env {
+        Env {
+            adapter: var("PAIRSUM_ADAPTER"),
+            cases: var("PAIRSUM_CASES").map(PathBuf::from),
+            stdlib: var("PAIRSUM_STDLIB").map(PathBuf::from),
+            debug: var("PAIRSUM_DEBUG").map(|v| if v == "2" { 2 } else { 1 }).unwrap_or(0),
+            no_wide_simd: var("PAIRSUM_NO_WIDE_SIMD").is_some(),
+            gpu_memory_limit: var("PAIRSUM_GPU_MEMORY_LIMIT").and_then(|v| v.parse().ok()),
+            wgsl_fault: var("PAIRSUM_WGSL_FAULT").is_some(),
+        }
+    }
+}
+
+/// The environment, read on first use.
+pub fn env() -> &'static Env {
+    static ENV: OnceLock<Env> = OnceLock::new();
+    ENV.get_or_init(Env::read)
+}
