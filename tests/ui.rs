@@ -47,3 +47,38 @@ fn every_wrong_program_gets_its_diagnostic() {
         }
     });
 }
+
+/// `docs/ERRORS.md` lists every diagnostic code the source can raise.
+#[test]
+fn every_error_code_is_documented() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let doc = std::fs::read_to_string(root.join("docs/ERRORS.md")).expect("docs/ERRORS.md");
+    let mut missing = vec![];
+    for f in pairsum_sources(&root.join("src")) {
+        let text = std::fs::read_to_string(&f).expect("read");
+        for (k, _) in text.match_indices('"') {
+            let code = text.get(k + 1..k + 6).unwrap_or("");
+            let well_formed = code.len() == 5
+                && code.starts_with(['E', 'C'])
+                && code[1..].chars().all(|c| c.is_ascii_digit())
+                && text.get(k + 6..k + 7) == Some("\"");
+            if well_formed && !doc.contains(&format!("| {code} |")) && !missing.contains(&code.to_string()) {
+                missing.push(code.to_string());
+            }
+        }
+    }
+    assert!(missing.is_empty(), "codes missing from docs/ERRORS.md: {missing:?}");
+}
+
+fn pairsum_sources(dir: &std::path::Path) -> Vec<std::path::PathBuf> {
+    let mut out = vec![];
+    for e in std::fs::read_dir(dir).expect("src").flatten() {
+        let p = e.path();
+        if p.is_dir() {
+            out.extend(pairsum_sources(&p));
+        } else if p.extension().is_some_and(|x| x == "rs") {
+            out.push(p);
+        }
+    }
+    out
+}

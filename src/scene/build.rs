@@ -4,6 +4,7 @@
 
 use super::case::{self, CaseFile, Value};
 use super::geometry::{self, Primitive};
+use super::measure::Measure;
 use super::quantity;
 use crate::backend::Mirror;
 use crate::check::{self, Stdlib};
@@ -47,7 +48,7 @@ pub enum ProbeKind {
         locate: Option<usize>,
     },
     /// A named measurement (`scene::measure`).
-    Measure(String),
+    Measure(Measure),
 }
 
 /// What a field probe reads of each particle's value.
@@ -583,16 +584,17 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
     let mut probes = vec![];
     for p in &case.probes {
         let kind = if let Some(m) = &p.measure {
-            if !super::measure::NAMES.contains(&m.get_ref().as_str()) {
+            let Some(measure) = Measure::parse(m.get_ref()) else {
+                let known: Vec<&str> = Measure::ALL.iter().map(|m| m.name()).collect();
                 cx.err(
                     m.span(),
                     "C0016",
-                    format!("unknown measure `{}`; known: {}", m.get_ref(), super::measure::NAMES.join(", ")),
+                    format!("unknown measure `{}`; known: {}", m.get_ref(), known.join(", ")),
                     "here",
                 );
                 continue;
-            }
-            ProbeKind::Measure(m.get_ref().clone())
+            };
+            ProbeKind::Measure(measure)
         } else {
             let Some(fname) = &p.field else {
                 cx.err(
@@ -747,7 +749,7 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
             }
         }
         if let ProbeKind::Measure(m) = &p.kind {
-            for name in super::measure::fields_needed(m) {
+            for name in m.fields_needed() {
                 if let Some(f) = model.field_id(name) {
                     outputs.push(f);
                 }

@@ -5,31 +5,77 @@ use super::build::{Pick, ProbeKind, ProbeSpec, ResultSpec, Scene};
 use crate::backend::{Backend, BackendError};
 use crate::ir::{component_indices, Shape};
 
-/// Named measurements and what each reads.
-pub const NAMES: [&str; 12] = [
-    "min_pair_distance",
-    "max_neighbour_gap",
-    "min_interbody_distance",
-    "interpenetrated",
-    "front_position",
-    "kinetic_energy",
-    "max_speed",
-    "crater_diameter",
-    "debris_length",
-    "debris_width",
-    "debris_length_to_width",
-    "plug_velocity",
-];
+/// A named measurement with a documented, automatic definition (`docs/CASE_FILES.md`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Measure {
+    /// Over every particle, the least distance to another, over its own Δx (clumping).
+    MinPairDistance,
+    /// Over every particle, the largest distance to its nearest neighbour, over its own Δx.
+    MaxNeighbourGap,
+    /// The least distance between the first two bodies, over Δx.
+    MinInterbodyDistance,
+    /// Particles of the first two bodies closer than Δx/2 to a particle of the other.
+    Interpenetrated,
+    /// Where a wave front driven by the first body has got to.
+    FrontPosition,
+    KineticEnergy,
+    MaxSpeed,
+    CraterDiameter,
+    DebrisLength,
+    DebrisWidth,
+    DebrisLengthToWidth,
+    /// The speed of the plug the first body pushes out of the second.
+    PlugVelocity,
+}
 
-pub fn fields_needed(name: &str) -> Vec<&'static str> {
-    match name {
-        "min_interbody_distance" | "interpenetrated" | "crater_diameter" => vec!["x"],
-        "min_pair_distance" | "max_neighbour_gap" => vec!["x", "dx"],
-        "debris_length" | "debris_width" | "debris_length_to_width" => vec!["x"],
-        "front_position" | "plug_velocity" => vec!["x", "v"],
-        "kinetic_energy" => vec!["v", "m"],
-        "max_speed" => vec!["v"],
-        _ => vec![],
+impl Measure {
+    pub const ALL: [Measure; 12] = [
+        Measure::MinPairDistance,
+        Measure::MaxNeighbourGap,
+        Measure::MinInterbodyDistance,
+        Measure::Interpenetrated,
+        Measure::FrontPosition,
+        Measure::KineticEnergy,
+        Measure::MaxSpeed,
+        Measure::CraterDiameter,
+        Measure::DebrisLength,
+        Measure::DebrisWidth,
+        Measure::DebrisLengthToWidth,
+        Measure::PlugVelocity,
+    ];
+
+    /// Its name in case files.
+    pub fn name(self) -> &'static str {
+        match self {
+            Measure::MinPairDistance => "min_pair_distance",
+            Measure::MaxNeighbourGap => "max_neighbour_gap",
+            Measure::MinInterbodyDistance => "min_interbody_distance",
+            Measure::Interpenetrated => "interpenetrated",
+            Measure::FrontPosition => "front_position",
+            Measure::KineticEnergy => "kinetic_energy",
+            Measure::MaxSpeed => "max_speed",
+            Measure::CraterDiameter => "crater_diameter",
+            Measure::DebrisLength => "debris_length",
+            Measure::DebrisWidth => "debris_width",
+            Measure::DebrisLengthToWidth => "debris_length_to_width",
+            Measure::PlugVelocity => "plug_velocity",
+        }
+    }
+
+    pub fn parse(name: &str) -> Option<Measure> {
+        Measure::ALL.into_iter().find(|m| m.name() == name)
+    }
+
+    /// The fields it reads, which the run must store.
+    pub fn fields_needed(self) -> &'static [&'static str] {
+        match self {
+            Measure::MinInterbodyDistance | Measure::Interpenetrated | Measure::CraterDiameter => &["x"],
+            Measure::MinPairDistance | Measure::MaxNeighbourGap => &["x", "dx"],
+            Measure::DebrisLength | Measure::DebrisWidth | Measure::DebrisLengthToWidth => &["x"],
+            Measure::FrontPosition | Measure::PlugVelocity => &["x", "v"],
+            Measure::KineticEnergy => &["v", "m"],
+            Measure::MaxSpeed => &["v"],
+        }
     }
 }
 
@@ -78,7 +124,7 @@ pub fn evaluate(p: &ProbeSpec, scene: &Scene, b: &dyn Backend) -> Result<f64, Ba
                 None => Ok(reduce_values(reduce, &selected.iter().map(|p| p.1).collect::<Vec<_>>())),
             }
         }
-        ProbeKind::Measure(name) => measure(name, scene, b),
+        ProbeKind::Measure(m) => measure(*m, scene, b),
     }
 }
 
@@ -132,30 +178,29 @@ fn reduce_values(reduce: &str, v: &[f64]) -> f64 {
     }
 }
 
-fn measure(name: &str, scene: &Scene, b: &dyn Backend) -> Result<f64, BackendError> {
+fn measure(m: Measure, scene: &Scene, b: &dyn Backend) -> Result<f64, BackendError> {
     let Some(x) = positions(b)? else { return Ok(f64::NAN) };
     let which = bodies_now(scene, &b.ids()?);
     let dim = b.plan().dim;
-    Ok(match name {
+    Ok(match m {
         // The least distance between a particle of the first body and one of the second, over Δx.
-        "min_interbody_distance" => interbody(&x, &which, dim, scene.dx).0 / scene.dx,
+        Measure::MinInterbodyDistance => interbody(&x, &which, dim, scene.dx).0 / scene.dx,
         // Particles of the first two bodies closer than Δx/2 to a particle of the other body.
-        "interpenetrated" => interbody(&x, &which, dim, scene.dx).1 as f64,
+        Measure::Interpenetrated => interbody(&x, &which, dim, scene.dx).1 as f64,
         // Where a wave front driven by the first body has got to.
-        "front_position" => front_position(&x, &which, b)?,
-        "min_pair_distance" => spacing_extremes(&x, b)?.0,
-        "max_neighbour_gap" => spacing_extremes(&x, b)?.1,
-        "kinetic_energy" => kinetic_energy(b)?,
-        "max_speed" => speeds(b)?.into_iter().fold(0.0, f64::max),
-        "crater_diameter" => crater_diameter(&x, &which, scene),
-        "debris_length" => debris(&x, scene).0,
-        "debris_width" => debris(&x, scene).1,
-        "debris_length_to_width" => {
+        Measure::FrontPosition => front_position(&x, &which, b)?,
+        Measure::MinPairDistance => spacing_extremes(&x, b)?.0,
+        Measure::MaxNeighbourGap => spacing_extremes(&x, b)?.1,
+        Measure::KineticEnergy => kinetic_energy(b)?,
+        Measure::MaxSpeed => speeds(b)?.into_iter().fold(0.0, f64::max),
+        Measure::CraterDiameter => crater_diameter(&x, &which, scene),
+        Measure::DebrisLength => debris(&x, scene).0,
+        Measure::DebrisWidth => debris(&x, scene).1,
+        Measure::DebrisLengthToWidth => {
             let (l, w) = debris(&x, scene);
             l / w
         }
-        "plug_velocity" => plug_velocity(&x, &which, scene, b)?,
-        _ => f64::NAN,
+        Measure::PlugVelocity => plug_velocity(&x, &which, scene, b)?,
     })
 }
 
