@@ -108,6 +108,8 @@ pub struct Field {
     /// Initial value (per particle, i side only) for state fields the scene does not set.
     pub init: Option<Expr>,
     pub span: Span,
+    /// For the integrator's copy of a state at the start of the step (named `x@0`): the state.
+    pub saved_of: Option<FieldId>,
 }
 
 #[derive(Clone, Debug)]

@@ -142,6 +142,7 @@ impl Checker {
                 continue;
             }
             self.model.fields.push(ir::Field {
+                saved_of: None,
                 name: format!("{}.{}", p.name.name, t.name.name),
                 ty,
                 storage: Storage::Temp,

@@ -463,7 +463,7 @@ impl Checker {
             );
             return None;
         }
-        self.model.fields.push(ir::Field { name: name.name.clone(), ty, storage, init: None, span });
+        self.model.fields.push(ir::Field { name: name.name.clone(), ty, storage, init: None, span, saved_of: None });
         Some(FieldId(self.model.fields.len() as u32 - 1))
     }
 

@@ -362,8 +362,7 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
         let mut mi = MaterialInput { name: mat_name.clone(), ..Default::default() };
         for (key, v) in values {
             let Some(p) = model.param_id(key) else {
-                let names: Vec<&str> =
-                    model.params.iter().map(|p| p.name.as_str()).filter(|n| !n.starts_with('@')).collect();
+                let names: Vec<&str> = model.params.iter().map(|p| p.name.as_str()).collect();
                 let mut d = Diagnostic::error(
                     "C0007",
                     format!("material `{}` sets `{key}`, which is not a parameter of the model", mi.name),

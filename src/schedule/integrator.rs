@@ -13,7 +13,7 @@
 //! particle that crosses a symmetry plane is reflected back with its normal velocity reversed.
 
 use super::live::Live;
-use super::{synthetic_param, Action, Block, Plan, SceneParam, SceneSpec, Stage};
+use super::{synthetic_param, Action, Block, Plan, SceneParam, SceneRole, SceneSpec, Stage};
 use crate::ir::{self, Expr, ExprKind, FieldId, Global, GroupSet, Model, Op, Shape, Stmt, Storage, Type};
 use crate::units::Unit;
 use std::collections::BTreeSet;
@@ -57,19 +57,20 @@ pub fn scene_params(model: &mut Model, scene: &SceneSpec) -> Vec<SceneParam> {
     let mut out = vec![];
     if let Some(g) = &scene.gravity {
         let p = synthetic_param(model, "@gravity", Shape::Vec, accel_unit());
-        out.push(SceneParam { param: p, value: g.clone() });
+        out.push(SceneParam { param: p, value: g.clone(), role: SceneRole::Gravity });
     }
     for (k, l) in scene.loads.iter().enumerate() {
         let p = synthetic_param(model, &format!("@load{k}"), Shape::Vec, accel_unit());
-        out.push(SceneParam { param: p, value: l.accel.clone() });
+        out.push(SceneParam { param: p, value: l.accel.clone(), role: SceneRole::Load(k) });
     }
     for (k, c) in scene.constraints.iter().enumerate() {
         let p = synthetic_param(model, &format!("@constraint{k}"), Shape::Vec, speed_unit());
-        out.push(SceneParam { param: p, value: c.velocity.clone() });
+        out.push(SceneParam { param: p, value: c.velocity.clone(), role: SceneRole::Constraint(k) });
     }
     for (k, (axis, _)) in scene.symmetry.iter().enumerate() {
         let p = synthetic_param(model, &format!("@symmetry{k}"), Shape::Vec, Unit::ONE);
-        out.push(SceneParam { param: p, value: (0..scene.dim).map(|c| if c == *axis { 1.0 } else { 0.0 }).collect() });
+        let normal = (0..scene.dim).map(|c| if c == *axis { 1.0 } else { 0.0 }).collect();
+        out.push(SceneParam { param: p, value: normal, role: SceneRole::Symmetry(k) });
     }
     out
 }
@@ -104,11 +105,10 @@ fn velocity_rate(plan: &Plan, scene: &SceneSpec, rate: Expr) -> Expr {
     let model = &plan.model;
     let mut r = rate;
     for sp in &plan.scene_params {
-        let name = &model.params[sp.param.index()].name;
         let p = Expr::param(sp.param, model.params[sp.param.index()].ty);
-        if name == "@gravity" {
+        if sp.role == SceneRole::Gravity {
             r = r.plus(p);
-        } else if let Some(k) = name.strip_prefix("@load").and_then(|k| k.parse::<usize>().ok()) {
+        } else if let SceneRole::Load(k) = sp.role {
             let load = &scene.loads[k];
             if let Some(cond) = on_target(model, load.target) {
                 let a = p.scaled_by(ramp(load.ramp));
@@ -125,8 +125,7 @@ fn constrain(plan: &Plan, scene: &SceneSpec, v: FieldId) -> Vec<Stmt> {
     let ty = model.field(v).ty;
     let mut out = vec![];
     for sp in &plan.scene_params {
-        let name = &model.params[sp.param.index()].name;
-        let Some(k) = name.strip_prefix("@constraint").and_then(|k| k.parse::<usize>().ok()) else { continue };
+        let SceneRole::Constraint(k) = sp.role else { continue };
         let c = &scene.constraints[k];
         let Some(cond) = on_target(model, c.target) else { continue };
         let target = Expr::param(sp.param, model.params[sp.param.index()].ty).scaled_by(ramp(c.ramp));
@@ -143,8 +142,7 @@ fn reflect(plan: &Plan, scene: &SceneSpec, x: FieldId, v: Option<FieldId>) -> Ve
     let model = &plan.model;
     let mut out = vec![];
     for sp in &plan.scene_params {
-        let name = &model.params[sp.param.index()].name;
-        let Some(k) = name.strip_prefix("@symmetry").and_then(|k| k.parse::<usize>().ok()) else { continue };
+        let SceneRole::Symmetry(k) = sp.role else { continue };
         let (axis, offset) = scene.symmetry[k];
         let n = Expr::param(sp.param, model.params[sp.param.index()].ty);
         let component = |f: FieldId| {
@@ -193,6 +191,7 @@ pub fn build(plan: &mut Plan, scene: &SceneSpec, live: &Live) {
                 storage: Storage::State,
                 init: None,
                 span: orig.span,
+                saved_of: Some(*f),
             });
             plan.saved.push((*f, FieldId(plan.model.fields.len() as u32 - 1)));
         }

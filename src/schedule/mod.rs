@@ -140,6 +140,20 @@ pub struct FieldLayout {
 pub struct SceneParam {
     pub param: ParamId,
     pub value: Vec<f64>,
+    /// What the scene uses it for.
+    pub role: SceneRole,
+}
+
+/// What a parameter the scene adds to a plan stands for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SceneRole {
+    Gravity,
+    /// The acceleration of load `k`.
+    Load(usize),
+    /// The prescribed velocity of constraint `k`.
+    Constraint(usize),
+    /// The unit normal of symmetry plane `k`.
+    Symmetry(usize),
 }
 
 #[derive(Clone, Debug)]
@@ -242,7 +256,9 @@ impl Plan {
 
     /// The stored fields a NaN/Inf watchdog scans: every one but the saved copies of a step.
     pub fn watched_fields(&self) -> Vec<FieldId> {
-        self.layout.iter().map(|l| l.field).filter(|f| self.model.field(*f).storage != Storage::Temp).collect()
+        let watched =
+            |f: &FieldId| self.model.field(*f).storage != Storage::Temp && self.model.field(*f).saved_of.is_none();
+        self.layout.iter().map(|l| l.field).filter(watched).collect()
     }
 
     /// Bytes of particle state per particle of a group (all live fields stored there).
