@@ -157,3 +157,19 @@ of = "not_a_result"
     assert!(started.elapsed().as_secs() < 60);
     std::fs::remove_dir_all(&d).unwrap();
 }
+
+#[test]
+fn a_plan_error_has_its_code_and_points_at_the_model() {
+    let d = scratch("plan-error");
+    std::fs::write(
+        d.join("m.sph"),
+        "use models::elastic_solid\nparticle lift -> up: scalar [m/s] {\n    up = v.z\n}\nstate height: scalar [m]\nintegrate { height' = up }\n",
+    )
+    .unwrap();
+    let o = pairsum(&d, &["plan", "m.sph", "--dim", "2"]);
+    assert!(!o.status.success());
+    let err = stderr(&o);
+    assert!(err.contains("error[P0003]") && err.contains("m.sph:3:"), "{err}");
+    assert!(pairsum(&d, &["plan", "m.sph", "--dim", "3"]).status.success());
+    std::fs::remove_dir_all(&d).unwrap();
+}

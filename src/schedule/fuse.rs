@@ -91,7 +91,7 @@ pub fn fuse(model: &Model, scene: &SceneSpec, live: &Live) -> Result<Fused, Plan
         d.remove(&e);
         d
     })
-    .ok_or_else(|| PlanError("the equations of one step form a cycle".into()))?;
+    .ok_or_else(|| PlanError::new("P0004", "the equations of one step form a cycle"))?;
     for &(e, ref d) in &order {
         deps.insert(e, d.clone());
         let tail_level = |w: &EqId, level: &BTreeMap<EqId, usize>| level[w];
@@ -187,7 +187,7 @@ pub fn fuse(model: &Model, scene: &SceneSpec, live: &Live) -> Result<Fused, Plan
             .filter(|w| *w != e && model.correction_before(*w, e, writes_read))
             .collect()
     })
-    .ok_or_else(|| PlanError("the corrections form a cycle".into()))?
+    .ok_or_else(|| PlanError::new("P0005", "the corrections form a cycle"))?
     .into_iter()
     .map(|(e, _)| e)
     .collect();

@@ -278,7 +278,12 @@ fn initial_order(model: &Model, needed: &BTreeMap<FieldId, GroupSet>) -> Result<
             }
         }
         if order.len() == before {
-            return Err(PlanError("the initial values of the state fields depend on each other".into()));
+            let stuck = want.iter().find(|f| !done.contains(f)).map(|f| model.field(*f));
+            let e = PlanError::new("P0006", "the initial values of the state fields depend on each other");
+            return Err(match stuck {
+                Some(field) => e.at(field.span, &format!("`{}` waits on another", field.name)),
+                None => e,
+            });
         }
     }
     Ok(order)

@@ -19,6 +19,7 @@ mod print;
 pub use integrator::IntegratorKind;
 pub use live::stmts_of;
 
+use crate::diag::{Diagnostic, Span};
 use crate::ir::{self, EqId, FieldId, GroupId, GroupSet, Model, ParamId, Storage};
 use crate::units::Unit;
 
@@ -179,13 +180,24 @@ pub struct Plan {
     pub saved: Vec<(FieldId, FieldId)>,
 }
 
-/// A reason the plan cannot be made for this scene.
+/// A reason the plan cannot be made for this scene: a diagnostic with a code (`P…`, listed in
+/// `docs/ERRORS.md`) and, where the model has one, the span of what caused it.
 #[derive(Debug, Clone)]
-pub struct PlanError(pub String);
+pub struct PlanError(pub Diagnostic);
+
+impl PlanError {
+    pub(crate) fn new(code: &'static str, message: impl Into<String>) -> PlanError {
+        PlanError(Diagnostic::error(code, message.into()))
+    }
+
+    pub(crate) fn at(self, span: Span, label: &str) -> PlanError {
+        PlanError(self.0.at(span, label))
+    }
+}
 
 impl std::fmt::Display for PlanError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&self.0)
+        write!(f, "error[{}]: {}", self.0.code, self.0.message)
     }
 }
 
@@ -194,10 +206,10 @@ impl Plan {
         let kernel = match kernel {
             Some(name) => model.kernel_id(name).ok_or_else(|| {
                 let names: Vec<&str> = model.kernels.iter().map(|k| k.name.as_str()).collect();
-                PlanError(format!("unknown kernel `{name}`; the model defines: {}", names.join(", ")))
+                PlanError::new("P0001", format!("unknown kernel `{name}`; the model defines: {}", names.join(", ")))
             })?,
             None => model.kernel.ok_or_else(|| {
-                PlanError("the model names no kernel (`kernel = name`) and the case sets none".into())
+                PlanError::new("P0002", "the model names no kernel (`kernel = name`) and the case sets none")
             })?,
         };
         check_components(model, scene.dim)?;
@@ -287,9 +299,11 @@ fn check_components(model: &Model, dim: usize) -> Result<(), PlanError> {
         }
     }
     match bad {
-        Some(_) => {
-            Err(PlanError(format!("the model reads a component that a {dim}D scene does not have (`.z` in 2D?)")))
-        }
+        Some(span) => Err(PlanError::new(
+            "P0003",
+            format!("the model reads a component that a {dim}D scene does not have (`.z` in 2D?)"),
+        )
+        .at(span, &format!("not in {dim}D"))),
         None => Ok(()),
     }
 }
