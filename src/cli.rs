@@ -452,7 +452,7 @@ fn run_plan(path: &Path, dim: usize, integrator: &str, precision: Precision, opt
             0
         }
         Err(e) => {
-            eprint!("{}", render(&sources, &[e.0]));
+            eprint!("{}", render(&sources, &[*e.0]));
             1
         }
     }
@@ -480,7 +480,7 @@ pub fn plan_of(path: &Path, dim: usize) -> Result<crate::schedule::Plan, String>
         constraints: vec![],
         symmetry: vec![],
     };
-    crate::schedule::Plan::build(&checked.model, &scene, None).map_err(|e| render(&sources, &[e.0]))
+    crate::schedule::Plan::build(&checked.model, &scene, None).map_err(|e| render(&sources, &[*e.0]))
 }
 
 /// Every (directory under shaders_gen, model or case path) that `emit --all` writes.

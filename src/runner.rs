@@ -96,7 +96,7 @@ pub fn prepare(path: &Path, opts: &scene::Options) -> Result<(Scene, Plan), RunF
     let mut sources = Sources::new();
     let scene = scene::load(path, &mut sources, opts).map_err(|d| input_error(&sources, &d))?;
     let plan = Plan::build(&scene.model, &scene.spec, scene.kernel.as_deref()).map_err(|e| {
-        let d = e.0.note(format!("while planning the case `{}`", path.display()));
+        let d = (*e.0).note(format!("while planning the case `{}`", path.display()));
         input_error(&sources, &[d])
     })?;
     Ok((scene, plan))

@@ -183,15 +183,15 @@ pub struct Plan {
 /// A reason the plan cannot be made for this scene: a diagnostic with a code (`P…`, listed in
 /// `docs/ERRORS.md`) and, where the model has one, the span of what caused it.
 #[derive(Debug, Clone)]
-pub struct PlanError(pub Diagnostic);
+pub struct PlanError(pub Box<Diagnostic>);
 
 impl PlanError {
     pub(crate) fn new(code: &'static str, message: impl Into<String>) -> PlanError {
-        PlanError(Diagnostic::error(code, message.into()))
+        PlanError(Box::new(Diagnostic::error(code, message.into())))
     }
 
     pub(crate) fn at(self, span: Span, label: &str) -> PlanError {
-        PlanError(self.0.at(span, label))
+        PlanError(Box::new(self.0.at(span, label)))
     }
 }
 
