@@ -46,7 +46,31 @@ fn run_and_check(name: &str, precision: Precision) {
     for key in ["case", "backend", "precision", "particles", "steps", "wall_s", "particle_steps_per_s", "results"] {
         assert!(json.get(key).is_some(), "report.json lacks `{key}`");
     }
+    check_histories_csv(&opts.out.join("histories.csv"), &outcome.histories);
     let _ = std::fs::remove_dir_all(&opts.out);
+}
+
+/// `histories.csv` holds every probe's history: a time column, then one column per probe with the
+/// values the run recorded (empty where a probe was not sampled).
+fn check_histories_csv(path: &Path, histories: &[(String, Vec<(f64, f64)>)]) {
+    let text = std::fs::read_to_string(path).expect("histories.csv beside report.json");
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().expect("a header").split(',').collect();
+    assert_eq!(header[0], "time [s]");
+    assert_eq!(header.len(), histories.len() + 1, "{header:?}");
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    for (k, (name, points)) in histories.iter().enumerate() {
+        assert!(header[k + 1].starts_with(name.as_str()), "column {} is {}, not {name}", k + 1, header[k + 1]);
+        let column: Vec<(f64, f64)> = rows
+            .iter()
+            .filter(|r| !r[k + 1].is_empty())
+            .map(|r| (r[0].parse().expect("time"), r[k + 1].parse::<f64>().unwrap_or(f64::NAN)))
+            .collect();
+        assert_eq!(column.len(), points.len(), "{name}");
+        for (a, b) in column.iter().zip(points) {
+            assert!(a.0 == b.0 && (a.1 == b.1 || (a.1.is_nan() && b.1.is_nan())), "{name}: {a:?} vs {b:?}");
+        }
+    }
 }
 
 #[test]

@@ -6,9 +6,12 @@
 //! - [`json`]: the machine-readable run report (`report.json`) and its types.
 //! - [`markdown`]: the human-readable run report (`report.md`) with embedded plots.
 //! - [`plot`]: SVG line plots of time histories.
+//! - [`csv`]: the time histories as `histories.csv`, one column per probe.
 //!
-//! [`write`] writes a whole report directory: `report.json`, `report.md` and one SVG per history.
+//! [`write`] writes a whole report directory: `report.json`, `report.md`, `histories.csv` and one
+//! SVG per history.
 
+pub mod csv;
 pub mod json;
 pub mod markdown;
 pub mod plot;
@@ -20,12 +23,16 @@ use std::path::{Path, PathBuf};
 pub use json::{Curve, GroupBytes, History, ResultRow, RunReport};
 pub use vtk::{read_vtu, write_vtu, PointField, Series, VtuData};
 
-/// Writes `dir/report.json`, `dir/report.md` and, for every history, `dir/<name>.svg` (see
+/// Writes `dir/report.json`, `dir/report.md`, `dir/histories.csv` (when there are time
+/// histories) and, for every history, `dir/<name>.svg` (see
 /// [`markdown::plot_file_name`]). Creates `dir` if needed. A plot that cannot be drawn does not
 /// fail the report: `report.md` says why in its place. Errors are I/O errors only.
 pub fn write(dir: &Path, report: &RunReport) -> io::Result<()> {
     std::fs::create_dir_all(dir)?;
     json::write_json(&dir.join("report.json"), report)?;
+    if let Some(text) = csv::histories_csv(report) {
+        write_atomic(&dir.join("histories.csv"), text.as_bytes())?;
+    }
     markdown::write_markdown(dir, report)
 }
 
