@@ -632,3 +632,53 @@ fn time_a_million_particle_fill() {
     let s = estimate_spacing(&p.positions, 3);
     println!("estimate_spacing on {} nodes: {:?}", s.len(), t.elapsed());
 }
+
+/// Lattice count × dx² against the exact area: the lattice misses or adds at most a band of
+/// width about dx along the boundary.
+fn area_within_a_boundary_band(p: &Particles, dx: f64, area: f64, perimeter: f64) {
+    let lattice = p.len() as f64 * dx * dx;
+    assert!((lattice - area).abs() <= perimeter * dx, "lattice area {lattice} vs exact {area}");
+    assert!(close(p.total_volume(), area, 1e-9), "volumes sum to {} vs {area}", p.total_volume());
+}
+
+#[test]
+fn disc_annulus_and_polygon_fill_their_areas_in_2d() {
+    let dx = 0.01;
+    let disc = fill(&Primitive::Disc { center: [0.1, -0.2, 0.0], radius: 0.25 }, dx, 2).unwrap();
+    area_within_a_boundary_band(&disc, dx, PI * 0.0625, 2.0 * PI * 0.25);
+    assert!(disc.positions.iter().all(|x| dist(*x, [0.1, -0.2, 0.0]) <= 0.25 + 1e-9));
+
+    let (ri, ro) = (0.03, 0.04);
+    let ring = Primitive::Annulus { center: [0.0; 3], inner_radius: ri, outer_radius: ro };
+    let ring = fill(&ring, 0.001, 2).unwrap();
+    area_within_a_boundary_band(&ring, 0.001, PI * (ro * ro - ri * ri), 2.0 * PI * (ri + ro));
+    assert!(ring.positions.iter().all(|x| (ri - 1e-9..=ro + 1e-9).contains(&dist(*x, [0.0; 3]))));
+
+    // An L: the unit square less its upper right quarter, given clockwise.
+    let l = vec![[0.0, 0.0], [0.0, 1.0], [0.5, 1.0], [0.5, 0.5], [1.0, 0.5], [1.0, 0.0]];
+    let filled = fill(&Primitive::Polygon { vertices: l }, 0.02, 2).unwrap();
+    area_within_a_boundary_band(&filled, 0.02, 0.75, 4.0);
+    assert!(filled.positions.iter().all(|x| !(x[0] > 0.5 + 1e-9 && x[1] > 0.5 + 1e-9)), "a node in the notch");
+    assert!(filled
+        .positions
+        .iter()
+        .all(|x| (-1e-9..=1.0 + 1e-9).contains(&x[0]) && (-1e-9..=1.0 + 1e-9).contains(&x[1])));
+    let triangle = vec![[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]];
+    area_within_a_boundary_band(&fill(&Primitive::Polygon { vertices: triangle }, 0.01, 2).unwrap(), 0.01, 0.5, 3.5);
+}
+
+#[test]
+fn the_2d_shapes_are_refused_elsewhere_and_checked() {
+    let disc = Primitive::Disc { center: [0.0; 3], radius: 1.0 };
+    for dim in [1, 3] {
+        assert!(matches!(fill(&disc, 0.1, dim), Err(GeometryError::Parameter { name: "dim", .. })), "{dim}D");
+    }
+    let bow_tie = vec![[0.0, 0.0], [1.0, 1.0], [1.0, 0.0], [0.0, 1.0]];
+    let e = fill(&Primitive::Polygon { vertices: bow_tie }, 0.1, 2).unwrap_err();
+    assert!(e.to_string().contains("crosses itself"), "{e}");
+    let flat = vec![[0.0, 0.0], [1.0, 1.0], [2.0, 2.0]];
+    assert!(fill(&Primitive::Polygon { vertices: flat }, 0.1, 2).is_err());
+    assert!(fill(&Primitive::Polygon { vertices: vec![[0.0, 0.0], [1.0, 0.0]] }, 0.1, 2).is_err());
+    let ring = Primitive::Annulus { center: [0.0; 3], inner_radius: 1.0, outer_radius: 0.5 };
+    assert!(fill(&ring, 0.1, 2).is_err());
+}

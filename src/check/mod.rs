@@ -107,6 +107,27 @@ fn modules_used(modules: &[load::Module]) -> HashMap<u32, BTreeSet<u32>> {
         .collect()
 }
 
+/// Checks an expression written outside the model (a case file's initial value of `field`, the
+/// text standing at byte `offset` of source `file`) against the checked model: names, shapes and
+/// units as in an `init` of the model, and the field's type.
+pub fn initial_value(
+    model: &Model,
+    file: u32,
+    offset: usize,
+    text: &str,
+    field: FieldId,
+) -> Result<ir::Expr, Vec<Diagnostic>> {
+    let ast = crate::syntax::parse_expr(file, offset, text).map_err(|d| vec![*d])?;
+    let mut checker = Checker::new();
+    checker.model = model.clone();
+    let cx = expr::Cx::particle("an initial value");
+    let value = checker.expr_as(&ast, &cx, model.field(field).ty, "the initial value");
+    match value {
+        Some(v) if !checker.diags.iter().any(|d| d.is_error()) => Ok(v),
+        _ => Err(checker.diags),
+    }
+}
+
 fn dedup(diags: &mut Vec<Diagnostic>) {
     let mut seen = std::collections::HashSet::new();
     diags.retain(|d| seen.insert((d.message.clone(), d.primary.as_ref().map(|p| p.0))));

@@ -19,6 +19,17 @@ pub struct ParticleInput {
     pub part: Vec<i32>,
     pub group: Vec<u32>,
     pub material: Vec<u32>,
+    /// Initial values the case gives per body, evaluated for each of its particles after the
+    /// model's own (which they replace).
+    pub initial: Vec<InitialValue>,
+}
+
+/// `initial = { field = "expression" }` of one body.
+#[derive(Clone, Debug)]
+pub struct InitialValue {
+    pub field: FieldId,
+    pub body: u32,
+    pub value: Expr,
 }
 
 impl ParticleInput {
@@ -166,6 +177,7 @@ fn eval(
             values[k * comps..(k + 1) * comps].to_vec()
         }
         ExprKind::Global(ir::Global::Dim) => vec![dim as f64],
+        ExprKind::Component(a, r, _) if a.ty.shape == ir::Shape::Vec => vec![*go(a)?.get(*r as usize)?],
         ExprKind::Unary(Op::Neg, a) => go(a)?.iter().map(|x| -x).collect(),
         ExprKind::Binary(op, a, b) => {
             let (x, y) = (go(a)?, go(b)?);
@@ -309,6 +321,22 @@ pub fn host_fields(
             values[k * comps..(k + 1) * comps].copy_from_slice(&v[..comps]);
         }
         fields.insert(*f, (comps, values));
+    }
+    for iv in &input.initial {
+        let comps = ir::components(model.field(iv.field).ty.shape, dim);
+        let mut params = materials.to_vec();
+        let mut values = fields.get(&iv.field).map(|f| f.1.clone()).unwrap_or_else(|| vec![0.0; n * comps]);
+        for k in (0..n).filter(|k| input.body[*k] == iv.body) {
+            let params = &mut params[input.material[k] as usize];
+            let v = eval(model, dim, &iv.value, params, &mut BTreeSet::new(), Some((&fields, k))).ok_or_else(|| {
+                SetupError(format!(
+                    "cannot compute the case's initial value of `{}` (it reads something the scene does not set)",
+                    model.field(iv.field).name
+                ))
+            })?;
+            values[k * comps..(k + 1) * comps].copy_from_slice(&v[..comps]);
+        }
+        fields.insert(iv.field, (comps, values));
     }
     Ok(fields)
 }

@@ -9,9 +9,9 @@ use super::quantity;
 use crate::backend::Mirror;
 use crate::check::{self, Stdlib};
 use crate::diag::{closest, Diagnostic, Sources, Span};
-use crate::engine::setup::{MaterialInput, ParticleInput};
+use crate::engine::setup::{InitialValue, MaterialInput, ParticleInput};
 use crate::engine::RunConfig;
-use crate::ir::{FieldId, GroupId, GroupSet, Model, Shape};
+use crate::ir::{self, FieldId, GroupId, GroupSet, Model, Shape};
 use crate::schedule::{Constraint, IntegratorKind, Load, SceneSpec, Target};
 use crate::units::Unit;
 use std::path::{Path, PathBuf};
@@ -185,9 +185,53 @@ impl Ctx<'_> {
             return None;
         }
         let mut out = [0.0; 3];
-        for (k, item) in items.iter().take(self.dim).enumerate() {
+        for (k, item) in items.iter().enumerate() {
             let spanned = toml::Spanned::new(span.clone(), item.clone());
             out[k] = self.scalar(&spanned, unit, what)?;
+        }
+        if let Some(k) = (self.dim..items.len()).find(|k| out[*k] != 0.0) {
+            let msg = format!(
+                "{what} has a non-zero component {} beyond the {}D case's axes: leave it out or make it 0",
+                "xyz".as_bytes()[k] as char,
+                self.dim
+            );
+            self.err(span, "C0002", msg, "here");
+            return None;
+        }
+        Some(out)
+    }
+
+    /// A direction: `dim` to 3 dimensionless components, all kept (an axis along z is
+    /// perpendicular to a 2D case's plane).
+    fn direction(&mut self, v: &Value, what: &str) -> Option<[f64; 3]> {
+        let saved = self.dim;
+        self.dim = 3.min(v.get_ref().as_array().map_or(saved, Vec::len)).max(saved);
+        let out = self.vector(v, Unit::ONE, what);
+        self.dim = saved;
+        out
+    }
+
+    /// A polygon's vertices: a list of `[x, y]` points in m.
+    fn vertices(&mut self, v: &Value, what_span: &str) -> Option<Vec<[f64; 2]>> {
+        let span = v.span();
+        let toml::Value::Array(items) = v.get_ref() else {
+            self.err(span, "C0002", format!("{what_span} must be a list of [x, y] points"), "not a list");
+            return None;
+        };
+        let mut out = vec![];
+        for item in items {
+            let spanned = toml::Spanned::new(span.clone(), item.clone());
+            let ok = item.as_array().is_some_and(|a| a.len() == 2);
+            if !ok {
+                self.err(span.clone(), "C0002", format!("each of the {what_span} is an [x, y] point"), "here");
+                return None;
+            }
+            let saved = self.dim;
+            self.dim = 2;
+            let p = self.vector(&spanned, Unit::M, what_span);
+            self.dim = saved;
+            let p = p?;
+            out.push([p[0], p[1]]);
         }
         Some(out)
     }
@@ -467,6 +511,11 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
             particles.group.push(group.0);
             particles.material.push(material as u32);
         }
+        for (field, text) in &body.initial {
+            if let Some(value) = initial_value(&model, field, text, cx) {
+                particles.initial.push(InitialValue { field: value.0, body: b as u32, value: value.1 });
+            }
+        }
         bodies.push(BodyInfo { name, group, material, particles: start..particles.len(), mass });
     }
     if particles.is_empty() {
@@ -690,9 +739,14 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
             continue;
         };
         let at = r.at.as_ref().map(|a| a.get_ref().clone()).unwrap_or_else(|| "end".into());
-        if !["end", "min", "max", "abs_max", "mean_after", "slope"].contains(&at.as_str()) {
+        if !["end", "min", "max", "abs_max", "mean_after", "slope", "zero_crossing"].contains(&at.as_str()) {
             let span = r.at.as_ref().map(|a| a.span()).unwrap_or(0..0);
-            cx.err(span, "C0019", format!("`at` is end, min, max, abs_max, mean_after or slope, found `{at}`"), "here");
+            cx.err(
+                span,
+                "C0019",
+                format!("`at` is end, min, max, abs_max, mean_after, slope or zero_crossing, found `{at}`"),
+                "here",
+            );
             continue;
         }
         let unit_text = r.unit.clone().unwrap_or_else(|| probes[probe].unit.clone());
@@ -958,9 +1012,41 @@ fn place_whole(
     }
 }
 
+/// A body's `initial` value of `field`: a state field other than those the scene places, and an
+/// expression of the language of its type.
+fn initial_value(
+    model: &Model,
+    field: &str,
+    text: &toml::Spanned<String>,
+    cx: &mut Ctx,
+) -> Option<(FieldId, ir::Expr)> {
+    const PLACED: [&str; 5] = ["x", "vol", "dx", "body", "part"];
+    let f = model.field_id(field).filter(|f| model.field(*f).storage == ir::Storage::State && !PLACED.contains(&field));
+    let Some(f) = f else {
+        let states: Vec<&str> = model
+            .fields
+            .iter()
+            .filter(|f| f.storage == ir::Storage::State && !PLACED.contains(&f.name.as_str()))
+            .map(|f| f.name.as_str())
+            .collect();
+        let d = Diagnostic::error("C0032", format!("`{field}` is not a state field a case can give an initial value"))
+            .at(cx.span(text.span()), "here")
+            .help(format!("the model's state fields: {}", states.join(", ")));
+        cx.diags.push(d);
+        return None;
+    };
+    // The expression's first byte in the case file: after the opening quote of a one-line string.
+    match check::initial_value(model, cx.file, text.span().start + 1, text.get_ref(), f) {
+        Ok(e) => Some((f, e)),
+        Err(d) => {
+            cx.diags.extend(d);
+            None
+        }
+    }
+}
+
 fn primitive(s: &case::Shape, cx: &mut Ctx) -> Option<Primitive> {
     let m = Unit::M;
-    let one = Unit::ONE;
     Some(match s {
         case::Shape::Box { min, max } => {
             Primitive::Box { min: cx.vector(min, m, "box min")?, max: cx.vector(max, m, "box max")? }
@@ -971,23 +1057,35 @@ fn primitive(s: &case::Shape, cx: &mut Ctx) -> Option<Primitive> {
         },
         case::Shape::Cylinder { base, axis, radius, length } => Primitive::Cylinder {
             base: cx.vector(base, m, "cylinder base")?,
-            axis: cx.vector(axis, one, "cylinder axis")?,
+            axis: cx.direction(axis, "cylinder axis")?,
             radius: cx.scalar(radius, m, "cylinder radius")?,
             length: cx.scalar(length, m, "cylinder length")?,
         },
         case::Shape::HollowCylinder { base, axis, inner_radius, outer_radius, length } => Primitive::HollowCylinder {
             base: cx.vector(base, m, "tube base")?,
-            axis: cx.vector(axis, one, "tube axis")?,
+            axis: cx.direction(axis, "tube axis")?,
             inner_radius: cx.scalar(inner_radius, m, "tube inner radius")?,
             outer_radius: cx.scalar(outer_radius, m, "tube outer radius")?,
             length: cx.scalar(length, m, "tube length")?,
         },
         case::Shape::Plate { center, normal, radius, thickness } => Primitive::Plate {
             center: cx.vector(center, m, "plate center")?,
-            normal: cx.vector(normal, one, "plate normal")?,
+            normal: cx.direction(normal, "plate normal")?,
             radius: cx.scalar(radius, m, "plate radius")?,
             thickness: cx.scalar(thickness, m, "plate thickness")?,
         },
+        case::Shape::Disc { center, radius } => Primitive::Disc {
+            center: cx.vector(center, m, "disc center")?,
+            radius: cx.scalar(radius, m, "disc radius")?,
+        },
+        case::Shape::Annulus { center, inner_radius, outer_radius } => Primitive::Annulus {
+            center: cx.vector(center, m, "annulus center")?,
+            inner_radius: cx.scalar(inner_radius, m, "annulus inner radius")?,
+            outer_radius: cx.scalar(outer_radius, m, "annulus outer radius")?,
+        },
+        case::Shape::Polygon { vertices } => {
+            Primitive::Polygon { vertices: cx.vertices(vertices, "polygon vertices")? }
+        }
         case::Shape::Nodes { .. } => return None,
     })
 }

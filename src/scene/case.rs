@@ -93,6 +93,10 @@ pub struct Body {
     pub shape: Spanned<Shape>,
     #[serde(default)]
     pub velocity: Option<Value>,
+    /// Initial values of state fields, each an expression of the language (position `x`, the
+    /// material's parameters): `initial = { v = "vec(...)" }`.
+    #[serde(default)]
+    pub initial: std::collections::BTreeMap<String, Spanned<String>>,
     /// Spacing as a multiple of the resolution's dx (default 1).
     #[serde(default)]
     pub spacing_factor: Option<f64>,
@@ -151,6 +155,22 @@ pub enum Shape {
         normal: Value,
         radius: Value,
         thickness: Value,
+    },
+    /// 2D only.
+    Disc {
+        center: Value,
+        radius: Value,
+    },
+    /// 2D only.
+    #[serde(alias = "ring")]
+    Annulus {
+        center: Value,
+        inner_radius: Value,
+        outer_radius: Value,
+    },
+    /// 2D only: `vertices = [[x, y], …]`.
+    Polygon {
+        vertices: Value,
     },
     /// Nodes from a file: `.csv` (x,y,z[,volume]) or an LS-DYNA keyword deck (`*NODE`).
     Nodes {

@@ -461,6 +461,15 @@ pub fn result_value(r: &ResultSpec, h: &History) -> f64 {
                 cov / var
             }
         }
+        // The first time after `from` at which the history changes sign (linear interpolation).
+        "zero_crossing" => {
+            let from = r.from.unwrap_or(f64::NEG_INFINITY);
+            let sel: Vec<(f64, f64)> = pts.iter().copied().filter(|p| p.0 >= from && p.1.is_finite()).collect();
+            sel.windows(2)
+                .find(|w| w[0].1 != 0.0 && w[0].1.signum() != w[1].1.signum())
+                .map(|w| w[0].0 + (w[1].0 - w[0].0) * w[0].1 / (w[0].1 - w[1].1))
+                .unwrap_or(f64::NAN)
+        }
         _ => pts.last().map(|p| p.1).unwrap_or(f64::NAN),
     };
     v * r.scale

@@ -4,4 +4,4 @@
 pub mod ast;
 mod parse;
 
-pub use parse::parse_file;
+pub use parse::{parse_expr, parse_file};

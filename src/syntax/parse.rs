@@ -14,10 +14,26 @@ struct Grammar;
 /// Parses one source file (`file` is its id in `Sources`).
 pub fn parse_file(file: u32, text: &str) -> Result<File, Box<Diagnostic>> {
     let mut pairs = Grammar::parse(Rule::file, text).map_err(|e| Box::new(syntax_error(file, text, e)))?;
-    let b = Builder { file };
+    let b = Builder { file, offset: 0 };
     let root = pairs.next().expect("the file rule always yields one pair");
     let items = root.into_inner().filter(|p| p.as_rule() != Rule::EOI).map(|p| b.item(p)).collect();
     Ok(File { items })
+}
+
+/// Parses one expression that stands at byte `offset` of source file `file` (a case file's
+/// initial value): spans point into that file.
+pub fn parse_expr(file: u32, offset: usize, text: &str) -> Result<Expr, Box<Diagnostic>> {
+    let mut pairs = Grammar::parse(Rule::expr_only, text).map_err(|e| {
+        let mut d = syntax_error(file, text, e);
+        if let Some((span, _)) = &mut d.primary {
+            *span = Span::new(file, span.start as usize + offset, span.end as usize + offset);
+        }
+        Box::new(d)
+    })?;
+    let b = Builder { file, offset };
+    let root = pairs.next().expect("the expr_only rule always yields one pair");
+    let e = root.into_inner().find(|p| p.as_rule() == Rule::expr).expect("expr_only holds an expr");
+    Ok(b.expr(e))
 }
 
 fn syntax_error(file: u32, text: &str, e: pest::error::Error<Rule>) -> Diagnostic {
@@ -172,13 +188,16 @@ fn kids(p: Pair<Rule>) -> impl Iterator<Item = Pair<Rule>> {
 
 struct Builder {
     file: u32,
+    /// Where the parsed text starts in the file (an expression inside a case file).
+    offset: usize,
 }
 
 impl Builder {
     /// A pair's span without the whitespace and comments pest lets a rule absorb at its end.
     fn span(&self, p: &Pair<Rule>) -> Span {
         let s = p.as_span();
-        Span::new(self.file, s.start(), s.start() + trimmed_len(p.as_str()))
+        let start = self.offset + s.start();
+        Span::new(self.file, start, start + trimmed_len(p.as_str()))
     }
 
     fn ident(&self, p: Pair<Rule>) -> Ident {

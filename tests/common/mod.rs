@@ -48,6 +48,7 @@ pub fn input(dim: usize, x: Vec<[f64; 3]>, dx: f64) -> ParticleInput {
         part: vec![-1; n],
         group: vec![0; n],
         material: vec![0; n],
+        initial: vec![],
         x,
     }
 }

@@ -47,6 +47,27 @@ pub enum Primitive {
         /// The length along the axis, > 0.
         length: f64,
     },
+    /// A disc (2D only).
+    Disc {
+        /// The centre.
+        center: [f64; 3],
+        /// The radius, > 0.
+        radius: f64,
+    },
+    /// A ring, `inner_radius ≤ |x − center| ≤ outer_radius` (2D only).
+    Annulus {
+        /// The centre.
+        center: [f64; 3],
+        /// The inner radius, ≥ 0 and < `outer_radius`.
+        inner_radius: f64,
+        /// The outer radius, > `inner_radius`.
+        outer_radius: f64,
+    },
+    /// A simple polygon (2D only), its vertices in order, either orientation; at least 3.
+    Polygon {
+        /// The vertices `(x, y)`.
+        vertices: Vec<[f64; 2]>,
+    },
     /// A circular plate: a cylinder of length `thickness` along `normal`, centred on `center`.
     Plate {
         /// The centre of the plate (half way through its thickness).
@@ -64,7 +85,7 @@ pub enum Primitive {
 const AXIS_EPS: f64 = 1e-12;
 
 /// The geometric kinds every primitive reduces to, in the model's `dim` axes (unused coordinates 0).
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub(crate) enum Region {
     /// `min ≤ x ≤ max` along the model's axes.
     Box { min: [f64; 3], max: [f64; 3] },
@@ -72,10 +93,12 @@ pub(crate) enum Region {
     Shell { center: [f64; 3], r_in: f64, r_out: f64 },
     /// `0 ≤ (x − base)·axis ≤ len` and `r_in ≤ distance to the axis ≤ r_out`; `axis` is a unit vector.
     Tube { base: [f64; 3], axis: [f64; 3], r_in: f64, r_out: f64, len: f64 },
+    /// Inside a simple polygon of the (x, y) plane (even–odd rule).
+    Polygon { vertices: std::sync::Arc<[[f64; 2]]> },
 }
 
 /// A primitive resolved for a dimension: every parameter checked, unused coordinates zeroed.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub(crate) struct Shape {
     pub region: Region,
     pub dim: usize,
@@ -181,6 +204,23 @@ impl Shape {
     pub fn resolve(p: &Primitive, dim: usize) -> Result<Shape, GeometryError> {
         check_dim(dim)?;
         let region = match *p {
+            Primitive::Disc { center, radius } => {
+                plane_only("disc", dim)?;
+                Region::Shell {
+                    center: truncate(finite_point("center", center)?, 2),
+                    r_in: 0.0,
+                    r_out: positive("radius", radius)?,
+                }
+            }
+            Primitive::Annulus { center, inner_radius, outer_radius } => {
+                plane_only("annulus", dim)?;
+                let (r_in, r_out) = radii(inner_radius, outer_radius)?;
+                Region::Shell { center: truncate(finite_point("center", center)?, 2), r_in, r_out }
+            }
+            Primitive::Polygon { ref vertices } => {
+                plane_only("polygon", dim)?;
+                polygon(vertices)?
+            }
             Primitive::Box { min, max } => resolve_box(min, max, dim)?,
             Primitive::Sphere { center, radius } => {
                 let center = truncate(finite_point("center", center)?, dim);
@@ -211,6 +251,7 @@ impl Shape {
             Region::Box { min, max } => (0..d).map(|i| max[i] - min[i]).product(),
             Region::Shell { r_in, r_out, .. } => ball(d, r_out) - ball(d, r_in),
             Region::Tube { r_in, r_out, len, .. } => len * (ball(d - 1, r_out) - ball(d - 1, r_in)),
+            Region::Polygon { ref vertices } => shoelace(vertices).abs(),
         }
     }
 
@@ -231,6 +272,9 @@ impl Shape {
                     let ext = r_out * (1.0 - axis[i] * axis[i]).max(0.0).sqrt();
                     (a.min(b) - ext, a.max(b) + ext)
                 }
+                Region::Polygon { ref vertices } => {
+                    vertices.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| (lo.min(v[i]), hi.max(v[i])))
+                }
             };
         }
         (lo, hi)
@@ -250,6 +294,7 @@ impl Shape {
         out.clear();
         q[k] = 0.0;
         match self.region {
+            Region::Polygon { ref vertices } => polygon_row(vertices, q, k, tol, out),
             Region::Box { min, max } => self.box_row(min, max, q, k, tol, out),
             Region::Shell { center, r_in, r_out } => self.shell_row(center, r_in, r_out, q, k, tol, out),
             Region::Tube { base, axis, r_in, r_out, len } => {
@@ -296,6 +341,80 @@ impl Shape {
         } else {
             out.push((c[k] - w, c[k] + w));
         }
+    }
+}
+
+/// The 2D shapes (disc, annulus, polygon) exist only in a 2D model.
+fn plane_only(shape: &'static str, dim: usize) -> Result<(), GeometryError> {
+    if dim == 2 {
+        Ok(())
+    } else {
+        let hint = if dim == 3 { "; in 3D use a cylinder, a hollow cylinder or a plate" } else { "" };
+        Err(param("dim", format!("a {shape} is a shape of a 2D case, and this case is {dim}D{hint}")))
+    }
+}
+
+/// A simple polygon: at least 3 finite vertices, a non-zero area, no edge crossing another.
+fn polygon(vertices: &[[f64; 2]]) -> Result<Region, GeometryError> {
+    if vertices.len() < 3 {
+        return Err(param("vertices", format!("a polygon needs at least 3 vertices, found {}", vertices.len())));
+    }
+    if let Some(v) = vertices.iter().find(|v| !v.iter().all(|c| c.is_finite())) {
+        return Err(param("vertices", format!("polygon vertices must be finite, found {v:?}")));
+    }
+    let n = vertices.len();
+    let edge = |k: usize| (vertices[k], vertices[(k + 1) % n]);
+    for a in 0..n {
+        for b in a + 2..n {
+            if (b + 1) % n == a {
+                continue;
+            }
+            if segments_cross(edge(a), edge(b)) {
+                let msg = format!("the polygon crosses itself: edge {} and edge {} intersect", a + 1, b + 1);
+                return Err(param("vertices", msg));
+            }
+        }
+    }
+    if shoelace(vertices).abs() <= 0.0 {
+        return Err(param("vertices", "the polygon has no area (its vertices lie on a line)".to_string()));
+    }
+    Ok(Region::Polygon { vertices: vertices.into() })
+}
+
+/// Twice the signed area, halved: the shoelace formula.
+fn shoelace(v: &[[f64; 2]]) -> f64 {
+    let n = v.len();
+    0.5 * (0..n).map(|k| v[k][0] * v[(k + 1) % n][1] - v[(k + 1) % n][0] * v[k][1]).sum::<f64>()
+}
+
+/// Whether two segments properly intersect (touching at an end counts).
+fn segments_cross((p1, p2): ([f64; 2], [f64; 2]), (q1, q2): ([f64; 2], [f64; 2])) -> bool {
+    let cross = |o: [f64; 2], a: [f64; 2], b: [f64; 2]| (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]);
+    let (d1, d2) = (cross(q1, q2, p1), cross(q1, q2, p2));
+    let (d3, d4) = (cross(p1, p2, q1), cross(p1, p2, q2));
+    d1 * d2 <= 0.0 && d3 * d4 <= 0.0 && !(d1 == 0.0 && d2 == 0.0)
+}
+
+/// The intervals along axis `k` (0 or 1) of the row through `q` that lie inside the polygon
+/// (even–odd rule), each widened by `tol`.
+fn polygon_row(v: &[[f64; 2]], q: [f64; 3], k: usize, tol: f64, out: &mut Vec<(f64, f64)>) {
+    let other = 1 - k;
+    let at = q[other];
+    let n = v.len();
+    let mut crossings: Vec<f64> = (0..n)
+        .filter_map(|e| {
+            let (a, b) = (v[e], v[(e + 1) % n]);
+            // Half-open in the other coordinate, so a vertex on the row counts once.
+            if (a[other] <= at) == (b[other] <= at) {
+                return None;
+            }
+            let t = (at - a[other]) / (b[other] - a[other]);
+            Some(a[k] + t * (b[k] - a[k]))
+        })
+        .collect();
+    crossings.sort_by(f64::total_cmp);
+    for pair in crossings.chunks_exact(2) {
+        out.push((pair[0] - tol, pair[1] + tol));
     }
 }
 
