@@ -1,7 +1,7 @@
 //! Probes: what a case measures during a run — a field component reduced over a body, or a named
 //! measurement with a documented, automatic definition — and the results taken from them.
 
-use super::build::{Pick, ProbeKind, ProbeSpec, ResultSpec, Scene};
+use super::spec::{Pick, ProbeKind, ProbeSpec, ResultSpec, Scene};
 use crate::backend::{Backend, BackendError};
 use crate::ir::{component_indices, Shape};
 

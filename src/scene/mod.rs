@@ -6,7 +6,9 @@ pub mod case;
 pub mod geometry;
 pub mod measure;
 pub mod quantity;
+pub mod spec;
 pub mod study;
 pub mod template;
 
-pub use build::{load, Options, Scene};
+pub use build::load;
+pub use spec::{Options, Scene};

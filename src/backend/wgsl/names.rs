@@ -86,7 +86,8 @@ pub const HELPERS: &[&str] = &[
     "cl_add",
 ];
 
-/// Names the scaffolding of a kernel body uses; a DSL local never takes one.
+/// Names the scaffolding of a kernel body uses; a DSL local never takes one (nor a name of
+/// [`HELPERS`]).
 pub const SCAFFOLDING: &[&str] = &[
     "i",
     "j",
@@ -132,13 +133,6 @@ pub const SCAFFOLDING: &[&str] = &[
     "best",
     "remaining",
     "R",
-    "data",
-    "ints",
-    "params",
-    "info",
-    "grid",
-    "cells",
-    "globals",
 ];
 
 /// Gives out unique, valid identifiers.

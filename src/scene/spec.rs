@@ -1,0 +1,107 @@
+//! What a loaded case is: the scene (model, particles, materials, bodies, symmetry planes, run
+//! configuration) and what it measures (probes and results), with the options it was loaded with.
+//! `build` makes it from a case file; `measure` and the runner read it.
+
+use super::measure::Measure;
+use crate::backend::Mirror;
+use crate::engine::setup::{MaterialInput, ParticleInput};
+use crate::engine::RunConfig;
+use crate::ir::{FieldId, GroupId, Model};
+use crate::schedule::SceneSpec;
+use std::path::PathBuf;
+
+/// What to run: the resolution by name (`ci`, `paper`) or a spacing, and overrides.
+#[derive(Clone, Debug, Default)]
+pub struct Options {
+    pub resolution: Option<String>,
+    pub end_time: Option<f64>,
+    /// Values for the case's `[parameters]` (`${name}` in the case file), e.g. from a study.
+    pub set: Vec<(String, String)>,
+}
+
+#[derive(Clone, Debug)]
+pub struct BodyInfo {
+    pub name: String,
+    pub group: GroupId,
+    pub material: usize,
+    /// Indices of its particles in the scene's order.
+    pub particles: std::ops::Range<usize>,
+    pub mass: f64,
+}
+
+#[derive(Clone, Debug)]
+pub enum ProbeKind {
+    /// A field component reduced over a set of particles (by their index in the scene).
+    Field {
+        select: Option<Vec<bool>>,
+        field: FieldId,
+        pick: Pick,
+        reduce: String,
+        relative: bool,
+        /// Report this coordinate of the particle where `reduce` (min, max, abs_max) is reached.
+        locate: Option<usize>,
+    },
+    /// A named measurement (`scene::measure`).
+    Measure(Measure),
+}
+
+/// What a field probe reads of each particle's value.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Pick {
+    /// One stored component (`v.z` → `component = "z"`, `s.xy`, a scalar).
+    Component(usize),
+    /// The length of a vec (`component = "norm"`).
+    Norm,
+    /// √(3/2 s:s) of a deviatoric symtensor (`component = "von_mises"`), with the out-of-plane
+    /// diagonal of 1D and 2D implied by a zero trace.
+    VonMises,
+}
+
+#[derive(Clone, Debug)]
+pub struct ProbeSpec {
+    pub name: String,
+    pub kind: ProbeKind,
+    pub unit: String,
+    pub every: u64,
+}
+
+#[derive(Clone, Debug)]
+pub struct ResultSpec {
+    pub quantity: String,
+    pub probe: usize,
+    pub at: String,
+    pub from: Option<f64>,
+    pub to: Option<f64>,
+    pub scale: f64,
+    pub unit: String,
+    pub reference: Option<f64>,
+    pub source: Option<String>,
+    pub tolerance: Option<f64>,
+    pub tolerance_why: Option<String>,
+}
+
+pub struct Scene {
+    pub name: String,
+    pub title: String,
+    pub path: PathBuf,
+    pub model: Model,
+    pub spec: SceneSpec,
+    pub kernel: Option<String>,
+    pub particles: ParticleInput,
+    pub materials: Vec<MaterialInput>,
+    pub bodies: Vec<BodyInfo>,
+    pub mirrors: Vec<Mirror>,
+    pub config: RunConfig,
+    pub resolution: String,
+    pub dx: f64,
+    /// The resolution's `time_scale` (1: the paper's timing).
+    pub time_scale: f64,
+    /// Relative tolerance the CI test asserts for every result at this resolution, if given.
+    pub tolerance: Option<f64>,
+    pub output_interval: Option<f64>,
+    pub output_fields: Vec<FieldId>,
+    pub probes: Vec<ProbeSpec>,
+    pub results: Vec<ResultSpec>,
+    /// Per resolution name: its dx (for listings).
+    pub resolutions: Vec<(String, f64)>,
+}
