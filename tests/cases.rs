@@ -339,3 +339,19 @@ fn a_coordinate_beyond_the_cases_axes_is_an_error() {
     assert!(err.contains("C0002") && err.contains("component z"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A node list given as a region was dropped without a word and the case failed with no message.
+#[test]
+fn a_node_list_as_a_region_is_a_clear_error() {
+    let text = std::fs::read_to_string(case("rings_2d")).expect("case");
+    let dir = out_dir("nodes-region");
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::copy(case("rings_2d").with_extension("sph"), dir.join("rings_2d.sph")).unwrap();
+    let path = dir.join("rings_2d.toml");
+    let bad = format!("{text}\n[[constraints]]\nbody = \"left\"\nregion = {{ nodes = {{ file = \"grip.csv\" }} }}\n");
+    std::fs::write(&path, &bad).unwrap();
+    let err = prepare(&path, &Default::default()).err().map(|e| e.to_string()).expect("an error");
+    let line = bad.lines().position(|l| l.starts_with("region = { nodes")).unwrap() + 1;
+    assert!(err.contains("C0033") && err.contains(&format!("rings_2d.toml:{line}:")), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -991,6 +991,10 @@ fn primitive(s: &case::Shape, cx: &mut Ctx) -> Option<Primitive> {
         case::Shape::Polygon { vertices } => {
             Primitive::Polygon { vertices: cx.vertices(vertices, "polygon vertices")? }
         }
-        case::Shape::Nodes { .. } => return None,
+        // A body's node list is read by `place`; anywhere else it has no inside.
+        case::Shape::Nodes { file, .. } => {
+            cx.err(file.span(), "C0033", "a node list is the shape of a body, not a region: it has no inside", "here");
+            return None;
+        }
     })
 }
