@@ -281,13 +281,9 @@ pub fn cases_dir() -> PathBuf {
 /// A model or case file as given, or else a bundled case of that name (`pairsum plan cantilever`).
 pub fn find_input(path: &Path) -> PathBuf {
     if path.exists() {
-        return path.to_path_buf();
-    }
-    let case = find_case(&path.to_string_lossy());
-    if case.is_file() {
-        case
-    } else {
         path.to_path_buf()
+    } else {
+        find_case(&path.to_string_lossy())
     }
 }
 
@@ -520,7 +516,8 @@ fn run_emit(path: Option<&Path>, target: &str, out: Option<&Path>, dim: usize, a
             match write_wgsl(&src, 3, &gen.join(&sub), force) {
                 Ok(n) => eprintln!("{}: {n} kernels", gen.join(&sub).display()),
                 Err(e) => {
-                    eprintln!("error: {}: {e}", src.display());
+                    // Rendered diagnostics, or a refusal that names the directory.
+                    eprint!("{e}");
                     return 1;
                 }
             }
