@@ -18,6 +18,8 @@ pub struct Env {
     pub debug: u8,
     /// `PAIRSUM_NO_WIDE_SIMD`: the CPU backend keeps to its portable lane loops.
     pub no_wide_simd: bool,
+    /// `PAIRSUM_NO_JIT`: the CPU backend runs its neighbour loops as closures, not native code.
+    pub no_jit: bool,
     /// `PAIRSUM_GPU_MEMORY_LIMIT`: bytes the GPU backend may use (tests its out-of-memory path).
     pub gpu_memory_limit: Option<u64>,
     /// `PAIRSUM_WGSL_FAULT`: breaks the first generated kernel (tests the path of a rejected module).
@@ -36,6 +38,7 @@ impl Env {
             stdlib: var("PAIRSUM_STDLIB").map(PathBuf::from),
             debug: var("PAIRSUM_DEBUG").map(|v| if v == "2" { 2 } else { 1 }).unwrap_or(0),
             no_wide_simd: var("PAIRSUM_NO_WIDE_SIMD").is_some(),
+            no_jit: var("PAIRSUM_NO_JIT").is_some(),
             gpu_memory_limit: var("PAIRSUM_GPU_MEMORY_LIMIT").and_then(|v| v.parse().ok()),
             wgsl_fault: var("PAIRSUM_WGSL_FAULT").is_some(),
         }

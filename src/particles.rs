@@ -39,6 +39,10 @@ pub trait Real:
     fn min(self, o: Self) -> Self;
     fn max(self, o: Self) -> Self;
     fn is_finite(self) -> bool;
+    /// exp by the CPU backend's vectorisable recipe (`backend::cpu::math`), not libm.
+    fn lane_exp(self) -> Self;
+    /// The constants of that recipe in this precision.
+    const EXP: &'static crate::backend::cpu::math::ExpConsts;
     fn zero() -> Self {
         Self::from_f64(0.0)
     }
@@ -48,10 +52,15 @@ pub trait Real:
 }
 
 macro_rules! real {
-    ($t:ty, $name:expr) => {
+    ($t:ty, $name:expr, $exp:path, $consts:path) => {
         impl Real for $t {
             const BYTES: usize = std::mem::size_of::<$t>();
             const NAME: &'static str = $name;
+            const EXP: &'static crate::backend::cpu::math::ExpConsts = &$consts;
+            #[inline(always)]
+            fn lane_exp(self) -> Self {
+                $exp(self)
+            }
             #[inline(always)]
             fn from_f64(x: f64) -> Self {
                 x as $t
@@ -91,8 +100,8 @@ macro_rules! real {
         }
     };
 }
-real!(f32, "f32");
-real!(f64, "f64");
+real!(f32, "f32", crate::backend::cpu::math::exp_f32, crate::backend::cpu::math::EXP_F32);
+real!(f64, "f64", crate::backend::cpu::math::exp_f64, crate::backend::cpu::math::EXP_F64);
 
 /// Where a column has no row for a group.
 pub const ABSENT: isize = isize::MIN;

@@ -249,7 +249,9 @@ pub fn run_pass_chunk<T: Real>(
     // Lanes hold the neighbours of several particles of the chunk one after another, so that the
     // cost of running an operation is shared by more pairs; `segs` marks whose lanes are whose.
     let all_sources = (0..64).filter(|g| v.sources >> g & 1 == 1).count() >= sh_groups(sh);
+    let jit_cols = v.jit.as_ref().and_then(|jit| gathered_columns(&jit.gathers, sh.cols));
     let mut w = Writer {
+        jit_cols: jit_cols.as_deref(),
         v,
         sh,
         temps: &temp_views,
@@ -315,6 +317,8 @@ struct Writer<'a, 'b, T> {
     j: &'a mut Vec<u32>,
     sign: &'a mut Vec<T>,
     with_sign: bool,
+    /// Row 0 of each column the native pair program gathers (None: run the closures).
+    jit_cols: Option<&'a [*const T]>,
     slots: &'a mut Vec<T>,
     comp: &'a mut Vec<T>,
     /// Lanes filled, and where each particle's lanes start: (particle in chunk, first lane).
@@ -360,8 +364,18 @@ impl<T: Real> Writer<'_, '_, T> {
             }
         }
         let sign: &[T] = if self.with_sign { self.sign } else { &[] };
-        let ctx = self.sh.ctx(self.temps, self.chunk, self.j, sign, n);
-        v.pair.run(self.pair, &ctx);
+        match (&v.jit, self.jit_cols) {
+            (Some(jit), Some(cols)) => {
+                // SAFETY: the frame is the pair program's; j holds LANES rows of every gathered
+                // column (stale lanes past n are earlier, valid neighbours); the sign lanes exist
+                // whenever the case has mirrors, which is when the program reads them.
+                unsafe { jit.run(self.pair, self.j, cols, n, sign.as_ptr(), self.sh.time, self.sh.dt) }
+            }
+            _ => {
+                let ctx = self.sh.ctx(self.temps, self.chunk, self.j, sign, n);
+                v.pair.run(self.pair, &ctx);
+            }
+        }
         for (a, s) in v.pair.accums.iter().zip(&v.accum_slot) {
             for (q, &(k, start)) in segs.iter().enumerate() {
                 let end = seg_end(q);
@@ -379,6 +393,17 @@ impl<T: Real> Writer<'_, '_, T> {
         self.n = 0;
         self.segs.clear();
     }
+}
+
+/// Row 0 of each gathered column, when every one is stored with one base on all groups.
+fn gathered_columns<T>(fields: &[crate::ir::FieldId], cols: &[Option<ColView<T>>]) -> Option<Vec<*const T>> {
+    fields
+        .iter()
+        .map(|f| {
+            let c = cols[f.index()].as_ref()?;
+            Some(c.ptr.wrapping_offset(c.uniform? * c.comps as isize) as *const T)
+        })
+        .collect()
 }
 
 fn sh_groups<T>(sh: &Shared<T>) -> usize {

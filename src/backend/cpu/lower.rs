@@ -337,8 +337,14 @@ pub enum Mode {
     Pair,
 }
 
+/// Parameter values known when the programs are compiled, by parameter id: `Some` when every
+/// material with particles has the same value, so that the parameter is a constant of the run and
+/// folds like a literal (`f^art_n` with `art_n = 4` becomes three multiplications).
+pub type KnownParams = [Option<Vec<f64>>];
+
 pub struct Lowerer<'a> {
     pub model: &'a Model,
+    known: &'a KnownParams,
     pub kernel: &'a Kernel,
     pub dim: usize,
     pub g: Graph,
@@ -354,6 +360,7 @@ pub struct Lowerer<'a> {
 impl<'a> Lowerer<'a> {
     pub fn new(
         model: &'a Model,
+        known: &'a KnownParams,
         kernel: &'a Kernel,
         dim: usize,
         mode: Mode,
@@ -361,6 +368,7 @@ impl<'a> Lowerer<'a> {
     ) -> Self {
         Lowerer {
             model,
+            known,
             kernel,
             dim,
             g: Graph::default(),
@@ -456,6 +464,9 @@ impl<'a> Lowerer<'a> {
 
     fn param(&mut self, p: ParamId, side: Side) -> Val {
         let shape = self.model.params[p.index()].ty.shape;
+        if let Some(values) = self.known.get(p.index()).and_then(|v| v.as_ref()) {
+            return self.expand(shape, |g, k| g.c(values[k]));
+        }
         self.expand(shape, |g, k| g.intern(Node::Param { param: p, comp: k as u16, side }))
     }
 

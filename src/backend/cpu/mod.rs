@@ -3,6 +3,8 @@
 //! cell list as the neighbour iterator (`exec`).
 
 mod exec;
+pub mod jit;
+pub mod math;
 pub mod lower;
 pub mod program;
 
@@ -12,7 +14,7 @@ use crate::ir::{FieldId, GroupId, Reduce, Storage};
 use crate::particles::{Real, Store};
 use crate::schedule::{Block, Plan};
 use exec::{chunks, views, Chunk, Neighbours, Scratch, Shared};
-use lower::{Effect, Id, Lowerer, Mode, Node};
+use lower::{Effect, Id, KnownParams, Lowerer, Mode, Node};
 use program::{compile, live_nodes, Pinned, Program, LANES};
 use rayon::prelude::*;
 
@@ -46,6 +48,8 @@ pub struct Variant<T> {
     /// (register in `dest`, register in `pair`) of every value broadcast to the neighbour lanes.
     pub exports: Vec<(usize, usize)>,
     pub pair: Program<T>,
+    /// The pair program as native code (`jit.rs`), when it compiled.
+    pub jit: Option<jit::JitPair<T>>,
     pub pair_regs: PairRegs,
     pub slots: Vec<Slot>,
     /// For each of `pair.accums`, its slot.
@@ -76,9 +80,9 @@ fn is_stored(plan: &Plan, g: usize) -> impl Fn(FieldId) -> bool + '_ {
 }
 
 /// A particle program for group `g` from blocks run in order.
-fn particle_program<T: Real>(plan: &Plan, g: usize, blocks: &[Block]) -> Option<Program<T>> {
+fn particle_program<T: Real>(plan: &Plan, known: &KnownParams, g: usize, blocks: &[Block]) -> Option<Program<T>> {
     let kernel = &plan.model.kernels[plan.kernel.index()];
-    let mut lw = Lowerer::new(&plan.model, kernel, plan.dim, Mode::Particle, Box::new(is_stored(plan, g)));
+    let mut lw = Lowerer::new(&plan.model, known, kernel, plan.dim, Mode::Particle, Box::new(is_stored(plan, g)));
     let mut any = false;
     for b in blocks.iter().filter(|b| b.dest.contains(GroupId(g as u32))) {
         lw.block(&b.stmts, None);
@@ -92,6 +96,24 @@ fn particle_program<T: Real>(plan: &Plan, g: usize, blocks: &[Block]) -> Option<
     let roots: Vec<Id> = lw.effects.iter().map(effect_value).collect();
     let nodes = live_nodes(&lw.g, roots);
     Some(compile(&plan.model, plan.dim, &lw.g, &nodes, &lw.effects, &Pinned { preset: vec![], exports: vec![] }))
+}
+
+/// The parameters every material with particles binds to the same value (see [`KnownParams`]).
+fn known_params<T: Real>(model: &crate::ir::Model, store: &Store<T>) -> Vec<Option<Vec<f64>>> {
+    let mut materials: Vec<u32> = store.material.clone();
+    materials.sort_unstable();
+    materials.dedup();
+    let table = &store.params;
+    (0..model.params.len())
+        .map(|p| {
+            let p = crate::ir::ParamId(p as u32);
+            let values = |m: u32| -> Vec<f64> {
+                (0..table.comps[p.index()]).map(|c| table.get(m as usize, p, c).to_f64()).collect()
+            };
+            let first = values(*materials.first()?);
+            materials.iter().all(|m| values(*m) == first).then_some(first)
+        })
+        .collect()
 }
 
 fn effect_value(e: &Effect) -> Id {
@@ -121,13 +143,18 @@ fn varying(node: &Node, flags: &[bool]) -> bool {
     }
 }
 
-fn compile_variant<T: Real>(plan: &Plan, v: &crate::schedule::PassVariant) -> Variant<T> {
+fn compile_variant<T: Real>(
+    plan: &Plan,
+    known: &KnownParams,
+    signs: bool,
+    v: &crate::schedule::PassVariant,
+) -> Variant<T> {
     let g = v.group.index();
     let model = &plan.model;
     let kernel = &model.kernels[plan.kernel.index()];
     let dim = plan.dim;
     // The neighbour loops of every pair sum of the pass, one graph.
-    let mut lw = Lowerer::new(model, kernel, dim, Mode::Pair, Box::new(|_| true));
+    let mut lw = Lowerer::new(model, known, kernel, dim, Mode::Pair, Box::new(|_| true));
     let mut init_blocks = vec![];
     let mut slots: Vec<Slot> = vec![];
     let mut temps = vec![];
@@ -157,7 +184,7 @@ fn compile_variant<T: Real>(plan: &Plan, v: &crate::schedule::PassVariant) -> Va
     }
     // Initial accumulator values (`init` blocks), as a particle program whose stores are read.
     let init = if init_blocks.iter().any(|b| !b.stmts.is_empty()) {
-        let mut il = Lowerer::new(model, kernel, dim, Mode::Particle, Box::new(|_| true));
+        let mut il = Lowerer::new(model, known, kernel, dim, Mode::Particle, Box::new(|_| true));
         for b in &init_blocks {
             il.block(&b.stmts, None);
         }
@@ -243,13 +270,35 @@ fn compile_variant<T: Real>(plan: &Plan, v: &crate::schedule::PassVariant) -> Va
         }
     }
     let pair: Program<T> =
-        compile(model, dim, graph, &pair_nodes, &accum_effects, &Pinned { preset: preset_regs, exports: vec![] });
+        compile(model, dim, graph, &pair_nodes, &accum_effects, &Pinned { preset: preset_regs.clone(), exports: vec![] });
+    let jit = jit::enabled()
+        .then(|| {
+            let outputs: Vec<(Id, usize)> =
+                accum_effects.iter().zip(&pair.accums).map(|(e, a)| (effect_value(e), a.reg)).collect();
+            let spec = jit::PairSpec {
+                model,
+                dim,
+                graph,
+                nodes: &pair_nodes,
+                preset: &preset_regs,
+                outputs: &outputs,
+                signs,
+            };
+            jit::compile_pair::<T>(&spec)
+                .map_err(|why| {
+                    if crate::config::env().debug >= 1 {
+                        eprintln!("pass on group {g}: closures, not native code ({why})");
+                    }
+                })
+                .ok()
+        })
+        .flatten();
     let accum_slot = pair
         .accums
         .iter()
         .map(|a| slots.iter().position(|s| s.field == a.field && s.comp == a.comp).expect("slot of every accum"))
         .collect();
-    let tail = particle_program(plan, g, &plan.tail_blocks(&v.tail));
+    let tail = particle_program(plan, known, g, &plan.tail_blocks(&v.tail));
     Variant {
         group: g,
         sources: v.sources.0,
@@ -257,6 +306,7 @@ fn compile_variant<T: Real>(plan: &Plan, v: &crate::schedule::PassVariant) -> Va
         dest,
         exports: bcast,
         pair,
+        jit,
         pair_regs,
         slots,
         accum_slot,
@@ -268,6 +318,21 @@ fn compile_variant<T: Real>(plan: &Plan, v: &crate::schedule::PassVariant) -> Va
 impl<T: Real> CpuBackend<T> {
     /// Compiles every block of the plan for every group present. The store must hold the
     /// particles (sorted group-major) with the scene's fields and the material parameters set.
+    /// The same backend with every neighbour loop run by closures (the reference the JIT's
+    /// native code is tested against, and `PAIRSUM_NO_JIT`'s behaviour).
+    pub fn without_jit(mut self) -> Self {
+        for v in self.passes.iter_mut().flatten() {
+            v.jit = None;
+        }
+        self
+    }
+
+    /// How many pass variants run as native code, of how many.
+    pub fn native_passes(&self) -> (usize, usize) {
+        let all = self.passes.iter().flatten();
+        (all.clone().filter(|v| v.jit.is_some()).count(), all.count())
+    }
+
     pub fn new(plan: Plan, store: Store<T>, mirrors: Vec<Mirror>) -> Result<CpuBackend<T>, BackendError> {
         let x = plan.model.field_id("x").ok_or_else(|| BackendError("the model has no position field `x`".into()))?;
         let h = plan.model.field_id("h").ok_or_else(|| BackendError("the model has no smoothing length `h`".into()))?;
@@ -276,23 +341,24 @@ impl<T: Real> CpuBackend<T> {
         let per_group = |f: &dyn Fn(usize) -> Option<Program<T>>| -> Vec<Option<Program<T>>> {
             (0..n_groups).map(|g| if present.contains(&g) { f(g) } else { None }).collect()
         };
+        let known = known_params(&plan.model, &store);
         let passes: Vec<Vec<Variant<T>>> =
-            plan.passes.iter().map(|p| p.variants.iter().map(|v| compile_variant(&plan, v)).collect()).collect();
+            plan.passes.iter().map(|p| p.variants.iter().map(|v| compile_variant(&plan, &known, !mirrors.is_empty(), v)).collect()).collect();
         let mut stages = vec![];
         for st in &plan.stages {
             let mut blocks = st.updates.clone();
             blocks.extend(eq_blocks(&plan, &st.corrections));
             blocks.extend(eq_blocks(&plan, &st.derived));
-            stages.push(per_group(&|g| particle_program(&plan, g, &blocks)));
+            stages.push(per_group(&|g| particle_program(&plan, &known, g, &blocks)));
         }
-        let derived = per_group(&|g| particle_program(&plan, g, &eq_blocks(&plan, &plan.derived)));
+        let derived = per_group(&|g| particle_program(&plan, &known, g, &eq_blocks(&plan, &plan.derived)));
         let reds = timestep::reductions(&plan.model, &plan.timesteps);
         let kernel = &plan.model.kernels[plan.kernel.index()];
         let reductions = per_group(&|_| {
             if reds.is_empty() {
                 return None;
             }
-            let mut lw = Lowerer::new(&plan.model, kernel, plan.dim, Mode::Particle, Box::new(|_| true));
+            let mut lw = Lowerer::new(&plan.model, &known, kernel, plan.dim, Mode::Particle, Box::new(|_| true));
             for (k, (r, e)) in reds.iter().enumerate() {
                 lw.reduction(k, *r, e);
             }

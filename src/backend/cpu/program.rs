@@ -202,12 +202,32 @@ fn truth<T: Real>(c: bool) -> T {
     }
 }
 
+/// min and max as the JIT computes them: NaN loses to a number, as in `f64::min`; of two equal
+/// values (±0) the first.
+#[inline(always)]
+pub fn lane_min<T: Real>(x: T, y: T) -> T {
+    if x != x || y < x {
+        y
+    } else {
+        x
+    }
+}
+
+#[inline(always)]
+pub fn lane_max<T: Real>(x: T, y: T) -> T {
+    if x != x || y > x {
+        y
+    } else {
+        x
+    }
+}
+
 fn un_instr<T: Real>(op: Un, o: usize, a: usize) -> Instr<T> {
     match op {
         Un::Neg => lanes1!(o, a, |x| -x),
         Un::Not => lanes1!(o, a, |x| truth(x == T::zero())),
         Un::Sqrt => lanes1!(o, a, |x| x.sqrt()),
-        Un::Exp => lanes1!(o, a, |x| x.exp()),
+        Un::Exp => lanes1!(o, a, |x| x.lane_exp()),
         Un::Ln => lanes1!(o, a, |x| x.ln()),
         Un::Abs => lanes1!(o, a, |x| x.abs()),
     }
@@ -220,8 +240,8 @@ fn bin_instr<T: Real>(op: Bin, o: usize, a: usize, b: usize) -> Instr<T> {
         Bin::Mul => lanes2!(o, a, b, |x, y| x * y),
         Bin::Div => lanes2!(o, a, b, |x, y| x / y),
         Bin::Pow => lanes2!(o, a, b, |x, y| x.powf(y)),
-        Bin::Min => lanes2!(o, a, b, |x, y| x.min(y)),
-        Bin::Max => lanes2!(o, a, b, |x, y| x.max(y)),
+        Bin::Min => lanes2!(o, a, b, |x, y| lane_min(x, y)),
+        Bin::Max => lanes2!(o, a, b, |x, y| lane_max(x, y)),
         Bin::Lt => lanes2!(o, a, b, |x, y| truth(x < y)),
         Bin::Le => lanes2!(o, a, b, |x, y| truth(x <= y)),
         Bin::Gt => lanes2!(o, a, b, |x, y| truth(x > y)),

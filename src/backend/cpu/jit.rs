@@ -1,0 +1,470 @@
+//! Native code for the neighbour loop's pair program, generated with Cranelift.
+//!
+//! The closure programs (`program.rs`) pay for each operation with a call and a round trip of its
+//! lanes through memory. The JIT compiles the same scalar SSA graph into one function that runs
+//! the whole program on a SIMD vector of neighbours (2 f64 or 4 f32) with every intermediate in a
+//! register, and writes only the accumulated values back into the frame, where the closure path
+//! would have left them. So it is a drop-in replacement for `Program::run` on the pair program:
+//! same frame in, same registers out, and the same operations in the same order (no fused
+//! multiply–adds, min/max and exp as `program.rs` computes them), hence bit-identical results —
+//! `tests/jit.rs` checks that on every stdlib model.
+//!
+//! A program with an operation the JIT does not emit (`ln`, `pow` with a varying exponent, a
+//! parameter or group test at j) keeps its closures; so does a pass whose gathered columns are not
+//! stored with one base on every group. `PAIRSUM_NO_JIT=1` turns the JIT off.
+
+use super::lower::{Bin, Graph, Id, Node, Un};
+use super::math::ExpConsts;
+use super::program::LANES;
+use crate::ir::{FieldId, Global, Model, Shape, Side};
+use crate::particles::Real;
+use cranelift_codegen::ir::condcodes::FloatCC;
+use cranelift_codegen::ir::{types, AbiParam, InstBuilder, MachMemFlags as MemFlags, Type, UserFuncName, Value};
+use cranelift_codegen::settings::{self, Configurable};
+use cranelift_frontend::{FunctionBuilder, FunctionBuilderContext};
+use cranelift_jit::{JITBuilder, JITModule};
+use cranelift_module::{default_libcall_names, Linkage, Module};
+use std::collections::HashMap;
+
+/// `fn(frame, j, columns, n, sign, time, dt)`: runs the pair program on lanes `0..n` (rounded up
+/// to whole vectors) of the frame.
+type PairFn<T> = unsafe extern "C" fn(*mut T, *const u32, *const *const T, usize, *const T, T, T);
+
+/// A compiled pair program.
+pub struct JitPair<T> {
+    func: PairFn<T>,
+    /// The fields it gathers at j, in the order of the column pointers it expects.
+    pub gathers: Vec<FieldId>,
+    _code: Code,
+}
+
+/// The module owning the generated code; freed with the program.
+struct Code(Option<JITModule>);
+
+// SAFETY: the module is only touched on drop; the code it owns is immutable and re-entrant.
+unsafe impl Send for Code {}
+unsafe impl Sync for Code {}
+
+impl Drop for Code {
+    fn drop(&mut self) {
+        if let Some(m) = self.0.take() {
+            // SAFETY: the function pointer into this memory is dropped with the JitPair.
+            unsafe { m.free_memory() };
+        }
+    }
+}
+
+impl<T: Real> JitPair<T> {
+    /// Runs the program. `cols[k]` points at row 0 of `gathers[k]`'s column; `sign` holds the
+    /// per-axis mirror signs (3 × LANES) when the program was compiled with them.
+    ///
+    /// # Safety
+    /// `frame` is the program's frame (`n_regs × LANES`), `j[..LANES]` are rows of every gathered
+    /// column, and `sign` is valid when the program uses it.
+    pub unsafe fn run(&self, frame: &mut [T], j: &[u32], cols: &[*const T], n: usize, sign: *const T, t: T, dt: T) {
+        debug_assert!(j.len() >= LANES && cols.len() == self.gathers.len());
+        unsafe { (self.func)(frame.as_mut_ptr(), j.as_ptr(), cols.as_ptr(), n, sign, t, dt) }
+    }
+}
+
+/// What the JIT needs to know of the program: its graph and nodes in order, where the caller
+/// puts the preset values, and where the accumulated values must end up.
+pub struct PairSpec<'a> {
+    pub model: &'a Model,
+    pub dim: usize,
+    pub graph: &'a Graph,
+    pub nodes: &'a [Id],
+    pub preset: &'a [(Id, usize)],
+    pub outputs: &'a [(Id, usize)],
+    /// Whether lanes carry mirror signs (the case has symmetry planes).
+    pub signs: bool,
+}
+
+/// Whether the JIT is on (it is unless `PAIRSUM_NO_JIT` is set or the host has no backend).
+pub fn enabled() -> bool {
+    !crate::config::env().no_jit && cranelift_native::builder().is_ok()
+}
+
+/// Compiles the pair program, or says why not.
+pub fn compile_pair<T: Real>(spec: &PairSpec) -> Result<JitPair<T>, String> {
+    for id in spec.nodes {
+        supported(&spec.graph.nodes[*id as usize])?;
+    }
+    let mut flags = settings::builder();
+    flags.set("opt_level", "speed").map_err(|e| e.to_string())?;
+    flags.set("use_colocated_libcalls", "false").map_err(|e| e.to_string())?;
+    flags.set("is_pic", "false").map_err(|e| e.to_string())?;
+    let isa = cranelift_native::builder()?.finish(settings::Flags::new(flags)).map_err(|e| e.to_string())?;
+    let mut module = JITModule::new(JITBuilder::with_isa(isa, default_libcall_names()));
+    let ptr = module.target_config().pointer_type();
+    let real = if T::BYTES == 8 { types::F64 } else { types::F32 };
+    let mut ctx = module.make_context();
+    for t in [ptr, ptr, ptr, ptr, ptr, real, real] {
+        ctx.func.signature.params.push(AbiParam::new(t));
+    }
+    let id = module.declare_function("pair", Linkage::Local, &ctx.func.signature).map_err(|e| e.to_string())?;
+    ctx.func.name = UserFuncName::user(0, id.as_u32());
+    let mut fctx = FunctionBuilderContext::new();
+    let config = module.target_config();
+    let gathers = {
+        let b = FunctionBuilder::new(&mut ctx.func, &mut fctx);
+        Emitter::<T>::new(b, spec, ptr).emit(config)
+    };
+    module.define_function(id, &mut ctx).map_err(|e| format!("{e:?}"))?;
+    module.clear_context(&mut ctx);
+    module.finalize_definitions().map_err(|e| e.to_string())?;
+    let code = module.get_finalized_function(id);
+    // SAFETY: the function was declared with exactly this signature (C calling convention).
+    let func = unsafe { std::mem::transmute::<*const u8, PairFn<T>>(code) };
+    Ok(JitPair { func, gathers, _code: Code(Some(module)) })
+}
+
+fn supported(node: &Node) -> Result<(), String> {
+    match node {
+        Node::Un(Un::Ln, _) => Err("ln".into()),
+        Node::Bin(Bin::Pow, _, _) => Err("pow with a varying exponent".into()),
+        Node::Param { side: Side::J, .. } => Err("a material parameter of particle j".into()),
+        Node::InGroup(..) => Err("a group test".into()),
+        Node::Load { side: Side::I, .. } | Node::Param { side: Side::I, .. } => {
+            Err("a value of particle i read per lane".into())
+        }
+        _ => Ok(()),
+    }
+}
+
+/// The axes whose mirror signs multiply a gathered component (as `program.rs` applies them).
+fn sign_axes(shape: Shape, dim: usize, comp: usize) -> Vec<usize> {
+    match shape {
+        Shape::Scalar | Shape::Bool => vec![],
+        Shape::Vec => vec![comp],
+        _ => {
+            let (a, b) = crate::ir::component_indices(shape, dim)[comp];
+            if a == b {
+                vec![]
+            } else {
+                vec![a, b]
+            }
+        }
+    }
+}
+
+struct Emitter<'a, 'b, T> {
+    b: FunctionBuilder<'b>,
+    spec: &'a PairSpec<'a>,
+    ptr: Type,
+    real: Type,
+    vec: Type,
+    int: Type,
+    width: usize,
+    consts: HashMap<u64, Value>,
+    int_consts: HashMap<i64, Value>,
+    _t: std::marker::PhantomData<T>,
+}
+
+impl<'a, 'b, T: Real> Emitter<'a, 'b, T> {
+    fn new(b: FunctionBuilder<'b>, spec: &'a PairSpec<'a>, ptr: Type) -> Self {
+        let (real, vec, int) = if T::BYTES == 8 {
+            (types::F64, types::F64X2, types::I64X2)
+        } else {
+            (types::F32, types::F32X4, types::I32X4)
+        };
+        Emitter {
+            b,
+            spec,
+            ptr,
+            real,
+            vec,
+            int,
+            width: 16 / T::BYTES,
+            consts: HashMap::new(),
+            int_consts: HashMap::new(),
+            _t: std::marker::PhantomData,
+        }
+    }
+
+    fn mem() -> MemFlags {
+        MemFlags::new().with_notrap()
+    }
+
+    /// A vector of the constant `v` (rounded to T), made once in the entry block.
+    fn splat(&mut self, v: f64) -> Value {
+        let t = T::from_f64(v);
+        let bits = t.to_f64().to_bits();
+        if let Some(x) = self.consts.get(&bits) {
+            return *x;
+        }
+        let s = if T::BYTES == 8 { self.b.ins().f64const(t.to_f64()) } else { self.b.ins().f32const(t.to_f64() as f32) };
+        let x = self.b.ins().splat(self.vec, s);
+        self.consts.insert(bits, x);
+        x
+    }
+
+    fn splat_int(&mut self, v: i64) -> Value {
+        if let Some(x) = self.int_consts.get(&v) {
+            return *x;
+        }
+        let lane = self.int.lane_type();
+        let s = self.b.ins().iconst(lane, if T::BYTES == 8 { v } else { v as i32 as i64 });
+        let x = self.b.ins().splat(self.int, s);
+        self.int_consts.insert(v, x);
+        x
+    }
+
+    fn to_float(&mut self, mask: Value) -> Value {
+        self.b.ins().bitcast(self.vec, MemFlags::new(), mask)
+    }
+
+    fn to_int(&mut self, x: Value) -> Value {
+        self.b.ins().bitcast(self.int, MemFlags::new(), x)
+    }
+
+    /// 1 where the mask is set, else 0.
+    fn truth(&mut self, mask: Value, one: Value, zero: Value) -> Value {
+        let m = self.to_float(mask);
+        self.b.ins().bitselect(m, one, zero)
+    }
+
+    fn select(&mut self, mask: Value, a: Value, b: Value) -> Value {
+        let m = self.to_float(mask);
+        self.b.ins().bitselect(m, a, b)
+    }
+
+    /// Emits the function; returns the gathered fields in column-pointer order.
+    fn emit(mut self, config: cranelift_codegen::isa::TargetFrontendConfig) -> Vec<FieldId> {
+        let spec = self.spec;
+        let entry = self.b.create_block();
+        self.b.append_block_params_for_function_params(entry);
+        self.b.switch_to_block(entry);
+        let p = self.b.block_params(entry).to_vec();
+        let (frame, jptr, cols, n, sign, time, dt) = (p[0], p[1], p[2], p[3], p[4], p[5], p[6]);
+        // Loop-invariant values: constants, globals, column pointers.
+        let one = self.splat(1.0);
+        let zero = self.splat(0.0);
+        let time = self.b.ins().splat(self.vec, time);
+        let dt = self.b.ins().splat(self.vec, dt);
+        let mut gathers: Vec<FieldId> = vec![];
+        for id in spec.nodes {
+            if let Node::Load { field, side: Side::J, .. } = spec.graph.nodes[*id as usize] {
+                if !gathers.contains(&field) {
+                    gathers.push(field);
+                }
+            }
+        }
+        let col_ptrs: Vec<Value> = (0..gathers.len())
+            .map(|k| self.b.ins().load(self.ptr, Self::mem(), cols, (k * self.ptr.bytes() as usize) as i32))
+            .collect();
+        let mut vals: HashMap<Id, Value> = HashMap::new();
+        for id in spec.nodes {
+            if let Node::Const(bits) = spec.graph.nodes[*id as usize] {
+                let v = self.splat(f64::from_bits(bits));
+                vals.insert(*id, v);
+            }
+        }
+        let head = self.b.create_block();
+        let body = self.b.create_block();
+        let exit = self.b.create_block();
+        let base0 = self.b.ins().iconst(self.ptr, 0);
+        self.b.ins().jump(head, &[base0.into()]);
+
+        self.b.switch_to_block(head);
+        let base = self.b.append_block_param(head, self.ptr);
+        let more = self.b.ins().icmp(cranelift_codegen::ir::condcodes::IntCC::UnsignedLessThan, base, n);
+        self.b.ins().brif(more, body, &[], exit, &[]);
+
+        self.b.switch_to_block(body);
+        let bytes = T::BYTES as i64;
+        // Byte offset of lane `base` within a register.
+        let lane_off = self.b.ins().imul_imm_s(base, bytes);
+        let lane_addr = self.b.ins().iadd(frame, lane_off);
+        let reg_addr = |r: usize| (r * LANES * T::BYTES) as i32;
+        for (id, r) in spec.preset {
+            if (*id as usize) < spec.graph.nodes.len() {
+                let v = self.b.ins().load(self.vec, Self::mem(), lane_addr, reg_addr(*r));
+                vals.insert(*id, v);
+            }
+        }
+        // The neighbour index of each lane, widened to a pointer.
+        let j_off = self.b.ins().imul_imm_s(base, 4);
+        let j_addr = self.b.ins().iadd(jptr, j_off);
+        let js: Vec<Value> = (0..self.width)
+            .map(|k| {
+                let j = self.b.ins().uload32(Self::mem(), j_addr, (4 * k) as i32);
+                if self.ptr == types::I32 {
+                    self.b.ins().ireduce(types::I32, j)
+                } else {
+                    j
+                }
+            })
+            .collect();
+        let mut rows: HashMap<FieldId, Vec<Value>> = HashMap::new();
+        let sign_addr = if spec.signs {
+            let off = self.b.ins().imul_imm_s(base, bytes);
+            Some(self.b.ins().iadd(sign, off))
+        } else {
+            None
+        };
+        for id in spec.nodes {
+            if vals.contains_key(id) {
+                continue;
+            }
+            let node = spec.graph.nodes[*id as usize];
+            let v = match node {
+                Node::Const(_) | Node::PairX(_) | Node::PairR | Node::PairH => {
+                    unreachable!("constants and pair values are preset")
+                }
+                Node::Global(g) => match g {
+                    Global::Time => time,
+                    Global::Dt => dt,
+                    Global::Dim => self.splat(spec.dim as f64),
+                },
+                Node::Load { field, comp, side: Side::J } => {
+                    let comps = crate::ir::components(spec.model.field(field).ty.shape, spec.dim);
+                    let slot = gathers.iter().position(|f| *f == field).expect("gathered field");
+                    let row = match rows.get(&field) {
+                        Some(r) => r.clone(),
+                        None => {
+                            let stride = (comps * T::BYTES) as i64;
+                            let r: Vec<Value> = js
+                                .iter()
+                                .map(|j| {
+                                    let off = self.b.ins().imul_imm_s(*j, stride);
+                                    self.b.ins().iadd(col_ptrs[slot], off)
+                                })
+                                .collect();
+                            rows.insert(field, r.clone());
+                            r
+                        }
+                    };
+                    let off = (comp as usize * T::BYTES) as i32;
+                    let first = self.b.ins().load(self.real, Self::mem(), row[0], off);
+                    let mut v = self.b.ins().scalar_to_vector(self.vec, first);
+                    for (k, addr) in row.iter().enumerate().skip(1) {
+                        let x = self.b.ins().load(self.real, Self::mem(), *addr, off);
+                        v = self.b.ins().insertlane(v, x, k as u8);
+                    }
+                    if let Some(sa) = sign_addr {
+                        for a in sign_axes(spec.model.field(field).ty.shape, spec.dim, comp as usize) {
+                            let s = self.b.ins().load(self.vec, Self::mem(), sa, (a * LANES * T::BYTES) as i32);
+                            v = self.b.ins().fmul(v, s);
+                        }
+                    }
+                    v
+                }
+                Node::Un(op, a) => {
+                    let a = vals[&a];
+                    match op {
+                        Un::Neg => self.b.ins().fneg(a),
+                        Un::Abs => self.b.ins().fabs(a),
+                        Un::Sqrt => self.b.ins().sqrt(a),
+                        Un::Not => {
+                            let m = self.b.ins().fcmp(FloatCC::Equal, a, zero);
+                            self.truth(m, one, zero)
+                        }
+                        Un::Exp => self.exp(a, T::EXP),
+                        Un::Ln => unreachable!("checked by `supported`"),
+                    }
+                }
+                Node::Bin(op, a, c) => {
+                    let (a, c) = (vals[&a], vals[&c]);
+                    self.bin(op, a, c, one, zero)
+                }
+                Node::Select(c, a, e) => {
+                    let m = self.b.ins().fcmp(FloatCC::NotEqual, vals[&c], zero);
+                    self.select(m, vals[&a], vals[&e])
+                }
+                Node::Load { .. } | Node::Param { .. } | Node::InGroup(..) => unreachable!("checked by `supported`"),
+            };
+            vals.insert(*id, v);
+        }
+        for (id, r) in spec.outputs {
+            self.b.ins().store(Self::mem(), vals[id], lane_addr, reg_addr(*r));
+        }
+        let next = self.b.ins().iadd_imm_s(base, self.width as i64);
+        self.b.ins().jump(head, &[next.into()]);
+
+        self.b.switch_to_block(exit);
+        self.b.ins().return_(&[]);
+        self.b.seal_all_blocks();
+        self.b.finalize(config);
+        gathers
+    }
+
+    fn bin(&mut self, op: Bin, a: Value, c: Value, one: Value, zero: Value) -> Value {
+        let cmp = |e: &mut Self, cc: FloatCC| {
+            let m = e.b.ins().fcmp(cc, a, c);
+            e.truth(m, one, zero)
+        };
+        match op {
+            Bin::Add => self.b.ins().fadd(a, c),
+            Bin::Sub => self.b.ins().fsub(a, c),
+            Bin::Mul => self.b.ins().fmul(a, c),
+            Bin::Div => self.b.ins().fdiv(a, c),
+            Bin::Lt => cmp(self, FloatCC::LessThan),
+            Bin::Le => cmp(self, FloatCC::LessThanOrEqual),
+            Bin::Gt => cmp(self, FloatCC::GreaterThan),
+            Bin::Ge => cmp(self, FloatCC::GreaterThanOrEqual),
+            Bin::Eq => cmp(self, FloatCC::Equal),
+            Bin::Ne => cmp(self, FloatCC::NotEqual),
+            Bin::And | Bin::Or => {
+                let x = self.b.ins().fcmp(FloatCC::NotEqual, a, zero);
+                let y = self.b.ins().fcmp(FloatCC::NotEqual, c, zero);
+                let m = if op == Bin::And { self.b.ins().band(x, y) } else { self.b.ins().bor(x, y) };
+                self.truth(m, one, zero)
+            }
+            // program::lane_min / lane_max: y when x is NaN or y is beyond x, else x.
+            Bin::Min | Bin::Max => {
+                let nan = self.b.ins().fcmp(FloatCC::Unordered, a, a);
+                let cc = if op == Bin::Min { FloatCC::LessThan } else { FloatCC::GreaterThan };
+                let beyond = self.b.ins().fcmp(cc, c, a);
+                let m = self.b.ins().bor(nan, beyond);
+                self.select(m, c, a)
+            }
+            Bin::Pow => unreachable!("checked by `supported`"),
+        }
+    }
+
+    /// `math::exp_f64` / `exp_f32`, operation for operation.
+    fn exp(&mut self, x: Value, k: &ExpConsts) -> Value {
+        let lo = self.splat(k.lo);
+        let hi = self.splat(k.hi);
+        let below = self.b.ins().fcmp(FloatCC::LessThan, x, lo);
+        let above = self.b.ins().fcmp(FloatCC::GreaterThan, x, hi);
+        let x = self.select(above, hi, x);
+        let x = self.select(below, lo, x);
+        let magic = self.splat(k.magic);
+        let log2e = self.splat(k.log2e);
+        let t = self.b.ins().fmul(x, log2e);
+        let t = self.b.ins().fadd(t, magic);
+        let nf = self.b.ins().fsub(t, magic);
+        let (ln2_hi, ln2_lo) = (self.splat(k.ln2_hi), self.splat(k.ln2_lo));
+        let a = self.b.ins().fmul(nf, ln2_hi);
+        let r = self.b.ins().fsub(x, a);
+        let a = self.b.ins().fmul(nf, ln2_lo);
+        let r = self.b.ins().fsub(r, a);
+        let c = k.coeffs;
+        let mut p = self.splat(c[c.len() - 1]);
+        for ci in c[..c.len() - 1].iter().rev() {
+            let ci = self.splat(*ci);
+            p = self.b.ins().fmul(p, r);
+            p = self.b.ins().fadd(p, ci);
+        }
+        let magic_bits = if T::BYTES == 8 { k.magic.to_bits() as i64 } else { (k.magic as f32).to_bits() as i64 };
+        let magic_int = self.splat_int(magic_bits);
+        let t_int = self.to_int(t);
+        let n = self.b.ins().isub(t_int, magic_int);
+        let zero = self.splat(0.0);
+        let negative = self.b.ins().fcmp(FloatCC::LessThan, x, zero);
+        let (up, down) = (self.splat_int(k.margin), self.splat_int(-k.margin));
+        let m = self.b.ins().bitselect(negative, up, down);
+        let bias = self.splat_int(k.bias);
+        let e1 = self.b.ins().iadd(n, m);
+        let e1 = self.b.ins().iadd(e1, bias);
+        let e1 = self.b.ins().ishl_imm_u(e1, k.mantissa as i64);
+        let e2 = self.b.ins().isub(bias, m);
+        let e2 = self.b.ins().ishl_imm_u(e2, k.mantissa as i64);
+        let s1 = self.to_float(e1);
+        let s2 = self.to_float(e2);
+        let y = self.b.ins().fmul(p, s1);
+        self.b.ins().fmul(y, s2)
+    }
+}
