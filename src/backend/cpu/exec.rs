@@ -174,10 +174,27 @@ fn fold(r: Reduce, a: f64, b: f64) -> f64 {
 #[inline(always)]
 fn fold_t<T: Real>(r: Reduce, a: T, lanes: &[T]) -> T {
     match r {
-        Reduce::Sum => lanes.iter().fold(a, |s, x| s + *x),
+        Reduce::Sum => a + sum_lanes(lanes),
         Reduce::Min => lanes.iter().fold(a, |s, x| s.min(*x)),
         Reduce::Max => lanes.iter().fold(a, |s, x| s.max(*x)),
     }
+}
+
+/// The sum of a batch's lanes in eight interleaved partial sums (so that the adds do not wait on
+/// each other and vectorise), combined pairwise.
+#[inline(always)]
+fn sum_lanes<T: Real>(lanes: &[T]) -> T {
+    let mut p = [T::zero(); 8];
+    let mut it = lanes.chunks_exact(8);
+    for c in &mut it {
+        for k in 0..8 {
+            p[k] = p[k] + c[k];
+        }
+    }
+    for (k, x) in it.remainder().iter().enumerate() {
+        p[k] = p[k] + *x;
+    }
+    ((p[0] + p[4]) + (p[2] + p[6])) + ((p[1] + p[5]) + (p[3] + p[7]))
 }
 
 /// Kahan summation: `sum` carries the total, `c` the low-order part lost so far.

@@ -110,13 +110,64 @@ pub fn compile_pair<T: Real>(spec: &PairSpec) -> Result<JitPair<T>, String> {
         let b = FunctionBuilder::new(&mut ctx.func, &mut fctx);
         Emitter::<T>::new(b, spec, ptr).emit(config)
     };
+    let debug = crate::config::env().debug >= 2;
+    ctx.set_disasm(debug);
     module.define_function(id, &mut ctx).map_err(|e| format!("{e:?}"))?;
+    if debug {
+        if let Some(code) = ctx.compiled_code().and_then(|c| c.vcode.as_ref()) {
+            eprintln!("native pair program:\n{code}");
+        }
+    }
     module.clear_context(&mut ctx);
     module.finalize_definitions().map_err(|e| e.to_string())?;
     let code = module.get_finalized_function(id);
     // SAFETY: the function was declared with exactly this signature (C calling convention).
     let func = unsafe { std::mem::transmute::<*const u8, PairFn<T>>(code) };
     Ok(JitPair { func, gathers, _code: Code(Some(module)) })
+}
+
+/// The nodes in the order the outputs demand them (a depth-first post-order from each output,
+/// operands before their users, the deeper operand first), so that a value is computed just
+/// before it is used and the registers hold few values at a time.
+fn demand_order(spec: &PairSpec) -> Vec<Id> {
+    let g = spec.graph;
+    // Register need of each subtree (Sethi–Ullman), to visit the hungrier operand first.
+    let mut need: HashMap<Id, u32> = HashMap::new();
+    for id in spec.nodes {
+        let ops = g.nodes[*id as usize].operands();
+        let mut ns: Vec<u32> = ops.iter().map(|o| need.get(o).copied().unwrap_or(1)).collect();
+        ns.sort_unstable_by(|a, b| b.cmp(a));
+        let n = ns.iter().enumerate().map(|(k, n)| n + k as u32).max().unwrap_or(1);
+        need.insert(*id, n);
+    }
+    let mut done: std::collections::HashSet<Id> = std::collections::HashSet::new();
+    let mut order = vec![];
+    for (root, _) in spec.outputs {
+        let mut stack = vec![(*root, false)];
+        while let Some((id, expanded)) = stack.pop() {
+            if done.contains(&id) {
+                continue;
+            }
+            if expanded {
+                done.insert(id);
+                order.push(id);
+                continue;
+            }
+            stack.push((id, true));
+            if spec.preset.iter().any(|(p, _)| *p == id) {
+                continue; // computed by the caller: its operands are not the program's
+            }
+            let mut ops = g.nodes[id as usize].operands();
+            // Pushed last = visited first: the operand that needs the most registers.
+            ops.sort_by_key(|o| need.get(o).copied().unwrap_or(1));
+            for o in ops {
+                if !done.contains(&o) {
+                    stack.push((o, false));
+                }
+            }
+        }
+    }
+    order
 }
 
 fn supported(node: &Node) -> Result<(), String> {
@@ -277,12 +328,9 @@ impl<'a, 'b, T: Real> Emitter<'a, 'b, T> {
         let lane_off = self.b.ins().imul_imm_s(base, bytes);
         let lane_addr = self.b.ins().iadd(frame, lane_off);
         let reg_addr = |r: usize| (r * LANES * T::BYTES) as i32;
-        for (id, r) in spec.preset {
-            if (*id as usize) < spec.graph.nodes.len() {
-                let v = self.b.ins().load(self.vec, Self::mem(), lane_addr, reg_addr(*r));
-                vals.insert(*id, v);
-            }
-        }
+        // Preset values are loaded where first used, not all at the top (where they would only
+        // be spilled).
+        let preset: HashMap<Id, usize> = spec.preset.iter().copied().collect();
         // The neighbour index of each lane, widened to a pointer.
         let j_off = self.b.ins().imul_imm_s(base, 4);
         let j_addr = self.b.ins().iadd(jptr, j_off);
@@ -303,11 +351,22 @@ impl<'a, 'b, T: Real> Emitter<'a, 'b, T> {
         } else {
             None
         };
-        for id in spec.nodes {
+        for id in &demand_order(spec) {
             if vals.contains_key(id) {
                 continue;
             }
             let node = spec.graph.nodes[*id as usize];
+            for o in node.operands() {
+                if let (None, Some(r)) = (vals.get(&o), preset.get(&o)) {
+                    let v = self.b.ins().load(self.vec, Self::mem(), lane_addr, reg_addr(*r));
+                    vals.insert(o, v);
+                }
+            }
+            if let Some(r) = preset.get(id) {
+                let v = self.b.ins().load(self.vec, Self::mem(), lane_addr, reg_addr(*r));
+                vals.insert(*id, v);
+                continue;
+            }
             let v = match node {
                 Node::Const(_) | Node::PairX(_) | Node::PairR | Node::PairH => {
                     unreachable!("constants and pair values are preset")
@@ -377,7 +436,12 @@ impl<'a, 'b, T: Real> Emitter<'a, 'b, T> {
             vals.insert(*id, v);
         }
         for (id, r) in spec.outputs {
-            self.b.ins().store(Self::mem(), vals[id], lane_addr, reg_addr(*r));
+            let v = match (vals.get(id), preset.get(id)) {
+                (Some(v), _) => *v,
+                (None, Some(p)) => self.b.ins().load(self.vec, Self::mem(), lane_addr, reg_addr(*p)),
+                (None, None) => unreachable!("every output is computed or preset"),
+            };
+            self.b.ins().store(Self::mem(), v, lane_addr, reg_addr(*r));
         }
         let next = self.b.ins().iadd_imm_s(base, self.width as i64);
         self.b.ins().jump(head, &[next.into()]);
