@@ -154,6 +154,67 @@ impl Grid {
         });
     }
 
+    /// Replaces `out` with the ranges into [`order`](Self::order) of the cells that may hold a
+    /// particle within `radius` of `p`: of each row of cells along x whose y–z distance from `p`
+    /// is below `radius`, the run of cells that the sphere of `radius` reaches along x. On a grid
+    /// of cells finer than `radius` this visits far fewer candidates than the 3^dim cells around
+    /// `p` on a grid of cells of `radius`. The ranges are disjoint and increasing; cells on the
+    /// grid's border count as reaching to infinity (points beyond it are clamped into them).
+    pub fn cell_ranges_within(&self, p: [f64; 3], radius: f64, out: &mut Vec<(u32, u32)>) {
+        out.clear();
+        let g = &self.geom;
+        if !g.cell_size.is_finite() || radius.is_nan() || !radius.is_finite() {
+            if !self.order.is_empty() {
+                out.push((0, self.order.len() as u32));
+            }
+            return;
+        }
+        let c = g.cell_of(p);
+        let reach = (radius * g.inv).ceil().min(u32::MAX as f64 / 2.0) as u32;
+        // Distance from p to cell k's slab along axis a.
+        let gap = |a: usize, k: u32| -> f64 {
+            if a >= g.dim {
+                return 0.0;
+            }
+            let last = g.counts[a] as u32 - 1;
+            let lo = if k == 0 { f64::NEG_INFINITY } else { g.origin[a] + k as f64 * g.cell_size };
+            let hi = if k == last { f64::INFINITY } else { g.origin[a] + (k + 1) as f64 * g.cell_size };
+            if p[a] < lo {
+                lo - p[a]
+            } else if p[a] > hi {
+                p[a] - hi
+            } else {
+                0.0
+            }
+        };
+        let span = |a: usize| {
+            let last = g.counts[a] as u32 - 1;
+            (c[a].saturating_sub(reach), (c[a].saturating_add(reach)).min(last))
+        };
+        let ((z0, z1), (y0, y1)) = (span(2), span(1));
+        let r2 = radius * radius;
+        for z in z0..=z1 {
+            let dz = gap(2, z);
+            for y in y0..=y1 {
+                let dy = gap(1, y);
+                let d2 = dy * dy + dz * dz;
+                if d2 > r2 {
+                    continue;
+                }
+                let ext = (r2 - d2).sqrt();
+                let (x0, x1) = (g.axis_cell(0, p[0] - ext), g.axis_cell(0, p[0] + ext));
+                let a = self.cell_start[g.linear([x0, y, z])];
+                let b = self.cell_start[g.linear([x1, y, z]) + 1];
+                if a < b {
+                    match out.last_mut() {
+                        Some(last) if last.1 == a => last.1 = b,
+                        _ => out.push((a, b)),
+                    }
+                }
+            }
+        }
+    }
+
     /// Calls `g(a, b)` for each non-empty row of neighbouring cells, in increasing order.
     fn for_each_range(&self, p: [f64; 3], mut g: impl FnMut(u32, u32)) {
         let (lo, hi) = self.neighbourhood(p);

@@ -467,7 +467,9 @@ fn neighbours_of<T: Real, const D: usize>(
         for c in 0..D {
             p[c] = yi[c].to_f64();
         }
-        nb.grid.cell_ranges_around(p, ranges);
+        // h_ij ≤ (h_i + h_max)/2: no neighbour lies beyond support · that.
+        let radius = nb.support.to_f64() * 0.5 * (hi.to_f64() + nb.h_max);
+        nb.grid.cell_ranges_within(p, radius, ranges);
         let mirrored = flip.iter().any(|f| *f);
         for &(s, e) in ranges.iter() {
             for &jj in &order[s as usize..e as usize] {

@@ -491,7 +491,10 @@ impl<T: Real> Backend for CpuBackend<T> {
                 "the largest smoothing length is {h_max}: no neighbour search is possible"
             )));
         }
-        let grid = Grid::build(self.positions(), dim, self.support * h_max);
+        // Cells of half the largest cut-off: the neighbour search visits only the cells the
+        // cut-off sphere reaches (`Grid::cell_ranges_within`), about a third of the candidates
+        // of the 3^dim cells of a cut-off's size.
+        let grid = Grid::build(self.positions(), dim, 0.5 * self.support * h_max);
         let x: Vec<T> = self.positions().to_vec();
         let h: Vec<T> = self.store.column(self.h).expect("h is stored").data.clone();
         let cols = views(&mut self.store);
