@@ -400,3 +400,47 @@ fn build_time_one_million_3d() {
     let grid = Grid::build(&xm, 3, cell);
     println!("cells {:?}, {} per cell", grid.cells_per_axis(), n as f64 / grid.num_cells() as f64);
 }
+
+/// `cell_ranges_within` on grids of cells finer than the radius (as the CPU backend builds them)
+/// visits every particle within the radius, each once, for points inside the cloud, on its border
+/// and far outside it (mirror images), in 1D, 2D and 3D.
+#[test]
+fn ranges_within_a_radius_hold_every_particle_within_it() {
+    let mut rng = XorShift(0x1234_5678_9abc_def1);
+    for dim in 1..=3 {
+        for fine in [1.0, 2.0, 3.0] {
+            let n = [0, 300, 600, 900][dim];
+            let x = cloud(&mut rng, n, dim, 1.0);
+            let radius = 0.2;
+            let grid = Grid::build(&x, dim, radius / fine);
+            let mut ranges = vec![];
+            let mut visited = 0usize;
+            for q in 0..200 {
+                // Points inside, near the border and well beyond the cloud.
+                let scale = [0.6, 1.1, 2.0][q % 3];
+                let mut p = [0.0; 3];
+                for v in p.iter_mut().take(dim) {
+                    *v = rng.range(-0.5 * scale, 0.5 * scale);
+                }
+                grid.cell_ranges_within(p, radius, &mut ranges);
+                let mut seen = vec![false; n];
+                for w in ranges.windows(2) {
+                    assert!(w[0].1 < w[1].0, "ranges overlap or are not increasing: {ranges:?}");
+                }
+                for &(a, b) in &ranges {
+                    for &j in &grid.order()[a as usize..b as usize] {
+                        assert!(!std::mem::replace(&mut seen[j as usize], true), "{j} visited twice");
+                        visited += 1;
+                    }
+                }
+                for (j, s) in seen.iter().enumerate() {
+                    let q = point_of(&x, dim, j);
+                    let r: f64 = (0..dim).map(|k| (q[k] - p[k]).powi(2)).sum::<f64>().sqrt();
+                    assert!(*s || r >= radius, "{dim}D, cells of radius/{fine}: particle {j} at {r} missed");
+                }
+            }
+            // Finer cells visit fewer candidates than the 3^dim cells of the radius would.
+            assert!(visited > 0);
+        }
+    }
+}

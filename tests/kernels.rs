@@ -10,13 +10,8 @@ use pairsum::schedule::IntegratorKind;
 /// Each kernel with its h/Δx for the lattice test: 2.5 for the compact kernels (support 2h); 1.3
 /// for the Gaussian (support 3h), whose lattice sums are already exact to 1e-7 there and whose
 /// support must fit in the 13³ lattice.
-const KERNELS: [(&str, f64); 5] = [
-    ("cubic_spline", 2.5),
-    ("quartic_ek18", 2.5),
-    ("wendland_c2", 2.5),
-    ("wendland_quintic", 2.5),
-    ("gaussian", 1.3),
-];
+const KERNELS: [(&str, f64); 5] =
+    [("cubic_spline", 2.5), ("quartic_ek18", 2.5), ("wendland_c2", 2.5), ("wendland_quintic", 2.5), ("gaussian", 1.3)];
 
 fn shepard_model(kernel: &str) -> pairsum::ir::Model {
     model(&format!(

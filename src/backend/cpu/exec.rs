@@ -386,7 +386,15 @@ impl<T: Real> Writer<'_, '_, T> {
                 // SAFETY: the frame is the pair program's; j holds LANES rows of every gathered
                 // column (stale lanes past n are earlier, valid neighbours); the sign lanes exist
                 // whenever the case has mirrors, which is when the program reads them.
-                unsafe { jit.run(self.pair, self.j, cols, n, sign.as_ptr(), self.sh.time, self.sh.dt) }
+                let sh = self.sh;
+                let world = super::jit::World {
+                    group: sh.group,
+                    material: sh.material,
+                    params: sh.params,
+                    time: sh.time,
+                    dt: sh.dt,
+                };
+                unsafe { jit.run(self.pair, self.j, cols, n, sign.as_ptr(), &world) }
             }
             _ => {
                 let ctx = self.sh.ctx(self.temps, self.chunk, self.j, sign, n);

@@ -26,9 +26,10 @@ use cranelift_jit::{JITBuilder, JITModule};
 use cranelift_module::{default_libcall_names, Linkage, Module};
 use std::collections::HashMap;
 
-/// `fn(frame, j, columns, n, sign, time, dt)`: runs the pair program on lanes `0..n` (rounded up
-/// to whole vectors) of the frame.
-type PairFn<T> = unsafe extern "C" fn(*mut T, *const u32, *const *const T, usize, *const T, T, T);
+/// `fn(frame, j, columns, n, sign, group, material, params, time, dt)`: runs the pair program on
+/// lanes `0..n` (rounded up to whole vectors) of the frame.
+type PairFn<T> =
+    unsafe extern "C" fn(*mut T, *const u32, *const *const T, usize, *const T, *const u32, *const u32, *const T, T, T);
 
 /// A compiled pair program.
 pub struct JitPair<T> {
@@ -60,11 +61,31 @@ impl<T: Real> JitPair<T> {
     ///
     /// # Safety
     /// `frame` is the program's frame (`n_regs × LANES`), `j[..LANES]` are rows of every gathered
-    /// column, and `sign` is valid when the program uses it.
-    pub unsafe fn run(&self, frame: &mut [T], j: &[u32], cols: &[*const T], n: usize, sign: *const T, t: T, dt: T) {
+    /// column and particles of `group`/`material`, `params` is the parameter table the program was
+    /// compiled for, and `sign` is valid when the program uses it.
+    pub unsafe fn run(
+        &self,
+        frame: &mut [T],
+        j: &[u32],
+        cols: &[*const T],
+        n: usize,
+        sign: *const T,
+        world: &World<T>,
+    ) {
         debug_assert!(j.len() >= LANES && cols.len() == self.gathers.len());
-        unsafe { (self.func)(frame.as_mut_ptr(), j.as_ptr(), cols.as_ptr(), n, sign, t, dt) }
+        let f = self.func;
+        let (g, m, p) = (world.group.as_ptr(), world.material.as_ptr(), world.params.as_ptr());
+        unsafe { f(frame.as_mut_ptr(), j.as_ptr(), cols.as_ptr(), n, sign, g, m, p, world.time, world.dt) }
     }
+}
+
+/// What a pair program reads besides the frame and the gathered columns.
+pub struct World<'a, T> {
+    pub group: &'a [u32],
+    pub material: &'a [u32],
+    pub params: &'a [T],
+    pub time: T,
+    pub dt: T,
 }
 
 /// What the JIT needs to know of the program: its graph and nodes in order, where the caller
@@ -78,6 +99,9 @@ pub struct PairSpec<'a> {
     pub outputs: &'a [(Id, usize)],
     /// Whether lanes carry mirror signs (the case has symmetry planes).
     pub signs: bool,
+    /// The parameter table's layout: a parameter component is at `material × stride + offset`.
+    pub param_stride: usize,
+    pub param_offset: &'a [usize],
 }
 
 /// Whether the JIT is on (it is unless `PAIRSUM_NO_JIT` is set or the host has no backend).
@@ -99,7 +123,7 @@ pub fn compile_pair<T: Real>(spec: &PairSpec) -> Result<JitPair<T>, String> {
     let ptr = module.target_config().pointer_type();
     let real = if T::BYTES == 8 { types::F64 } else { types::F32 };
     let mut ctx = module.make_context();
-    for t in [ptr, ptr, ptr, ptr, ptr, real, real] {
+    for t in [ptr, ptr, ptr, ptr, ptr, ptr, ptr, ptr, real, real] {
         ctx.func.signature.params.push(AbiParam::new(t));
     }
     let id = module.declare_function("pair", Linkage::Local, &ctx.func.signature).map_err(|e| e.to_string())?;
@@ -174,8 +198,6 @@ fn supported(node: &Node) -> Result<(), String> {
     match node {
         Node::Un(Un::Ln, _) => Err("ln".into()),
         Node::Bin(Bin::Pow, _, _) => Err("pow with a varying exponent".into()),
-        Node::Param { side: Side::J, .. } => Err("a material parameter of particle j".into()),
-        Node::InGroup(..) => Err("a group test".into()),
         Node::Load { side: Side::I, .. } | Node::Param { side: Side::I, .. } => {
             Err("a value of particle i read per lane".into())
         }
@@ -244,7 +266,8 @@ impl<'a, 'b, T: Real> Emitter<'a, 'b, T> {
         if let Some(x) = self.consts.get(&bits) {
             return *x;
         }
-        let s = if T::BYTES == 8 { self.b.ins().f64const(t.to_f64()) } else { self.b.ins().f32const(t.to_f64() as f32) };
+        let s =
+            if T::BYTES == 8 { self.b.ins().f64const(t.to_f64()) } else { self.b.ins().f32const(t.to_f64() as f32) };
         let x = self.b.ins().splat(self.vec, s);
         self.consts.insert(bits, x);
         x
@@ -287,7 +310,8 @@ impl<'a, 'b, T: Real> Emitter<'a, 'b, T> {
         self.b.append_block_params_for_function_params(entry);
         self.b.switch_to_block(entry);
         let p = self.b.block_params(entry).to_vec();
-        let (frame, jptr, cols, n, sign, time, dt) = (p[0], p[1], p[2], p[3], p[4], p[5], p[6]);
+        let (frame, jptr, cols, n, sign) = (p[0], p[1], p[2], p[3], p[4]);
+        let (group, material, params, time, dt) = (p[5], p[6], p[7], p[8], p[9]);
         // Loop-invariant values: constants, globals, column pointers.
         let one = self.splat(1.0);
         let zero = self.splat(0.0);
@@ -431,6 +455,24 @@ impl<'a, 'b, T: Real> Emitter<'a, 'b, T> {
                     let m = self.b.ins().fcmp(FloatCC::NotEqual, vals[&c], zero);
                     self.select(m, vals[&a], vals[&e])
                 }
+                Node::Param { param, comp, side: Side::J } => {
+                    let off = (spec.param_offset[param.index()] + comp as usize) * T::BYTES;
+                    let stride = (spec.param_stride * T::BYTES) as i64;
+                    self.per_lane(&js, |e, j| {
+                        let m = e.lane_u32(material, j);
+                        let row = e.b.ins().imul_imm_s(m, stride);
+                        let addr = e.b.ins().iadd(params, row);
+                        e.b.ins().load(e.real, Self::mem(), addr, off as i32)
+                    })
+                }
+                Node::InGroup(Side::J, set) => self.per_lane(&js, |e, j| {
+                    // (set >> group[j]) & 1, as a real 0 or 1.
+                    let g = e.lane_u32(group, j);
+                    let bits = e.b.ins().iconst(types::I64, set as i64);
+                    let bit = e.b.ins().ushr(bits, g);
+                    let bit = e.b.ins().band_imm_s(bit, 1);
+                    e.b.ins().fcvt_from_uint(e.real, bit)
+                }),
                 Node::Load { .. } | Node::Param { .. } | Node::InGroup(..) => unreachable!("checked by `supported`"),
             };
             vals.insert(*id, v);
@@ -451,6 +493,29 @@ impl<'a, 'b, T: Real> Emitter<'a, 'b, T> {
         self.b.seal_all_blocks();
         self.b.finalize(config);
         gathers
+    }
+
+    /// `array[j]` of a `u32` array, widened to 64 bits.
+    fn lane_u32(&mut self, array: Value, j: Value) -> Value {
+        let off = self.b.ins().imul_imm_s(j, 4);
+        let addr = self.b.ins().iadd(array, off);
+        let v = self.b.ins().uload32(Self::mem(), addr, 0);
+        if self.ptr == types::I32 {
+            self.b.ins().ireduce(types::I32, v)
+        } else {
+            v
+        }
+    }
+
+    /// A vector whose lane k is `scalar(j_k)`.
+    fn per_lane(&mut self, js: &[Value], mut scalar: impl FnMut(&mut Self, Value) -> Value) -> Value {
+        let first = scalar(self, js[0]);
+        let mut v = self.b.ins().scalar_to_vector(self.vec, first);
+        for (k, j) in js.iter().enumerate().skip(1) {
+            let x = scalar(self, *j);
+            v = self.b.ins().insertlane(v, x, k as u8);
+        }
+        v
     }
 
     fn bin(&mut self, op: Bin, a: Value, c: Value, one: Value, zero: Value) -> Value {

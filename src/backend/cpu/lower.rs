@@ -337,10 +337,20 @@ pub enum Mode {
     Pair,
 }
 
-/// Parameter values known when the programs are compiled, by parameter id: `Some` when every
-/// material with particles has the same value, so that the parameter is a constant of the run and
-/// folds like a literal (`f^art_n` with `art_n = 4` becomes three multiplications).
-pub type KnownParams = [Option<Vec<f64>>];
+/// Values known when the programs are compiled, which fold like literals.
+#[derive(Clone, Debug, Default)]
+pub struct Known {
+    /// By parameter id: `Some` when every material with particles binds the same value, so that
+    /// the parameter is a constant of the run (`f^art_n` with `art_n = 4` becomes three
+    /// multiplications).
+    pub params: Vec<Option<Vec<f64>>>,
+    /// By field id: `Some` when no equation, rate, constraint or saved copy writes the field and
+    /// every particle holds the same value (a uniform `h`, `dx`: the kernel's normalisation and
+    /// `W(Δp)` become constants).
+    pub fields: Vec<Option<Vec<f64>>>,
+}
+
+pub type KnownParams = Known;
 
 pub struct Lowerer<'a> {
     pub model: &'a Model,
@@ -452,6 +462,15 @@ impl<'a> Lowerer<'a> {
         }
     }
 
+    /// h_ij: a constant when `h` is a known field (one value on every particle, never written).
+    fn pair_h(&mut self) -> Id {
+        let known = self.model.field_id("h").and_then(|h| self.known.fields.get(h.index())).and_then(|v| v.as_ref());
+        match known {
+            Some(h) => self.g.c(h[0]),
+            None => self.g.intern(Node::PairH),
+        }
+    }
+
     fn field(&mut self, f: FieldId, side: Side) -> Val {
         if side == Side::I {
             if let Some(v) = self.current.get(&f) {
@@ -459,12 +478,15 @@ impl<'a> Lowerer<'a> {
             }
         }
         let shape = self.model.field(f).ty.shape;
+        if let Some(values) = self.known.fields.get(f.index()).and_then(|v| v.as_ref()) {
+            return self.expand(shape, |g, k| g.c(values[k]));
+        }
         self.expand(shape, |g, k| g.intern(Node::Load { field: f, comp: k as u16, side }))
     }
 
     fn param(&mut self, p: ParamId, side: Side) -> Val {
         let shape = self.model.params[p.index()].ty.shape;
-        if let Some(values) = self.known.get(p.index()).and_then(|v| v.as_ref()) {
+        if let Some(values) = self.known.params.get(p.index()).and_then(|v| v.as_ref()) {
             return self.expand(shape, |g, k| g.c(values[k]));
         }
         self.expand(shape, |g, k| g.intern(Node::Param { param: p, comp: k as u16, side }))
@@ -489,7 +511,7 @@ impl<'a> Lowerer<'a> {
 
     /// ∇_i W = norm_d / h^(d+1) · dw(R) · x_ij / r (pairs at r = 0 never reach a program).
     fn kernel_grad(&mut self) -> Val {
-        let (r, h) = (self.g.intern(Node::PairR), self.g.intern(Node::PairH));
+        let (r, h) = (self.g.intern(Node::PairR), self.pair_h());
         let big_r = self.g.div(r, h);
         let dw = self.kernel_fn(big_r, false);
         let norm = self.g.c(self.kernel.norm[self.dim - 1]);
@@ -578,9 +600,9 @@ impl<'a> Lowerer<'a> {
                 Val { shape: Shape::Vec, c }
             }
             PairValue::Rij => scalar(self.g.intern(Node::PairR)),
-            PairValue::Hij => scalar(self.g.intern(Node::PairH)),
+            PairValue::Hij => scalar(self.pair_h()),
             PairValue::W => {
-                let (r, h) = (self.g.intern(Node::PairR), self.g.intern(Node::PairH));
+                let (r, h) = (self.g.intern(Node::PairR), self.pair_h());
                 let w = self.kernel_w(r, h, false);
                 scalar(w)
             }

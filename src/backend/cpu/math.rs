@@ -78,7 +78,13 @@ macro_rules! exp_impl {
             let k = &$consts;
             let lo = k.lo as $t;
             let hi = k.hi as $t;
-            let x = if x < lo { lo } else if x > hi { hi } else { x };
+            let x = if x < lo {
+                lo
+            } else if x > hi {
+                hi
+            } else {
+                x
+            };
             let magic = k.magic as $t;
             let t = x * (k.log2e as $t) + magic;
             let nf = t - magic;

@@ -4,8 +4,8 @@
 
 mod exec;
 pub mod jit;
-pub mod math;
 pub mod lower;
+pub mod math;
 pub mod program;
 
 use super::{timestep, Backend, BackendError, Globals, Mirror, Snapshot};
@@ -98,7 +98,59 @@ fn particle_program<T: Real>(plan: &Plan, known: &KnownParams, g: usize, blocks:
     Some(compile(&plan.model, plan.dim, &lw.g, &nodes, &lw.effects, &Pinned { preset: vec![], exports: vec![] }))
 }
 
-/// The parameters every material with particles binds to the same value (see [`KnownParams`]).
+/// The parameters and fields that are constants of the run (see [`lower::Known`]).
+fn known<T: Real>(plan: &Plan, store: &Store<T>) -> lower::Known {
+    lower::Known { params: known_params(&plan.model, store), fields: known_fields(plan, store) }
+}
+
+/// Fields nothing writes during a run and every particle holds with one value.
+fn known_fields<T: Real>(plan: &Plan, store: &Store<T>) -> Vec<Option<Vec<f64>>> {
+    let model = &plan.model;
+    let mut written = vec![false; model.fields.len()];
+    for eq in &model.equations {
+        eq.writes.iter().for_each(|f| written[f.index()] = true);
+    }
+    model.rates.iter().for_each(|r| written[r.state.index()] = true);
+    for (a, b) in &plan.saved {
+        written[a.index()] = true;
+        written[b.index()] = true;
+    }
+    fn targets(stmts: &[crate::ir::Stmt], written: &mut [bool]) {
+        for s in stmts {
+            match s {
+                crate::ir::Stmt::Set(f, _) | crate::ir::Stmt::Accum(f, _, _) => written[f.index()] = true,
+                crate::ir::Stmt::If(_, a, b) => {
+                    targets(a, written);
+                    targets(b, written);
+                }
+                crate::ir::Stmt::Let(..) => {}
+            }
+        }
+    }
+    for st in &plan.stages {
+        st.updates.iter().for_each(|b| targets(&b.stmts, &mut written));
+    }
+    (0..model.fields.len())
+        .map(|f| {
+            let field = &model.fields[f];
+            if written[f] || field.storage == Storage::Temp || field.saved_of.is_some() || store.n == 0 {
+                return None;
+            }
+            let col = store.columns[f].as_ref()?;
+            if store.ranges.iter().any(|(g, _)| col.base[g.index()] == crate::particles::ABSENT) {
+                return None;
+            }
+            let first: Vec<T> = col.data[..col.comps].to_vec();
+            col.data
+                .chunks_exact(col.comps)
+                .take(store.n)
+                .all(|row| row == first.as_slice())
+                .then(|| first.iter().map(|v| v.to_f64()).collect())
+        })
+        .collect()
+}
+
+/// The parameters every material with particles binds to the same value.
 fn known_params<T: Real>(model: &crate::ir::Model, store: &Store<T>) -> Vec<Option<Vec<f64>>> {
     let mut materials: Vec<u32> = store.material.clone();
     materials.sort_unstable();
@@ -146,7 +198,7 @@ fn varying(node: &Node, flags: &[bool]) -> bool {
 fn compile_variant<T: Real>(
     plan: &Plan,
     known: &KnownParams,
-    signs: bool,
+    (signs, param_stride, param_offset): (bool, usize, &[usize]),
     v: &crate::schedule::PassVariant,
 ) -> Variant<T> {
     let g = v.group.index();
@@ -269,8 +321,14 @@ fn compile_variant<T: Real>(
             eprintln!("  {e:?}");
         }
     }
-    let pair: Program<T> =
-        compile(model, dim, graph, &pair_nodes, &accum_effects, &Pinned { preset: preset_regs.clone(), exports: vec![] });
+    let pair: Program<T> = compile(
+        model,
+        dim,
+        graph,
+        &pair_nodes,
+        &accum_effects,
+        &Pinned { preset: preset_regs.clone(), exports: vec![] },
+    );
     let jit = jit::enabled()
         .then(|| {
             let outputs: Vec<(Id, usize)> =
@@ -283,6 +341,8 @@ fn compile_variant<T: Real>(
                 preset: &preset_regs,
                 outputs: &outputs,
                 signs,
+                param_stride,
+                param_offset,
             };
             jit::compile_pair::<T>(&spec)
                 .map_err(|why| {
@@ -341,9 +401,24 @@ impl<T: Real> CpuBackend<T> {
         let per_group = |f: &dyn Fn(usize) -> Option<Program<T>>| -> Vec<Option<Program<T>>> {
             (0..n_groups).map(|g| if present.contains(&g) { f(g) } else { None }).collect()
         };
-        let known = known_params(&plan.model, &store);
-        let passes: Vec<Vec<Variant<T>>> =
-            plan.passes.iter().map(|p| p.variants.iter().map(|v| compile_variant(&plan, &known, !mirrors.is_empty(), v)).collect()).collect();
+        let known = known(&plan, &store);
+        let passes: Vec<Vec<Variant<T>>> = plan
+            .passes
+            .iter()
+            .map(|p| {
+                p.variants
+                    .iter()
+                    .map(|v| {
+                        compile_variant(
+                            &plan,
+                            &known,
+                            (!mirrors.is_empty(), store.params.stride, &store.params.offset),
+                            v,
+                        )
+                    })
+                    .collect()
+            })
+            .collect();
         let mut stages = vec![];
         for st in &plan.stages {
             let mut blocks = st.updates.clone();

@@ -1,0 +1,144 @@
+//! The CPU backend's native pair programs (Cranelift, `backend/cpu/jit.rs`) against its closures:
+//! the same operations in the same order, so every stored field must agree bit for bit after
+//! several steps of every bundled case, in f64 and in f32. Also checks that the native code is
+//! actually used (a program that fell back to closures would make the comparison empty).
+
+mod common;
+use common::*;
+use pairsum::backend::cpu::CpuBackend;
+use pairsum::backend::Backend;
+use pairsum::engine::setup::build_store;
+use pairsum::engine::Engine;
+use pairsum::particles::Real;
+use pairsum::runner::prepare;
+use std::path::Path;
+
+fn case(name: &str) -> std::path::PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("cases").join(format!("{name}.toml"))
+}
+
+/// `steps` steps of the case at its CI resolution with native pair programs and with closures;
+/// returns how many pass variants ran natively, of how many.
+fn native_equals_closures<T: Real>(name: &str, steps: usize) -> (usize, usize) {
+    let opts = pairsum::scene::Options { resolution: Some("ci".into()), ..Default::default() };
+    let (scene, plan) = prepare(&case(name), &opts).unwrap_or_else(|e| panic!("{name}: {e}"));
+    let store = build_store::<T>(&plan, &scene.particles, &scene.materials).expect("store");
+    let native = CpuBackend::new(plan.clone(), store.clone(), scene.mirrors.clone()).expect("cpu");
+    let counts = native.native_passes();
+    let closures = CpuBackend::new(plan.clone(), store, scene.mirrors.clone()).expect("cpu").without_jit();
+    assert_eq!(closures.native_passes().0, 0);
+    let mut a = Engine::new(native, scene.config.clone());
+    let mut b = Engine::new(closures, scene.config.clone());
+    a.initialise().expect("init");
+    b.initialise().expect("init");
+    for k in 0..steps {
+        a.step().unwrap_or_else(|e| panic!("{name}: native step {k}: {e}"));
+        b.step().unwrap_or_else(|e| panic!("{name}: closure step {k}: {e}"));
+    }
+    assert_eq!(a.time.to_bits(), b.time.to_bits(), "{name}: the clocks differ");
+    for f in plan.watched_fields() {
+        let field = plan.model.field(f).name.clone();
+        let (_, x) = field_by_id(&a.backend, &field);
+        let (_, y) = field_by_id(&b.backend, &field);
+        let differ =
+            x.iter().zip(&y).filter(|(p, q)| p.to_bits() != q.to_bits() && !(p.is_nan() && q.is_nan())).count();
+        assert_eq!(differ, 0, "{name} ({}): `{field}` differs in {differ} of {} values", T::NAME, x.len());
+    }
+    counts
+}
+
+const CASES: [&str; 10] = [
+    "cantilever",
+    "elastic_wave",
+    "standing_wave",
+    "rings_2d",
+    "hypervelocity_impact",
+    "cube_on_cube",
+    "borvik_perforation",
+    "tensile_test",
+    "sphere_plate_graded",
+    "pysph_impact3d",
+];
+
+#[test]
+fn native_pair_programs_equal_the_closures_bit_for_bit_on_every_bundled_case() {
+    let mut native = 0;
+    let mut all = 0;
+    for name in CASES {
+        let (n, a) = native_equals_closures::<f64>(name, 4);
+        native += n;
+        all += a;
+    }
+    // Every pair program of the bundled models is within what the JIT emits.
+    assert_eq!(native, all, "{native} of {all} pass variants ran as native code");
+}
+
+#[test]
+fn native_pair_programs_equal_the_closures_bit_for_bit_in_f32() {
+    for name in ["hypervelocity_impact", "rings_2d", "borvik_perforation", "pysph_impact3d"] {
+        let (n, a) = native_equals_closures::<f32>(name, 4);
+        assert_eq!(n, a, "{name}: {n} of {a} pass variants ran as native code");
+    }
+}
+
+fn rnd(seed: &mut u64) -> f64 {
+    *seed ^= *seed << 13;
+    *seed ^= *seed >> 7;
+    *seed ^= *seed << 17;
+    (*seed % 1_000_000) as f64 / 1_000_000.0
+}
+
+/// One evaluation of every pass of the stdlib solid and fluid models on a jittered cloud with
+/// varying smoothing lengths (so `h` is not a constant of the run), natively and by closures.
+#[test]
+fn native_pair_programs_equal_the_closures_on_jittered_clouds_with_variable_h() {
+    use pairsum::backend::Globals;
+    use pairsum::schedule::{IntegratorKind, Plan};
+    let steel = |m: &pairsum::ir::Model| {
+        material(m, &[("rho0", vec![7850.0]), ("E", vec![200e9]), ("nu", vec![0.3]), ("h_ratio", vec![1.3])])
+    };
+    let water =
+        |m: &pairsum::ir::Model| material(m, &[("rho0", vec![1000.0]), ("c0", vec![30.0]), ("h_ratio", vec![1.3])]);
+    type Mat = fn(&pairsum::ir::Model) -> pairsum::engine::setup::MaterialInput;
+    let models: [(&str, Mat); 3] =
+        [("models::elastic_solid", steel), ("models::elastic_solid_corrected", steel), ("models::wcsph_fluid", water)];
+    for (name, mat) in models {
+        let m = model(&format!("use {name}\n"));
+        for dim in [2, 3] {
+            let dx = 0.01;
+            let mut seed = 11 + dim as u64;
+            let mut x = lattice(dim, if dim == 2 { 14 } else { 7 }, dx);
+            for p in &mut x {
+                for c in p.iter_mut().take(dim) {
+                    *c += 0.3 * dx * (rnd(&mut seed) - 0.5);
+                }
+            }
+            let mut inp = input(dim, x, dx);
+            for k in 0..inp.len() {
+                for c in 0..dim {
+                    inp.v[k][c] = 5.0 * (rnd(&mut seed) - 0.5);
+                }
+                inp.dx[k] = dx * (0.7 + 0.6 * rnd(&mut seed));
+            }
+            let plan = Plan::build(&m, &scene(&m, dim, &[], IntegratorKind::Euler), None).expect("plan");
+            let store = build_store::<f64>(&plan, &inp, &[mat(&m)]).expect("store");
+            let mut a = CpuBackend::new(plan.clone(), store.clone(), vec![]).expect("cpu");
+            assert_eq!(a.native_passes().0, a.native_passes().1, "{name}: every pass native");
+            let mut b = CpuBackend::new(plan.clone(), store, vec![]).expect("cpu").without_jit();
+            a.initialise().expect("init");
+            b.initialise().expect("init");
+            let g = Globals { time: 0.0, dt: 1e-7 };
+            a.evaluate(g).expect("native");
+            b.evaluate(g).expect("closures");
+            for f in plan.watched_fields() {
+                let field = &plan.model.field(f).name;
+                let (_, x) = field_by_id(&a, field);
+                let (_, y) = field_by_id(&b, field);
+                assert!(
+                    x.iter().zip(&y).all(|(p, q)| p.to_bits() == q.to_bits()),
+                    "{name} {dim}D: `{field}` differs between native code and closures"
+                );
+            }
+        }
+    }
+}
