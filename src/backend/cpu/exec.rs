@@ -368,6 +368,25 @@ impl<T: Real> Writer<'_, '_, T> {
         }
     }
 
+    /// Writes a candidate into the next lane and keeps it only if `keep` (a branch-free push:
+    /// whether a candidate is a neighbour is too random to predict). Never with mirror signs.
+    #[inline(always)]
+    fn offer<const D: usize>(&mut self, j: u32, dx: [T; 3], r2: T, h: T, keep: bool) {
+        let n = self.n;
+        let PairRegs { x, r: rr, h: hr } = self.v.pair_regs;
+        for (c, v) in dx.iter().enumerate().take(D) {
+            self.pair[(x + c) * LANES + n] = *v;
+        }
+        self.pair[rr * LANES + n] = r2.sqrt();
+        self.pair[hr * LANES + n] = h;
+        self.j[n] = j;
+        self.n += keep as usize;
+        if self.n == LANES {
+            self.flush();
+            self.segs.push((self.k, 0));
+        }
+    }
+
     /// Broadcasts each particle's own values over its lanes, runs the pair program, and folds
     /// every particle's lanes into its accumulators.
     fn flush(&mut self) {
@@ -495,10 +514,16 @@ fn neighbours_of<T: Real, const D: usize>(
                 }
                 let hij = (hi + nb.h[jj]) * half;
                 let rc = nb.support * hij;
-                if r2 >= rc * rc || r2 == T::zero() {
+                let inside = r2 < rc * rc && r2 != T::zero();
+                if !mirrored {
+                    // Half the candidates are rejected, at random: written without a branch.
+                    w.offer::<D>(jj as u32, dx, r2, hij, inside);
                     continue;
                 }
-                if mirrored {
+                if !inside {
+                    continue;
+                }
+                {
                     // x_ij = x_i − (image of x_j): the reflection of (y_i − x_j) on the flipped axes.
                     for c in 0..D {
                         if flip[c] {
