@@ -82,7 +82,7 @@ fn every_kernel_derivative_matches_its_function() {
 fn eval_kernel(m: &pairsum::ir::Model, k: &pairsum::ir::Kernel, e: &pairsum::ir::Expr, r: f64) -> f64 {
     use pairsum::backend::cpu::lower::{Graph, Node};
     let _ = (m, k);
-    // The kernel expressions use only R, constants and arithmetic: evaluate them directly.
+    // The kernel expressions use only R, constants, arithmetic and exp: evaluate them directly.
     fn go(e: &pairsum::ir::Expr, r: f64) -> f64 {
         use pairsum::ir::{ExprKind, Op};
         match &e.kind {
@@ -108,6 +108,7 @@ fn eval_kernel(m: &pairsum::ir::Model, k: &pairsum::ir::Kernel, e: &pairsum::ir:
                     go(b, r)
                 }
             }
+            ExprKind::Call(pairsum::ir::Builtin::Exp, args) => go(&args[0], r).exp(),
             other => panic!("unexpected {other:?} in a kernel"),
         }
     }

@@ -8,6 +8,9 @@ use crate::grid::Grid;
 use crate::ir::Reduce;
 use crate::particles::{Real, Store};
 
+/// Lanes past a batch's last that native code may read or write (a vector's width).
+const OVERRUN: usize = 4;
+
 /// A chunk of consecutive particles of one group.
 #[derive(Clone, Copy, Debug)]
 pub struct Chunk {
@@ -62,7 +65,9 @@ pub struct Scratch<T> {
 }
 
 fn frame<'a, T: Real>(buf: &'a mut Vec<T>, p: &Program<T>) -> &'a mut [T] {
-    let len = p.n_regs.max(1) * LANES;
+    // Native code runs whole vectors from a particle's first lane, so it may touch up to
+    // `OVERRUN` lanes past the last: frames, neighbour and sign lanes carry that padding.
+    let len = p.n_regs.max(1) * LANES + OVERRUN;
     if buf.len() < len {
         buf.resize(len, T::zero());
     }
@@ -171,32 +176,6 @@ fn fold(r: Reduce, a: f64, b: f64) -> f64 {
     }
 }
 
-#[inline(always)]
-fn fold_t<T: Real>(r: Reduce, a: T, lanes: &[T]) -> T {
-    match r {
-        Reduce::Sum => a + sum_lanes(lanes),
-        Reduce::Min => lanes.iter().fold(a, |s, x| s.min(*x)),
-        Reduce::Max => lanes.iter().fold(a, |s, x| s.max(*x)),
-    }
-}
-
-/// The sum of a batch's lanes in eight interleaved partial sums (so that the adds do not wait on
-/// each other and vectorise), combined pairwise.
-#[inline(always)]
-fn sum_lanes<T: Real>(lanes: &[T]) -> T {
-    let mut p = [T::zero(); 8];
-    let mut it = lanes.chunks_exact(8);
-    for c in &mut it {
-        for k in 0..8 {
-            p[k] = p[k] + c[k];
-        }
-    }
-    for (k, x) in it.remainder().iter().enumerate() {
-        p[k] = p[k] + *x;
-    }
-    ((p[0] + p[4]) + (p[2] + p[6])) + ((p[1] + p[5]) + (p[3] + p[7]))
-}
-
 /// Kahan summation: `sum` carries the total, `c` the low-order part lost so far.
 #[inline(always)]
 fn kahan<T: Real>(sum: &mut T, c: &mut T, lanes: &[T]) {
@@ -248,9 +227,9 @@ pub fn run_pass_chunk<T: Real>(
     let dest = frame(b, &v.dest);
     v.dest.run(dest, &sh.ctx(&temp_views, chunk, &[], &[], chunk.len));
     let pair = frame(c, &v.pair);
-    j.resize(LANES, 0);
+    j.resize(LANES + OVERRUN, 0);
     let with_sign = !nb.mirrors.is_empty();
-    sign.resize(if with_sign { 3 * LANES } else { 0 }, T::one());
+    sign.resize(if with_sign { 3 * LANES + OVERRUN } else { 0 }, T::one());
     let ns = v.slots.len();
     slots.resize(ns * chunk.len, T::zero());
     comp.clear();
@@ -368,8 +347,8 @@ impl<T: Real> Writer<'_, '_, T> {
         }
     }
 
-    /// Writes a candidate into the next lane and keeps it only if `keep` (a branch-free push:
-    /// whether a candidate is a neighbour is too random to predict). Never with mirror signs.
+    /// Writes a candidate (particle j itself, not an image) into the next lane and keeps it only
+    /// if `keep` (a branch-free push: whether a candidate is a neighbour is too random to predict).
     #[inline(always)]
     fn offer<const D: usize>(&mut self, j: u32, dx: [T; 3], r2: T, h: T, keep: bool) {
         let n = self.n;
@@ -380,6 +359,12 @@ impl<T: Real> Writer<'_, '_, T> {
         self.pair[rr * LANES + n] = r2.sqrt();
         self.pair[hr * LANES + n] = h;
         self.j[n] = j;
+        if self.with_sign {
+            // Not an image: no axis flips (the lane may hold an image's signs from before).
+            for c in 0..3 {
+                self.sign[c * LANES + n] = T::one();
+            }
+        }
         self.n += keep as usize;
         if self.n == LANES {
             self.flush();
@@ -387,24 +372,18 @@ impl<T: Real> Writer<'_, '_, T> {
         }
     }
 
-    /// Broadcasts each particle's own values over its lanes, runs the pair program, and folds
-    /// every particle's lanes into its accumulators.
+    /// Runs the pair program over the batch and folds every particle's lanes into its
+    /// accumulators: natively, one call per particle (which loads the particle's own values and
+    /// folds its sums itself), or by closures over the whole batch, each particle's own values
+    /// broadcast over its lanes first.
     fn flush(&mut self) {
         let (n, v) = (self.n, self.v);
         let ns = v.slots.len();
-        let segs = &self.segs;
+        let segs = std::mem::take(&mut self.segs);
         let seg_end = |q: usize| segs.get(q + 1).map(|s| s.1).unwrap_or(n);
-        for (u, r) in &v.exports {
-            for (q, &(k, start)) in segs.iter().enumerate() {
-                self.pair[r * LANES + start..r * LANES + seg_end(q)].fill(self.dest[u * LANES + k]);
-            }
-        }
         let sign: &[T] = if self.with_sign { self.sign } else { &[] };
-        match (&v.jit, self.jit_cols) {
+        let native = match (&v.jit, self.jit_cols) {
             (Some(jit), Some(cols)) => {
-                // SAFETY: the frame is the pair program's; j holds LANES rows of every gathered
-                // column (stale lanes past n are earlier, valid neighbours); the sign lanes exist
-                // whenever the case has mirrors, which is when the program reads them.
                 let sh = self.sh;
                 let world = super::jit::World {
                     group: sh.group,
@@ -413,28 +392,52 @@ impl<T: Real> Writer<'_, '_, T> {
                     time: sh.time,
                     dt: sh.dt,
                 };
-                unsafe { jit.run(self.pair, self.j, cols, n, sign.as_ptr(), &world) }
+                for (q, &(k, start)) in segs.iter().enumerate() {
+                    let end = seg_end(q);
+                    if end > start {
+                        let slots = &mut self.slots[k * ns..(k + 1) * ns];
+                        let dest = self.dest[k..].as_ptr();
+                        // SAFETY: the frame is the pair program's (padded for whole vectors); j
+                        // holds LANES + padding rows of every gathered column (stale lanes are
+                        // earlier, valid neighbours); the sign lanes exist whenever the case has
+                        // mirrors, which is when the program reads them; `dest` is lane k of the
+                        // dest frame, which holds every broadcast register; `slots` are k's.
+                        unsafe { jit.run(self.pair, self.j, cols, start..end, sign.as_ptr(), &world, dest, slots) }
+                    }
+                }
+                true
             }
             _ => {
+                for (u, r) in &v.exports {
+                    for (q, &(k, start)) in segs.iter().enumerate() {
+                        self.pair[r * LANES + start..r * LANES + seg_end(q)].fill(self.dest[u * LANES + k]);
+                    }
+                }
                 let ctx = self.sh.ctx(self.temps, self.chunk, self.j, sign, n);
                 v.pair.run(self.pair, &ctx);
+                false
             }
-        }
+        };
         for (a, s) in v.pair.accums.iter().zip(&v.accum_slot) {
+            let compensated = v.slots[*s].compensated;
+            if native && !compensated {
+                continue; // folded by the native code
+            }
             for (q, &(k, start)) in segs.iter().enumerate() {
                 let end = seg_end(q);
                 if end > start {
                     let lanes = &self.pair[a.reg * LANES + start..a.reg * LANES + end];
                     let slot = &mut self.slots[k * ns + s];
-                    if v.slots[*s].compensated {
+                    if compensated {
                         kahan(slot, &mut self.comp[k * ns + s], lanes);
                     } else {
-                        *slot = fold_t(a.reduce, *slot, lanes);
+                        *slot = super::jit::fold_partials(a.reduce, *slot, lanes);
                     }
                 }
             }
         }
         self.n = 0;
+        self.segs = segs;
         self.segs.clear();
     }
 }

@@ -16,20 +16,66 @@
 use super::lower::{Bin, Graph, Id, Node, Un};
 use super::math::ExpConsts;
 use super::program::LANES;
-use crate::ir::{FieldId, Global, Model, Shape, Side};
+use super::program::{lane_max, lane_min};
+use crate::ir::{FieldId, Global, Model, Reduce, Shape, Side};
 use crate::particles::Real;
 use cranelift_codegen::ir::condcodes::FloatCC;
+use cranelift_codegen::ir::condcodes::IntCC;
 use cranelift_codegen::ir::{types, AbiParam, InstBuilder, MachMemFlags as MemFlags, Type, UserFuncName, Value};
 use cranelift_codegen::settings::{self, Configurable};
+use cranelift_frontend::Variable;
 use cranelift_frontend::{FunctionBuilder, FunctionBuilderContext};
 use cranelift_jit::{JITBuilder, JITModule};
 use cranelift_module::{default_libcall_names, Linkage, Module};
 use std::collections::HashMap;
 
-/// `fn(frame, j, columns, n, sign, group, material, params, time, dt)`: runs the pair program on
-/// lanes `0..n` (rounded up to whole vectors) of the frame.
-type PairFn<T> =
-    unsafe extern "C" fn(*mut T, *const u32, *const *const T, usize, *const T, *const u32, *const u32, *const T, T, T);
+/// `fn(frame, j, columns, start, end, sign, group, material, params, dest, slots, time, dt)`: runs
+/// the pair program on lanes `start..end` of the frame — the neighbours of one particle —, with
+/// that particle's own values at `dest` (its lane of the dest program's frame) and its
+/// accumulators at `slots`.
+type PairFn<T> = unsafe extern "C" fn(
+    *mut T,
+    *const u32,
+    *const *const T,
+    usize,
+    usize,
+    *const T,
+    *const u32,
+    *const u32,
+    *const T,
+    *const T,
+    *mut T,
+    T,
+    T,
+);
+
+/// Lanes of the JIT's vectors (16 bytes) for reals of type T: the partial sums of a batch fold
+/// with this period on both paths (see [`fold_partials`]).
+pub fn width<T: Real>() -> usize {
+    16 / T::BYTES
+}
+
+/// Folds lanes into `slot` as the native code does: `width` interleaved partial results (lane k
+/// into partial k mod width, padded with the identity to whole vectors), combined pairwise, then
+/// into the slot. The closures fold with it too, so both paths stay bit-identical.
+#[inline]
+pub fn fold_partials<T: Real>(reduce: Reduce, slot: T, lanes: &[T]) -> T {
+    let w = width::<T>();
+    let op = |a: T, b: T| match reduce {
+        Reduce::Sum => a + b,
+        Reduce::Min => lane_min(a, b),
+        Reduce::Max => lane_max(a, b),
+    };
+    let id = T::from_f64(reduce.identity());
+    let mut p = [id; 4];
+    let whole = lanes.len().div_ceil(w) * w;
+    for k in 0..whole {
+        let x = if k < lanes.len() { lanes[k] } else { id };
+        p[k % w] = op(p[k % w], x);
+    }
+    let h = if w == 2 { op(p[0], p[1]) } else { op(op(p[0], p[1]), op(p[2], p[3])) };
+    op(slot, h)
+}
 
 /// A compiled pair program.
 pub struct JitPair<T> {
@@ -56,26 +102,33 @@ impl Drop for Code {
 }
 
 impl<T: Real> JitPair<T> {
-    /// Runs the program. `cols[k]` points at row 0 of `gathers[k]`'s column; `sign` holds the
-    /// per-axis mirror signs (3 × LANES) when the program was compiled with them.
+    /// Runs the program on lanes `lanes` of the frame, the neighbours of one particle, and folds
+    /// them into its accumulators. `cols[k]` points at row 0 of `gathers[k]`'s column; `sign`
+    /// holds the per-axis mirror signs (3 × LANES) when the program was compiled with them;
+    /// `dest` is the particle's lane of the dest program's frame; `slots` its accumulators.
     ///
     /// # Safety
     /// `frame` is the program's frame (`n_regs × LANES`), `j[..LANES]` are rows of every gathered
     /// column and particles of `group`/`material`, `params` is the parameter table the program was
-    /// compiled for, and `sign` is valid when the program uses it.
+    /// compiled for, `sign` is valid when the program uses it, `dest` reaches every broadcast
+    /// register and `slots` every folded slot.
+    #[allow(clippy::too_many_arguments)]
     pub unsafe fn run(
         &self,
         frame: &mut [T],
         j: &[u32],
         cols: &[*const T],
-        n: usize,
+        lanes: std::ops::Range<usize>,
         sign: *const T,
         world: &World<T>,
+        dest: *const T,
+        slots: &mut [T],
     ) {
-        debug_assert!(j.len() >= LANES && cols.len() == self.gathers.len());
+        debug_assert!(j.len() >= LANES && cols.len() == self.gathers.len() && lanes.end <= LANES);
         let f = self.func;
         let (g, m, p) = (world.group.as_ptr(), world.material.as_ptr(), world.params.as_ptr());
-        unsafe { f(frame.as_mut_ptr(), j.as_ptr(), cols.as_ptr(), n, sign, g, m, p, world.time, world.dt) }
+        let (fr, jp, cp, sl) = (frame.as_mut_ptr(), j.as_ptr(), cols.as_ptr(), slots.as_mut_ptr());
+        unsafe { f(fr, jp, cp, lanes.start, lanes.end, sign, g, m, p, dest, sl, world.time, world.dt) }
     }
 }
 
@@ -96,7 +149,12 @@ pub struct PairSpec<'a> {
     pub graph: &'a Graph,
     pub nodes: &'a [Id],
     pub preset: &'a [(Id, usize)],
+    /// Values of particle i: (id, register of the dest program), loaded once per call.
+    pub broadcast: &'a [(Id, usize)],
+    /// Values written per lane into the frame (id, register): compensated sums, which Rust folds.
     pub outputs: &'a [(Id, usize)],
+    /// Values folded into the particle's accumulators: (id, slot, reduction).
+    pub folded: &'a [(Id, usize, Reduce)],
     /// Whether lanes carry mirror signs (the case has symmetry planes).
     pub signs: bool,
     /// The parameter table's layout: a parameter component is at `material × stride + offset`.
@@ -123,7 +181,7 @@ pub fn compile_pair<T: Real>(spec: &PairSpec) -> Result<JitPair<T>, String> {
     let ptr = module.target_config().pointer_type();
     let real = if T::BYTES == 8 { types::F64 } else { types::F32 };
     let mut ctx = module.make_context();
-    for t in [ptr, ptr, ptr, ptr, ptr, ptr, ptr, ptr, real, real] {
+    for t in [ptr, ptr, ptr, ptr, ptr, ptr, ptr, ptr, ptr, ptr, ptr, real, real] {
         ctx.func.signature.params.push(AbiParam::new(t));
     }
     let id = module.declare_function("pair", Linkage::Local, &ctx.func.signature).map_err(|e| e.to_string())?;
@@ -166,8 +224,9 @@ fn demand_order(spec: &PairSpec) -> Vec<Id> {
     }
     let mut done: std::collections::HashSet<Id> = std::collections::HashSet::new();
     let mut order = vec![];
-    for (root, _) in spec.outputs {
-        let mut stack = vec![(*root, false)];
+    let roots = spec.outputs.iter().map(|(id, _)| *id).chain(spec.folded.iter().map(|(id, _, _)| *id));
+    for root in roots {
+        let mut stack = vec![(root, false)];
         while let Some((id, expanded)) = stack.pop() {
             if done.contains(&id) {
                 continue;
@@ -284,22 +343,22 @@ impl<'a, 'b, T: Real> Emitter<'a, 'b, T> {
         x
     }
 
-    fn to_float(&mut self, mask: Value) -> Value {
+    fn mask_as_float(&mut self, mask: Value) -> Value {
         self.b.ins().bitcast(self.vec, MemFlags::new(), mask)
     }
 
-    fn to_int(&mut self, x: Value) -> Value {
+    fn bits_as_int(&mut self, x: Value) -> Value {
         self.b.ins().bitcast(self.int, MemFlags::new(), x)
     }
 
     /// 1 where the mask is set, else 0.
     fn truth(&mut self, mask: Value, one: Value, zero: Value) -> Value {
-        let m = self.to_float(mask);
+        let m = self.mask_as_float(mask);
         self.b.ins().bitselect(m, one, zero)
     }
 
     fn select(&mut self, mask: Value, a: Value, b: Value) -> Value {
-        let m = self.to_float(mask);
+        let m = self.mask_as_float(mask);
         self.b.ins().bitselect(m, a, b)
     }
 
@@ -310,8 +369,8 @@ impl<'a, 'b, T: Real> Emitter<'a, 'b, T> {
         self.b.append_block_params_for_function_params(entry);
         self.b.switch_to_block(entry);
         let p = self.b.block_params(entry).to_vec();
-        let (frame, jptr, cols, n, sign) = (p[0], p[1], p[2], p[3], p[4]);
-        let (group, material, params, time, dt) = (p[5], p[6], p[7], p[8], p[9]);
+        let (frame, jptr, cols, start, end, sign) = (p[0], p[1], p[2], p[3], p[4], p[5]);
+        let (group, material, params, dest, slots, time, dt) = (p[6], p[7], p[8], p[9], p[10], p[11], p[12]);
         // Loop-invariant values: constants, globals, column pointers.
         let one = self.splat(1.0);
         let zero = self.splat(0.0);
@@ -329,6 +388,34 @@ impl<'a, 'b, T: Real> Emitter<'a, 'b, T> {
             .map(|k| self.b.ins().load(self.ptr, Self::mem(), cols, (k * self.ptr.bytes() as usize) as i32))
             .collect();
         let mut vals: HashMap<Id, Value> = HashMap::new();
+        for (id, u) in spec.broadcast {
+            let x = self.b.ins().load(self.real, Self::mem(), dest, (u * LANES * T::BYTES) as i32);
+            let v = self.b.ins().splat(self.vec, x);
+            vals.insert(*id, v);
+        }
+        // The accumulators, one vector each, starting at the identity.
+        let accs: Vec<Variable> = spec
+            .folded
+            .iter()
+            .map(|(_, _, r)| {
+                let var = self.b.declare_var(self.vec);
+                let id = self.splat(r.identity());
+                self.b.def_var(var, id);
+                var
+            })
+            .collect();
+        // Lane k of a vector is lane base + k of the frame; iota = (0, 1, …).
+        let lane_ty = self.int.lane_type();
+        let mut iota = {
+            let z = self.b.ins().iconst(lane_ty, 0);
+            self.b.ins().scalar_to_vector(self.int, z)
+        };
+        for k in 1..self.width {
+            let c = self.b.ins().iconst(lane_ty, k as i64);
+            iota = self.b.ins().insertlane(iota, c, k as u8);
+        }
+        let end_lane = if lane_ty == self.ptr { end } else { self.b.ins().ireduce(lane_ty, end) };
+        let end_vec = self.b.ins().splat(self.int, end_lane);
         for id in spec.nodes {
             if let Node::Const(bits) = spec.graph.nodes[*id as usize] {
                 let v = self.splat(f64::from_bits(bits));
@@ -338,12 +425,11 @@ impl<'a, 'b, T: Real> Emitter<'a, 'b, T> {
         let head = self.b.create_block();
         let body = self.b.create_block();
         let exit = self.b.create_block();
-        let base0 = self.b.ins().iconst(self.ptr, 0);
-        self.b.ins().jump(head, &[base0.into()]);
+        self.b.ins().jump(head, &[start.into()]);
 
         self.b.switch_to_block(head);
         let base = self.b.append_block_param(head, self.ptr);
-        let more = self.b.ins().icmp(cranelift_codegen::ir::condcodes::IntCC::UnsignedLessThan, base, n);
+        let more = self.b.ins().icmp(IntCC::UnsignedLessThan, base, end);
         self.b.ins().brif(more, body, &[], exit, &[]);
 
         self.b.switch_to_block(body);
@@ -485,14 +571,67 @@ impl<'a, 'b, T: Real> Emitter<'a, 'b, T> {
             };
             self.b.ins().store(Self::mem(), v, lane_addr, reg_addr(*r));
         }
+        if !spec.folded.is_empty() {
+            // Lanes at or past `end` contribute the identity (as `fold_partials` pads).
+            let base_lane = if lane_ty == self.ptr { base } else { self.b.ins().ireduce(lane_ty, base) };
+            let base_vec = self.b.ins().splat(self.int, base_lane);
+            let idx = self.b.ins().iadd(base_vec, iota);
+            let live = self.b.ins().icmp(IntCC::UnsignedLessThan, idx, end_vec);
+            for ((id, _, r), var) in spec.folded.iter().zip(&accs) {
+                let v = match (vals.get(id), preset.get(id)) {
+                    (Some(v), _) => *v,
+                    (None, Some(p)) => self.b.ins().load(self.vec, Self::mem(), lane_addr, reg_addr(*p)),
+                    (None, None) => unreachable!("every folded value is computed or preset"),
+                };
+                let identity = self.splat(r.identity());
+                let v = self.select(live, v, identity);
+                let acc = self.b.use_var(*var);
+                let acc = self.combine(*r, acc, v);
+                self.b.def_var(*var, acc);
+            }
+        }
         let next = self.b.ins().iadd_imm_s(base, self.width as i64);
         self.b.ins().jump(head, &[next.into()]);
 
         self.b.switch_to_block(exit);
+        for ((_, slot, r), var) in spec.folded.iter().zip(&accs) {
+            let acc = self.b.use_var(*var);
+            let lanes: Vec<Value> = (0..self.width).map(|k| self.b.ins().extractlane(acc, k as u8)).collect();
+            let h = if self.width == 2 {
+                self.combine(*r, lanes[0], lanes[1])
+            } else {
+                let a = self.combine(*r, lanes[0], lanes[1]);
+                let b = self.combine(*r, lanes[2], lanes[3]);
+                self.combine(*r, a, b)
+            };
+            let off = (slot * T::BYTES) as i32;
+            let old = self.b.ins().load(self.real, Self::mem(), slots, off);
+            let new = self.combine(*r, old, h);
+            self.b.ins().store(Self::mem(), new, slots, off);
+        }
         self.b.ins().return_(&[]);
         self.b.seal_all_blocks();
         self.b.finalize(config);
         gathers
+    }
+
+    /// `op(a, b)` of a reduction, as `fold_partials` computes it (scalars or vectors alike).
+    fn combine(&mut self, r: Reduce, a: Value, b: Value) -> Value {
+        match r {
+            Reduce::Sum => self.b.ins().fadd(a, b),
+            Reduce::Min | Reduce::Max => {
+                // lane_min / lane_max: b when a is NaN or b is beyond a, else a.
+                let nan = self.b.ins().fcmp(FloatCC::Unordered, a, a);
+                let cc = if r == Reduce::Min { FloatCC::LessThan } else { FloatCC::GreaterThan };
+                let beyond = self.b.ins().fcmp(cc, b, a);
+                let m = self.b.ins().bor(nan, beyond);
+                if self.b.func.dfg.value_type(a).is_vector() {
+                    self.select(m, b, a)
+                } else {
+                    self.b.ins().select(m, b, a)
+                }
+            }
+        }
     }
 
     /// `array[j]` of a `u32` array, widened to 64 bits.
@@ -579,7 +718,7 @@ impl<'a, 'b, T: Real> Emitter<'a, 'b, T> {
         }
         let magic_bits = if T::BYTES == 8 { k.magic.to_bits() as i64 } else { (k.magic as f32).to_bits() as i64 };
         let magic_int = self.splat_int(magic_bits);
-        let t_int = self.to_int(t);
+        let t_int = self.bits_as_int(t);
         let n = self.b.ins().isub(t_int, magic_int);
         let zero = self.splat(0.0);
         let negative = self.b.ins().fcmp(FloatCC::LessThan, x, zero);
@@ -591,8 +730,8 @@ impl<'a, 'b, T: Real> Emitter<'a, 'b, T> {
         let e1 = self.b.ins().ishl_imm_u(e1, k.mantissa as i64);
         let e2 = self.b.ins().isub(bias, m);
         let e2 = self.b.ins().ishl_imm_u(e2, k.mantissa as i64);
-        let s1 = self.to_float(e1);
-        let s2 = self.to_float(e2);
+        let s1 = self.mask_as_float(e1);
+        let s2 = self.mask_as_float(e2);
         let y = self.b.ins().fmul(p, s1);
         self.b.ins().fmul(y, s2)
     }

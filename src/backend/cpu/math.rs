@@ -49,8 +49,9 @@ pub const EXP_F64: ExpConsts = ExpConsts {
     hi: 710.0,
     log2e: std::f64::consts::LOG2_E,
     magic: 6755399441055744.0,
-    ln2_hi: 6.931_471_803_691_238_164_9e-1,
-    ln2_lo: 1.908_214_929_270_587_700_02e-10,
+    // fdlibm's split of ln 2: the high part has trailing zero bits, so n · ln2_hi is exact.
+    ln2_hi: f64::from_bits(0x3FE6_2E42_FEE0_0000),
+    ln2_lo: f64::from_bits(0x3DEA_39EF_3579_3C76),
     coeffs: &INV_FACT,
     bias: 1023,
     mantissa: 52,

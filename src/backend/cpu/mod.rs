@@ -329,17 +329,32 @@ fn compile_variant<T: Real>(
         &accum_effects,
         &Pinned { preset: preset_regs.clone(), exports: vec![] },
     );
+    let accum_slot: Vec<usize> = pair
+        .accums
+        .iter()
+        .map(|a| slots.iter().position(|s| s.field == a.field && s.comp == a.comp).expect("slot of every accum"))
+        .collect();
     let jit = jit::enabled()
         .then(|| {
-            let outputs: Vec<(Id, usize)> =
-                accum_effects.iter().zip(&pair.accums).map(|(e, a)| (effect_value(e), a.reg)).collect();
+            let mut outputs: Vec<(Id, usize)> = vec![];
+            let mut folded: Vec<(Id, usize, Reduce)> = vec![];
+            for ((e, a), s) in accum_effects.iter().zip(&pair.accums).zip(&accum_slot) {
+                if slots[*s].compensated {
+                    outputs.push((effect_value(e), a.reg));
+                } else {
+                    folded.push((effect_value(e), *s, a.reduce));
+                }
+            }
+            let broadcast: Vec<(Id, usize)> = exports.iter().map(|u| (*u, dest.reg_of[u])).collect();
             let spec = jit::PairSpec {
                 model,
                 dim,
                 graph,
                 nodes: &pair_nodes,
                 preset: &preset_regs,
+                broadcast: &broadcast,
                 outputs: &outputs,
+                folded: &folded,
                 signs,
                 param_stride,
                 param_offset,
@@ -353,11 +368,6 @@ fn compile_variant<T: Real>(
                 .ok()
         })
         .flatten();
-    let accum_slot = pair
-        .accums
-        .iter()
-        .map(|a| slots.iter().position(|s| s.field == a.field && s.comp == a.comp).expect("slot of every accum"))
-        .collect();
     let tail = particle_program(plan, known, g, &plan.tail_blocks(&v.tail));
     Variant {
         group: g,

@@ -205,6 +205,7 @@ fn truth<T: Real>(c: bool) -> T {
 /// min and max as the JIT computes them: NaN loses to a number, as in `f64::min`; of two equal
 /// values (±0) the first.
 #[inline(always)]
+#[allow(clippy::eq_op)] // x != x: x is NaN
 pub fn lane_min<T: Real>(x: T, y: T) -> T {
     if x != x || y < x {
         y
@@ -214,6 +215,7 @@ pub fn lane_min<T: Real>(x: T, y: T) -> T {
 }
 
 #[inline(always)]
+#[allow(clippy::eq_op)] // x != x: x is NaN
 pub fn lane_max<T: Real>(x: T, y: T) -> T {
     if x != x || y > x {
         y
