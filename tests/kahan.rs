@@ -38,6 +38,14 @@ fn compensated_f32_sums_stay_close_to_f64() {
     let (_, plain) = field_by_id(&f32b, "sum_plain");
     let (_, kahan) = field_by_id(&f32b, "sum_kahan");
     let (e_plain, e_kahan) = (worst_error(&plain, &exact), worst_error(&kahan, &exact));
-    assert!(e_kahan < 2e-7, "compensated f32 error {e_kahan:e}");
-    assert!(e_kahan < 0.2 * e_plain, "compensation should help: plain {e_plain:e}, compensated {e_kahan:e}");
+    // Within 2 ulp of f32 at the sum's value (about 1): the compensated sum of the f32 terms is
+    // exact to about one, and the terms' own rounding (each W_ij in f32) adds about another.
+    let ulp = f32::EPSILON as f64;
+    assert!(e_kahan < 2.0 * ulp, "compensated f32 error {e_kahan:e} ({:.2} ulp)", e_kahan / ulp);
+    // The CPU folds each batch of at most 64 neighbours in interleaved partial sums (the vector
+    // width of its native code), which already keeps plain f32 sums within 3 ulp here (summed
+    // one lane after another they were off by more than five times the compensated sum);
+    // compensation must still not be worse. On the GPU, which sums one
+    // neighbour after another, it is what keeps f32 close (tests/gpu.rs).
+    assert!(e_kahan <= e_plain, "compensation should not hurt: plain {e_plain:e}, compensated {e_kahan:e}");
 }
