@@ -16,13 +16,6 @@ fn gpu() -> Gpu {
     Gpu::new().unwrap_or_else(|e| panic!("the GPU tests need a GPU adapter: {e}"))
 }
 
-fn rnd(seed: &mut u64) -> f64 {
-    *seed ^= *seed << 13;
-    *seed ^= *seed >> 7;
-    *seed ^= *seed << 17;
-    (*seed % 1_000_000) as f64 / 1_000_000.0
-}
-
 /// A random cloud with jittered spacing; with `variable_h`, spacings (so h) vary by ±30 %.
 fn cloud(dim: usize, n_side: usize, dx: f64, variable_h: bool, seed: u64) -> ParticleInput {
     let mut s = seed;

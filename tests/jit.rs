@@ -81,13 +81,6 @@ fn native_pair_programs_equal_the_closures_bit_for_bit_in_f32() {
     }
 }
 
-fn rnd(seed: &mut u64) -> f64 {
-    *seed ^= *seed << 13;
-    *seed ^= *seed >> 7;
-    *seed ^= *seed << 17;
-    (*seed % 1_000_000) as f64 / 1_000_000.0
-}
-
 /// One evaluation of every pass of the stdlib solid and fluid models on a jittered cloud with
 /// varying smoothing lengths (so `h` is not a constant of the run), natively and by closures.
 #[test]

@@ -101,3 +101,11 @@ pub fn field_by_id<B: Backend>(b: &B, name: &str) -> (usize, Vec<f64>) {
     }
     (comps, out)
 }
+
+/// A xorshift pseudo-random number in [0, 1), advancing `seed`.
+pub fn rnd(seed: &mut u64) -> f64 {
+    *seed ^= *seed << 13;
+    *seed ^= *seed >> 7;
+    *seed ^= *seed << 17;
+    (*seed % 1_000_000) as f64 / 1_000_000.0
+}

@@ -16,8 +16,8 @@
 use super::lower::{Bin, Graph, Id, Node, Un};
 use super::math::ExpConsts;
 use super::program::LANES;
-use super::program::{lane_max, lane_min};
-use crate::ir::{FieldId, Global, Model, Reduce, Shape, Side};
+use super::program::{lane_max, lane_min, sign_axes};
+use crate::ir::{FieldId, Global, Model, Reduce, Side};
 use crate::particles::Real;
 use cranelift_codegen::ir::condcodes::FloatCC;
 use cranelift_codegen::ir::condcodes::IntCC;
@@ -261,22 +261,6 @@ fn supported(node: &Node) -> Result<(), String> {
             Err("a value of particle i read per lane".into())
         }
         _ => Ok(()),
-    }
-}
-
-/// The axes whose mirror signs multiply a gathered component (as `program.rs` applies them).
-fn sign_axes(shape: Shape, dim: usize, comp: usize) -> Vec<usize> {
-    match shape {
-        Shape::Scalar | Shape::Bool => vec![],
-        Shape::Vec => vec![comp],
-        _ => {
-            let (a, b) = crate::ir::component_indices(shape, dim)[comp];
-            if a == b {
-                vec![]
-            } else {
-                vec![a, b]
-            }
-        }
     }
 }
 

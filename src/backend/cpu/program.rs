@@ -257,7 +257,7 @@ fn bin_instr<T: Real>(op: Bin, o: usize, a: usize, b: usize) -> Instr<T> {
 
 /// The axes whose mirror signs multiply a stored component (a vec's component flips with its axis,
 /// a tensor's (a, b) with both).
-fn sign_axes(shape: Shape, dim: usize, comp: usize) -> Vec<usize> {
+pub(super) fn sign_axes(shape: Shape, dim: usize, comp: usize) -> Vec<usize> {
     match shape {
         Shape::Scalar | Shape::Bool => vec![],
         Shape::Vec => vec![comp],
