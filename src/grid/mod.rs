@@ -148,10 +148,7 @@ impl Grid {
     /// where the next begins merged, empty ones left out. The ranges are disjoint and increasing.
     pub fn cell_ranges_around(&self, p: [f64; 3], out: &mut Vec<(u32, u32)>) {
         out.clear();
-        self.for_each_range(p, |a, b| match out.last_mut() {
-            Some(last) if last.1 == a => last.1 = b,
-            _ => out.push((a, b)),
-        });
+        self.for_each_range(p, |a, b| push_range(out, a, b));
     }
 
     /// Replaces `out` with the ranges into [`order`](Self::order) of the cells that may hold a
@@ -206,10 +203,7 @@ impl Grid {
                 let a = self.cell_start[g.linear([x0, y, z])];
                 let b = self.cell_start[g.linear([x1, y, z]) + 1];
                 if a < b {
-                    match out.last_mut() {
-                        Some(last) if last.1 == a => last.1 = b,
-                        _ => out.push((a, b)),
-                    }
+                    push_range(out, a, b);
                 }
             }
         }
@@ -238,6 +232,14 @@ impl Grid {
             hi[k] = (c[k] + 1).min(self.geom.counts[k] as u32 - 1);
         }
         (lo, hi)
+    }
+}
+
+/// Appends the range `a..b` of [`Grid::order`], merged into the last one when it ends at `a`.
+fn push_range(out: &mut Vec<(u32, u32)>, a: u32, b: u32) {
+    match out.last_mut() {
+        Some(last) if last.1 == a => last.1 = b,
+        _ => out.push((a, b)),
     }
 }
 

@@ -8,8 +8,9 @@ use crate::grid::Grid;
 use crate::ir::Reduce;
 use crate::particles::{Real, Store};
 
-/// Lanes past a batch's last that native code may read or write (a vector's width).
-const OVERRUN: usize = 4;
+/// Lanes past a batch's last that native code may read or write: up to a vector's width (the
+/// most lanes are f32's).
+const OVERRUN: usize = super::jit::VECTOR_BYTES / std::mem::size_of::<f32>();
 
 /// A chunk of consecutive particles of one group.
 #[derive(Clone, Copy, Debug)]
@@ -325,32 +326,11 @@ struct Writer<'a, 'b, T> {
 }
 
 impl<T: Real> Writer<'_, '_, T> {
+    /// Writes a candidate (j, or with `flip` an image of j) into the next lane and keeps it only
+    /// if `keep`: a branch-free push, since whether a candidate is a neighbour is too random to
+    /// predict (about half are rejected).
     #[inline(always)]
-    fn push<const D: usize>(&mut self, j: u32, dx: [T; 3], r: T, h: T, flip: [bool; 3]) {
-        let n = self.n;
-        let PairRegs { x, r: rr, h: hr } = self.v.pair_regs;
-        for (c, v) in dx.iter().enumerate().take(D) {
-            self.pair[(x + c) * LANES + n] = *v;
-        }
-        self.pair[rr * LANES + n] = r;
-        self.pair[hr * LANES + n] = h;
-        self.j[n] = j;
-        if self.with_sign {
-            for (c, f) in flip.iter().enumerate() {
-                self.sign[c * LANES + n] = if *f { -T::one() } else { T::one() };
-            }
-        }
-        self.n += 1;
-        if self.n == LANES {
-            self.flush();
-            self.segs.push((self.k, 0));
-        }
-    }
-
-    /// Writes a candidate (particle j itself, not an image) into the next lane and keeps it only
-    /// if `keep` (a branch-free push: whether a candidate is a neighbour is too random to predict).
-    #[inline(always)]
-    fn offer<const D: usize>(&mut self, j: u32, dx: [T; 3], r2: T, h: T, keep: bool) {
+    fn offer<const D: usize>(&mut self, j: u32, dx: [T; 3], r2: T, h: T, flip: [bool; 3], keep: bool) {
         let n = self.n;
         let PairRegs { x, r: rr, h: hr } = self.v.pair_regs;
         for (c, v) in dx.iter().enumerate().take(D) {
@@ -360,9 +340,9 @@ impl<T: Real> Writer<'_, '_, T> {
         self.pair[hr * LANES + n] = h;
         self.j[n] = j;
         if self.with_sign {
-            // Not an image: no axis flips (the lane may hold an image's signs from before).
-            for c in 0..3 {
-                self.sign[c * LANES + n] = T::one();
+            // Every lane gets its signs: it may hold an earlier image's.
+            for (c, f) in flip.iter().enumerate() {
+                self.sign[c * LANES + n] = if *f { -T::one() } else { T::one() };
             }
         }
         self.n += keep as usize;
@@ -518,15 +498,7 @@ fn neighbours_of<T: Real, const D: usize>(
                 let hij = (hi + nb.h[jj]) * half;
                 let rc = nb.support * hij;
                 let inside = r2 < rc * rc && r2 != T::zero();
-                if !mirrored {
-                    // Half the candidates are rejected, at random: written without a branch.
-                    w.offer::<D>(jj as u32, dx, r2, hij, inside);
-                    continue;
-                }
-                if !inside {
-                    continue;
-                }
-                {
+                if mirrored {
                     // x_ij = x_i − (image of x_j): the reflection of (y_i − x_j) on the flipped axes.
                     for c in 0..D {
                         if flip[c] {
@@ -534,7 +506,7 @@ fn neighbours_of<T: Real, const D: usize>(
                         }
                     }
                 }
-                w.push::<D>(jj as u32, dx, r2.sqrt(), hij, flip);
+                w.offer::<D>(jj as u32, dx, r2, hij, flip, inside);
             }
         }
     }

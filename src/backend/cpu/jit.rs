@@ -2,16 +2,17 @@
 //!
 //! The closure programs (`program.rs`) pay for each operation with a call and a round trip of its
 //! lanes through memory. The JIT compiles the same scalar SSA graph into one function that runs
-//! the whole program on a SIMD vector of neighbours (2 f64 or 4 f32) with every intermediate in a
-//! register, and writes only the accumulated values back into the frame, where the closure path
-//! would have left them. So it is a drop-in replacement for `Program::run` on the pair program:
-//! same frame in, same registers out, and the same operations in the same order (no fused
-//! multiply–adds, min/max and exp as `program.rs` computes them), hence bit-identical results —
-//! `tests/jit.rs` checks that on every stdlib model.
+//! the whole program on SIMD vectors of neighbours (2 f64 or 4 f32) with every intermediate in a
+//! register. It is called once per particle with that particle's lanes of the batch, loads the
+//! particle's own values itself and folds its sums into the particle's accumulators
+//! ([`fold_partials`], which the closures use too); compensated sums are written per lane for Rust
+//! to fold (Kahan). It emits the same operations in the same order as the closures (no fused
+//! multiply–adds; min/max and exp as `program.rs` computes them), hence bit-identical results —
+//! `tests/jit.rs` checks that on every bundled case.
 //!
-//! A program with an operation the JIT does not emit (`ln`, `pow` with a varying exponent, a
-//! parameter or group test at j) keeps its closures; so does a pass whose gathered columns are not
-//! stored with one base on every group. `PAIRSUM_NO_JIT=1` turns the JIT off.
+//! A program with an operation the JIT does not emit (`ln`, `pow` with a varying exponent) keeps
+//! its closures; so does a pass whose gathered columns are not stored with one base on every
+//! group. `PAIRSUM_NO_JIT=1` turns the JIT off.
 
 use super::lower::{Bin, Graph, Id, Node, Un};
 use super::math::ExpConsts;
@@ -49,10 +50,13 @@ type PairFn<T> = unsafe extern "C" fn(
     T,
 );
 
-/// Lanes of the JIT's vectors (16 bytes) for reals of type T: the partial sums of a batch fold
-/// with this period on both paths (see [`fold_partials`]).
+/// The JIT's vectors: 128 bits (Cranelift's x86 backend has no wider ones).
+pub const VECTOR_BYTES: usize = 16;
+
+/// Lanes of the JIT's vectors for reals of type T: the partial sums of a batch fold with this
+/// period on both paths (see [`fold_partials`]).
 pub fn width<T: Real>() -> usize {
-    16 / T::BYTES
+    VECTOR_BYTES / T::BYTES
 }
 
 /// Folds lanes into `slot` as the native code does: `width` interleaved partial results (lane k
@@ -108,7 +112,8 @@ impl<T: Real> JitPair<T> {
     /// `dest` is the particle's lane of the dest program's frame; `slots` its accumulators.
     ///
     /// # Safety
-    /// `frame` is the program's frame (`n_regs × LANES`), `j[..LANES]` are rows of every gathered
+    /// `frame` is the program's frame (`n_regs × LANES`, plus `width − 1` lanes of padding: the
+    /// last vector may run past `lanes.end`), `j[..LANES + width − 1]` are rows of every gathered
     /// column and particles of `group`/`material`, `params` is the parameter table the program was
     /// compiled for, `sign` is valid when the program uses it, `dest` reaches every broadcast
     /// register and `slots` every folded slot.
@@ -124,7 +129,9 @@ impl<T: Real> JitPair<T> {
         dest: *const T,
         slots: &mut [T],
     ) {
-        debug_assert!(j.len() >= LANES && cols.len() == self.gathers.len() && lanes.end <= LANES);
+        let pad = width::<T>() - 1;
+        debug_assert!(cols.len() == self.gathers.len() && lanes.end <= LANES);
+        debug_assert!(j.len() >= LANES + pad && frame.len() % LANES >= pad, "no padding for whole vectors");
         let f = self.func;
         let (g, m, p) = (world.group.as_ptr(), world.material.as_ptr(), world.params.as_ptr());
         let (fr, jp, cp, sl) = (frame.as_mut_ptr(), j.as_ptr(), cols.as_ptr(), slots.as_mut_ptr());
@@ -291,7 +298,7 @@ impl<'a, 'b, T: Real> Emitter<'a, 'b, T> {
             real,
             vec,
             int,
-            width: 16 / T::BYTES,
+            width: width::<T>(),
             consts: HashMap::new(),
             int_consts: HashMap::new(),
             _t: std::marker::PhantomData,
@@ -302,7 +309,8 @@ impl<'a, 'b, T: Real> Emitter<'a, 'b, T> {
         MemFlags::new().with_notrap()
     }
 
-    /// A vector of the constant `v` (rounded to T), made once in the entry block.
+    /// A vector of the constant `v` (rounded to T), made once where first asked for: the entry
+    /// block, or the loop body for constants only the body uses.
     fn splat(&mut self, v: f64) -> Value {
         let t = T::from_f64(v);
         let bits = t.to_f64().to_bits();

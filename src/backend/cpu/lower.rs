@@ -350,11 +350,9 @@ pub struct Known {
     pub fields: Vec<Option<Vec<f64>>>,
 }
 
-pub type KnownParams = Known;
-
 pub struct Lowerer<'a> {
     pub model: &'a Model,
-    known: &'a KnownParams,
+    known: &'a Known,
     pub kernel: &'a Kernel,
     pub dim: usize,
     pub g: Graph,
@@ -370,7 +368,7 @@ pub struct Lowerer<'a> {
 impl<'a> Lowerer<'a> {
     pub fn new(
         model: &'a Model,
-        known: &'a KnownParams,
+        known: &'a Known,
         kernel: &'a Kernel,
         dim: usize,
         mode: Mode,

@@ -14,7 +14,7 @@ use crate::ir::{FieldId, GroupId, Reduce, Storage};
 use crate::particles::{Real, Store};
 use crate::schedule::{Block, Plan};
 use exec::{chunks, views, Chunk, Neighbours, Scratch, Shared};
-use lower::{Effect, Id, KnownParams, Lowerer, Mode, Node};
+use lower::{Effect, Id, Known, Lowerer, Mode, Node};
 use program::{compile, live_nodes, Pinned, Program, LANES};
 use rayon::prelude::*;
 
@@ -80,7 +80,7 @@ fn is_stored(plan: &Plan, g: usize) -> impl Fn(FieldId) -> bool + '_ {
 }
 
 /// A particle program for group `g` from blocks run in order.
-fn particle_program<T: Real>(plan: &Plan, known: &KnownParams, g: usize, blocks: &[Block]) -> Option<Program<T>> {
+fn particle_program<T: Real>(plan: &Plan, known: &Known, g: usize, blocks: &[Block]) -> Option<Program<T>> {
     let kernel = &plan.model.kernels[plan.kernel.index()];
     let mut lw = Lowerer::new(&plan.model, known, kernel, plan.dim, Mode::Particle, Box::new(is_stored(plan, g)));
     let mut any = false;
@@ -197,8 +197,9 @@ fn varying(node: &Node, flags: &[bool]) -> bool {
 
 fn compile_variant<T: Real>(
     plan: &Plan,
-    known: &KnownParams,
-    (signs, param_stride, param_offset): (bool, usize, &[usize]),
+    known: &Known,
+    params: &crate::particles::ParamTable<T>,
+    signs: bool,
     v: &crate::schedule::PassVariant,
 ) -> Variant<T> {
     let g = v.group.index();
@@ -356,8 +357,8 @@ fn compile_variant<T: Real>(
                 outputs: &outputs,
                 folded: &folded,
                 signs,
-                param_stride,
-                param_offset,
+                param_stride: params.stride,
+                param_offset: &params.offset,
             };
             jit::compile_pair::<T>(&spec)
                 .map_err(|why| {
@@ -386,8 +387,6 @@ fn compile_variant<T: Real>(
 }
 
 impl<T: Real> CpuBackend<T> {
-    /// Compiles every block of the plan for every group present. The store must hold the
-    /// particles (sorted group-major) with the scene's fields and the material parameters set.
     /// The same backend with every neighbour loop run by closures (the reference the JIT's
     /// native code is tested against, and `PAIRSUM_NO_JIT`'s behaviour).
     pub fn without_jit(mut self) -> Self {
@@ -403,6 +402,8 @@ impl<T: Real> CpuBackend<T> {
         (all.clone().filter(|v| v.jit.is_some()).count(), all.count())
     }
 
+    /// Compiles every block of the plan for every group present. The store must hold the
+    /// particles (sorted group-major) with the scene's fields and the material parameters set.
     pub fn new(plan: Plan, store: Store<T>, mirrors: Vec<Mirror>) -> Result<CpuBackend<T>, BackendError> {
         let x = plan.model.field_id("x").ok_or_else(|| BackendError("the model has no position field `x`".into()))?;
         let h = plan.model.field_id("h").ok_or_else(|| BackendError("the model has no smoothing length `h`".into()))?;
@@ -418,14 +419,7 @@ impl<T: Real> CpuBackend<T> {
             .map(|p| {
                 p.variants
                     .iter()
-                    .map(|v| {
-                        compile_variant(
-                            &plan,
-                            &known,
-                            (!mirrors.is_empty(), store.params.stride, &store.params.offset),
-                            v,
-                        )
-                    })
+                    .map(|v| compile_variant(&plan, &known, &store.params, !mirrors.is_empty(), v))
                     .collect()
             })
             .collect();
@@ -577,8 +571,8 @@ impl<T: Real> Backend for CpuBackend<T> {
             )));
         }
         // Cells of half the largest cut-off: the neighbour search visits only the cells the
-        // cut-off sphere reaches (`Grid::cell_ranges_within`), about a third of the candidates
-        // of the 3^dim cells of a cut-off's size.
+        // cut-off sphere reaches (`Grid::cell_ranges_within`): fewer candidates than the 3^dim
+        // cells of a cut-off's size.
         let grid = Grid::build(self.positions(), dim, 0.5 * self.support * h_max);
         let x: Vec<T> = self.positions().to_vec();
         let h: Vec<T> = self.store.column(self.h).expect("h is stored").data.clone();
