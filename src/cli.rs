@@ -441,6 +441,7 @@ fn run_plan(path: &Path, dim: usize, integrator: &str, precision: Precision, opt
         loads: vec![],
         constraints: vec![],
         symmetry: vec![],
+        search: Default::default(),
     };
     match crate::schedule::Plan::build(&model, &scene, None) {
         Ok(plan) => {
@@ -475,6 +476,7 @@ pub fn plan_of(path: &Path, dim: usize) -> Result<crate::schedule::Plan, String>
         loads: vec![],
         constraints: vec![],
         symmetry: vec![],
+        search: Default::default(),
     };
     crate::schedule::Plan::build(&checked.model, &scene, None).map_err(|e| render(&sources, &[*e.0]))
 }

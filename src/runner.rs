@@ -356,6 +356,11 @@ fn make_report<B: Backend>(
         })
         .collect();
     let mut notes = vec![format!("resolution `{}`: particle spacing {} m", scene.resolution, scene.dx)];
+    let search = &engine.backend.plan().search;
+    if search.keeps_lists() {
+        notes.push(format!("neighbour search: {}", search.describe()));
+        notes.extend(engine.backend.search_stats().describe(search));
+    }
     if let Some(f) = failure {
         notes.push(format!("the run did not complete: {f}"));
     }

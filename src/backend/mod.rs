@@ -71,6 +71,10 @@ pub trait Backend {
     fn restore(&mut self, s: &Snapshot) -> Result<(), BackendError>;
     /// The first particle (in the current order) and field that is NaN or infinite among `fields`.
     fn first_non_finite(&mut self, fields: &[FieldId]) -> Result<Option<(usize, FieldId)>, BackendError>;
+    /// What the neighbour search has done so far (rebuilds of kept lists).
+    fn search_stats(&self) -> crate::schedule::SearchStats {
+        crate::schedule::SearchStats::default()
+    }
     /// A whole step on the device in one submission, for backends that can (the GPU): from the
     /// clock (time, last dt, step) to the new one. `None`: the engine runs the actions itself.
     fn device_step(

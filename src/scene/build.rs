@@ -13,7 +13,7 @@ use crate::diag::{closest, Diagnostic, Sources, Span};
 use crate::engine::setup::{InitialValue, MaterialInput, ParticleInput};
 use crate::engine::RunConfig;
 use crate::ir::{self, FieldId, GroupSet, Model, Shape};
-use crate::schedule::{Constraint, IntegratorKind, Load, SceneSpec, Target};
+use crate::schedule::{Constraint, IntegratorKind, Load, SceneSpec, Search, Target};
 use crate::units::Unit;
 use std::path::Path;
 
@@ -714,6 +714,10 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
             }
         }
     }
+    let search = neighbour_search(cx, &model, case.neighbours.as_ref())?;
+    if let Search::Adaptive { field, .. } = &search {
+        outputs.push(*field);
+    }
     outputs.sort();
     outputs.dedup();
     let groups = particles.groups();
@@ -723,7 +727,7 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
         None => f64::INFINITY,
     };
     let symmetry = mirrors.iter().map(|m| (m.axis, m.offset)).collect();
-    let spec = SceneSpec { dim, groups, outputs, integrator, gravity, loads, constraints, symmetry };
+    let spec = SceneSpec { dim, groups, outputs, integrator, gravity, loads, constraints, symmetry, search };
     let mut config =
         RunConfig { end_time, dt_max, reorder_every: case.reorder_every.unwrap_or(25), ..RunConfig::default() };
     if let Some(r) = &case.min_dt_ratio {
@@ -997,4 +1001,55 @@ fn primitive(s: &case::Shape, cx: &mut Ctx) -> Option<Primitive> {
             return None;
         }
     })
+}
+
+/// The `[neighbours]` table: the cell list when absent.
+fn neighbour_search(cx: &mut Ctx, model: &Model, n: Option<&case::Neighbours>) -> Option<Search> {
+    let Some(n) = n else { return Some(Search::Cells) };
+    let skin = match &n.skin {
+        Some(s) if !(*s.get_ref() >= 0.0 && *s.get_ref() <= 1.0) => {
+            let msg = format!("the skin is a fraction of the largest cut-off between 0 and 1, found {}", s.get_ref());
+            cx.err(s.span(), "C0034", msg, "out of range");
+            return None;
+        }
+        Some(s) => Some(*s.get_ref()),
+        None => None,
+    };
+    // The cell list reads nothing else, and `field` and `threshold` are read by the adaptive
+    // search only, so that a study can switch `search` alone.
+    let kind = n.search.get_ref().as_str();
+    match kind {
+        "cells" => Some(Search::Cells),
+        "verlet" => Some(Search::Verlet { skin: skin.unwrap_or(0.1) }),
+        "adaptive" => {
+            let Some(f) = &n.field else {
+                cx.err(n.search.span(), "C0034", "the adaptive search needs `field` (e.g. \"eps_p\")", "no field");
+                return None;
+            };
+            let Some(field) = model.field_id(f.get_ref()).filter(|id| model.field(*id).ty.shape == Shape::Scalar)
+            else {
+                cx.err(f.span(), "C0034", format!("`{}` is not a scalar field of the model", f.get_ref()), "here");
+                return None;
+            };
+            let threshold = match &n.threshold {
+                Some(t) => cx.scalar(t, Unit::ONE, "threshold")?,
+                None => {
+                    cx.err(n.search.span(), "C0034", "the adaptive search needs `threshold`", "no threshold");
+                    return None;
+                }
+            };
+            if threshold.is_nan() || threshold < 0.0 {
+                let span = n.threshold.as_ref().map(|t| t.span()).unwrap_or(n.search.span());
+                cx.err(span, "C0034", format!("the threshold is a non-negative number, found {threshold}"), "here");
+                return None;
+            }
+            let field_name = f.get_ref().clone();
+            Some(Search::Adaptive { field, field_name, threshold, skin: skin.unwrap_or(0.0) })
+        }
+        other => {
+            let msg = format!("unknown neighbour search `{other}`: cells, verlet or adaptive");
+            cx.err(n.search.span(), "C0034", msg, "here");
+            None
+        }
+    }
 }

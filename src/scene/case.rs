@@ -46,6 +46,9 @@ pub struct CaseFile {
     pub constraints: Vec<Constraint>,
     #[serde(default)]
     pub symmetry: Vec<Symmetry>,
+    /// How neighbours are found (`[neighbours]`; the cell list when absent).
+    #[serde(default)]
+    pub neighbours: Option<Neighbours>,
     #[serde(default)]
     pub output: Option<Output>,
     #[serde(default)]
@@ -199,6 +202,20 @@ pub struct Symmetry {
     pub axis: Spanned<String>,
     #[serde(default)]
     pub at: Option<Value>,
+}
+
+/// `[neighbours]`: `search = "cells" | "verlet" | "adaptive"`, the skin (a fraction of the
+/// largest cut-off), and for the adaptive search the field and its threshold.
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct Neighbours {
+    pub search: Spanned<String>,
+    #[serde(default)]
+    pub skin: Option<Spanned<f64>>,
+    #[serde(default)]
+    pub field: Option<Spanned<String>>,
+    #[serde(default)]
+    pub threshold: Option<Value>,
 }
 
 #[derive(Deserialize, Debug)]

@@ -15,9 +15,11 @@ mod fuse;
 mod integrator;
 mod live;
 mod print;
+pub mod search;
 
 pub use integrator::IntegratorKind;
 pub use live::stmts_of;
+pub use search::{Drift, Rebuild, Search, SearchStats};
 
 use crate::diag::{Diagnostic, Span};
 use crate::ir::{self, EqId, FieldId, GroupId, GroupSet, Model, ParamId, Storage};
@@ -41,6 +43,8 @@ pub struct SceneSpec {
     /// Symmetry planes `(axis, offset)`: the particles live on the side `x[axis] > offset`, and
     /// one that crosses a plane is reflected back, its normal velocity reversed.
     pub symmetry: Vec<(usize, f64)>,
+    /// How neighbours are found, and when kept lists are rebuilt.
+    pub search: Search,
 }
 
 /// The particles a load or a constraint acts on: a whole body, or a part (a region of a body).
@@ -178,6 +182,8 @@ pub struct Plan {
     pub scene_params: Vec<SceneParam>,
     /// Saved copies of the evolving state (multi-stage integrators): (field, copy).
     pub saved: Vec<(FieldId, FieldId)>,
+    /// How neighbours are found, and when kept lists are rebuilt (the backends follow it).
+    pub search: Search,
 }
 
 /// A reason the plan cannot be made for this scene: a diagnostic with a code (`P…`, listed in
@@ -235,6 +241,7 @@ impl Plan {
             timesteps: live.timesteps.clone(),
             scene_params,
             saved: vec![],
+            search: scene.search.clone(),
             model,
         };
         integrator::build(&mut plan, scene, &live);

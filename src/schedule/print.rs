@@ -35,6 +35,7 @@ pub fn describe(plan: &Plan, real: usize) -> String {
         evals,
         real
     );
+    let _ = writeln!(s, "neighbours: {}", plan.search.describe());
     let x_h: Vec<FieldId> = ["x", "h"].iter().filter_map(|n| m.field_id(n)).collect();
     let mut total_r = 0;
     let mut total_w = 0;

@@ -73,6 +73,7 @@ pub fn scene(model: &Model, dim: usize, outputs: &[&str], integrator: Integrator
         loads: vec![],
         constraints: vec![],
         symmetry: vec![],
+        search: Default::default(),
     }
 }
 

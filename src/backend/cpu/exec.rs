@@ -2,6 +2,7 @@
 //! each particle gathering its neighbours in batches from the cell list (gather only: a chunk
 //! writes the rows of its own particles and nothing else).
 
+use super::lists::{transformed, INDEX_MASK, TRANSFORM_SHIFT};
 use super::program::{ColView, Ctx, Program, LANES};
 use super::{Mirror, PairRegs, Variant};
 use crate::grid::Grid;
@@ -190,13 +191,22 @@ fn kahan<T: Real>(sum: &mut T, c: &mut T, lanes: &[T]) {
 
 /// What the neighbour batches of one pass need.
 pub struct Neighbours<'a, T> {
-    pub grid: &'a Grid,
     pub x: &'a [T],
     pub h: &'a [T],
     pub dim: usize,
     pub support: T,
     pub h_max: f64,
     pub mirrors: &'a [Mirror],
+    pub walk: Walk<'a>,
+}
+
+/// Where a pass finds the candidates of a particle.
+#[derive(Clone, Copy)]
+pub enum Walk<'a> {
+    /// The cells its cut-off reaches.
+    Cells(&'a Grid),
+    /// Its kept list.
+    Lists(&'a [Vec<u32>]),
 }
 
 /// One pass variant over one chunk: accumulator initial values and particle-i values, the
@@ -267,10 +277,14 @@ pub fn run_pass_chunk<T: Real>(
     for k in 0..chunk.len {
         w.k = k;
         w.segs.push((k, w.n));
-        match nb.dim {
-            1 => neighbours_of::<T, 1>(&mut w, nb, chunk.start + k, ranges, !all_sources),
-            2 => neighbours_of::<T, 2>(&mut w, nb, chunk.start + k, ranges, !all_sources),
-            _ => neighbours_of::<T, 3>(&mut w, nb, chunk.start + k, ranges, !all_sources),
+        let i = chunk.start + k;
+        match (nb.dim, nb.walk) {
+            (1, Walk::Lists(l)) => listed_neighbours_of::<T, 1>(&mut w, nb, i, &l[i], !all_sources),
+            (2, Walk::Lists(l)) => listed_neighbours_of::<T, 2>(&mut w, nb, i, &l[i], !all_sources),
+            (_, Walk::Lists(l)) => listed_neighbours_of::<T, 3>(&mut w, nb, i, &l[i], !all_sources),
+            (1, Walk::Cells(g)) => neighbours_of::<T, 1>(&mut w, nb, g, i, ranges, !all_sources),
+            (2, Walk::Cells(g)) => neighbours_of::<T, 2>(&mut w, nb, g, i, ranges, !all_sources),
+            (_, Walk::Cells(g)) => neighbours_of::<T, 3>(&mut w, nb, g, i, ranges, !all_sources),
         }
     }
     if w.n > 0 {
@@ -442,6 +456,7 @@ fn sh_groups<T>(sh: &Shared<T>) -> usize {
 fn neighbours_of<T: Real, const D: usize>(
     w: &mut Writer<T>,
     nb: &Neighbours<T>,
+    grid: &Grid,
     i: usize,
     ranges: &mut Vec<(u32, u32)>,
     filter: bool,
@@ -452,7 +467,7 @@ fn neighbours_of<T: Real, const D: usize>(
     let half = T::from_f64(0.5);
     let group = w.sh.group;
     let sources = w.v.sources;
-    let order = nb.grid.order();
+    let order = grid.order();
     let transforms = 1usize << nb.mirrors.len();
     for t in 0..transforms {
         // Transform t reflects particle j across the mirrors whose bit is set; the image of j is
@@ -479,7 +494,7 @@ fn neighbours_of<T: Real, const D: usize>(
         }
         // h_ij ≤ (h_i + h_max)/2: no neighbour lies beyond support · that.
         let radius = nb.support.to_f64() * 0.5 * (hi.to_f64() + nb.h_max);
-        nb.grid.cell_ranges_within(p, radius, ranges);
+        grid.cell_ranges_within(p, radius, ranges);
         let mirrored = flip.iter().any(|f| *f);
         for &(s, e) in ranges.iter() {
             for &jj in &order[s as usize..e as usize] {
@@ -509,5 +524,46 @@ fn neighbours_of<T: Real, const D: usize>(
                 w.offer::<D>(jj as u32, dx, r2, hij, flip, inside);
             }
         }
+    }
+}
+
+/// Adds the neighbours of particle i from its kept list: the entries within the current cut-off.
+#[inline(always)]
+fn listed_neighbours_of<T: Real, const D: usize>(
+    w: &mut Writer<T>,
+    nb: &Neighbours<T>,
+    i: usize,
+    list: &[u32],
+    filter: bool,
+) {
+    let mut xi = [T::zero(); 3];
+    xi[..D].copy_from_slice(&nb.x[i * D..i * D + D]);
+    let hi = nb.h[i];
+    let half = T::from_f64(0.5);
+    let group = w.sh.group;
+    let sources = w.v.sources;
+    let (mut t, (mut yi, mut flip)) = (0u32, (xi, [false; 3]));
+    for &e in list {
+        let jj = (e & INDEX_MASK) as usize;
+        if e >> TRANSFORM_SHIFT != t {
+            // Entries come grouped by transform: this changes a few times per list at most.
+            t = e >> TRANSFORM_SHIFT;
+            (yi, flip) = transformed(xi, t, nb.mirrors);
+        }
+        if filter && (sources >> group[jj]) & 1 == 0 {
+            continue;
+        }
+        let xj = &nb.x[jj * D..jj * D + D];
+        let mut r2 = T::zero();
+        let mut dx = [T::zero(); 3];
+        for c in 0..D {
+            let diff = yi[c] - xj[c];
+            dx[c] = if flip[c] { -diff } else { diff };
+            r2 = r2 + diff * diff;
+        }
+        let hij = (hi + nb.h[jj]) * half;
+        let rc = nb.support * hij;
+        let inside = r2 < rc * rc && r2 != T::zero();
+        w.offer::<D>(jj as u32, dx, r2, hij, flip, inside);
     }
 }

@@ -4,6 +4,7 @@
 
 mod exec;
 pub mod jit;
+pub mod lists;
 pub mod lower;
 pub mod math;
 pub mod program;
@@ -13,7 +14,7 @@ use crate::grid::{morton_permutation, Grid};
 use crate::ir::{FieldId, GroupId, Reduce, Storage};
 use crate::particles::{Real, Store};
 use crate::schedule::{Block, Plan};
-use exec::{chunks, views, Chunk, Neighbours, Scratch, Shared};
+use exec::{chunks, views, Chunk, Neighbours, Scratch, Shared, Walk};
 use lower::{Effect, Id, Known, Lowerer, Mode, Node};
 use program::{compile, live_nodes, Pinned, Program, LANES};
 use rayon::prelude::*;
@@ -73,6 +74,8 @@ pub struct CpuBackend<T: Real> {
     pub support: f64,
     x: FieldId,
     h: FieldId,
+    /// Neighbour lists kept across evaluations, when the plan's search keeps them.
+    lists: lists::Lists<T>,
 }
 
 fn is_stored(plan: &Plan, g: usize) -> impl Fn(FieldId) -> bool + '_ {
@@ -484,6 +487,7 @@ impl<T: Real> CpuBackend<T> {
             h,
             plan,
             store,
+            lists: lists::Lists::default(),
         })
     }
 
@@ -570,12 +574,25 @@ impl<T: Real> Backend for CpuBackend<T> {
                 "the largest smoothing length is {h_max}: no neighbour search is possible"
             )));
         }
-        // Cells of half the largest cut-off: the neighbour search visits only the cells the
-        // cut-off sphere reaches (`Grid::cell_ranges_within`): fewer candidates than the 3^dim
-        // cells of a cut-off's size.
-        let grid = Grid::build(self.positions(), dim, 0.5 * self.support * h_max);
         let x: Vec<T> = self.positions().to_vec();
         let h: Vec<T> = self.store.column(self.h).expect("h is stored").data.clone();
+        // Kept lists, brought up to date as the plan's search says; or cells of half the largest
+        // cut-off: the search visits only the cells the cut-off sphere reaches
+        // (`Grid::cell_ranges_within`), fewer candidates than the 3^dim cells of a cut-off's size.
+        let keeps_lists = self.plan.search.keeps_lists();
+        let grid = if keeps_lists {
+            let inp = lists::BuildInput { x: &x, h: &h, dim, support: self.support, h_max, mirrors: &self.mirrors };
+            let store = &self.store;
+            let field = |f| store.read_f64(f).map(|(_, v)| v).unwrap_or_else(|| vec![f64::NAN; store.n]);
+            self.lists.prepare(&self.plan.search, &inp, field);
+            None
+        } else {
+            Some(Grid::build(&x, dim, 0.5 * self.support * h_max))
+        };
+        let walk = match &grid {
+            Some(g) => Walk::Cells(g),
+            None => Walk::Lists(&self.lists.of),
+        };
         let cols = views(&mut self.store);
         let (params, stride, offset) = (&self.store.params.values, self.store.params.stride, &self.store.params.offset);
         let sh = Shared {
@@ -589,15 +606,8 @@ impl<T: Real> Backend for CpuBackend<T> {
             time: T::from_f64(g.time),
             dt: T::from_f64(g.dt),
         };
-        let nb = Neighbours {
-            grid: &grid,
-            x: &x,
-            h: &h,
-            dim,
-            support: T::from_f64(self.support),
-            h_max,
-            mirrors: &self.mirrors,
-        };
+        let nb =
+            Neighbours { walk, x: &x, h: &h, dim, support: T::from_f64(self.support), h_max, mirrors: &self.mirrors };
         for pass in &self.passes {
             self.chunks.par_iter().for_each_init(Scratch::default, |scratch, chunk| {
                 if let Some(v) = pass.iter().find(|v| v.group == chunk.group) {
@@ -674,6 +684,7 @@ impl<T: Real> Backend for CpuBackend<T> {
             perm.extend(morton_permutation(x, dim, cell).into_iter().map(|p| p + r.start as u32));
         }
         self.store.permute(&perm);
+        self.lists.permute(&perm);
         Ok(())
     }
 
@@ -712,7 +723,12 @@ impl<T: Real> Backend for CpuBackend<T> {
         }
         self.store.id = s.id.clone();
         self.store.material = s.material.clone();
+        self.lists.invalidate();
         Ok(())
+    }
+
+    fn search_stats(&self) -> crate::schedule::SearchStats {
+        self.lists.stats
     }
 
     fn first_non_finite(&mut self, fields: &[FieldId]) -> Result<Option<(usize, FieldId)>, BackendError> {

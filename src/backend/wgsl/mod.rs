@@ -181,6 +181,7 @@ mod tests {
                     loads: vec![],
                     constraints: vec![],
                     symmetry: vec![],
+                    search: Default::default(),
                 };
                 let plan = Plan::build(&checked.model, &scene, None).expect("plan");
                 let kernels = generate(&plan, cells).unwrap_or_else(|e| panic!("{m} {dim}D: {e}"));

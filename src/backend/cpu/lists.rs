@@ -1,0 +1,203 @@
+//! Neighbour lists kept across evaluations (the Verlet and the F-ANS adaptive search of
+//! [`Search`]): per particle, every particle (or mirror image) within its cut-off plus a skin at
+//! the last build, each entry an index and the mirror transform of the image. Passes walk the
+//! lists and keep the pairs within the current cut-off; when a list is rebuilt is the schedule's
+//! decision ([`Search::rebuild`]).
+
+use super::Mirror;
+use crate::grid::Grid;
+use crate::ir::FieldId;
+use crate::particles::Real;
+use crate::schedule::{Drift, Rebuild, Search, SearchStats};
+use rayon::prelude::*;
+
+/// An entry holds the transform (which mirrors reflect the neighbour; at most 3) in its top bits.
+pub const TRANSFORM_SHIFT: u32 = 29;
+pub const INDEX_MASK: u32 = (1 << TRANSFORM_SHIFT) - 1;
+
+/// The lists, with the state they were built on.
+#[derive(Default)]
+pub struct Lists<T> {
+    /// Per particle (in the store's order): its entries, grouped by transform.
+    pub of: Vec<Vec<u32>>,
+    /// Positions and smoothing lengths at the last full build (Verlet's bound).
+    x0: Vec<T>,
+    h0: Vec<T>,
+    /// The skin's length at the last full build.
+    skin_len: f64,
+    /// The adaptive search's field at each particle's last rebuild (NaN where not stored).
+    field0: Vec<f64>,
+    pub built: bool,
+    pub stats: SearchStats,
+}
+
+/// What a build reads.
+pub struct BuildInput<'a, T> {
+    pub x: &'a [T],
+    pub h: &'a [T],
+    pub dim: usize,
+    pub support: f64,
+    pub h_max: f64,
+    pub mirrors: &'a [Mirror],
+}
+
+impl<T: Real> Lists<T> {
+    /// Brings the lists up to date for an evaluation, as the search asks; `field` reads a scalar
+    /// field per particle (NaN where it is not stored) for the adaptive search.
+    pub fn prepare(&mut self, search: &Search, inp: &BuildInput<T>, field: impl Fn(FieldId) -> Vec<f64>) {
+        self.stats.evaluations += 1;
+        let support = inp.support;
+        let rebuild = search.rebuild(self.built, || (self.drift(inp), self.skin_len), support);
+        match rebuild {
+            Rebuild::Keep => {}
+            Rebuild::All => {
+                self.skin_len = search.skin() * support * inp.h_max;
+                self.of.resize(inp.h.len(), vec![]);
+                self.rebuild_where(inp, |_| true);
+                self.x0 = inp.x.to_vec();
+                self.h0 = inp.h.to_vec();
+                self.field0 = match search {
+                    Search::Adaptive { field: f, .. } => field(*f),
+                    _ => vec![],
+                };
+                self.built = true;
+                self.stats.full_builds += 1;
+            }
+            Rebuild::Where { field: f, threshold } => {
+                let now = field(f);
+                let stale: Vec<bool> = now.iter().zip(&self.field0).map(|(a, b)| a - b > threshold).collect();
+                let count = stale.iter().filter(|s| **s).count();
+                if count > 0 {
+                    self.rebuild_where(inp, |i| stale[i]);
+                    for (i, s) in stale.iter().enumerate() {
+                        if *s {
+                            self.field0[i] = now[i];
+                        }
+                    }
+                }
+                self.stats.particle_rebuilds += count as u64;
+            }
+        }
+    }
+
+    /// The largest displacement and growth of h since the last full build.
+    fn drift(&self, inp: &BuildInput<T>) -> Drift {
+        let d = inp.dim;
+        let displacement = inp
+            .x
+            .par_chunks(d)
+            .zip(self.x0.par_chunks(d))
+            .map(|(a, b)| a.iter().zip(b).map(|(p, q)| (*p - *q).to_f64().powi(2)).sum::<f64>())
+            .reduce(|| 0.0, |a, b| if a.is_nan() || b.is_nan() { f64::NAN } else { a.max(b) })
+            .sqrt();
+        let h_growth = inp.h.iter().zip(&self.h0).map(|(a, b)| (*a - *b).to_f64()).fold(0.0, |m: f64, g| {
+            if g.is_nan() {
+                g
+            } else {
+                m.max(g)
+            }
+        });
+        Drift { displacement, h_growth }
+    }
+
+    /// Rebuilds the lists of the particles `which` picks, from a fresh cell list.
+    fn rebuild_where(&mut self, inp: &BuildInput<T>, which: impl Fn(usize) -> bool + Sync) {
+        let reach = inp.support * inp.h_max + self.skin_len;
+        let grid = Grid::build(inp.x, inp.dim, 0.5 * reach);
+        let skin = self.skin_len;
+        self.of.par_iter_mut().enumerate().for_each_init(Vec::new, |ranges, (i, list)| {
+            if which(i) {
+                list.clear();
+                match inp.dim {
+                    1 => collect::<T, 1>(&grid, inp, skin, i, ranges, list),
+                    2 => collect::<T, 2>(&grid, inp, skin, i, ranges, list),
+                    _ => collect::<T, 3>(&grid, inp, skin, i, ranges, list),
+                }
+            }
+        });
+    }
+
+    /// The lists follow a reordering of the store (`perm[new] = old`).
+    pub fn permute(&mut self, perm: &[u32]) {
+        if !self.built {
+            return;
+        }
+        let mut new_of_old = vec![0u32; perm.len()];
+        for (new, old) in perm.iter().enumerate() {
+            new_of_old[*old as usize] = new as u32;
+        }
+        let remap = |e: &u32| (e & !INDEX_MASK) | new_of_old[(e & INDEX_MASK) as usize];
+        self.of = perm.iter().map(|old| self.of[*old as usize].iter().map(remap).collect()).collect();
+        let d = self.x0.len() / perm.len().max(1);
+        self.x0 = perm.iter().flat_map(|old| self.x0[*old as usize * d..(*old as usize + 1) * d].to_vec()).collect();
+        self.h0 = perm.iter().map(|old| self.h0[*old as usize]).collect();
+        if !self.field0.is_empty() {
+            self.field0 = perm.iter().map(|old| self.field0[*old as usize]).collect();
+        }
+    }
+
+    /// Forgets the lists (the state was replaced): the next evaluation builds them all.
+    pub fn invalidate(&mut self) {
+        self.built = false;
+    }
+}
+
+/// The mirror transform `t` applied to particle i's position: the point whose neighbours are the
+/// images, and the axes it flips.
+pub fn transformed<T: Real>(xi: [T; 3], t: u32, mirrors: &[Mirror]) -> ([T; 3], [bool; 3]) {
+    let mut yi = xi;
+    let mut flip = [false; 3];
+    for (m, mirror) in mirrors.iter().enumerate() {
+        if t >> m & 1 == 1 {
+            yi[mirror.axis] = T::from_f64(2.0 * mirror.offset) - xi[mirror.axis];
+            flip[mirror.axis] = !flip[mirror.axis];
+        }
+    }
+    (yi, flip)
+}
+
+/// Every particle or image within i's build radius: its cut-off reach plus the skin.
+fn collect<T: Real, const D: usize>(
+    grid: &Grid,
+    inp: &BuildInput<T>,
+    skin: f64,
+    i: usize,
+    ranges: &mut Vec<(u32, u32)>,
+    out: &mut Vec<u32>,
+) {
+    let mut xi = [T::zero(); 3];
+    xi[..D].copy_from_slice(&inp.x[i * D..i * D + D]);
+    // h_ij ≤ (h_i + h_max)/2: no neighbour lies beyond support · that.
+    let radius = inp.support * 0.5 * (inp.h[i].to_f64() + inp.h_max) + skin;
+    let order = grid.order();
+    for t in 0..1u32 << inp.mirrors.len() {
+        // Images of j are near i exactly when j is near the reflection of i; none is within the
+        // radius when i is that far from a plane it reflects across.
+        let far = inp
+            .mirrors
+            .iter()
+            .enumerate()
+            .any(|(m, mirror)| t >> m & 1 == 1 && (xi[mirror.axis].to_f64() - mirror.offset).abs() >= radius);
+        if far {
+            continue;
+        }
+        let (yi, _) = transformed(xi, t, inp.mirrors);
+        let mut p = [0.0; 3];
+        for c in 0..D {
+            p[c] = yi[c].to_f64();
+        }
+        grid.cell_ranges_within(p, radius, ranges);
+        for &(s, e) in ranges.iter() {
+            for &j in &order[s as usize..e as usize] {
+                if t == 0 && j as usize == i {
+                    continue;
+                }
+                let xj = &inp.x[j as usize * D..j as usize * D + D];
+                let r2: f64 = (0..D).map(|c| (yi[c] - xj[c]).to_f64().powi(2)).sum();
+                if r2 < radius * radius {
+                    out.push(j | t << TRANSFORM_SHIFT);
+                }
+            }
+        }
+    }
+}
