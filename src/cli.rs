@@ -63,6 +63,10 @@ enum Command {
         /// Set a case parameter (`${name}` in the case file): --set v_impact=250
         #[arg(long = "set", value_parser = parse_set)]
         set: Vec<(String, String)>,
+        /// Find neighbours with Verlet lists of this skin (a fraction of the largest cut-off),
+        /// whatever the case's `[neighbours]` says; no pair is missed
+        #[arg(long, value_name = "SKIN")]
+        verlet: Option<f64>,
     },
     /// List the bundled cases
     Cases,
@@ -147,6 +151,7 @@ pub fn main() -> i32 {
             quiet,
             force,
             set,
+            verlet,
         } => {
             let opts = RunArgs {
                 backend,
@@ -160,6 +165,7 @@ pub fn main() -> i32 {
                 quiet,
                 force,
                 set,
+                verlet,
             };
             run_run(&case, opts)
         }
@@ -349,6 +355,7 @@ struct RunArgs {
     max_steps: Option<u64>,
     quiet: bool,
     force: bool,
+    verlet: Option<f64>,
 }
 
 fn run_run(case: &str, a: RunArgs) -> i32 {
@@ -369,7 +376,7 @@ fn run_run(case: &str, a: RunArgs) -> i32 {
     let opts = RunOptions {
         backend,
         precision,
-        scene: crate::scene::Options { resolution: a.resolution, end_time: a.end_time, set: a.set },
+        scene: crate::scene::Options { resolution: a.resolution, end_time: a.end_time, set: a.set, verlet: a.verlet },
         out,
         progress: !a.quiet && std::io::IsTerminal::is_terminal(&std::io::stderr()),
         checkpoint_every: a.checkpoint_every,

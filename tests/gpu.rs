@@ -333,6 +333,47 @@ fn graded_sphere_plate_on_the_gpu_matches_the_cpu_with_variable_h() {
     case_matches_cpu("sphere_plate_graded", &[("plate_coarse", "2")], 60, &["p", "h"], 2e-3);
 }
 
+// The kept neighbour lists on the GPU (`backend::gpu::lists`), against the CPU's: the bullet
+// entering the plate, with Verlet lists (rebuilt by the conservative bound) and with F-ANS's
+// adaptive rebuild; 120 steps include four Morton reorders (each of which rebuilds the lists).
+
+#[test]
+fn bullet_with_verlet_lists_on_the_gpu_matches_the_cpu() {
+    case_matches_cpu("fans_bullet", &[("search", "verlet"), ("skin", "0.1")], 120, &["eps_p", "s"], 2e-3);
+}
+
+#[test]
+fn bullet_with_adaptive_lists_on_the_gpu_matches_the_cpu() {
+    case_matches_cpu("fans_bullet", &[("search", "adaptive"), ("threshold", "1e-5")], 120, &["eps_p", "s"], 2e-3);
+}
+
+#[test]
+fn the_gpu_keeps_its_verlet_lists_across_evaluations_and_counts_its_rebuilds() {
+    use pairsum::engine::Engine;
+    use pairsum::runner::prepare;
+    let opts = pairsum::scene::Options {
+        set: vec![("search".into(), "verlet".into()), ("skin".into(), "0.1".into())],
+        ..Default::default()
+    };
+    let (scene, plan) = prepare(Path::new(&case("fans_bullet")), &opts).expect("case");
+    let store = build_store::<f32>(&plan, &scene.particles, &scene.materials).expect("store");
+    let config = pairsum::engine::RunConfig { reorder_every: 0, ..scene.config.clone() };
+    let mut cpu =
+        Engine::new(CpuBackend::new(plan.clone(), store.clone(), scene.mirrors.clone()).expect("cpu"), config.clone());
+    let mut gpu = Engine::new(GpuBackend::new(gpu(), plan, store, &scene.mirrors).expect("gpu"), config);
+    cpu.initialise().expect("cpu init");
+    gpu.initialise().expect("gpu init");
+    for _ in 0..100 {
+        cpu.step().expect("cpu step");
+        gpu.step().expect("gpu step");
+    }
+    let (c, g) = (cpu.backend.search_stats(), gpu.backend.search_stats());
+    assert_eq!(g.evaluations, 200);
+    assert!(g.full_builds > 1 && g.full_builds < 50, "{} full builds on the GPU", g.full_builds);
+    // The same rule on the same motion: the two rebuild within a build or two of each other.
+    assert!(c.full_builds.abs_diff(g.full_builds) <= 2, "CPU {} vs GPU {} full builds", c.full_builds, g.full_builds);
+}
+
 /// The Morton code of cell coordinates as the GPU reorder builds it: 10 bits per axis in 3D and
 /// 16 in 2D, after dropping the low bits of every axis when the largest needs more.
 fn coarse_morton(c: [u32; 3], dims: [usize; 3], dim: usize) -> u32 {

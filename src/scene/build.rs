@@ -714,7 +714,15 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
             }
         }
     }
-    let search = neighbour_search(cx, &model, case.neighbours.as_ref())?;
+    let search = match opts.verlet {
+        Some(skin) if (0.0..=1.0).contains(&skin) => Search::Verlet { skin },
+        Some(skin) => {
+            let msg = format!("--verlet: the skin is a fraction of the largest cut-off between 0 and 1, found {skin}");
+            cx.diags.push(Diagnostic::error("C0034", msg));
+            return None;
+        }
+        None => neighbour_search(cx, &model, case.neighbours.as_ref())?,
+    };
     if let Search::Adaptive { field, .. } = &search {
         outputs.push(*field);
     }

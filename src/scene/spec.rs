@@ -17,6 +17,8 @@ pub struct Options {
     pub end_time: Option<f64>,
     /// Values for the case's `[parameters]` (`${name}` in the case file), e.g. from a study.
     pub set: Vec<(String, String)>,
+    /// Verlet lists with this skin, overriding the case's `[neighbours]` (`pairsum run --verlet`).
+    pub verlet: Option<f64>,
 }
 
 #[derive(Clone, Debug)]

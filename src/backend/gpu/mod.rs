@@ -1,6 +1,7 @@
 //! The GPU backend: wgpu device and buffers, the GPU cell list, reductions and reordering.
 pub mod cells;
 pub mod device;
+pub mod lists;
 pub mod reduce;
 pub mod reorder;
 pub mod runtime;

@@ -6,13 +6,14 @@
 
 use super::cells::CellList;
 use super::device::{Gpu, GpuError};
+use super::lists::{GpuLists, ListScene};
 use super::reduce::{ReduceOp, Reducer, Segment, SegmentList, ALL_FINITE};
 use super::reorder::{Particles, Reorder};
 use crate::backend::wgsl::{self, globals as gl, Binding, Kernel, KernelKind, Layout, ABSENT};
 use crate::backend::{Backend, BackendError, Globals, Mirror, Snapshot};
 use crate::ir::{FieldId, GroupId, Reduce};
 use crate::particles::Store;
-use crate::schedule::{Action, Plan};
+use crate::schedule::{Action, Plan, Search};
 
 /// A compiled kernel with its bind group.
 struct Compiled {
@@ -35,6 +36,8 @@ pub struct GpuBackend {
     /// The id of the particle in each row (rows move when the data is reordered).
     ids: wgpu::Buffer,
     globals: wgpu::Buffer,
+    /// The layout table (`meta`).
+    info: wgpu::Buffer,
     cells: CellList,
     reorder: Reorder,
     reducer: Reducer,
@@ -47,6 +50,8 @@ pub struct GpuBackend {
     x_offset: u32,
     h_offset: u32,
     group_counts: Vec<(GroupId, usize, usize)>,
+    /// Kept neighbour lists, when the plan's search keeps them.
+    lists: Option<GpuLists>,
 }
 
 fn err(e: GpuError) -> BackendError {
@@ -171,6 +176,31 @@ impl GpuBackend {
             g[gl::MIRRORS + 2 + 2 * k] = m.offset as f32;
         }
         gpu.upload(&globals, 0, &g).map_err(err)?;
+        let x = plan.model.field_id("x").ok_or_else(|| BackendError("the model has no position field `x`".into()))?;
+        let h = plan.model.field_id("h").ok_or_else(|| BackendError("the model has no smoothing length `h`".into()))?;
+        let x_offset = offset[x.index()].ok_or_else(|| BackendError("positions are not stored".into()))? as u32;
+        let h_offset = offset[h.index()].ok_or_else(|| BackendError("smoothing lengths are not stored".into()))? as u32;
+        let support = plan.model.kernels[plan.kernel.index()].support as f32;
+        let lists = match &plan.search {
+            Search::Cells => None,
+            search => {
+                let field_base = match search {
+                    Search::Adaptive { field, .. } => lay.slot(*field).map(|slot| lay.base_index(slot, 0)),
+                    _ => None,
+                };
+                let scene = ListScene {
+                    n,
+                    dim: plan.dim,
+                    x_offset,
+                    h_offset,
+                    support,
+                    mirrors,
+                    field_base,
+                    stride: list_stride(&store, x, h, plan.dim, support as f64, search.skin(), mirrors),
+                };
+                Some(GpuLists::new(&gpu, search, &scene, super::cells::wgsl_helpers()).map_err(err)?)
+            }
+        };
         // Kernels, each bound to exactly the buffers it declares.
         let generated = wgsl::generate(&plan, super::cells::wgsl_helpers()).map_err(BackendError)?;
         let mut kernels = vec![];
@@ -185,6 +215,7 @@ impl GpuBackend {
                     Binding::Grid => cells.grid_buffer(),
                     Binding::Cells => cells.cells_buffer(),
                     Binding::Globals => &globals,
+                    Binding::Lists => lists.as_ref().expect("list kernels are generated with lists").buffer(),
                 }
             };
             // The automatic layout holds only the bindings the kernel really uses.
@@ -198,13 +229,9 @@ impl GpuBackend {
             let bind = gpu.bind_at(&k.name, &pipeline, &entries);
             kernels.push(Compiled { kernel: k, pipeline, bind });
         }
-        let x = plan.model.field_id("x").ok_or_else(|| BackendError("the model has no position field `x`".into()))?;
-        let h = plan.model.field_id("h").ok_or_else(|| BackendError("the model has no smoothing length `h`".into()))?;
-        let x_offset = offset[x.index()].ok_or_else(|| BackendError("positions are not stored".into()))? as u32;
-        let h_offset = offset[h.index()].ok_or_else(|| BackendError("smoothing lengths are not stored".into()))? as u32;
         let mut b = GpuBackend {
             gpu,
-            support: plan.model.kernels[plan.kernel.index()].support as f32,
+            support,
             plan,
             host: store,
             offset,
@@ -213,6 +240,7 @@ impl GpuBackend {
             ints,
             ids,
             globals,
+            info,
             cells,
             reorder,
             reducer,
@@ -222,9 +250,25 @@ impl GpuBackend {
             x_offset,
             h_offset,
             group_counts,
+            lists,
         };
         b.upload_data()?;
         Ok(b)
+    }
+
+    /// An error when a kept list overflowed in the last submission.
+    fn check_lists(&self) -> Result<(), BackendError> {
+        match &self.lists {
+            Some(l) => l.check_overflow(&self.gpu).map_err(failed("checking the neighbour lists")),
+            None => Ok(()),
+        }
+    }
+
+    fn invalidate_lists(&self) -> Result<(), BackendError> {
+        match &self.lists {
+            Some(l) => l.invalidate(&self.gpu).map_err(failed("resetting the neighbour lists")),
+            None => Ok(()),
+        }
     }
 
     pub fn gpu(&self) -> &Gpu {
@@ -280,7 +324,15 @@ impl GpuBackend {
     }
 
     fn record_evaluate(&self, encoder: &mut wgpu::CommandEncoder) {
-        self.cells.record(&self.gpu, encoder, &self.data, self.x_offset, self.h_offset, self.support);
+        match &self.lists {
+            // Cells of the cut-off plus the skin, for the lists' build.
+            Some(l) => {
+                let reach = self.support * (1.0 + self.plan.search.skin() as f32);
+                self.cells.record(&self.gpu, encoder, &self.data, self.x_offset, self.h_offset, reach);
+                l.record(&self.gpu, encoder, &self.data, &self.cells, &self.ints, &self.info);
+            }
+            None => self.cells.record(&self.gpu, encoder, &self.data, self.x_offset, self.h_offset, self.support),
+        }
         for p in 0..self.plan.passes.len() {
             self.dispatch_where(encoder, |k| matches!(k, KernelKind::Pass { pass, .. } if *pass == p));
         }
@@ -352,6 +404,7 @@ impl GpuBackend {
         }
         self.dispatch_where(&mut encoder, |k| *k == KernelKind::Advance);
         self.submit(encoder, "running a step")?;
+        self.check_lists()?;
         let clock: Vec<f32> = self.gpu.download(&self.globals, 0, gl::STEP + 1).map_err(failed("reading the clock"))?;
         // Time accumulates on the host in f64 from the device's f32 step.
         let dt = clock[gl::DT] as f64;
@@ -388,7 +441,8 @@ impl Backend for GpuBackend {
         self.set_globals(&[(gl::TIME, g.time as f32), (gl::DT_PREV, g.dt as f32)])?;
         let mut encoder = self.gpu.encoder("evaluate");
         self.record_evaluate(&mut encoder);
-        self.submit(encoder, "running the neighbour passes")
+        self.submit(encoder, "running the neighbour passes")?;
+        self.check_lists()
     }
 
     fn reductions(&mut self, g: Globals) -> Result<Vec<f64>, BackendError> {
@@ -419,7 +473,9 @@ impl Backend for GpuBackend {
         let mut encoder = self.gpu.encoder("reorder");
         self.cells.record(&self.gpu, &mut encoder, &self.data, self.x_offset, self.h_offset, self.support);
         self.reorder.record(&self.gpu, &mut encoder, &self.particle_buffers());
-        self.submit(encoder, "reordering the particles")
+        self.submit(encoder, "reordering the particles")?;
+        // The lists name particles by row, and rows moved.
+        self.invalidate_lists()
     }
 
     fn read(&self, f: FieldId) -> Result<Option<(usize, Vec<f64>)>, BackendError> {
@@ -472,7 +528,12 @@ impl Backend for GpuBackend {
         ints.extend(&s.material);
         self.gpu.upload(&self.ints, 0, &ints).map_err(failed("restoring the materials"))?;
         self.gpu.upload(&self.ids, 0, &s.id).map_err(failed("restoring the particle ids"))?;
+        self.invalidate_lists()?;
         self.upload_data()
+    }
+
+    fn search_stats(&self) -> crate::schedule::SearchStats {
+        self.lists.as_ref().and_then(|l| l.stats(&self.gpu).ok()).unwrap_or_default()
     }
 
     fn first_non_finite(&mut self, fields: &[FieldId]) -> Result<Option<(usize, FieldId)>, BackendError> {
@@ -527,4 +588,24 @@ impl Backend for GpuBackend {
     ) -> Option<Result<(f64, f64, u64), BackendError>> {
         Some(GpuBackend::device_step(self, time, dt_prev, step, end_time, dt_max))
     }
+}
+
+/// Entries per particle of the device's lists: twice the most candidates any particle has at the
+/// start within the cut-off plus the skin (counted on the host), plus 16.
+fn list_stride(
+    store: &Store<f32>,
+    x: FieldId,
+    h: FieldId,
+    dim: usize,
+    support: f64,
+    skin: f64,
+    mirrors: &[Mirror],
+) -> u32 {
+    let (Some(x), Some(h)) = (store.column(x), store.column(h)) else { return 16 };
+    let h_max = h.data.iter().map(|v| *v as f64).filter(|v| v.is_finite()).fold(0.0, f64::max);
+    let inp = crate::backend::cpu::lists::BuildInput { x: &x.data, h: &h.data, dim, support, h_max, mirrors };
+    let mut lists = crate::backend::cpu::lists::Lists::default();
+    lists.prepare(&Search::Verlet { skin }, &inp, |_| vec![]);
+    let most = lists.of.iter().map(Vec::len).max().unwrap_or(0);
+    (2 * most + 16) as u32
 }

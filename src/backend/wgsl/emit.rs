@@ -882,38 +882,11 @@ fn pass_kernel(plan: &Plan, lay: &Layout, pass: usize, v: &PassVariant, cell_hel
         w.line(format!("let {name} = ld_{}(i);", w.field_name(f)));
         w.current.insert(f, name);
     }
-    // The neighbour loop: the cells around particle i (and around its mirror images).
     w.line("let xi = pos3(i);");
     w.line("let hi = h_of(i);");
     w.line(format!("let mirrors = u32(globals[{}u]);", gl::MIRRORS));
-    w.line("let h_max = bitcast<f32>(grid[9]);");
-    w.line("for (var tr = 0u; tr < (1u << mirrors); tr++) {");
-    w.indent += 1;
-    w.line("var yi = xi;");
-    w.line("var sgn = vec3<f32>(1.0);");
-    w.line("var skip = false;");
-    w.line("for (var m = 0u; m < mirrors; m++) {");
-    w.line("    if (((tr >> m) & 1u) == 1u) {");
-    w.line(format!("        let axis = u32(globals[{}u + 2u * m]);", gl::MIRRORS + 1));
-    w.line(format!("        let at = globals[{}u + 2u * m];", gl::MIRRORS + 2));
-    w.line(format!("        if (abs(xi[axis] - at) >= {support} * h_max) {{ skip = true; }}"));
-    w.line("        yi[axis] = 2.0 * at - xi[axis];");
-    w.line("        sgn[axis] = -sgn[axis];");
-    w.line("    }");
-    w.line("}");
-    w.line("if (skip) { continue; }");
-    w.line("let c = cell_coords(yi);");
-    w.line("let dims = grid_dims();");
-    w.line("let lo = select(c - vec3<u32>(1u), vec3<u32>(0u), c == vec3<u32>(0u));");
-    w.line("let hi_c = min(c + vec3<u32>(1u), dims - vec3<u32>(1u));");
-    w.line("for (var z = lo.z; z <= hi_c.z; z++) {");
-    w.line("for (var y = lo.y; y <= hi_c.y; y++) {");
-    w.line("for (var x = lo.x; x <= hi_c.x; x++) {");
-    w.line("let cell = cell_index(vec3<u32>(x, y, z));");
-    w.line("for (var s = cell_start(cell); s < cell_start(cell + 1u); s++) {");
-    w.indent += 1;
-    w.line("let j = sorted_particle(s);");
-    w.line("if (tr == 0u && j == i) { continue; }");
+    let lists = plan.search.keeps_lists();
+    let close = if lists { list_walk(&mut w) } else { cell_walk(&mut w, &support) };
     let all_present = v.sources == plan.groups;
     if !all_present {
         w.line(format!("if (!in_groups({}u, ints[j])) {{ continue; }}", v.sources.0 as u32));
@@ -955,11 +928,10 @@ fn pass_kernel(plan: &Plan, lay: &Layout, pass: usize, v: &PassVariant, cell_hel
         );
         w.out.insert_str(body_start, &pre);
     }
-    w.indent -= 1;
-    w.line("}");
-    w.line("}}}");
-    w.indent -= 1;
-    w.line("}");
+    for (outdent, line) in close {
+        w.indent -= outdent;
+        w.line(line);
+    }
     // The tail: `finally` blocks and particle equations, in order. Preloaded values of fields the
     // tail sets give way to variables.
     for b in plan.tail_blocks(&v.tail) {
@@ -978,17 +950,14 @@ fn pass_kernel(plan: &Plan, lay: &Layout, pass: usize, v: &PassVariant, cell_hel
     let name = format!("pass{}_{}", pass + 1, group_name(plan, g));
     let eqs: Vec<&str> = v.pair_sums.iter().map(|e| plan.equation(*e).name.as_str()).collect();
     let title = format!("pass {} on {}: {}", pass + 1, model.groups[g.index()].name, eqs.join(", "));
-    let bindings = vec![
-        Binding::Data,
-        Binding::Ints,
-        Binding::Params,
-        Binding::Meta,
-        Binding::Grid,
-        Binding::Cells,
-        Binding::Globals,
-    ];
+    let walk = if lists { vec![Binding::Lists] } else { vec![Binding::Grid, Binding::Cells] };
+    let mut bindings = vec![Binding::Data, Binding::Ints, Binding::Params, Binding::Meta];
+    bindings.extend(walk);
+    bindings.push(Binding::Globals);
     let mut wgsl = header(plan, &title, Some(g), &bindings);
-    wgsl.push_str(cell_helpers);
+    if !lists {
+        wgsl.push_str(cell_helpers);
+    }
     wgsl.push_str(&kernel_functions(plan, lay));
     wgsl.push_str(&position_fn(plan, lay));
     wgsl.push_str(&h_fn(plan, lay));
@@ -999,6 +968,65 @@ fn pass_kernel(plan: &Plan, lay: &Layout, pass: usize, v: &PassVariant, cell_hel
         w.out
     );
     Kernel { name, kind: KernelKind::Pass { pass, group: g }, wgsl, bindings }
+}
+
+/// Opens the neighbour loop over the cells around particle i (and around its mirror images):
+/// `j`, `yi` (i or its image) and `sgn` are in scope inside. Returns the lines that close it, each
+/// with how far it is outdented.
+fn cell_walk(w: &mut Writer, support: &str) -> Vec<(usize, &'static str)> {
+    w.line("let h_max = bitcast<f32>(grid[9]);");
+    w.line("for (var tr = 0u; tr < (1u << mirrors); tr++) {");
+    w.indent += 1;
+    w.line("var yi = xi;");
+    w.line("var sgn = vec3<f32>(1.0);");
+    w.line("var skip = false;");
+    w.line("for (var m = 0u; m < mirrors; m++) {");
+    w.line("    if (((tr >> m) & 1u) == 1u) {");
+    w.line(format!("        let axis = u32(globals[{}u + 2u * m]);", gl::MIRRORS + 1));
+    w.line(format!("        let at = globals[{}u + 2u * m];", gl::MIRRORS + 2));
+    w.line(format!("        if (abs(xi[axis] - at) >= {support} * h_max) {{ skip = true; }}"));
+    w.line("        yi[axis] = 2.0 * at - xi[axis];");
+    w.line("        sgn[axis] = -sgn[axis];");
+    w.line("    }");
+    w.line("}");
+    w.line("if (skip) { continue; }");
+    w.line("let c = cell_coords(yi);");
+    w.line("let dims = grid_dims();");
+    w.line("let lo = select(c - vec3<u32>(1u), vec3<u32>(0u), c == vec3<u32>(0u));");
+    w.line("let hi_c = min(c + vec3<u32>(1u), dims - vec3<u32>(1u));");
+    w.line("for (var z = lo.z; z <= hi_c.z; z++) {");
+    w.line("for (var y = lo.y; y <= hi_c.y; y++) {");
+    w.line("for (var x = lo.x; x <= hi_c.x; x++) {");
+    w.line("let cell = cell_index(vec3<u32>(x, y, z));");
+    w.line("for (var s = cell_start(cell); s < cell_start(cell + 1u); s++) {");
+    w.indent += 1;
+    w.line("let j = sorted_particle(s);");
+    w.line("if (tr == 0u && j == i) { continue; }");
+    vec![(1, "}"), (0, "}}}"), (1, "}")]
+}
+
+/// Opens the neighbour loop over particle i's kept list (`backend::gpu::lists`): each entry a
+/// neighbour and the mirrors its image reflects across. Returns the line that closes it.
+fn list_walk(w: &mut Writer) -> Vec<(usize, &'static str)> {
+    use crate::backend::gpu::lists as l;
+    w.line("let n_all = u32(info[0]);");
+    w.line(format!("let stride = lists[{}u];", l::STRIDE));
+    w.line(format!("let list_start = {}u + n_all + i * stride;", l::HEADER));
+    w.line(format!("for (var q = list_start; q < list_start + lists[{}u + i]; q++) {{", l::HEADER));
+    w.indent += 1;
+    w.line("let e = lists[q];");
+    w.line(format!("let j = e & {:#x}u;", l::INDEX_MASK));
+    w.line(format!("let tr = e >> {}u;", l::TRANSFORM_SHIFT));
+    w.line("var yi = xi;");
+    w.line("var sgn = vec3<f32>(1.0);");
+    w.line("for (var m = 0u; m < mirrors; m++) {");
+    w.line("    if (((tr >> m) & 1u) == 1u) {");
+    w.line(format!("        let axis = u32(globals[{}u + 2u * m]);", gl::MIRRORS + 1));
+    w.line(format!("        yi[axis] = 2.0 * globals[{}u + 2u * m] - xi[axis];", gl::MIRRORS + 2));
+    w.line("        sgn[axis] = -sgn[axis];");
+    w.line("    }");
+    w.line("}");
+    vec![(1, "}")]
 }
 
 fn particle_kernel(

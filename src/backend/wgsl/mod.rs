@@ -11,6 +11,7 @@
 //! - `meta: array<i32>`: `[0]` n, `[1 + 2g]`/`[2 + 2g]` start and count of group g, then bases.
 //! - `globals: array<f32>`: time, dt, the step's dt, end time, dt_max, mirrors, reductions.
 //! - `grid`, `cells`: the GPU cell list (`backend::gpu::cells`).
+//! - `lists`: kept neighbour lists (`backend::gpu::lists`), when the plan's search keeps them.
 
 mod emit;
 pub mod names;
@@ -115,11 +116,21 @@ pub enum Binding {
     Grid = 4,
     Cells = 5,
     Globals = 6,
+    /// Kept neighbour lists (`backend::gpu::lists`), walked instead of the cells.
+    Lists = 7,
 }
 
 impl Binding {
-    pub const ALL: [Binding; 7] =
-        [Binding::Data, Binding::Ints, Binding::Params, Binding::Meta, Binding::Grid, Binding::Cells, Binding::Globals];
+    pub const ALL: [Binding; 8] = [
+        Binding::Data,
+        Binding::Ints,
+        Binding::Params,
+        Binding::Meta,
+        Binding::Grid,
+        Binding::Cells,
+        Binding::Globals,
+        Binding::Lists,
+    ];
     fn declaration(self) -> &'static str {
         match self {
             Binding::Data => "@group(0) @binding(0) var<storage, read_write> data: array<f32>;",
@@ -129,6 +140,7 @@ impl Binding {
             Binding::Grid => "@group(0) @binding(4) var<storage, read> grid: array<u32>;",
             Binding::Cells => "@group(0) @binding(5) var<storage, read> cells: array<u32>;",
             Binding::Globals => "@group(0) @binding(6) var<storage, read_write> globals: array<f32>;",
+            Binding::Lists => "@group(0) @binding(7) var<storage, read> lists: array<u32>;",
         }
     }
 }

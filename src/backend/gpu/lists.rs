@@ -1,0 +1,338 @@
+//! Kept neighbour lists on the GPU: the device side of the plan's [`Search`] (Verlet lists with a
+//! skin, F-ANS's adaptive rebuild), recorded into the step's command encoder like the cell list.
+//!
+//! # What `record` computes, before the passes of an evaluation
+//!
+//! 1. The cell list, with cells of the cut-off plus the skin (the caller builds it).
+//! 2. `drift` (Verlet, per particle): the largest squared displacement and growth of h since the
+//!    last full build, as atomic maxima of their f32 bits (non-negative floats order as their
+//!    bits; NaN is above every number, so a NaN forces a rebuild).
+//! 3. `decide` (one thread): a full build when there are no lists yet, or when the Verlet bound
+//!    `2 · displacement + support · h growth > skin` holds ([`crate::schedule::Drift::exceeds`],
+//!    the same rule in WGSL); it counts full builds and records the skin's length.
+//! 4. `build` (per particle): rebuilds the list of every particle on a full build, and on the
+//!    adaptive search the lists of the particles whose field grew by more than the threshold since
+//!    their last rebuild. A list holds at most `stride` entries; the largest count seen is kept,
+//!    and the runtime stops the run with an error when it exceeds the stride.
+//!
+//! # The `lists` buffer (u32 words)
+//! `[STRIDE]` entries per particle, `[BUILT]` 1 once built, `[REBUILD]` this evaluation's full
+//! build flag, `[DISPLACEMENT]`/`[H_GROWTH]` the drift maxima (f32 bits), `[LARGEST]` the largest
+//! candidate count, `[FULL_BUILDS]`/`[PARTICLE_REBUILDS]`/`[EVALUATIONS]` counters, `[SKIN_LEN]` the skin's length
+//! (f32 bits); from `HEADER` the `n` counts, then `n × stride` entries, each the neighbour's index
+//! with the mirror transform of its image in the top bits (as the CPU's
+//! [`crate::backend::cpu::lists`]).
+
+use super::device::{Gpu, GpuError};
+use crate::schedule::Search;
+
+pub use crate::backend::cpu::lists::{INDEX_MASK, TRANSFORM_SHIFT};
+
+pub const STRIDE: usize = 0;
+pub const BUILT: usize = 1;
+pub const REBUILD: usize = 2;
+pub const DISPLACEMENT: usize = 3;
+pub const H_GROWTH: usize = 4;
+pub const LARGEST: usize = 5;
+pub const FULL_BUILDS: usize = 6;
+pub const PARTICLE_REBUILDS: usize = 7;
+pub const SKIN_LEN: usize = 8;
+pub const EVALUATIONS: usize = 9;
+/// Words before the counts.
+pub const HEADER: usize = 16;
+
+const WG_PARTICLE: u32 = 64;
+
+/// The uniform of the list kernels.
+const PARAMS_WGSL: &str = r#"
+struct ListParams {
+    n: u32,
+    dim: u32,
+    x_offset: u32,
+    h_offset: u32,
+    support: f32,
+    skin: f32,
+    // 1: Verlet, 2: adaptive.
+    mode: u32,
+    threshold: f32,
+    // Index in `info` of the adaptive field's base on group 0 (groups follow), or -1.
+    field_base: i32,
+    mirrors: u32,
+    pad0: u32,
+    pad1: u32,
+    axis: vec4<u32>,
+    at: vec4<f32>,
+}
+"#;
+
+const DRIFT_WGSL: &str = r#"
+@group(0) @binding(0) var<uniform> params: ListParams;
+@group(0) @binding(1) var<storage, read> data: array<f32>;
+@group(0) @binding(2) var<storage, read_write> lists: array<atomic<u32>>;
+@group(0) @binding(3) var<storage, read> state: array<f32>;
+
+@compute @workgroup_size(64)
+fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+        @builtin(local_invocation_index) li: u32) {
+    let i = (wg.x + wg.y * nwg.x) * 64u + li;
+    if (i >= params.n || params.mode != 1u || atomicLoad(&lists[1]) == 0u) { return; }
+    var d2 = 0.0;
+    for (var k = 0u; k < params.dim; k++) {
+        let d = data[params.x_offset + i * params.dim + k] - state[i * 3u + k];
+        d2 += d * d;
+    }
+    let dh = max(data[params.h_offset + i] - state[3u * params.n + i], 0.0);
+    atomicMax(&lists[3], bitcast<u32>(abs(d2)));
+    atomicMax(&lists[4], bitcast<u32>(abs(dh)));
+}
+"#;
+
+const DECIDE_WGSL: &str = r#"
+@group(0) @binding(0) var<uniform> params: ListParams;
+@group(0) @binding(1) var<storage, read_write> lists: array<u32>;
+@group(0) @binding(2) var<storage, read> grid: array<u32>;
+
+@compute @workgroup_size(1)
+fn main() {
+    let displacement = sqrt(bitcast<f32>(lists[3]));
+    let growth = bitcast<f32>(lists[4]);
+    let reach = 2.0 * displacement + params.support * growth;
+    let exceeded = reach > bitcast<f32>(lists[8]) || reach != reach;
+    let rebuild = lists[1] == 0u || (params.mode == 1u && exceeded);
+    lists[2] = select(0u, 1u, rebuild);
+    if (rebuild) {
+        lists[6] += 1u;
+        lists[8] = bitcast<u32>(params.skin * params.support * bitcast<f32>(grid[9]));
+    }
+    lists[1] = 1u;
+    lists[9] += 1u;
+    lists[3] = 0u;
+    lists[4] = 0u;
+}
+"#;
+
+const BUILD_WGSL: &str = r#"
+@group(0) @binding(0) var<uniform> params: ListParams;
+@group(0) @binding(1) var<storage, read> data: array<f32>;
+@group(0) @binding(2) var<storage, read_write> lists: array<atomic<u32>>;
+@group(0) @binding(3) var<storage, read_write> state: array<f32>;
+@group(0) @binding(4) var<storage, read> grid: array<u32>;
+@group(0) @binding(5) var<storage, read> cells: array<u32>;
+@group(0) @binding(6) var<storage, read> ints: array<u32>;
+@group(0) @binding(7) var<storage, read> info: array<i32>;
+
+fn pos(p: u32) -> vec3<f32> {
+    var v = vec3<f32>(0.0);
+    for (var k = 0u; k < params.dim; k++) {
+        v[k] = data[params.x_offset + p * params.dim + k];
+    }
+    return v;
+}
+
+@compute @workgroup_size(64)
+fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+        @builtin(local_invocation_index) li: u32) {
+    let i = (wg.x + wg.y * nwg.x) * 64u + li;
+    let n = params.n;
+    if (i >= n) { return; }
+    let all = atomicLoad(&lists[2]) == 1u;
+    // The adaptive field of particle i (NaN where its group does not store it).
+    var f = bitcast<f32>(0x7fc00000u);
+    if (params.field_base >= 0) {
+        let base = info[u32(params.field_base) + ints[i]];
+        if (base != i32(-2147483648)) { f = data[u32(base) + i]; }
+    }
+    let grown = params.mode == 2u && f - state[4u * n + i] > params.threshold;
+    if (!all && !grown) { return; }
+    let xi = pos(i);
+    let hi = data[params.h_offset + i];
+    if (all) {
+        for (var k = 0u; k < 3u; k++) { state[i * 3u + k] = xi[k]; }
+        state[3u * n + i] = hi;
+    } else {
+        atomicAdd(&lists[7], 1u);
+    }
+    state[4u * n + i] = f;
+    let h_max = bitcast<f32>(grid[9]);
+    let radius = params.support * 0.5 * (hi + h_max) + bitcast<f32>(atomicLoad(&lists[8]));
+    let stride = atomicLoad(&lists[0]);
+    let first = 16u + n + i * stride;
+    var count = 0u;
+    for (var tr = 0u; tr < (1u << params.mirrors); tr++) {
+        var yi = xi;
+        var far = false;
+        for (var m = 0u; m < params.mirrors; m++) {
+            if (((tr >> m) & 1u) == 1u) {
+                let axis = params.axis[m];
+                let at = params.at[m];
+                if (abs(xi[axis] - at) >= radius) { far = true; }
+                yi[axis] = 2.0 * at - xi[axis];
+            }
+        }
+        if (far) { continue; }
+        let c = cell_coords(yi);
+        let dims = grid_dims();
+        let lo = select(c - vec3<u32>(1u), vec3<u32>(0u), c == vec3<u32>(0u));
+        let hi_c = min(c + vec3<u32>(1u), dims - vec3<u32>(1u));
+        for (var z = lo.z; z <= hi_c.z; z++) {
+        for (var y = lo.y; y <= hi_c.y; y++) {
+        for (var x = lo.x; x <= hi_c.x; x++) {
+            let cell = cell_index(vec3<u32>(x, y, z));
+            for (var s = cell_start(cell); s < cell_start(cell + 1u); s++) {
+                let j = sorted_particle(s);
+                if (tr == 0u && j == i) { continue; }
+                let d = yi - pos(j);
+                if (dot(d, d) < radius * radius) {
+                    if (count < stride) { atomicStore(&lists[first + count], j | (tr << 29u)); }
+                    count++;
+                }
+            }
+        }}}
+    }
+    atomicStore(&lists[16u + i], min(count, stride));
+    atomicMax(&lists[5], count);
+}
+"#;
+
+/// The device's lists and the kernels that keep them.
+pub struct GpuLists {
+    n: u32,
+    pub stride: u32,
+    lists: wgpu::Buffer,
+    state: wgpu::Buffer,
+    params: wgpu::Buffer,
+    drift: wgpu::ComputePipeline,
+    decide: wgpu::ComputePipeline,
+    build: wgpu::ComputePipeline,
+}
+
+/// What the list kernels need to know of the scene.
+pub struct ListScene<'a> {
+    pub n: usize,
+    pub dim: usize,
+    pub x_offset: u32,
+    pub h_offset: u32,
+    pub support: f32,
+    pub mirrors: &'a [crate::backend::Mirror],
+    /// Index in `info` of the adaptive field's base on group 0, when the search is adaptive.
+    pub field_base: Option<usize>,
+    /// Entries per particle.
+    pub stride: u32,
+}
+
+impl GpuLists {
+    /// The buffers for `n` particles with `stride` entries each, `(name, bytes)`.
+    pub fn planned_buffers(n: usize, stride: u32) -> Vec<(&'static str, u64)> {
+        vec![
+            ("neighbour lists", 4 * (HEADER as u64 + n as u64 * (1 + stride as u64))),
+            ("neighbour lists: state at the build", 4 * 5 * n as u64),
+        ]
+    }
+
+    pub fn new(gpu: &Gpu, search: &Search, scene: &ListScene, cell_helpers: &str) -> Result<GpuLists, GpuError> {
+        let (n, stride) = (scene.n, scene.stride);
+        gpu.estimate_fits(&GpuLists::planned_buffers(n, stride))?;
+        let none = wgpu::BufferUsages::empty();
+        let lists = gpu.storage_buffer("neighbour lists", 4 * (HEADER + n * (1 + stride as usize)) as u64, none)?;
+        let state = gpu.storage_buffer("neighbour lists: state at the build", 4 * 5 * n.max(1) as u64, none)?;
+        let mut header = [0u32; HEADER];
+        header[STRIDE] = stride;
+        gpu.upload(&lists, 0, &header)?;
+        let (mode, threshold) = match search {
+            Search::Cells => (0u32, 0.0f32),
+            Search::Verlet { .. } => (1, 0.0),
+            Search::Adaptive { threshold, .. } => (2, threshold.min(f32::MAX as f64) as f32),
+        };
+        let mut axis = [0u32; 4];
+        let mut at = [0f32; 4];
+        for (k, m) in scene.mirrors.iter().enumerate().take(3) {
+            axis[k] = m.axis as u32;
+            at[k] = m.offset as f32;
+        }
+        let words: Vec<u32> = [
+            n as u32,
+            scene.dim as u32,
+            scene.x_offset,
+            scene.h_offset,
+            scene.support.to_bits(),
+            (search.skin() as f32).to_bits(),
+            mode,
+            threshold.to_bits(),
+            scene.field_base.map(|b| b as i32).unwrap_or(-1) as u32,
+            scene.mirrors.len() as u32,
+            0,
+            0,
+        ]
+        .into_iter()
+        .chain(axis)
+        .chain(at.map(f32::to_bits))
+        .collect();
+        let params = gpu.uniform_buffer("neighbour lists: params", &words);
+        let drift = gpu.compile("neighbour lists: drift", &format!("{PARAMS_WGSL}{DRIFT_WGSL}"), "main")?;
+        let decide = gpu.compile("neighbour lists: decide", &format!("{PARAMS_WGSL}{DECIDE_WGSL}"), "main")?;
+        let build =
+            gpu.compile("neighbour lists: build", &format!("{PARAMS_WGSL}{cell_helpers}{BUILD_WGSL}"), "main")?;
+        Ok(GpuLists { n: n as u32, stride, lists, state, params, drift, decide, build })
+    }
+
+    pub fn buffer(&self) -> &wgpu::Buffer {
+        &self.lists
+    }
+
+    /// Records steps 2–4 (the cell list must be recorded first, with cells of the cut-off plus
+    /// the skin).
+    pub fn record(
+        &self,
+        gpu: &Gpu,
+        encoder: &mut wgpu::CommandEncoder,
+        data: &wgpu::Buffer,
+        cells: &super::cells::CellList,
+        ints: &wgpu::Buffer,
+        info: &wgpu::Buffer,
+    ) {
+        let groups = self.n.div_ceil(WG_PARTICLE);
+        let drift = gpu.bind("neighbour lists: drift", &self.drift, &[&self.params, data, &self.lists, &self.state]);
+        gpu.dispatch(encoder, "neighbour lists: drift", &self.drift, &drift, groups);
+        let decide =
+            gpu.bind("neighbour lists: decide", &self.decide, &[&self.params, &self.lists, cells.grid_buffer()]);
+        gpu.dispatch(encoder, "neighbour lists: decide", &self.decide, &decide, 1);
+        let entries =
+            [&self.params, data, &self.lists, &self.state, cells.grid_buffer(), cells.cells_buffer(), ints, info];
+        let build = gpu.bind("neighbour lists: build", &self.build, &entries);
+        gpu.dispatch(encoder, "neighbour lists: build", &self.build, &build, groups);
+    }
+
+    /// Forgets the lists (particles were reordered or the state replaced): the next evaluation
+    /// builds them all.
+    pub fn invalidate(&self, gpu: &Gpu) -> Result<(), GpuError> {
+        gpu.upload(&self.lists, 4 * BUILT as u64, &[0u32])
+    }
+
+    /// The header: counters and the largest candidate count.
+    pub fn header(&self, gpu: &Gpu) -> Result<Vec<u32>, GpuError> {
+        gpu.download(&self.lists, 0, HEADER)
+    }
+
+    /// An error when a particle had more candidates than its list holds (its list was cut short,
+    /// so the last evaluation missed pairs).
+    pub fn check_overflow(&self, gpu: &Gpu) -> Result<(), GpuError> {
+        let largest = self.header(gpu)?[LARGEST];
+        if largest > self.stride {
+            return Err(GpuError::Device(format!(
+                "a particle has {largest} neighbour candidates, more than the {} its list holds (twice the most at \
+                 the start, plus 16): the particles have clumped far beyond their initial packing",
+                self.stride
+            )));
+        }
+        Ok(())
+    }
+
+    pub fn stats(&self, gpu: &Gpu) -> Result<crate::schedule::SearchStats, GpuError> {
+        let h = self.header(gpu)?;
+        Ok(crate::schedule::SearchStats {
+            evaluations: h[EVALUATIONS] as u64,
+            full_builds: h[FULL_BUILDS] as u64,
+            particle_rebuilds: h[PARTICLE_REBUILDS] as u64,
+        })
+    }
+}
