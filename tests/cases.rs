@@ -355,3 +355,35 @@ fn a_node_list_as_a_region_is_a_clear_error() {
     assert!(err.contains("C0033") && err.contains(&format!("rings_2d.toml:{line}:")), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A wrong `[neighbours]` table is an error at its line: an unknown search, a skin beyond the
+/// cut-off, an adaptive search without its field or on a field the model lacks.
+#[test]
+fn a_wrong_neighbour_search_is_a_clear_error() {
+    let text = std::fs::read_to_string(case("rings_2d")).expect("case");
+    let dir = out_dir("neighbours");
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::copy(case("rings_2d").with_extension("sph"), dir.join("rings_2d.sph")).unwrap();
+    let path = dir.join("rings_2d.toml");
+    for (table, wanted, key) in [
+        ("search = \"octree\"", "unknown neighbour search `octree`", "search"),
+        ("search = \"verlet\"\nskin = 1.5", "between 0 and 1", "skin"),
+        ("search = \"adaptive\"\nthreshold = 1e-5", "needs `field`", "search"),
+        ("search = \"adaptive\"\nfield = \"eps_q\"\nthreshold = 1e-5", "`eps_q` is not a scalar field", "field"),
+        ("search = \"adaptive\"\nfield = \"v\"\nthreshold = 1e-5", "`v` is not a scalar field", "field"),
+    ] {
+        let bad = format!("{text}\n[neighbours]\n{table}\n");
+        std::fs::write(&path, &bad).unwrap();
+        let err = prepare(&path, &Default::default()).err().map(|e| e.to_string()).expect("an error");
+        let table_at = bad.lines().position(|l| l == "[neighbours]").unwrap();
+        let line = table_at + bad.lines().skip(table_at).position(|l| l.starts_with(&format!("{key} ="))).unwrap() + 1;
+        assert!(err.contains("C0034") && err.contains(wanted), "{table}: {err}");
+        assert!(err.contains(&format!("rings_2d.toml:{line}:")), "{table}: the error is not at line {line}: {err}");
+    }
+    // And a good one reaches the plan.
+    std::fs::write(&path, format!("{text}\n[neighbours]\nsearch = \"verlet\"\nskin = 0.2\n")).unwrap();
+    let (_, plan) = prepare(&path, &Default::default()).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(plan.search, pairsum::schedule::Search::Verlet { skin: 0.2 });
+    assert!(plan.describe(8).contains("Verlet lists with a skin of 0.2"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
