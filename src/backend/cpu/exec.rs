@@ -464,7 +464,6 @@ fn neighbours_of<T: Real, const D: usize>(
     let mut xi = [T::zero(); 3];
     xi[..D].copy_from_slice(&nb.x[i * D..i * D + D]);
     let hi = nb.h[i];
-    let half = T::from_f64(0.5);
     let group = w.sh.group;
     let sources = w.v.sources;
     let order = grid.order();
@@ -472,22 +471,13 @@ fn neighbours_of<T: Real, const D: usize>(
     for t in 0..transforms {
         // Transform t reflects particle j across the mirrors whose bit is set; the image of j is
         // near i exactly when j is near the reflection of i.
-        let mut yi = xi;
-        let mut flip = [false; 3];
-        let mut skip = false;
-        for (m, mirror) in nb.mirrors.iter().enumerate() {
-            if t >> m & 1 == 1 {
-                let dist = (xi[mirror.axis].to_f64() - mirror.offset).abs();
-                if dist >= nb.support.to_f64() * nb.h_max {
-                    skip = true;
-                }
-                yi[mirror.axis] = T::from_f64(2.0 * mirror.offset) - xi[mirror.axis];
-                flip[mirror.axis] = !flip[mirror.axis];
-            }
-        }
-        if skip {
+        let far = nb.mirrors.iter().enumerate().any(|(m, mirror)| {
+            t >> m & 1 == 1 && (xi[mirror.axis].to_f64() - mirror.offset).abs() >= nb.support.to_f64() * nb.h_max
+        });
+        if far {
             continue;
         }
+        let (yi, flip) = transformed(xi, t as u32, nb.mirrors);
         let mut p = [0.0; 3];
         for c in 0..D {
             p[c] = yi[c].to_f64();
@@ -495,33 +485,13 @@ fn neighbours_of<T: Real, const D: usize>(
         // h_ij ≤ (h_i + h_max)/2: no neighbour lies beyond support · that.
         let radius = nb.support.to_f64() * 0.5 * (hi.to_f64() + nb.h_max);
         grid.cell_ranges_within(p, radius, ranges);
-        let mirrored = flip.iter().any(|f| *f);
         for &(s, e) in ranges.iter() {
             for &jj in &order[s as usize..e as usize] {
                 let jj = jj as usize;
                 if (t == 0 && jj == i) || (filter && (sources >> group[jj]) & 1 == 0) {
                     continue;
                 }
-                let xj = &nb.x[jj * D..jj * D + D];
-                let mut r2 = T::zero();
-                let mut dx = [T::zero(); 3];
-                for c in 0..D {
-                    let diff = yi[c] - xj[c];
-                    dx[c] = diff;
-                    r2 = r2 + diff * diff;
-                }
-                let hij = (hi + nb.h[jj]) * half;
-                let rc = nb.support * hij;
-                let inside = r2 < rc * rc && r2 != T::zero();
-                if mirrored {
-                    // x_ij = x_i − (image of x_j): the reflection of (y_i − x_j) on the flipped axes.
-                    for c in 0..D {
-                        if flip[c] {
-                            dx[c] = -dx[c];
-                        }
-                    }
-                }
-                w.offer::<D>(jj as u32, dx, r2, hij, flip, inside);
+                offer_candidate::<T, D>(w, nb, yi, flip, hi, jj);
             }
         }
     }
@@ -539,7 +509,6 @@ fn listed_neighbours_of<T: Real, const D: usize>(
     let mut xi = [T::zero(); 3];
     xi[..D].copy_from_slice(&nb.x[i * D..i * D + D]);
     let hi = nb.h[i];
-    let half = T::from_f64(0.5);
     let group = w.sh.group;
     let sources = w.v.sources;
     let (mut t, (mut yi, mut flip)) = (0u32, (xi, [false; 3]));
@@ -553,17 +522,32 @@ fn listed_neighbours_of<T: Real, const D: usize>(
         if filter && (sources >> group[jj]) & 1 == 0 {
             continue;
         }
-        let xj = &nb.x[jj * D..jj * D + D];
-        let mut r2 = T::zero();
-        let mut dx = [T::zero(); 3];
-        for c in 0..D {
-            let diff = yi[c] - xj[c];
-            dx[c] = if flip[c] { -diff } else { diff };
-            r2 = r2 + diff * diff;
-        }
-        let hij = (hi + nb.h[jj]) * half;
-        let rc = nb.support * hij;
-        let inside = r2 < rc * rc && r2 != T::zero();
-        w.offer::<D>(jj as u32, dx, r2, hij, flip, inside);
+        offer_candidate::<T, D>(w, nb, yi, flip, hi, jj);
     }
+}
+
+/// Offers neighbour j (or its image, with `flip`) of the point `yi` (particle i or its reflection)
+/// to the batch: x_ij, r_ij, h_ij, kept when within the cut-off.
+#[inline(always)]
+fn offer_candidate<T: Real, const D: usize>(
+    w: &mut Writer<T>,
+    nb: &Neighbours<T>,
+    yi: [T; 3],
+    flip: [bool; 3],
+    hi: T,
+    jj: usize,
+) {
+    let xj = &nb.x[jj * D..jj * D + D];
+    let mut r2 = T::zero();
+    let mut dx = [T::zero(); 3];
+    for c in 0..D {
+        let diff = yi[c] - xj[c];
+        // x_ij = x_i − (image of x_j): the reflection of (y_i − x_j) on the flipped axes.
+        dx[c] = if flip[c] { -diff } else { diff };
+        r2 = r2 + diff * diff;
+    }
+    let hij = (hi + nb.h[jj]) * T::from_f64(0.5);
+    let rc = nb.support * hij;
+    let inside = r2 < rc * rc && r2 != T::zero();
+    w.offer::<D>(jj as u32, dx, r2, hij, flip, inside);
 }

@@ -154,7 +154,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     }
     state[4u * n + i] = f;
     let h_max = bitcast<f32>(grid[9]);
-    let radius = params.support * 0.5 * (hi + h_max) + bitcast<f32>(atomicLoad(&lists[8]));
+    // The 3^d cells around i hold everything within a cell size: a skin from an earlier full
+    // build, with a larger h_max then, may not reach further (the adaptive search's rebuilds).
+    let radius = min(params.support * 0.5 * (hi + h_max) + bitcast<f32>(atomicLoad(&lists[8])),
+                     bitcast<f32>(grid[3]));
     let stride = atomicLoad(&lists[0]);
     let first = 16u + n + i * stride;
     var count = 0u;

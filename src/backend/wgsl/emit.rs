@@ -977,19 +977,7 @@ fn cell_walk(w: &mut Writer, support: &str) -> Vec<(usize, &'static str)> {
     w.line("let h_max = bitcast<f32>(grid[9]);");
     w.line("for (var tr = 0u; tr < (1u << mirrors); tr++) {");
     w.indent += 1;
-    w.line("var yi = xi;");
-    w.line("var sgn = vec3<f32>(1.0);");
-    w.line("var skip = false;");
-    w.line("for (var m = 0u; m < mirrors; m++) {");
-    w.line("    if (((tr >> m) & 1u) == 1u) {");
-    w.line(format!("        let axis = u32(globals[{}u + 2u * m]);", gl::MIRRORS + 1));
-    w.line(format!("        let at = globals[{}u + 2u * m];", gl::MIRRORS + 2));
-    w.line(format!("        if (abs(xi[axis] - at) >= {support} * h_max) {{ skip = true; }}"));
-    w.line("        yi[axis] = 2.0 * at - xi[axis];");
-    w.line("        sgn[axis] = -sgn[axis];");
-    w.line("    }");
-    w.line("}");
-    w.line("if (skip) { continue; }");
+    reflect(w, Some(&format!("abs(xi[axis] - at) >= {support} * h_max")));
     w.line("let c = cell_coords(yi);");
     w.line("let dims = grid_dims();");
     w.line("let lo = select(c - vec3<u32>(1u), vec3<u32>(0u), c == vec3<u32>(0u));");
@@ -1012,21 +1000,38 @@ fn list_walk(w: &mut Writer) -> Vec<(usize, &'static str)> {
     w.line("let n_all = u32(info[0]);");
     w.line(format!("let stride = lists[{}u];", l::STRIDE));
     w.line(format!("let list_start = {}u + n_all + i * stride;", l::HEADER));
-    w.line(format!("for (var q = list_start; q < list_start + lists[{}u + i]; q++) {{", l::HEADER));
+    w.line(format!("for (var k_list = list_start; k_list < list_start + lists[{}u + i]; k_list++) {{", l::HEADER));
     w.indent += 1;
-    w.line("let e = lists[q];");
-    w.line(format!("let j = e & {:#x}u;", l::INDEX_MASK));
-    w.line(format!("let tr = e >> {}u;", l::TRANSFORM_SHIFT));
+    w.line("let entry = lists[k_list];");
+    w.line(format!("let j = entry & {:#x}u;", l::INDEX_MASK));
+    w.line(format!("let tr = entry >> {}u;", l::TRANSFORM_SHIFT));
+    reflect(w, None);
+    vec![(1, "}")]
+}
+
+/// `yi` and `sgn`: particle i reflected across the mirrors whose bit is set in transform `tr`,
+/// and the axes that flips. With `too_far` (a condition on `axis` and `at`), the transform is
+/// skipped when it holds for one of its mirrors.
+fn reflect(w: &mut Writer, too_far: Option<&str>) {
     w.line("var yi = xi;");
     w.line("var sgn = vec3<f32>(1.0);");
+    if too_far.is_some() {
+        w.line("var skip = false;");
+    }
     w.line("for (var m = 0u; m < mirrors; m++) {");
     w.line("    if (((tr >> m) & 1u) == 1u) {");
     w.line(format!("        let axis = u32(globals[{}u + 2u * m]);", gl::MIRRORS + 1));
-    w.line(format!("        yi[axis] = 2.0 * globals[{}u + 2u * m] - xi[axis];", gl::MIRRORS + 2));
+    w.line(format!("        let at = globals[{}u + 2u * m];", gl::MIRRORS + 2));
+    if let Some(cond) = too_far {
+        w.line(format!("        if ({cond}) {{ skip = true; }}"));
+    }
+    w.line("        yi[axis] = 2.0 * at - xi[axis];");
     w.line("        sgn[axis] = -sgn[axis];");
     w.line("    }");
     w.line("}");
-    vec![(1, "}")]
+    if too_far.is_some() {
+        w.line("if (skip) { continue; }");
+    }
 }
 
 fn particle_kernel(
