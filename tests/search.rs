@@ -98,7 +98,7 @@ fn verlet_lists_never_miss_a_pair_under_the_conservative_bound() {
             "{dim}D: {} full builds in {steps} steps",
             s.full_builds
         );
-        // And the lists hold more than the pairs (the skin) but not wildly more.
+        // Entries name particles of the store, and the lists are not empty.
         let listed: usize = lists.of.iter().map(|l| l.len()).sum();
         assert!(lists.of.iter().flatten().all(|e| (e & INDEX_MASK) < n as u32));
         assert!(listed > 0);

@@ -714,15 +714,7 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
             }
         }
     }
-    let search = match opts.verlet {
-        Some(skin) if (0.0..=1.0).contains(&skin) => Search::Verlet { skin },
-        Some(skin) => {
-            let msg = format!("--verlet: the skin is a fraction of the largest cut-off between 0 and 1, found {skin}");
-            cx.diags.push(Diagnostic::error("C0034", msg));
-            return None;
-        }
-        None => neighbour_search(cx, &model, case.neighbours.as_ref())?,
-    };
+    let search = neighbour_search(cx, &model, case.neighbours.as_ref(), opts.verlet)?;
     if let Search::Adaptive { field, .. } = &search {
         outputs.push(*field);
     }
@@ -1011,16 +1003,24 @@ fn primitive(s: &case::Shape, cx: &mut Ctx) -> Option<Primitive> {
     })
 }
 
-/// The `[neighbours]` table: the cell list when absent.
-fn neighbour_search(cx: &mut Ctx, model: &Model, n: Option<&case::Neighbours>) -> Option<Search> {
-    let Some(n) = n else { return Some(Search::Cells) };
-    let skin = match &n.skin {
-        Some(s) if !(*s.get_ref() >= 0.0 && *s.get_ref() <= 1.0) => {
-            let msg = format!("the skin is a fraction of the largest cut-off between 0 and 1, found {}", s.get_ref());
-            cx.err(s.span(), "C0034", msg, "out of range");
+/// The `[neighbours]` table (the cell list when absent), or Verlet lists of `--verlet`'s skin.
+fn neighbour_search(cx: &mut Ctx, model: &Model, n: Option<&case::Neighbours>, verlet: Option<f64>) -> Option<Search> {
+    if let Some(skin) = verlet {
+        if let Some(msg) = Search::skin_problem(skin) {
+            cx.diags.push(Diagnostic::error("C0034", format!("--verlet: {msg}")));
             return None;
         }
-        Some(s) => Some(*s.get_ref()),
+        return Some(Search::Verlet { skin });
+    }
+    let Some(n) = n else { return Some(Search::Cells) };
+    let skin = match &n.skin {
+        Some(s) => {
+            if let Some(msg) = Search::skin_problem(*s.get_ref()) {
+                cx.err(s.span(), "C0034", msg, "out of range");
+                return None;
+            }
+            Some(*s.get_ref())
+        }
         None => None,
     };
     // The cell list reads nothing else, and `field` and `threshold` are read by the adaptive

@@ -61,6 +61,12 @@ impl Search {
         !matches!(self, Search::Cells)
     }
 
+    /// Why `skin` cannot be a skin, if it cannot: it is a fraction of the largest cut-off.
+    pub fn skin_problem(skin: f64) -> Option<String> {
+        let ok = (0.0..=1.0).contains(&skin);
+        (!ok).then(|| format!("the skin is a fraction of the largest cut-off between 0 and 1, found {skin}"))
+    }
+
     /// The skin as a fraction of the largest cut-off radius.
     pub fn skin(&self) -> f64 {
         match self {

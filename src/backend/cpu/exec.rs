@@ -2,7 +2,7 @@
 //! each particle gathering its neighbours in batches from the cell list (gather only: a chunk
 //! writes the rows of its own particles and nothing else).
 
-use super::lists::{transformed, INDEX_MASK, TRANSFORM_SHIFT};
+use super::lists::{beyond_reach, transformed, INDEX_MASK, TRANSFORM_SHIFT};
 use super::program::{ColView, Ctx, Program, LANES};
 use super::{Mirror, PairRegs, Variant};
 use crate::grid::Grid;
@@ -467,17 +467,12 @@ fn neighbours_of<T: Real, const D: usize>(
     let group = w.sh.group;
     let sources = w.v.sources;
     let order = grid.order();
-    let transforms = 1usize << nb.mirrors.len();
-    for t in 0..transforms {
-        // Transform t reflects particle j across the mirrors whose bit is set; the image of j is
-        // near i exactly when j is near the reflection of i.
-        let far = nb.mirrors.iter().enumerate().any(|(m, mirror)| {
-            t >> m & 1 == 1 && (xi[mirror.axis].to_f64() - mirror.offset).abs() >= nb.support.to_f64() * nb.h_max
-        });
-        if far {
+    for t in 0..1u32 << nb.mirrors.len() {
+        // Transform t reflects particle j across the mirrors whose bit is set.
+        if beyond_reach(xi, t, nb.mirrors, nb.support.to_f64() * nb.h_max) {
             continue;
         }
-        let (yi, flip) = transformed(xi, t as u32, nb.mirrors);
+        let (yi, flip) = transformed(xi, t, nb.mirrors);
         let mut p = [0.0; 3];
         for c in 0..D {
             p[c] = yi[c].to_f64();

@@ -156,6 +156,15 @@ pub fn transformed<T: Real>(xi: [T; 3], t: u32, mirrors: &[Mirror]) -> ([T; 3], 
     (yi, flip)
 }
 
+/// Whether transform `t` holds no image within `radius` of i: images of j are near i exactly when
+/// j is near the reflection of i, and none is when i is that far from a plane `t` reflects across.
+pub fn beyond_reach<T: Real>(xi: [T; 3], t: u32, mirrors: &[Mirror], radius: f64) -> bool {
+    mirrors
+        .iter()
+        .enumerate()
+        .any(|(m, mirror)| t >> m & 1 == 1 && (xi[mirror.axis].to_f64() - mirror.offset).abs() >= radius)
+}
+
 /// Every particle or image within i's build radius: its cut-off reach plus the skin.
 fn collect<T: Real, const D: usize>(
     grid: &Grid,
@@ -171,14 +180,7 @@ fn collect<T: Real, const D: usize>(
     let radius = inp.support * 0.5 * (inp.h[i].to_f64() + inp.h_max) + skin;
     let order = grid.order();
     for t in 0..1u32 << inp.mirrors.len() {
-        // Images of j are near i exactly when j is near the reflection of i; none is within the
-        // radius when i is that far from a plane it reflects across.
-        let far = inp
-            .mirrors
-            .iter()
-            .enumerate()
-            .any(|(m, mirror)| t >> m & 1 == 1 && (xi[mirror.axis].to_f64() - mirror.offset).abs() >= radius);
-        if far {
+        if beyond_reach(xi, t, inp.mirrors, radius) {
             continue;
         }
         let (yi, _) = transformed(xi, t, inp.mirrors);
