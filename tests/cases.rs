@@ -21,8 +21,15 @@ fn out_dir(tag: &str) -> PathBuf {
 
 /// Runs a case on the CPU at CI resolution and checks every result against its tolerance.
 fn run_and_check(name: &str, precision: Precision) {
-    let opts =
-        RunOptions { backend: BackendChoice::Cpu, precision, out: out_dir(name), vtk: false, ..RunOptions::default() };
+    run_and_check_with(name, &[], precision);
+}
+
+/// `run_and_check` with case parameters set (`--set`).
+fn run_and_check_with(name: &str, set: &[(&str, &str)], precision: Precision) {
+    let tag = set.iter().fold(name.to_string(), |t, (k, v)| format!("{t}-{k}-{v}"));
+    let mut opts =
+        RunOptions { backend: BackendChoice::Cpu, precision, out: out_dir(&tag), vtk: false, ..RunOptions::default() };
+    opts.scene.set = set.iter().map(|(k, v)| (k.to_string(), v.to_string())).collect();
     let (scene, _) = prepare(&case(name), &opts.scene).unwrap_or_else(|e| panic!("{e}"));
     let outcome = run_case(&case(name), &opts).unwrap_or_else(|e| panic!("{name}: {e}"));
     assert!(!outcome.report.results.is_empty(), "{name} reports nothing");
@@ -76,6 +83,29 @@ fn check_histories_csv(path: &Path, histories: &[(String, Vec<(f64, f64)>)]) {
 #[test]
 fn elastic_wave_speed_is_within_3_percent_of_the_bar_speed() {
     run_and_check("elastic_wave", Precision::F64);
+}
+
+// The fluid cases, with each kind of wall: the surge front against Martin & Moyce's experiment,
+// the pressure of a tank at rest against ρ0 g (H − y).
+
+#[test]
+fn dam_break_front_follows_the_experiment_with_dynamic_boundary_particles() {
+    run_and_check_with("dam_break_2d", &[("boundary", "dbc")], Precision::F64);
+}
+
+#[test]
+fn dam_break_front_follows_the_experiment_with_adami_walls() {
+    run_and_check_with("dam_break_2d", &[("boundary", "adami")], Precision::F64);
+}
+
+#[test]
+fn a_tank_at_rest_holds_the_hydrostatic_pressure_with_dynamic_boundary_particles() {
+    run_and_check_with("hydrostatic_tank", &[("boundary", "dbc")], Precision::F64);
+}
+
+#[test]
+fn a_tank_at_rest_holds_the_hydrostatic_pressure_with_adami_walls() {
+    run_and_check_with("hydrostatic_tank", &[("boundary", "adami")], Precision::F32);
 }
 
 #[test]
@@ -385,5 +415,33 @@ fn a_wrong_neighbour_search_is_a_clear_error() {
     let (_, plan) = prepare(&path, &Default::default()).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(plan.search, pairsum::schedule::Search::Verlet { skin: 0.2 });
     assert!(plan.describe(8).contains("Verlet lists with a skin of 0.2"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_result_at_a_time_without_its_time_and_a_material_binding_gravity_are_errors_at_their_line() {
+    let dir = out_dir("badfluid");
+    std::fs::create_dir_all(&dir).expect("dir");
+    let bad = dir.join("bad.toml");
+    let check = |text: String| {
+        std::fs::write(&bad, text).expect("write");
+        let out = Command::new(env!("CARGO_BIN_EXE_pairsum")).args(["check", bad.to_str().unwrap()]).output();
+        let out = out.expect("runs");
+        (out.status.code(), String::from_utf8_lossy(&out.stderr).into_owned())
+    };
+    let text = std::fs::read_to_string(case("dam_break_2d")).expect("case");
+    let line_of = |text: &str, needle: &str| text.lines().position(|l| l.starts_with(needle)).expect("line") + 1;
+    // `at_time` needs its `time`.
+    let no_time = text.replacen("time = \"44.904 ms\"\n", "", 1);
+    let (code, err) = check(no_time.clone());
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("C0019") && err.contains("`at_time` needs a `time`"), "{err}");
+    assert!(err.contains(&format!("bad.toml:{}:", line_of(&no_time, "at = \"at_time\""))), "{err}");
+    // Gravity is the case's, not a material's.
+    let bound = text.replace("delta = 0.1\n", "delta = 0.1\ngravity = [0, \"-9.81 m/s^2\"]\n");
+    let (code, err) = check(bound.clone());
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("C0007") && err.contains("top-level `gravity`"), "{err}");
+    assert!(err.contains(&format!("bad.toml:{}:", line_of(&bound, "delta = 0.1") + 1)), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }

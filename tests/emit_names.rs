@@ -22,6 +22,8 @@ const MODELS: &[&str] = &[
     "fans_solid_plain",
     "ftlr19_perforation",
     "wcsph_fluid",
+    "wcsph_dbc",
+    "wcsph_adami",
 ];
 
 /// Names likely to collide with something in the generated code.

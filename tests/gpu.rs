@@ -333,6 +333,19 @@ fn graded_sphere_plate_on_the_gpu_matches_the_cpu_with_variable_h() {
     case_matches_cpu("sphere_plate_graded", &[("plate_coarse", "2")], 60, &["p", "h"], 2e-3);
 }
 
+// The fluid with each kind of wall: 300 steps (15 ms) of the dam break, the column well into its
+// collapse along the floor; ρ carries the continuity, the walls' pressure and the diffusion.
+
+#[test]
+fn dam_break_with_dynamic_boundary_particles_on_the_gpu_matches_the_cpu() {
+    case_matches_cpu("dam_break_2d", &[("boundary", "dbc")], 300, &["rho"], 2e-3);
+}
+
+#[test]
+fn dam_break_with_adami_walls_on_the_gpu_matches_the_cpu() {
+    case_matches_cpu("dam_break_2d", &[("boundary", "adami")], 300, &["rho", "p_over_rho2"], 2e-3);
+}
+
 // The kept neighbour lists on the GPU (`backend::gpu::lists`), against the CPU's: the bullet
 // entering the plate, with Verlet lists (rebuilt by the conservative bound) and with F-ANS's
 // adaptive rebuild; 120 steps include four Morton reorders (each of which rebuilds the lists).

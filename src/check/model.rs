@@ -254,7 +254,8 @@ impl Checker {
             }
         }
         for (k, p) in self.model.params.iter().enumerate() {
-            if !params.contains(&ir::ParamId(k as u32)) {
+            // The prelude's `gravity` is the scene's: the integrator reads it whether or not a model does.
+            if !params.contains(&ir::ParamId(k as u32)) && p.name != "gravity" {
                 warnings.push(
                     Diagnostic::warning("W0502", format!("parameter `{}` is declared but never used", p.name))
                         .at(p.span, "unused"),

@@ -323,6 +323,15 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
                 cx.diags.push(d);
                 continue;
             };
+            if key == "gravity" {
+                cx.err(
+                    v.span(),
+                    "C0007",
+                    "gravity is the case's top-level `gravity`, the same for every material",
+                    "here",
+                );
+                continue;
+            }
             let ty = model.params[p.index()].ty;
             let what = format!("`{key}` of material `{}`", mi.name);
             let value = match ty.shape {
@@ -644,14 +653,19 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
             continue;
         };
         let at = r.at.as_ref().map(|a| a.get_ref().clone()).unwrap_or_else(|| "end".into());
-        if !["end", "min", "max", "abs_max", "mean_after", "slope", "zero_crossing"].contains(&at.as_str()) {
+        if !["end", "min", "max", "abs_max", "mean_after", "slope", "zero_crossing", "at_time"].contains(&at.as_str()) {
             let span = r.at.as_ref().map(|a| a.span()).unwrap_or(0..0);
             cx.err(
                 span,
                 "C0019",
-                format!("`at` is end, min, max, abs_max, mean_after, slope or zero_crossing, found `{at}`"),
+                format!("`at` is end, min, max, abs_max, mean_after, slope, zero_crossing or at_time, found `{at}`"),
                 "here",
             );
+            continue;
+        }
+        if (at == "at_time") != r.time.is_some() {
+            let span = r.time.as_ref().map(|t| t.span()).or(r.at.as_ref().map(|a| a.span())).unwrap_or(0..0);
+            cx.err(span, "C0019", "`time` goes with `at = \"at_time\"`, and `at_time` needs a `time`", "here");
             continue;
         }
         let unit_text = r.unit.clone().unwrap_or_else(|| probes[probe].unit.clone());
@@ -668,12 +682,17 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
             Some(v) => Some(time_scale * cx.scalar(v, s, "to")?),
             None => None,
         };
+        let time = match &r.time {
+            Some(v) => Some(time_scale * cx.scalar(v, s, "time")?),
+            None => None,
+        };
         results.push(ResultSpec {
             quantity: r.quantity.get_ref().clone(),
             probe,
             at,
             from,
             to,
+            time,
             scale: r.scale.unwrap_or(1.0),
             unit: unit_text,
             reference,

@@ -271,6 +271,9 @@ pub struct ResultSpec {
     pub from: Option<Value>,
     #[serde(default)]
     pub to: Option<Value>,
+    /// The time of `at = "at_time"`.
+    #[serde(default)]
+    pub time: Option<Value>,
     #[serde(default)]
     pub scale: Option<f64>,
     #[serde(default)]

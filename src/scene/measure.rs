@@ -470,7 +470,53 @@ pub fn result_value(r: &ResultSpec, h: &History) -> f64 {
                 .map(|w| w[0].0 + (w[1].0 - w[0].0) * w[0].1 / (w[0].1 - w[1].1))
                 .unwrap_or(f64::NAN)
         }
+        // The history at `time`, interpolated linearly (NaN outside the recorded span).
+        "at_time" => {
+            let t = r.time.unwrap_or(f64::NAN);
+            pts.windows(2)
+                .find(|w| w[0].0 <= t && t <= w[1].0)
+                .map(|w| {
+                    if w[1].0 > w[0].0 {
+                        w[0].1 + (w[1].1 - w[0].1) * (t - w[0].0) / (w[1].0 - w[0].0)
+                    } else {
+                        w[0].1
+                    }
+                })
+                .unwrap_or(f64::NAN)
+        }
         _ => pts.last().map(|p| p.1).unwrap_or(f64::NAN),
     };
     v * r.scale
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn result(at: &str, time: Option<f64>) -> ResultSpec {
+        ResultSpec {
+            quantity: "q".into(),
+            probe: 0,
+            at: at.into(),
+            from: None,
+            to: None,
+            time,
+            scale: 1.0,
+            unit: String::new(),
+            reference: None,
+            source: None,
+            tolerance: None,
+            tolerance_why: None,
+        }
+    }
+
+    #[test]
+    fn at_time_interpolates_the_history_and_is_nan_outside_it() {
+        let h = History { points: vec![(0.0, 1.0), (0.1, 3.0), (0.3, -1.0)], ..Default::default() };
+        let at = |t: f64| result_value(&result("at_time", Some(t)), &h);
+        assert!((at(0.05) - 2.0).abs() < 1e-12);
+        assert!((at(0.1) - 3.0).abs() < 1e-12);
+        assert!((at(0.25) - 0.0).abs() < 1e-12);
+        assert!(at(0.31).is_nan() && at(-0.01).is_nan());
+    }
 }

@@ -74,6 +74,8 @@ pub struct ResultSpec {
     pub at: String,
     pub from: Option<f64>,
     pub to: Option<f64>,
+    /// The time of `at_time` (s, multiplied by the resolution's `time_scale`).
+    pub time: Option<f64>,
     pub scale: f64,
     pub unit: String,
     pub reference: Option<f64>,

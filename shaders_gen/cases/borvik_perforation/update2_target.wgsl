@@ -258,71 +258,71 @@ fn st_eps_p_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 0u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 4u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 7u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 8u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 9u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 10u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 15u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 16u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 17u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 18u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 19u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 20u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 21u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 22u;
     return params[b];
 }
 fn prm_eps_crit(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 23u;
     return params[b];
 }
 fn prm__constraint0(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 25u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm__symmetry0(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 28u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm__symmetry1(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 31u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 @compute @workgroup_size(64)

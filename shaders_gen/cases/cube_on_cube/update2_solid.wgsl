@@ -224,67 +224,67 @@ fn st_eps_p_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 0u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 2u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 5u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 3u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 6u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 4u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 7u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 8u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 12u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 13u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 14u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 15u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 16u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 17u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 18u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 19u;
     return params[b];
 }
 fn prm_C_v(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 20u;
     return params[b];
 }
 fn prm__symmetry0(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 22u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm__symmetry1(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 25u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 @compute @workgroup_size(64)

@@ -387,11 +387,11 @@ fn st_ds(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 12u + 4u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 5u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 12u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 7u;
     return params[b];
 }
 @compute @workgroup_size(64)

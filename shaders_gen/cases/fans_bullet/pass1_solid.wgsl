@@ -507,27 +507,27 @@ fn st_v_xsph(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 3u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 24u + 6u;
     return params[b];
 }
 fn prm_art_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 24u + 9u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 24u + 10u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 24u + 11u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 24u + 12u;
     return params[b];
 }
 fn prm_xsph_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 24u + 16u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -218,35 +218,35 @@ fn st_sigma_y_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 24u + 0u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 3u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 24u + 6u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 4u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 24u + 7u;
     return params[b];
 }
 fn prm_art_eps(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 24u + 8u;
     return params[b];
 }
 fn prm_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 24u + 13u;
     return params[b];
 }
 fn prm_E_T(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 24u + 14u;
     return params[b];
 }
 fn prm__symmetry0(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 24u + 18u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm__symmetry1(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 24u + 21u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 @compute @workgroup_size(64)

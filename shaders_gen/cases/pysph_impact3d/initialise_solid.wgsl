@@ -92,19 +92,19 @@ fn st_R_art(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 0u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 2u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 5u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 3u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 6u;
     return params[b];
 }
 fn prm_art_eps(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 9u;
     return params[b];
 }
 @compute @workgroup_size(64)

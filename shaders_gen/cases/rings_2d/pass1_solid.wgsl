@@ -483,27 +483,27 @@ fn st_v_xsph(i: u32, v: vec2<f32>) {
     data[b + 1u] = v[1];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 4u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 6u;
     return params[b];
 }
 fn prm_art_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 9u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 10u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 11u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 12u;
     return params[b];
 }
 fn prm_xsph_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 13u;
     return params[b];
 }
 @compute @workgroup_size(64)

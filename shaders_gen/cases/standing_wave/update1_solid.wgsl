@@ -125,19 +125,19 @@ fn st_s_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 0u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 6u;
     return params[b];
 }
 fn prm__constraint0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 12u;
     return params[b];
 }
 fn prm__constraint1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 13u;
     return params[b];
 }
 @compute @workgroup_size(64)

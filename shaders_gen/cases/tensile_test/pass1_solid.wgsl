@@ -507,27 +507,27 @@ fn st_v_xsph(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 3u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 6u;
     return params[b];
 }
 fn prm_art_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 9u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 10u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 11u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 12u;
     return params[b];
 }
 fn prm_xsph_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 16u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -226,43 +226,43 @@ fn st_sigma_y_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 0u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 3u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 6u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 4u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 7u;
     return params[b];
 }
 fn prm_art_eps(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 8u;
     return params[b];
 }
 fn prm_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 13u;
     return params[b];
 }
 fn prm_E_T(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 14u;
     return params[b];
 }
 fn prm__constraint0(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 18u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm__constraint1(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 21u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm__symmetry0(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 24u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm__symmetry1(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 27u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 @compute @workgroup_size(64)

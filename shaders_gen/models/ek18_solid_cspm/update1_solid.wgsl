@@ -216,59 +216,59 @@ fn st_e_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 0u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 2u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 5u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 3u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 6u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 4u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 7u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 8u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 12u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 13u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 14u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 15u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 16u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 17u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 18u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 19u;
     return params[b];
 }
 fn prm_C_v(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 20u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -436,11 +436,11 @@ fn st_ds(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 11u + 4u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 7u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 11u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 9u;
     return params[b];
 }
 @compute @workgroup_size(64)

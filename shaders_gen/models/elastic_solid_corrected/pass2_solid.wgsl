@@ -450,15 +450,15 @@ fn st_dv(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 11u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 10u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 11u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 11u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 11u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 12u;
     return params[b];
 }
 @compute @workgroup_size(64)

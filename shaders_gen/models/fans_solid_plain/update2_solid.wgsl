@@ -189,23 +189,23 @@ fn st_sigma_y_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 0u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 3u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 6u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 4u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 7u;
     return params[b];
 }
 fn prm_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 11u;
     return params[b];
 }
 fn prm_E_T(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 12u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -49,24 +49,32 @@ fn st_p(i: u32, v: f32) {
     let b = u32(info[8 + G] + i32(i) * 1);
     data[b] = v;
 }
-fn ld_c(i: u32) -> f32 {
+fn ld_p_over_rho2(i: u32) -> f32 {
     let b = u32(info[9 + G] + i32(i) * 1);
     return data[b];
 }
-fn st_c(i: u32, v: f32) {
+fn st_p_over_rho2(i: u32, v: f32) {
     let b = u32(info[9 + G] + i32(i) * 1);
     data[b] = v;
 }
+fn ld_c(i: u32) -> f32 {
+    let b = u32(info[10 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_c(i: u32, v: f32) {
+    let b = u32(info[10 + G] + i32(i) * 1);
+    data[b] = v;
+}
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 6u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 12u + 0u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 6u + 2u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 12u + 5u;
     return params[b];
 }
 fn prm_gamma(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 6u + 3u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 12u + 6u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -85,6 +93,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let B = (((p1 * p1) * prm_rho0(i)) / prm_gamma(i));
     p_i = (B * (pow((ld_rho(i) / prm_rho0(i)), prm_gamma(i)) - 1.0));
     c_i = (prm_c0(i) * pow((ld_rho(i) / prm_rho0(i)), ((prm_gamma(i) - 1.0) / 2.0)));
+    // pressure_term
+    var p_over_rho2_i: f32 = ld_p_over_rho2(i);
+    let p2 = ld_rho(i);
+    p_over_rho2_i = (p_i / (p2 * p2));
     st_p(i, p_i);
+    st_p_over_rho2(i, p_over_rho2_i);
     st_c(i, c_i);
 }

@@ -362,48 +362,74 @@ fn ldj_rho(j: u32, sgn: vec3<f32>) -> f32 {
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
-fn ld_p(i: u32) -> f32 {
-    let b = u32(info[8 + G] + i32(i) * 1);
+fn ld_p_over_rho2(i: u32) -> f32 {
+    let b = u32(info[9 + G] + i32(i) * 1);
     return data[b];
 }
-fn st_p(i: u32, v: f32) {
-    let b = u32(info[8 + G] + i32(i) * 1);
+fn st_p_over_rho2(i: u32, v: f32) {
+    let b = u32(info[9 + G] + i32(i) * 1);
     data[b] = v;
 }
-fn ldj_p(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[8 + ints[j]];
+fn ldj_p_over_rho2(j: u32, sgn: vec3<f32>) -> f32 {
+    let base = info[9 + ints[j]];
+    if (base == -2147483648) { return 0.0; }
+    let b = u32(base + i32(j) * 1);
+    return data[b];
+}
+fn ld_c(i: u32) -> f32 {
+    let b = u32(info[10 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_c(i: u32, v: f32) {
+    let b = u32(info[10 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ldj_c(j: u32, sgn: vec3<f32>) -> f32 {
+    let base = info[10 + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
 fn ld_dv(i: u32) -> vec3<f32> {
-    let b = u32(info[10 + G] + i32(i) * 3);
+    let b = u32(info[11 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_dv(i: u32, v: vec3<f32>) {
-    let b = u32(info[10 + G] + i32(i) * 3);
+    let b = u32(info[11 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_drho(i: u32) -> f32 {
-    let b = u32(info[11 + G] + i32(i) * 1);
+    let b = u32(info[12 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho(i: u32, v: f32) {
-    let b = u32(info[11 + G] + i32(i) * 1);
+    let b = u32(info[12 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_mu_max(i: u32) -> f32 {
-    let b = u32(info[12 + G] + i32(i) * 1);
+    let b = u32(info[13 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_mu_max(i: u32, v: f32) {
-    let b = u32(info[12 + G] + i32(i) * 1);
+    let b = u32(info[13 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_nu0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 6u + 4u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 12u + 7u;
+    return params[b];
+}
+fn prm_visc_a(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 12u + 8u;
+    return params[b];
+}
+fn prm_visc_b(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 12u + 9u;
+    return params[b];
+}
+fn prm_eta_ratio(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 12u + 10u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -423,7 +449,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var mu_max: f32 = (-pinf());
     let v_i = ld_v(i);
     let rho_i = ld_rho(i);
-    let p_i = ld_p(i);
+    let p_over_rho2_i = ld_p_over_rho2(i);
+    let c_i = ld_c(i);
     let xi = pos3(i);
     let hi = h_of(i);
     let mirrors = u32(globals[8u]);
@@ -464,9 +491,16 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let gradW_ij = kernel_grad(r_ij, h_ij) * x_ij;
             // pairsum continuity (stdlib/continuity/dualsph.sph:3)
             drho = drho + (ldj_m(j, sgn) * dot((v_i - ldj_v(j, sgn)), gradW_ij));
-            // pairsum momentum (stdlib/momentum/fluid_laminar.sph:9)
-            let p1 = ldj_rho(j, sgn);
-            let pressure = (((-ldj_m(j, sgn)) * ((ldj_p(j, sgn) / (p1 * p1)) + (p_i / (rho_i * rho_i)))) * gradW_ij);
+            // pairsum momentum (stdlib/momentum/fluid.sph:18)
+            let c_i_2 = c_i;
+            let c_j = ldj_c(j, sgn);
+            let vr = dot((v_i - ldj_v(j, sgn)), x_ij);
+            let hh = h_ij;
+            let p1 = (prm_eta_ratio(i) * hh);
+            let phi = ((hh * vr) / ((r_ij * r_ij) + (p1 * p1)));
+            let c_bar = ((c_i_2 + c_j) / 2.0);
+            let rho_bar = (0.5 * (rho_i + ldj_rho(j, sgn)));
+            let pressure = (((-ldj_m(j, sgn)) * ((ldj_p_over_rho2(j, sgn) + p_over_rho2_i) + select(0.0, (((((-prm_visc_a(i)) * c_bar) * phi) + (prm_visc_b(i) * (phi * phi))) / rho_bar), (vr < 0.0)))) * gradW_ij);
             let laminar = (((((ldj_m(j, sgn) * 4.0) * prm_nu0(i)) * dot(x_ij, gradW_ij)) / ((rho_i + ldj_rho(j, sgn)) * (r_ij * r_ij))) * (v_i - ldj_v(j, sgn)));
             dv = dv + (pressure + laminar);
             // pairsum viscous_speed (stdlib/timestep/lsr.sph:11)

@@ -41,33 +41,33 @@ fn st_h(i: u32, v: f32) {
     data[b] = v;
 }
 fn ld_c(i: u32) -> f32 {
-    let b = u32(info[9 + ints[i]] + i32(i) * 1);
+    let b = u32(info[10 + ints[i]] + i32(i) * 1);
     return data[b];
 }
 fn st_c(i: u32, v: f32) {
-    let b = u32(info[9 + ints[i]] + i32(i) * 1);
+    let b = u32(info[10 + ints[i]] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_dv(i: u32) -> vec3<f32> {
-    let b = u32(info[10 + ints[i]] + i32(i) * 3);
+    let b = u32(info[11 + ints[i]] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_dv(i: u32, v: vec3<f32>) {
-    let b = u32(info[10 + ints[i]] + i32(i) * 3);
+    let b = u32(info[11 + ints[i]] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_mu_max(i: u32) -> f32 {
-    let b = u32(info[12 + ints[i]] + i32(i) * 1);
+    let b = u32(info[13 + ints[i]] + i32(i) * 1);
     return data[b];
 }
 fn st_mu_max(i: u32, v: f32) {
-    let b = u32(info[12 + ints[i]] + i32(i) * 1);
+    let b = u32(info[13 + ints[i]] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_cfl_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 6u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 12u + 11u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -78,7 +78,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     if (i >= n) { return; }
     let t = globals[0u];
     let dt = globals[1u];
-    let scratch = u32(info[16]);
+    let scratch = u32(info[17]);
     data[scratch + 0u * n + i] = (prm_cfl_C(i) * sqrt((ld_h(i) / max(length(ld_dv(i)), 1e-12))));
     data[scratch + 1u * n + i] = ((prm_cfl_C(i) * ld_h(i)) / (ld_c(i) + ld_mu_max(i)));
 }

@@ -69,70 +69,78 @@ fn st_p(i: u32, v: f32) {
     let b = u32(info[8 + G] + i32(i) * 1);
     data[b] = v;
 }
-fn ld_c(i: u32) -> f32 {
+fn ld_p_over_rho2(i: u32) -> f32 {
     let b = u32(info[9 + G] + i32(i) * 1);
     return data[b];
 }
-fn st_c(i: u32, v: f32) {
+fn st_p_over_rho2(i: u32, v: f32) {
     let b = u32(info[9 + G] + i32(i) * 1);
     data[b] = v;
 }
+fn ld_c(i: u32) -> f32 {
+    let b = u32(info[10 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_c(i: u32, v: f32) {
+    let b = u32(info[10 + G] + i32(i) * 1);
+    data[b] = v;
+}
 fn ld_dv(i: u32) -> vec3<f32> {
-    let b = u32(info[10 + G] + i32(i) * 3);
+    let b = u32(info[11 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_dv(i: u32, v: vec3<f32>) {
-    let b = u32(info[10 + G] + i32(i) * 3);
+    let b = u32(info[11 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_drho(i: u32) -> f32 {
-    let b = u32(info[11 + G] + i32(i) * 1);
+    let b = u32(info[12 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho(i: u32, v: f32) {
-    let b = u32(info[11 + G] + i32(i) * 1);
+    let b = u32(info[12 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_x_0(i: u32) -> vec3<f32> {
-    let b = u32(info[13 + G] + i32(i) * 3);
+    let b = u32(info[14 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_x_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[13 + G] + i32(i) * 3);
+    let b = u32(info[14 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_v_0(i: u32) -> vec3<f32> {
-    let b = u32(info[14 + G] + i32(i) * 3);
+    let b = u32(info[15 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_v_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[14 + G] + i32(i) * 3);
+    let b = u32(info[15 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_rho_0(i: u32) -> f32 {
-    let b = u32(info[15 + G] + i32(i) * 1);
+    let b = u32(info[16 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho_0(i: u32, v: f32) {
-    let b = u32(info[15 + G] + i32(i) * 1);
+    let b = u32(info[16 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 6u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 12u + 0u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 6u + 2u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 12u + 5u;
     return params[b];
 }
 fn prm_gamma(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 6u + 3u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 12u + 6u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -161,9 +169,13 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let B = (((p1 * p1) * prm_rho0(i)) / prm_gamma(i));
     p_i = (B * (pow((rho_i / prm_rho0(i)), prm_gamma(i)) - 1.0));
     c_i = (prm_c0(i) * pow((rho_i / prm_rho0(i)), ((prm_gamma(i) - 1.0) / 2.0)));
+    // pressure_term
+    var p_over_rho2_i: f32 = ld_p_over_rho2(i);
+    p_over_rho2_i = (p_i / (rho_i * rho_i));
     st_x(i, x_i);
     st_v(i, v_i);
     st_rho(i, rho_i);
     st_p(i, p_i);
+    st_p_over_rho2(i, p_over_rho2_i);
     st_c(i, c_i);
 }

@@ -179,7 +179,13 @@ mod tests {
     #[test]
     fn every_stdlib_model_generates_wgsl_that_naga_accepts() {
         let cells = crate::backend::gpu::cells::wgsl_helpers();
-        for m in ["models/elastic_solid.sph", "models/elastic_solid_corrected.sph", "models/wcsph_fluid.sph"] {
+        for m in [
+            "models/elastic_solid.sph",
+            "models/elastic_solid_corrected.sph",
+            "models/wcsph_fluid.sph",
+            "models/wcsph_dbc.sph",
+            "models/wcsph_adami.sph",
+        ] {
             let mut sources = Sources::new();
             let checked = check_stdlib_modules(&mut sources, &[m], Stdlib::locate());
             assert!(!checked.has_errors(), "{}", render(&sources, &checked.diags));
