@@ -458,7 +458,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let r_ij = sqrt(r2);
             let W_ij = kernel_w(r_ij, h_ij);
             let gradW_ij = kernel_grad(r_ij, h_ij) * x_ij;
-            // pairsum wall_pressure (stdlib/boundary/adami.sph:17)
+            // pairsum wall_pressure (stdlib/boundary/adami.sph:15)
             if (in_groups(1u, ints[j])) {
                 weighted = weighted + ((ldj_p(j, sgn) + (ldj_rho(j, sgn) * dot(prm_gravity(i), x_ij))) * W_ij);
                 weight = weight + W_ij;
@@ -469,10 +469,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         }}}
     }
     // then wall_pressure
-    let p1 = prm_c0(i);
-    let B = (((p1 * p1) * prm_rho0(i)) / prm_gamma(i));
     p_wall = (weighted / max(weight, 1e-30));
-    let ratio = pow(((p_wall / B) + 1.0), (1.0 / prm_gamma(i)));
+    let p1 = prm_c0(i);
+    let ratio = pow(((p_wall / (((p1 * p1) * prm_rho0(i)) / prm_gamma(i))) + 1.0), (1.0 / prm_gamma(i)));
     c_2 = (prm_c0(i) * pow(ratio, ((prm_gamma(i) - 1.0) / 2.0)));
     let p2 = (prm_rho0(i) * ratio);
     p_over_rho2 = (p_wall / (p2 * p2));

@@ -166,8 +166,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var p_i: f32 = ld_p(i);
     var c_i: f32 = ld_c(i);
     let p1 = prm_c0(i);
-    let B = (((p1 * p1) * prm_rho0(i)) / prm_gamma(i));
-    p_i = (B * (pow((rho_i / prm_rho0(i)), prm_gamma(i)) - 1.0));
+    p_i = ((((p1 * p1) * prm_rho0(i)) / prm_gamma(i)) * (pow((rho_i / prm_rho0(i)), prm_gamma(i)) - 1.0));
     c_i = (prm_c0(i) * pow((rho_i / prm_rho0(i)), ((prm_gamma(i) - 1.0) / 2.0)));
     // pressure_term
     var p_over_rho2_i: f32 = ld_p_over_rho2(i);
