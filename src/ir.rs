@@ -33,6 +33,10 @@ impl std::fmt::Display for Type {
     }
 }
 
+/// The prelude's parameter that the case's `gravity` binds for every material (the integrator adds
+/// it to the rate of `v`; models may read it).
+pub const GRAVITY: &str = "gravity";
+
 /// Components a shape holds in `dim` dimensions. Symmetric and skew tensors keep their upper
 /// triangle row by row (sym 3D: xx xy xz yy yz zz; skew 3D: xy xz yz); full tensors are row-major.
 pub fn components(shape: Shape, dim: usize) -> usize {

@@ -255,7 +255,7 @@ impl Checker {
         }
         for (k, p) in self.model.params.iter().enumerate() {
             // The prelude's `gravity` is the scene's: the integrator reads it whether or not a model does.
-            if !params.contains(&ir::ParamId(k as u32)) && p.name != "gravity" {
+            if !params.contains(&ir::ParamId(k as u32)) && p.name != ir::GRAVITY {
                 warnings.push(
                     Diagnostic::warning("W0502", format!("parameter `{}` is declared but never used", p.name))
                         .at(p.span, "unused"),

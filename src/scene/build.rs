@@ -323,7 +323,7 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
                 cx.diags.push(d);
                 continue;
             };
-            if key == "gravity" {
+            if key == crate::ir::GRAVITY {
                 cx.err(
                     v.span(),
                     "C0007",

@@ -57,7 +57,7 @@ pub fn scene_params(model: &mut Model, scene: &SceneSpec) -> Vec<SceneParam> {
     let mut out = vec![];
     if let Some(g) = &scene.gravity {
         // The prelude's `gravity`, so that a model may read it (a wall's hydrostatic pressure).
-        let p = synthetic_param(model, "gravity", Shape::Vec, accel_unit());
+        let p = synthetic_param(model, ir::GRAVITY, Shape::Vec, accel_unit());
         out.push(SceneParam { param: p, value: g.clone(), role: SceneRole::Gravity });
     }
     for (k, l) in scene.loads.iter().enumerate() {
