@@ -34,6 +34,8 @@ pub trait Real:
     fn sqrt(self) -> Self;
     fn exp(self) -> Self;
     fn ln(self) -> Self;
+    fn sin(self) -> Self;
+    fn cos(self) -> Self;
     fn powf(self, e: Self) -> Self;
     fn abs(self) -> Self;
     fn min(self, o: Self) -> Self;
@@ -76,6 +78,14 @@ macro_rules! real {
             #[inline(always)]
             fn ln(self) -> Self {
                 <$t>::ln(self)
+            }
+            #[inline(always)]
+            fn sin(self) -> Self {
+                <$t>::sin(self)
+            }
+            #[inline(always)]
+            fn cos(self) -> Self {
+                <$t>::cos(self)
             }
             #[inline(always)]
             fn powf(self, e: Self) -> Self {

@@ -109,6 +109,16 @@ fn a_tank_at_rest_holds_the_hydrostatic_pressure_with_adami_walls() {
 }
 
 #[test]
+fn a_piston_drives_the_simple_wave_of_the_tait_equation_with_dynamic_boundary_particles() {
+    run_and_check_with("piston_2d", &[("boundary", "dbc")], Precision::F64);
+}
+
+#[test]
+fn a_piston_drives_the_simple_wave_of_the_tait_equation_with_adami_walls() {
+    run_and_check_with("piston_2d", &[("boundary", "adami")], Precision::F32);
+}
+
+#[test]
 fn elastic_wave_runs_in_f32_too() {
     run_and_check("elastic_wave", Precision::F32);
 }
@@ -419,7 +429,7 @@ fn a_wrong_neighbour_search_is_a_clear_error() {
 }
 
 #[test]
-fn a_result_at_a_time_without_its_time_and_a_material_binding_gravity_are_errors_at_their_line() {
+fn a_result_at_a_time_without_its_time_a_material_binding_gravity_and_a_tilted_2d_rotation_are_errors_at_their_line() {
     let dir = out_dir("badfluid");
     std::fs::create_dir_all(&dir).expect("dir");
     let bad = dir.join("bad.toml");
@@ -443,5 +453,15 @@ fn a_result_at_a_time_without_its_time_and_a_material_binding_gravity_are_errors
     assert_eq!(code, Some(1), "{err}");
     assert!(err.contains("C0007") && err.contains("top-level `gravity`"), "{err}");
     assert!(err.contains(&format!("bad.toml:{}:", line_of(&bound, "delta = 0.1") + 1)), "{err}");
+    // A 2D body turns about z: a rotation with an axis is refused where it is written.
+    let piston = std::fs::read_to_string(case("piston_2d")).expect("case");
+    let tilted = piston.replace(
+        "ramp = \"5 ms\"\n",
+        "ramp = \"5 ms\"\nrotation = { center = [0, 0], omega = \"1 rad/s\", axis = [1, 0, 0] }\n",
+    );
+    let (code, err) = check(tilted.clone());
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("C0035") && err.contains("turns about z"), "{err}");
+    assert!(err.contains(&format!("bad.toml:{}:", line_of(&tilted, "rotation = "))), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -274,13 +274,19 @@ fn compensated_sums_on_the_gpu_stay_close_to_f64() {
 /// `steps` steps of a bundled case at its CI resolution on the GPU and on the CPU (both f32):
 /// positions, velocities and `more` agree to `tol` of their largest values.
 fn case_matches_cpu(name: &str, set: &[(&str, &str)], steps: usize, more: &[&str], tol: f64) {
+    case_file_matches_cpu(Path::new(&case(name)), set, steps, more, tol);
+}
+
+/// `case_matches_cpu` for a case file anywhere.
+fn case_file_matches_cpu(path: &Path, set: &[(&str, &str)], steps: usize, more: &[&str], tol: f64) {
     use pairsum::engine::Engine;
     use pairsum::runner::prepare;
+    let name = path.display();
     let opts = pairsum::scene::Options {
         set: set.iter().map(|(k, v)| (k.to_string(), v.to_string())).collect(),
         ..Default::default()
     };
-    let (scene, plan) = prepare(Path::new(&case(name)), &opts).unwrap_or_else(|e| panic!("{name}: {e}"));
+    let (scene, plan) = prepare(path, &opts).unwrap_or_else(|e| panic!("{name}: {e}"));
     let store = build_store::<f32>(&plan, &scene.particles, &scene.materials).expect("store");
     let config = scene.config.clone();
     let mut cpu =
@@ -344,6 +350,21 @@ fn dam_break_with_dynamic_boundary_particles_on_the_gpu_matches_the_cpu() {
 #[test]
 fn dam_break_with_adami_walls_on_the_gpu_matches_the_cpu() {
     case_matches_cpu("dam_break_2d", &[("boundary", "adami")], 300, &["rho", "p_over_rho2"], 2e-3);
+}
+
+// Prescribed rigid motion: a piston translated into a channel of water (a wall moved as a whole)
+// until its wave has run 0.2 m; a paddle turned about its middle (sin and cos of the angle on the
+// GPU) until it has swept into the water.
+
+#[test]
+fn piston_on_the_gpu_matches_the_cpu() {
+    case_matches_cpu("piston_2d", &[("boundary", "adami")], 150, &["rho", "p_over_rho2"], 2e-3);
+}
+
+#[test]
+fn turning_paddle_on_the_gpu_matches_the_cpu() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/paddle_2d.toml");
+    case_file_matches_cpu(&path, &[], 1000, &["rho"], 2e-3);
 }
 
 // The kept neighbour lists on the GPU (`backend::gpu::lists`), against the CPU's: the bullet

@@ -65,6 +65,8 @@ fn eval(e: &Expr, values: &[f64], next: &mut usize, time: f64, dt: f64) -> f64 {
                 Builtin::Abs => a[0].abs(),
                 Builtin::Exp => a[0].exp(),
                 Builtin::Ln => a[0].ln(),
+                Builtin::Sin => a[0].sin(),
+                Builtin::Cos => a[0].cos(),
                 _ => f64::NAN,
             }
         }

@@ -338,7 +338,7 @@ pub fn builtin(f: Builtin, mut args: Vec<Expr>, span: crate::diag::Span) -> Resu
             let u = units[0].powr(Ratio { num: 1, den: 2 }).ok_or_else(unit_overflow)?;
             Ok(call(args, Type::scalar(u)))
         }
-        Builtin::Exp | Builtin::Ln => {
+        Builtin::Exp | Builtin::Ln | Builtin::Sin | Builtin::Cos => {
             if shapes[0] != Shape::Scalar {
                 return Err(bad("a scalar", None));
             }
@@ -411,6 +411,8 @@ pub fn builtin_by_name(name: &str) -> Option<(Builtin, Option<usize>)> {
         "sqrt" => (Sqrt, Some(1)),
         "exp" => (Exp, Some(1)),
         "ln" => (Ln, Some(1)),
+        "sin" => (Sin, Some(1)),
+        "cos" => (Cos, Some(1)),
         "abs" => (Abs, Some(1)),
         "min" => (Min, None),
         "max" => (Max, None),

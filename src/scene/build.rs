@@ -501,6 +501,12 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
     let mut constraints = vec![];
     for c in &case.constraints {
         let Some((t, _)) = target(cx, &mut particles, &c.body, &c.region) else { continue };
+        let name = c.body.get_ref();
+        let groups = bodies.iter().filter(|b| b.name == *name).fold(GroupSet::default(), |g, b| g.with(b.group));
+        let rotation = match &c.rotation {
+            Some(r) => Some(rotation(cx, r, dim, time_scale)?),
+            None => None,
+        };
         let velocity = match &c.velocity {
             Some(v) => cx.vector(v, unit("m/s"), "constraint velocity")?,
             None => [0.0; 3],
@@ -511,7 +517,7 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
         };
         // A faster clock keeps prescribed displacements: velocities grow as the times shrink.
         let velocity = velocity[..dim].iter().map(|v| v / time_scale).collect();
-        constraints.push(Constraint { target: t, velocity, ramp });
+        constraints.push(Constraint { target: t, groups, velocity, rotation, ramp });
     }
     let gravity = match &case.gravity {
         Some(g) => Some(cx.vector(g, unit("m/s^2"), "gravity")?[..dim].to_vec()),
@@ -780,6 +786,44 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
         results,
         resolutions,
     })
+}
+
+/// A constraint's rigid rotation: its centre, angular speed (divided by the time scale, like
+/// velocities) and unit axis (z in 2D; required in 3D).
+fn rotation(
+    cx: &mut Ctx,
+    r: &toml::Spanned<case::Rotation>,
+    dim: usize,
+    time_scale: f64,
+) -> Option<crate::schedule::Rotation> {
+    let spec = r.get_ref();
+    let center = cx.vector(&spec.center, unit("m"), "rotation centre")?[..dim].to_vec();
+    let omega = cx.scalar(&spec.omega, unit("1/s"), "rotation omega")? / time_scale;
+    let axis = match (&spec.axis, dim) {
+        (_, 1) => {
+            cx.err(r.span(), "C0035", "a 1D body cannot turn", "here");
+            return None;
+        }
+        (None, 2) => [0.0, 0.0, 1.0],
+        (Some(a), 3) => {
+            let a = cx.vector(a, Unit::ONE, "rotation axis")?;
+            let n = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
+            if n == 0.0 {
+                cx.err(r.span(), "C0035", "the rotation axis is the zero vector", "here");
+                return None;
+            }
+            [a[0] / n, a[1] / n, a[2] / n]
+        }
+        (Some(_), _) => {
+            cx.err(r.span(), "C0035", "a 2D body turns about z: a rotation takes no `axis`", "here");
+            return None;
+        }
+        (None, _) => {
+            cx.err(r.span(), "C0035", "a 3D rotation needs an `axis`", "no axis");
+            return None;
+        }
+    };
+    Some(crate::schedule::Rotation { center, axis, omega })
 }
 
 fn component_index(shape: Shape, dim: usize, name: &str) -> Option<usize> {

@@ -116,7 +116,8 @@ pub struct Refine {
 }
 
 /// A prescribed velocity (zeros: clamped) on a body or on the part of it inside `region`,
-/// reached after `ramp`.
+/// reached after `ramp`; with `rotation`, a rigid motion: the body turns about the centre, which
+/// moves at `velocity`.
 #[derive(Deserialize, Debug)]
 #[serde(deny_unknown_fields)]
 pub struct Constraint {
@@ -127,6 +128,19 @@ pub struct Constraint {
     pub velocity: Option<Value>,
     #[serde(default)]
     pub ramp: Option<Value>,
+    #[serde(default)]
+    pub rotation: Option<Spanned<Rotation>>,
+}
+
+/// `rotation = { center = [x, y(, z)], omega = "1.5 rad/s", axis = [0, 0, 1] }` (the axis only
+/// in 3D: a 2D body turns about z).
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct Rotation {
+    pub center: Value,
+    pub omega: Value,
+    #[serde(default)]
+    pub axis: Option<Value>,
 }
 
 #[derive(Deserialize, Debug)]

@@ -67,6 +67,9 @@ pub fn scene_params(model: &mut Model, scene: &SceneSpec) -> Vec<SceneParam> {
     for (k, c) in scene.constraints.iter().enumerate() {
         let p = synthetic_param(model, &format!("@constraint{k}"), Shape::Vec, speed_unit());
         out.push(SceneParam { param: p, value: c.velocity.clone(), role: SceneRole::Constraint(k) });
+        if let Some(r) = &c.rotation {
+            out.extend(rotation_params(model, scene.dim, k, r));
+        }
     }
     for (k, (axis, _)) in scene.symmetry.iter().enumerate() {
         let p = synthetic_param(model, &format!("@symmetry{k}"), Shape::Vec, Unit::ONE);
@@ -74,6 +77,33 @@ pub fn scene_params(model: &mut Model, scene: &SceneSpec) -> Vec<SceneParam> {
         out.push(SceneParam { param: p, value: normal, role: SceneRole::Symmetry(k) });
     }
     out
+}
+
+/// The parameters of a rotating constraint: its centre, its angular speed, the cross-product
+/// matrix [â]ₓ of its axis and â ⊗ â (in-plane blocks in 2D, where the axis is z).
+fn rotation_params(model: &mut Model, dim: usize, k: usize, r: &super::Rotation) -> Vec<SceneParam> {
+    let [a, b, c] = r.axis;
+    let cross = [[0.0, -c, b], [c, 0.0, -a], [-b, a, 0.0]];
+    let tensor = |m: &dyn Fn(usize, usize) -> f64| -> Vec<f64> {
+        (0..dim).flat_map(|i| (0..dim).map(move |j| (i, j))).map(|(i, j)| m(i, j)).collect()
+    };
+    let per_second = Unit::ONE.div(&Unit::S).unwrap_or(Unit::ONE);
+    let mut param = |name: &str, shape, unit, value: Vec<f64>, role| {
+        let p = synthetic_param(model, &format!("@{name}{k}"), shape, unit);
+        SceneParam { param: p, value, role }
+    };
+    vec![
+        param("center", Shape::Vec, Unit::M, r.center.clone(), SceneRole::Center(k)),
+        param("omega", Shape::Scalar, per_second, vec![r.omega], SceneRole::AngularSpeed(k)),
+        param("cross", Shape::Tensor, Unit::ONE, tensor(&|i, j| cross[i][j]), SceneRole::AxisCross(k)),
+        param(
+            "axis",
+            Shape::Tensor,
+            Unit::ONE,
+            tensor(&|i, j| if dim == 3 { r.axis[i] * r.axis[j] } else { 0.0 }),
+            SceneRole::AxisProjection(k),
+        ),
+    ]
 }
 
 /// `min(t / ramp, 1)`, or 1 for a step.
@@ -95,6 +125,18 @@ fn on_target(model: &Model, target: super::Target) -> Option<Expr> {
     let f = model.field_id(name)?;
     let ty = model.field(f).ty;
     Some(Expr::binary(Op::Eq, Expr::field(f, ty), Expr::constant(k as f64, ty), Type::BOOL))
+}
+
+/// `∫₀ᵗ ramp`: the time over which a ramped speed has acted at full value (`t` for a step).
+fn ramped_time(ramp: f64) -> Expr {
+    let t = || Expr::global(Global::Time);
+    if ramp <= 0.0 {
+        return t();
+    }
+    let s = Type::scalar(Unit::S);
+    let early = t().scaled_by(t()).divided_by(Expr::constant(2.0 * ramp, s));
+    let late = t().minus(Expr::constant(ramp / 2.0, s));
+    Expr::select(Expr::binary(Op::Lt, t(), Expr::constant(ramp, s), Type::BOOL), early, late)
 }
 
 fn zero_vec(unit: Unit) -> Expr {
@@ -133,6 +175,82 @@ fn constrain(plan: &Plan, scene: &SceneSpec, v: FieldId) -> Vec<Stmt> {
         out.push(Stmt::Set(v, Expr::select(cond, target, Expr::field(v, ty))));
     }
     out
+}
+
+/// Whether constraint `k` sets positions as well as velocities: when it rotates its body, or when
+/// it moves a body whose positions the model does not integrate (a wall moved as a whole).
+fn prescribes_position(scene: &SceneSpec, rates: &[ir::Rate], x: Option<FieldId>, k: usize) -> bool {
+    let c = &scene.constraints[k];
+    let integrated = rates.iter().filter(|r| Some(r.state) == x).fold(GroupSet::default(), |a, r| a.union(r.dest));
+    let on = c.groups.intersect(scene.groups);
+    let moves = c.velocity.iter().any(|v| *v != 0.0);
+    c.rotation.is_some() || (moves && on.intersect(integrated) != on)
+}
+
+/// The reference position `x` at t = 0 of the particles whose motion is prescribed.
+fn reference_positions(plan: &mut Plan) -> Option<FieldId> {
+    let x = plan.model.field_id("x")?;
+    let x_ty = plan.model.field(x).ty;
+    let span = plan.model.field(x).span;
+    plan.model.fields.push(ir::Field {
+        name: "x@ref".into(),
+        ty: x_ty,
+        storage: Storage::State,
+        init: Some(Expr::field(x, x_ty)),
+        span,
+        saved_of: None,
+    });
+    let id = FieldId(plan.model.fields.len() as u32 - 1);
+    plan.initial.push(id);
+    Some(id)
+}
+
+/// The rigid motion of the constraints that set positions, after the stage's integration: from
+/// the reference position `X` (`x` at t = 0), the centre's displacement `d = V s(t)` and the
+/// angle `θ = ω s(t)` (`s = ∫ ramp`), Rodrigues' rotation
+///   `x = c + d + cos θ (X − c) + sin θ â×(X − c) + (1 − cos θ) â(â·(X − c))`,
+///   `v = V r(t) + r(t) ω â×(x − c − d)`   (`r` the ramp).
+fn rigid_motion(plan: &Plan, scene: &SceneSpec, k: usize, x_ref: FieldId) -> Option<Block> {
+    let model = &plan.model;
+    let c = &scene.constraints[k];
+    let (x, v) = (model.field_id("x")?, model.field_id("v")?);
+    let cond = on_target(model, c.target)?;
+    let param_of = |role: SceneRole| {
+        let sp = plan.scene_params.iter().find(|sp| sp.role == role)?;
+        Some(Expr::param(sp.param, model.params[sp.param.index()].ty))
+    };
+    let x_ty = model.field(x).ty;
+    let v_ty = model.field(v).ty;
+    let speed = param_of(SceneRole::Constraint(k))?;
+    let shift = speed.clone().scaled_by(ramped_time(c.ramp));
+    let mut position = Expr::field(x_ref, x_ty).plus(shift.clone());
+    let mut velocity = speed.scaled_by(ramp(c.ramp));
+    if c.rotation.is_some() {
+        let center = param_of(SceneRole::Center(k))?;
+        let omega = param_of(SceneRole::AngularSpeed(k))?;
+        let cross = param_of(SceneRole::AxisCross(k))?;
+        let axis = param_of(SceneRole::AxisProjection(k))?;
+        let one = Type::scalar(Unit::ONE);
+        let angle = ramped_time(c.ramp).scaled_by(omega.clone());
+        let trig = |f| Expr::new(ExprKind::Call(f, vec![angle.clone()]), one);
+        let arm = Expr::field(x_ref, x_ty).minus(center.clone());
+        let mat_vec = |m: Expr, u: Expr| {
+            let unit = m.ty.unit.mul(&u.ty.unit).unwrap_or(u.ty.unit);
+            Expr::binary(Op::MatVec, m, u, Type::new(Shape::Vec, unit))
+        };
+        let rotated = arm
+            .clone()
+            .scaled_by(trig(ir::Builtin::Cos))
+            .plus(mat_vec(cross.clone(), arm.clone()).scaled_by(trig(ir::Builtin::Sin)))
+            .plus(mat_vec(axis, arm).scaled_by(Expr::constant(1.0, one).minus(trig(ir::Builtin::Cos))));
+        position = center.plus(shift).plus(rotated.clone());
+        velocity = velocity.plus(mat_vec(cross, rotated).scaled_by(omega.scaled_by(ramp(c.ramp))));
+    }
+    let stmts = vec![
+        Stmt::Set(x, Expr::select(cond.clone(), position, Expr::field(x, x_ty))),
+        Stmt::Set(v, Expr::select(cond, velocity, Expr::field(v, v_ty))),
+    ];
+    Some(Block { name: format!("prescribed motion {k}"), dest: c.groups.intersect(scene.groups), stmts })
 }
 
 /// Reflection at the symmetry planes, after `x` and `v` are updated in the step's last stage
@@ -197,11 +315,17 @@ pub fn build(plan: &mut Plan, scene: &SceneSpec, live: &Live) {
             plan.saved.push((*f, FieldId(plan.model.fields.len() as u32 - 1)));
         }
     }
-    let v = plan.model.field_id("v");
+    let x = plan.model.field_id("x");
+    let moving: Vec<usize> =
+        (0..scene.constraints.len()).filter(|k| prescribes_position(scene, &rates, x, *k)).collect();
+    let x_ref = if moving.is_empty() { None } else { reference_positions(plan) };
     let stage_count = if multi { 2 } else { 1 };
     for stage in 0..stage_count {
-        let (updates, locals) = stage_blocks(plan, scene, &rates, &evolving, stage);
+        let (mut updates, locals) = stage_blocks(plan, scene, &rates, &evolving, stage);
         plan.model.locals.extend(locals);
+        if let Some(x_ref) = x_ref {
+            updates.extend(moving.iter().filter_map(|k| rigid_motion(plan, scene, *k, x_ref)));
+        }
         let name = match (scene.integrator, stage) {
             (super::IntegratorKind::Euler, _) => "euler",
             (_, 0) => "predict",
@@ -209,7 +333,6 @@ pub fn build(plan: &mut Plan, scene: &SceneSpec, live: &Live) {
         };
         plan.stages.push(Stage { name, updates, corrections: plan.corrections.clone(), derived: plan.derived.clone() });
     }
-    let _ = v;
     plan.actions = if multi {
         vec![
             Action::Save,

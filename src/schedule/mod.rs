@@ -66,9 +66,25 @@ pub struct Load {
 #[derive(Clone, Debug)]
 pub struct Constraint {
     pub target: Target,
-    /// The velocity at the end of the ramp (zeros: a fixed body).
+    /// The groups of the target's body.
+    pub groups: GroupSet,
+    /// The velocity at the end of the ramp (zeros: a fixed body); with a rotation, the velocity
+    /// of its centre.
     pub velocity: Vec<f64>,
+    /// A rigid rotation, its angular speed ramped like the velocity.
+    pub rotation: Option<Rotation>,
     pub ramp: f64,
+}
+
+/// A rigid rotation about an axis through `center` (at t = 0) at angular speed `omega` (rad/s, the
+/// right-hand rule about `axis`; in 2D the axis is z).
+#[derive(Clone, Debug)]
+pub struct Rotation {
+    /// Length `dim`.
+    pub center: Vec<f64>,
+    /// A unit vector.
+    pub axis: [f64; 3],
+    pub omega: f64,
 }
 
 /// A per-particle block: a particle equation, a pair sum's `finally`, or integrator statements.
@@ -157,6 +173,14 @@ pub enum SceneRole {
     Load(usize),
     /// The prescribed velocity of constraint `k`.
     Constraint(usize),
+    /// Rotating constraint `k`: its centre at t = 0 (m).
+    Center(usize),
+    /// Rotating constraint `k`: its angular speed at the end of the ramp (rad/s).
+    AngularSpeed(usize),
+    /// Rotating constraint `k`: the matrix of the cross product with its unit axis, `â × u`.
+    AxisCross(usize),
+    /// Rotating constraint `k`: the projection onto its axis, `axis ⊗ axis` (zero in 2D).
+    AxisProjection(usize),
     /// The unit normal of symmetry plane `k`.
     Symmetry(usize),
 }

@@ -18,6 +18,8 @@ pub enum Un {
     Sqrt,
     Exp,
     Ln,
+    Sin,
+    Cos,
     Abs,
 }
 
@@ -139,6 +141,8 @@ impl Graph {
                 Un::Sqrt => x.sqrt(),
                 Un::Exp => x.exp(),
                 Un::Ln => x.ln(),
+                Un::Sin => x.sin(),
+                Un::Cos => x.cos(),
                 Un::Abs => x.abs(),
             };
             return self.c(r);
@@ -744,11 +748,13 @@ impl<'a> Lowerer<'a> {
                 let det = self.det(&args[0]);
                 scalar(det)
             }
-            Builtin::Sqrt | Builtin::Exp | Builtin::Ln | Builtin::Abs => {
+            Builtin::Sqrt | Builtin::Exp | Builtin::Ln | Builtin::Sin | Builtin::Cos | Builtin::Abs => {
                 let op = match f {
                     Builtin::Sqrt => Un::Sqrt,
                     Builtin::Exp => Un::Exp,
                     Builtin::Ln => Un::Ln,
+                    Builtin::Sin => Un::Sin,
+                    Builtin::Cos => Un::Cos,
                     _ => Un::Abs,
                 };
                 let c = args[0].c.iter().map(|x| self.g.un(op, *x)).collect();

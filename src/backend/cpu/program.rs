@@ -231,6 +231,8 @@ fn un_instr<T: Real>(op: Un, o: usize, a: usize) -> Instr<T> {
         Un::Sqrt => lanes1!(o, a, |x| x.sqrt()),
         Un::Exp => lanes1!(o, a, |x| x.lane_exp()),
         Un::Ln => lanes1!(o, a, |x| x.ln()),
+        Un::Sin => lanes1!(o, a, |x| x.sin()),
+        Un::Cos => lanes1!(o, a, |x| x.cos()),
         Un::Abs => lanes1!(o, a, |x| x.abs()),
     }
 }
