@@ -109,6 +109,11 @@ fn a_tank_at_rest_holds_the_hydrostatic_pressure_with_adami_walls() {
 }
 
 #[test]
+fn a_lattice_spring_cantilever_bends_within_its_measured_distance_of_timoshenko() {
+    run_and_check("cantilever_lsm", Precision::F64);
+}
+
+#[test]
 fn a_piston_drives_the_simple_wave_of_the_tait_equation_with_dynamic_boundary_particles() {
     run_and_check_with("piston_2d", &[("boundary", "dbc")], Precision::F64);
 }

@@ -24,6 +24,7 @@ const MODELS: &[&str] = &[
     "wcsph_fluid",
     "wcsph_dbc",
     "wcsph_adami",
+    "lsm_solid",
 ];
 
 /// Names likely to collide with something in the generated code.

@@ -352,6 +352,38 @@ fn dam_break_with_adami_walls_on_the_gpu_matches_the_cpu() {
     case_matches_cpu("dam_break_2d", &[("boundary", "adami")], 300, &["rho", "p_over_rho2"], 2e-3);
 }
 
+// The lattice spring model: 3000 steps (0.14 s) of the cantilever as the tip load grows. The
+// springs' forces come from stretches of 1e-7 to 1e-5 m between positions of up to 0.5 m, which
+// f32 resolves to 3e-8 m: the displacements (x − x0) are compared, relative to the largest, and
+// not the velocities, which are that rounding's time derivative.
+
+#[test]
+fn lattice_spring_cantilever_on_the_gpu_matches_the_cpu_in_displacement() {
+    use pairsum::engine::Engine;
+    use pairsum::runner::prepare;
+    let path = case("cantilever_lsm");
+    let (scene, plan) = prepare(Path::new(&path), &Default::default()).unwrap_or_else(|e| panic!("{e}"));
+    let store = build_store::<f32>(&plan, &scene.particles, &scene.materials).expect("store");
+    let config = scene.config.clone();
+    let mut cpu =
+        Engine::new(CpuBackend::new(plan.clone(), store.clone(), scene.mirrors.clone()).expect("cpu"), config.clone());
+    let mut gpu = Engine::new(GpuBackend::new(gpu(), plan, store, &scene.mirrors).expect("gpu"), config);
+    cpu.initialise().expect("cpu init");
+    gpu.initialise().expect("gpu init");
+    for k in 0..3000 {
+        cpu.step().unwrap_or_else(|e| panic!("CPU step {k}: {e}"));
+        gpu.step().unwrap_or_else(|e| panic!("GPU step {k}: {e}"));
+    }
+    let displacement =
+        |b: &dyn Fn(&str) -> Vec<f64>| -> Vec<f64> { b("x").iter().zip(b("x0")).map(|(x, x0)| x - x0).collect() };
+    let a = displacement(&|f| field_by_id(&cpu.backend, f).1);
+    let b = displacement(&|f| field_by_id(&gpu.backend, f).1);
+    let largest = a.iter().fold(0.0f64, |m, d| m.max(d.abs()));
+    assert!(largest > 5e-4, "the tip has moved only {largest} m");
+    let d = rel_diff(&a, &b);
+    assert!(d <= 2e-3, "displacements differ by {d:e} of the largest ({largest} m)");
+}
+
 // Prescribed rigid motion: a piston translated into a channel of water (a wall moved as a whole)
 // until its wave has run 0.2 m; a paddle turned about its middle (sin and cos of the angle on the
 // GPU) until it has swept into the water.

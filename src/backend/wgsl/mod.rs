@@ -185,6 +185,7 @@ mod tests {
             "models/wcsph_fluid.sph",
             "models/wcsph_dbc.sph",
             "models/wcsph_adami.sph",
+            "models/lsm_solid.sph",
         ] {
             let mut sources = Sources::new();
             let checked = check_stdlib_modules(&mut sources, &[m], Stdlib::locate());
