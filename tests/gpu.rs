@@ -277,8 +277,10 @@ fn case_matches_cpu(name: &str, set: &[(&str, &str)], steps: usize, more: &[&str
     case_file_matches_cpu(Path::new(&case(name)), set, steps, more, tol);
 }
 
-/// `case_matches_cpu` for a case file anywhere.
-fn case_file_matches_cpu(path: &Path, set: &[(&str, &str)], steps: usize, more: &[&str], tol: f64) {
+type Engines = (pairsum::engine::Engine<CpuBackend<f32>>, pairsum::engine::Engine<GpuBackend>);
+
+/// A case file run for `steps` steps on the CPU and on the GPU, both in f32.
+fn run_both(path: &Path, set: &[(&str, &str)], steps: usize) -> Engines {
     use pairsum::engine::Engine;
     use pairsum::runner::prepare;
     let name = path.display();
@@ -298,6 +300,13 @@ fn case_file_matches_cpu(path: &Path, set: &[(&str, &str)], steps: usize, more: 
         cpu.step().unwrap_or_else(|e| panic!("{name}: CPU step {k}: {e}"));
         gpu.step().unwrap_or_else(|e| panic!("{name}: GPU step {k}: {e}"));
     }
+    (cpu, gpu)
+}
+
+/// `case_matches_cpu` for a case file anywhere.
+fn case_file_matches_cpu(path: &Path, set: &[(&str, &str)], steps: usize, more: &[&str], tol: f64) {
+    let name = path.display();
+    let (cpu, gpu) = run_both(path, set, steps);
     assert!((cpu.time - gpu.time).abs() <= 1e-3 * cpu.time, "{name}: clocks {} vs {}", cpu.time, gpu.time);
     for field in ["x", "v"].iter().chain(more) {
         let (_, a) = field_by_id(&cpu.backend, field);
@@ -359,21 +368,7 @@ fn dam_break_with_adami_walls_on_the_gpu_matches_the_cpu() {
 
 #[test]
 fn lattice_spring_cantilever_on_the_gpu_matches_the_cpu_in_displacement() {
-    use pairsum::engine::Engine;
-    use pairsum::runner::prepare;
-    let path = case("cantilever_lsm");
-    let (scene, plan) = prepare(Path::new(&path), &Default::default()).unwrap_or_else(|e| panic!("{e}"));
-    let store = build_store::<f32>(&plan, &scene.particles, &scene.materials).expect("store");
-    let config = scene.config.clone();
-    let mut cpu =
-        Engine::new(CpuBackend::new(plan.clone(), store.clone(), scene.mirrors.clone()).expect("cpu"), config.clone());
-    let mut gpu = Engine::new(GpuBackend::new(gpu(), plan, store, &scene.mirrors).expect("gpu"), config);
-    cpu.initialise().expect("cpu init");
-    gpu.initialise().expect("gpu init");
-    for k in 0..3000 {
-        cpu.step().unwrap_or_else(|e| panic!("CPU step {k}: {e}"));
-        gpu.step().unwrap_or_else(|e| panic!("GPU step {k}: {e}"));
-    }
+    let (cpu, gpu) = run_both(Path::new(&case("cantilever_lsm")), &[], 3000);
     let displacement =
         |b: &dyn Fn(&str) -> Vec<f64>| -> Vec<f64> { b("x").iter().zip(b("x0")).map(|(x, x0)| x - x0).collect() };
     let a = displacement(&|f| field_by_id(&cpu.backend, f).1);
