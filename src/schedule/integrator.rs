@@ -80,7 +80,7 @@ pub fn scene_params(model: &mut Model, scene: &SceneSpec) -> Vec<SceneParam> {
 }
 
 /// The parameters of a rotating constraint: its centre, its angular speed, the cross-product
-/// matrix [â]ₓ of its axis and â ⊗ â (in-plane blocks in 2D, where the axis is z).
+/// matrix [â]ₓ of its axis (its in-plane block in 2D, where the axis is z) and, in 3D, â ⊗ â.
 fn rotation_params(model: &mut Model, dim: usize, k: usize, r: &super::Rotation) -> Vec<SceneParam> {
     let [a, b, c] = r.axis;
     let cross = [[0.0, -c, b], [c, 0.0, -a], [-b, a, 0.0]];
@@ -92,18 +92,16 @@ fn rotation_params(model: &mut Model, dim: usize, k: usize, r: &super::Rotation)
         let p = synthetic_param(model, &format!("@{name}{k}"), shape, unit);
         SceneParam { param: p, value, role }
     };
-    vec![
+    let mut out = vec![
         param("center", Shape::Vec, Unit::M, r.center.clone(), SceneRole::Center(k)),
         param("omega", Shape::Scalar, per_second, vec![r.omega], SceneRole::AngularSpeed(k)),
         param("cross", Shape::Tensor, Unit::ONE, tensor(&|i, j| cross[i][j]), SceneRole::AxisCross(k)),
-        param(
-            "axis",
-            Shape::Tensor,
-            Unit::ONE,
-            tensor(&|i, j| if dim == 3 { r.axis[i] * r.axis[j] } else { 0.0 }),
-            SceneRole::AxisProjection(k),
-        ),
-    ]
+    ];
+    if dim == 3 {
+        let projection = tensor(&|i, j| r.axis[i] * r.axis[j]);
+        out.push(param("axis", Shape::Tensor, Unit::ONE, projection, SceneRole::AxisProjection(k)));
+    }
+    out
 }
 
 /// `min(t / ramp, 1)`, or 1 for a step.
@@ -170,6 +168,9 @@ fn constrain(plan: &Plan, scene: &SceneSpec, v: FieldId) -> Vec<Stmt> {
     for sp in &plan.scene_params {
         let SceneRole::Constraint(k) = sp.role else { continue };
         let c = &scene.constraints[k];
+        if c.rotation.is_some() {
+            continue; // `rigid_motion` sets both x and v after the stage
+        }
         let Some(cond) = on_target(model, c.target) else { continue };
         let target = Expr::param(sp.param, model.params[sp.param.index()].ty).scaled_by(ramp(c.ramp));
         out.push(Stmt::Set(v, Expr::select(cond, target, Expr::field(v, ty))));
@@ -229,7 +230,6 @@ fn rigid_motion(plan: &Plan, scene: &SceneSpec, k: usize, x_ref: FieldId) -> Opt
         let center = param_of(SceneRole::Center(k))?;
         let omega = param_of(SceneRole::AngularSpeed(k))?;
         let cross = param_of(SceneRole::AxisCross(k))?;
-        let axis = param_of(SceneRole::AxisProjection(k))?;
         let one = Type::scalar(Unit::ONE);
         let angle = ramped_time(c.ramp).scaled_by(omega.clone());
         let trig = |f| Expr::new(ExprKind::Call(f, vec![angle.clone()]), one);
@@ -238,11 +238,15 @@ fn rigid_motion(plan: &Plan, scene: &SceneSpec, k: usize, x_ref: FieldId) -> Opt
             let unit = m.ty.unit.mul(&u.ty.unit).unwrap_or(u.ty.unit);
             Expr::binary(Op::MatVec, m, u, Type::new(Shape::Vec, unit))
         };
-        let rotated = arm
+        let mut rotated = arm
             .clone()
             .scaled_by(trig(ir::Builtin::Cos))
-            .plus(mat_vec(cross.clone(), arm.clone()).scaled_by(trig(ir::Builtin::Sin)))
-            .plus(mat_vec(axis, arm).scaled_by(Expr::constant(1.0, one).minus(trig(ir::Builtin::Cos))));
+            .plus(mat_vec(cross.clone(), arm.clone()).scaled_by(trig(ir::Builtin::Sin)));
+        // The component along the axis, which a 2D (in-plane) arm lacks.
+        if let Some(axis) = param_of(SceneRole::AxisProjection(k)) {
+            let along = mat_vec(axis, arm).scaled_by(Expr::constant(1.0, one).minus(trig(ir::Builtin::Cos)));
+            rotated = rotated.plus(along);
+        }
         position = center.plus(shift).plus(rotated.clone());
         velocity = velocity.plus(mat_vec(cross, rotated).scaled_by(omega.scaled_by(ramp(c.ramp))));
     }

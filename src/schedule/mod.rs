@@ -179,7 +179,7 @@ pub enum SceneRole {
     AngularSpeed(usize),
     /// Rotating constraint `k`: the matrix of the cross product with its unit axis, `â × u`.
     AxisCross(usize),
-    /// Rotating constraint `k`: the projection onto its axis, `axis ⊗ axis` (zero in 2D).
+    /// Rotating constraint `k` in 3D: the projection onto its axis, `axis ⊗ axis`.
     AxisProjection(usize),
     /// The unit normal of symmetry plane `k`.
     Symmetry(usize),
