@@ -252,6 +252,8 @@ pub struct Rate {
 #[derive(Clone, Debug)]
 pub struct Timestep {
     pub name: String,
+    /// Its reductions run over these groups' particles only (the `on` of the `use` that reached it).
+    pub dest: GroupSet,
     pub value: Expr,
     pub reads: BTreeSet<FieldId>,
     pub span: Span,
@@ -546,6 +548,34 @@ pub fn walk_expr<'a>(e: &'a Expr, f: &mut impl FnMut(&'a Expr)) {
         | ExprKind::Identity
         | ExprKind::InGroup(..) => {}
     }
+}
+
+/// Visits every sub-expression mutably (post-order: children first, so `f` sees them rewritten).
+pub fn walk_expr_mut(e: &mut Expr, f: &mut impl FnMut(&mut Expr)) {
+    match &mut e.kind {
+        ExprKind::Unary(_, a) | ExprKind::ToTensor(a) | ExprKind::Component(a, _, _) | ExprKind::Reduction(_, a) => {
+            walk_expr_mut(a, f)
+        }
+        ExprKind::Binary(_, a, b) | ExprKind::Let(_, a, b) => {
+            walk_expr_mut(a, f);
+            walk_expr_mut(b, f);
+        }
+        ExprKind::Select(c, a, b) => {
+            walk_expr_mut(c, f);
+            walk_expr_mut(a, f);
+            walk_expr_mut(b, f);
+        }
+        ExprKind::Call(_, args) => args.iter_mut().for_each(|a| walk_expr_mut(a, f)),
+        ExprKind::Const(_)
+        | ExprKind::Field(..)
+        | ExprKind::Param(..)
+        | ExprKind::Local(_)
+        | ExprKind::Pair(_)
+        | ExprKind::Global(_)
+        | ExprKind::Identity
+        | ExprKind::InGroup(..) => {}
+    }
+    f(e);
 }
 
 /// Visits every expression of a statement list.

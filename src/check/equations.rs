@@ -456,16 +456,20 @@ impl Checker {
 
     pub(crate) fn timestep(&mut self, def: &ast::TimestepDef) {
         let cx = Cx::new(Where::Global, format!("timestep `{}`", def.name.name));
-        let Some(value) = self.expr_as(&def.value, &cx, Type::scalar(Unit::S), "a time step") else {
+        let Some(mut value) = self.expr_as(&def.value, &cx, Type::scalar(Unit::S), "a time step") else {
             return;
         };
+        let dest = self.scoped_groups(None, false, def.name.span, &format!("timestep `{}`", def.name.name));
+        if dest.0 & self.model.all_groups().0 != self.model.all_groups().0 {
+            reduce_only_on(&mut value, dest);
+        }
         let mut reads = BTreeSet::new();
         ir::walk_expr(&value, &mut |e| {
             if let ExprKind::Field(f, _) = e.kind {
                 reads.insert(f);
             }
         });
-        self.model.timesteps.push(ir::Timestep { name: def.name.name.clone(), value, reads, span: def.span });
+        self.model.timesteps.push(ir::Timestep { name: def.name.name.clone(), dest, value, reads, span: def.span });
     }
 
     pub(crate) fn kernel(&mut self, k: &ast::KernelDef) {
@@ -593,4 +597,25 @@ impl Checker {
             }
         }
     }
+}
+
+/// A time step restricted to groups (`use timestep::x on G`) reduces over their particles only:
+/// every other particle gives the reduction its identity (+∞ to a min, −∞ to a max, 0 to a sum).
+fn reduce_only_on(value: &mut ir::Expr, dest: ir::GroupSet) {
+    ir::walk_expr_mut(value, &mut |e| {
+        if let ExprKind::Reduction(reduce, inner) = &mut e.kind {
+            let identity = match reduce {
+                ir::Reduce::Min => f64::INFINITY,
+                ir::Reduce::Max => f64::NEG_INFINITY,
+                ir::Reduce::Sum => 0.0,
+            };
+            let ty = inner.ty;
+            let member = ir::Expr::new(ExprKind::InGroup(ir::Side::I, dest), Type::BOOL);
+            let body = std::mem::replace(&mut **inner, ir::Expr::constant(identity, ty));
+            **inner = ir::Expr::new(
+                ExprKind::Select(Box::new(member), Box::new(body), Box::new(ir::Expr::constant(identity, ty))),
+                ty,
+            );
+        }
+    });
 }

@@ -70,7 +70,7 @@ impl Checker {
         }
         for t in &self.model.timesteps {
             for &f in &t.reads {
-                let missing = GroupSet(all.0 & !self.provided_on(f).0);
+                let missing = GroupSet(t.dest.0 & !self.provided_on(f).0 & all.0);
                 if !missing.is_empty() {
                     errors.push(self.not_provided(f, missing, t.span, &format!("timestep `{}`", t.name)));
                 }

@@ -79,8 +79,9 @@ pub fn params_used(plan: &Plan) -> BTreeMap<ParamId, GroupSet> {
         for v in &pass.variants {
             let g = GroupSet::default().with(v.group);
             for e in &v.pair_sums {
-                for s in crate::schedule::stmts_of(plan.equation(*e)) {
-                    walk(s, g, v.sources, &mut note);
+                let eq = plan.equation(*e);
+                for s in crate::schedule::stmts_of(eq) {
+                    walk(s, g, v.sources.intersect(eq.sources()), &mut note);
                 }
             }
             for b in plan.tail_blocks(&v.tail) {
@@ -110,9 +111,10 @@ pub fn params_used(plan: &Plan) -> BTreeMap<ParamId, GroupSet> {
         }
     }
     for t in &plan.timesteps {
-        ir::walk_expr(&plan.model.timesteps[*t].value, &mut |e| {
+        let ts = &plan.model.timesteps[*t];
+        ir::walk_expr(&ts.value, &mut |e| {
             if let ExprKind::Param(p, _) = e.kind {
-                note(p, all);
+                note(p, ts.dest.intersect(all));
             }
         });
     }
