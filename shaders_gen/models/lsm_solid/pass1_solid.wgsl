@@ -350,6 +350,12 @@ fn st_dx(i: u32, v: f32) {
     let b = u32(info[5 + G] + i32(i) * 1);
     data[b] = v;
 }
+fn ldj_dx(j: u32, sgn: vec3<f32>) -> f32 {
+    let base = info[5 + ints[j]];
+    if (base == -2147483648) { return 0.0; }
+    let b = u32(base + i32(j) * 1);
+    return data[b];
+}
 fn ld_m(i: u32) -> f32 {
     let b = u32(info[6 + G] + i32(i) * 1);
     return data[b];
@@ -384,11 +390,11 @@ fn st_a_lsm(i: u32, v: vec3<f32>) {
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
-fn prm_E(i: u32) -> f32 {
+fn prm_lattice_damping(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 8u + 5u;
     return params[b];
 }
-fn prm_lattice_damping(i: u32) -> f32 {
+fn prm_E(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 8u + 6u;
     return params[b];
 }
@@ -443,16 +449,25 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             if (r2 >= rc * rc || r2 == 0.0) { continue; }
             let x_ij = (dxv * sgn);
             let r_ij = sqrt(r2);
-            // pairsum lattice_spring (stdlib/lsm/lattice_spring.sph:28)
+            // pairsum lattice_spring (stdlib/lsm/lattice_spring.sph:16)
             let rest = (x0_i - ldj_x0(j, sgn));
             let rest_2 = rest;
             let spacing = dx_i;
             if (((length(rest_2) > (0.5 * spacing)) && (length(rest_2) <= ((1.0001 * sqrt(2.0)) * spacing)))) {
+                let modulus = prm_E(i);
                 let spacing_2 = dx_i;
-                let k_2 = ((0.4 * prm_E(i)) * spacing_2);
+                let slab = ((modulus * 1.0) / 1.5);
+                let bar = ((modulus * 1.0) / spacing_2);
+                let k_i = select(select(bar, slab, (3.0 == 2.0)), ((0.4 * modulus) * spacing_2), (3.0 == 3.0));
+                let modulus_2 = prm_E(j);
+                let spacing_3 = ldj_dx(j, sgn);
+                let slab_2 = ((modulus_2 * 1.0) / 1.5);
+                let bar_2 = ((modulus_2 * 1.0) / spacing_3);
+                let k_j = select(select(bar_2, slab_2, (3.0 == 2.0)), ((0.4 * modulus_2) * spacing_3), (3.0 == 3.0));
+                let k_2 = (((2.0 * k_i) * k_j) / (k_i + k_j));
                 let along = (x_ij / r_ij);
                 let stretch = (r_ij - length(rest));
-                a_lsm = a_lsm + (((-((k_2 * stretch) + (prm_lattice_damping(i) * dot((v_i - ldj_v(j, sgn)), along)))) * along) / m_i);
+                a_lsm = a_lsm + (((-((k_2 * stretch) + ((0.5 * (prm_lattice_damping(i) + prm_lattice_damping(j))) * dot((v_i - ldj_v(j, sgn)), along)))) * along) / m_i);
             }
         }
         }}}

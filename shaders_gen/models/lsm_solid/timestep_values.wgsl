@@ -49,7 +49,7 @@ fn st_m(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 8u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 8u + 6u;
     return params[b];
 }
 fn prm_c_t(i: u32) -> f32 {
@@ -65,6 +65,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let t = globals[0u];
     let dt = globals[1u];
     let scratch = u32(info[12]);
+    let modulus = prm_E(i);
     let spacing = ld_dx(i);
-    data[scratch + 0u * n + i] = (prm_c_t(i) * sqrt((ld_m(i) / (18.0 * ((0.4 * prm_E(i)) * spacing)))));
+    let slab = ((modulus * 1.0) / 1.5);
+    let bar = ((modulus * 1.0) / spacing);
+    data[scratch + 0u * n + i] = (prm_c_t(i) * sqrt((ld_m(i) / (select(select(2.0, 8.0, (3.0 == 2.0)), 18.0, (3.0 == 3.0)) * select(select(bar, slab, (3.0 == 2.0)), ((0.4 * modulus) * spacing), (3.0 == 3.0))))));
 }
