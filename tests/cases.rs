@@ -24,8 +24,13 @@ fn run_and_check(name: &str, precision: Precision) {
     run_and_check_with(name, &[], precision);
 }
 
-/// `run_and_check` with case parameters set (`--set`).
-fn run_and_check_with(name: &str, set: &[(&str, &str)], precision: Precision) {
+/// The values a probe recorded.
+fn history<'a>(histories: &'a [(String, Vec<(f64, f64)>)], probe: &str) -> &'a [(f64, f64)] {
+    &histories.iter().find(|(n, _)| n == probe).unwrap_or_else(|| panic!("no probe `{probe}`")).1
+}
+
+/// `run_and_check` with case parameters set (`--set`); returns the probes' histories.
+fn run_and_check_with(name: &str, set: &[(&str, &str)], precision: Precision) -> Vec<(String, Vec<(f64, f64)>)> {
     let tag = set.iter().fold(name.to_string(), |t, (k, v)| format!("{t}-{k}-{v}"));
     let mut opts =
         RunOptions { backend: BackendChoice::Cpu, precision, out: out_dir(&tag), vtk: false, ..RunOptions::default() };
@@ -55,6 +60,7 @@ fn run_and_check_with(name: &str, set: &[(&str, &str)], precision: Precision) {
     }
     check_histories_csv(&opts.out.join("histories.csv"), &outcome.histories);
     let _ = std::fs::remove_dir_all(&opts.out);
+    outcome.histories
 }
 
 /// `histories.csv` holds every probe's history: a time column, then one column per probe with the
@@ -121,6 +127,26 @@ fn a_piston_drives_the_simple_wave_of_the_tait_equation_with_dynamic_boundary_pa
 #[test]
 fn a_piston_drives_the_simple_wave_of_the_tait_equation_with_adami_walls() {
     run_and_check_with("piston_2d", &[("boundary", "adami")], Precision::F32);
+}
+
+#[test]
+fn an_elastic_body_dropped_on_water_floats_at_archimedes_draft_without_touching_it() {
+    // The lattice-spring hull (ρ = 500 kg/m³) sinks 16 mm (the results); the water never comes
+    // within half a spacing of it, it keeps every particle's mass, and its stiff and soft halves
+    // float level on average (the waves of its fall rock it by up to 2 mm).
+    let h = run_and_check_with("body_in_water_2d", &[], Precision::F64);
+    let gap = history(&h, "gap");
+    let closest = gap.iter().map(|p| p.1).fold(f64::INFINITY, f64::min);
+    assert!(closest > 0.5, "water came within {closest} Δx of the hull");
+    let mass = history(&h, "hull_mass");
+    assert!(mass.len() > 10 && mass.iter().all(|p| p.1 == mass[0].1), "the hull's mass changed: {mass:?}");
+    assert!((mass[0].1 - 500.0 * 0.06 * 0.04).abs() < 1e-9, "the soft half weighs {} kg", mass[0].1);
+    let settled = |probe: &str| {
+        let after: Vec<f64> = history(&h, probe).iter().filter(|p| p.0 >= 0.25).map(|p| p.1).collect();
+        after.iter().sum::<f64>() / after.len() as f64
+    };
+    let tilt = settled("sink_stiff") - settled("sink_soft");
+    assert!(tilt.abs() < 5e-4, "on average the halves' centroids differ by {tilt} m");
 }
 
 #[test]

@@ -25,6 +25,7 @@ const MODELS: &[&str] = &[
     "wcsph_dbc",
     "wcsph_adami",
     "lsm_solid",
+    "wcsph_lsm",
 ];
 
 /// Names likely to collide with something in the generated code.

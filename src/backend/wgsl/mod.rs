@@ -186,6 +186,7 @@ mod tests {
             "models/wcsph_dbc.sph",
             "models/wcsph_adami.sph",
             "models/lsm_solid.sph",
+            "models/wcsph_lsm.sph",
         ] {
             let mut sources = Sources::new();
             let checked = check_stdlib_modules(&mut sources, &[m], Stdlib::locate());
