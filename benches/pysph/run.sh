@@ -12,16 +12,10 @@
 # native (JIT) pair programs against the closures; then `pairsum bench`'s generated/hand-written.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
-VENV=${PAIRSUM_PYSPH_VENV:-target/pysph-venv}
 STEPS=${STEPS:-50}
 THREADS=${THREADS:-$(nproc)}
 
-if [ ! -x "$VENV/bin/python" ] || ! "$VENV/bin/python" -c 'import pysph' 2>/dev/null; then
-    echo "installing PySPH 1.0b2 into $VENV ..." >&2
-    python3 -m venv "$VENV"
-    "$VENV/bin/pip" install -q --upgrade pip setuptools wheel
-    "$VENV/bin/pip" install -q 'pysph==1.0b2'
-fi
+. benches/pysph/venv.sh
 cargo build --release -q
 PAIRSUM=target/release/pairsum
 EXAMPLE=$("$VENV/bin/python" -c 'import os, pysph; print(os.path.join(os.path.dirname(pysph.__file__), "examples", "solid_mech", "impact3d.py"))')
