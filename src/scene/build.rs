@@ -451,10 +451,10 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
                       particles: &mut ParticleInput,
                       body: &toml::Spanned<String>,
                       region: &Option<toml::Spanned<case::Shape>>|
-     -> Option<(Target, f64)> {
+     -> Option<(Target, f64, crate::ir::GroupId)> {
         let b = body_index(cx, body)?;
         let info = bodies.iter().find(|x| x.name == *case.bodies[b].name.get_ref())?;
-        let Some(region) = region else { return Some((Target::Body(b), info.mass)) };
+        let Some(region) = region else { return Some((Target::Body(b), info.mass, info.group)) };
         let shape = primitive(region.get_ref(), cx)?;
         let range = info.particles.clone();
         let inside = match geometry::inside(&shape, dim, &particles.x[range.clone()]) {
@@ -482,11 +482,11 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
             );
             return None;
         }
-        Some((Target::Part(id), mass))
+        Some((Target::Part(id), mass, info.group))
     };
     let mut loads = vec![];
     for l in &case.loads {
-        let Some((t, mass)) = target(cx, &mut particles, &l.body, &l.region) else { continue };
+        let Some((t, mass, _)) = target(cx, &mut particles, &l.body, &l.region) else { continue };
         let Some(force) = cx.vector(&l.force, Unit::named("N").unwrap_or(Unit::ONE), "load force") else { continue };
         let ramp = match &l.ramp {
             Some(r) => time_scale * cx.scalar(r, s, "load ramp")?,
@@ -500,9 +500,8 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
     }
     let mut constraints = vec![];
     for c in &case.constraints {
-        let Some((t, _)) = target(cx, &mut particles, &c.body, &c.region) else { continue };
-        let name = c.body.get_ref();
-        let groups = bodies.iter().filter(|b| b.name == *name).fold(GroupSet::default(), |g, b| g.with(b.group));
+        let Some((t, _, group)) = target(cx, &mut particles, &c.body, &c.region) else { continue };
+        let groups = GroupSet::default().with(group);
         let rotation = match &c.rotation {
             Some(r) => Some(rotation(cx, r, dim, time_scale)?),
             None => None,
