@@ -37,11 +37,15 @@ fn run_and_check_with(name: &str, set: &[(&str, &str)], precision: Precision) ->
     opts.scene.set = set.iter().map(|(k, v)| (k.to_string(), v.to_string())).collect();
     let (scene, _) = prepare(&case(name), &opts.scene).unwrap_or_else(|e| panic!("{e}"));
     let outcome = run_case(&case(name), &opts).unwrap_or_else(|e| panic!("{name}: {e}"));
-    assert!(!outcome.report.results.is_empty(), "{name} reports nothing");
-    for (row, spec) in outcome.report.results.iter().zip(&scene.results) {
+    // Results without a reference are reported figures (a gap, a deflection); the test that runs
+    // the case asserts on them from the histories.
+    let referenced: Vec<_> =
+        outcome.report.results.iter().zip(&scene.results).filter(|(_, spec)| spec.reference.is_some()).collect();
+    assert!(!referenced.is_empty(), "{name} reports nothing against a reference");
+    for (row, spec) in referenced {
         let tol =
             spec.tolerance.or(scene.tolerance).unwrap_or_else(|| panic!("{name}: no tolerance for {}", row.quantity));
-        let err = row.rel_error.unwrap_or_else(|| panic!("{name}: {} has no reference", row.quantity));
+        let err = row.rel_error.unwrap_or_else(|| panic!("{name}: {} has no error", row.quantity));
         assert!(
             err.abs() <= tol,
             "{name}: {} = {} vs {:?}: error {:+.2} % beyond ±{} %",
@@ -147,6 +151,30 @@ fn an_elastic_body_dropped_on_water_floats_at_archimedes_draft_without_touching_
     };
     let tilt = settled("sink_stiff") - settled("sink_soft");
     assert!(tilt.abs() < 5e-4, "on average the halves' centroids differ by {tilt} m");
+}
+
+// Water into a plate through interface particles (EK18 Eq 31, Fig 8): the water-hammer pressure
+// against the 1D impedance match (the case's result), and EK18's claims as measured numbers:
+// - the water never within half a spacing of the plate (0.74 Δx measured), and the gap steady once
+//   the jet spreads: its mean after 5 µs within 0.15 Δx of its least (0.03 measured);
+// - no particle shooting: no plate particle faster than the jet that drives it, and no water
+//   faster than 1.8 × the jet (its side jet runs at 1.63–1.68 × at 0.25 and 0.125 mm);
+// - the plate deflects away from the jet, by less than the jet's own travel in 20 µs (10 mm).
+#[test]
+fn a_water_jet_meets_a_plate_with_a_steady_gap_and_the_water_hammer_pressure() {
+    let h = run_and_check_with("water_jet_plate_2d", &[], Precision::F64);
+    let least = |name: &str| history(&h, name).iter().map(|p| p.1).fold(f64::INFINITY, f64::min);
+    let most = |name: &str| history(&h, name).iter().map(|p| p.1).fold(f64::NEG_INFINITY, f64::max);
+    let gap = history(&h, "gap");
+    assert!(least("gap") >= 0.5, "water within {} Δx of the plate", least("gap"));
+    assert_eq!(most("interpenetrated"), 0.0);
+    let late: Vec<f64> = gap.iter().filter(|p| p.0 >= 5e-6).map(|p| p.1).collect();
+    let mean_late = late.iter().sum::<f64>() / late.len() as f64;
+    assert!(mean_late - least("gap") <= 0.15, "the gap wanders: least {}, mean after 5 µs {mean_late}", least("gap"));
+    assert!(most("jet_max_speed") <= 1.8 * 500.0, "water shot out at {} m/s", most("jet_max_speed"));
+    assert!(most("plate_max_speed") <= 500.0, "plate particles shot out at {} m/s", most("plate_max_speed"));
+    let deflection = -history(&h, "deflection").last().expect("deflection").1;
+    assert!((1e-3..=1e-2).contains(&deflection), "the plate's back face moved {deflection} m");
 }
 
 #[test]

@@ -26,6 +26,7 @@ const MODELS: &[&str] = &[
     "wcsph_adami",
     "lsm_solid",
     "wcsph_lsm",
+    "ek18_fsi",
 ];
 
 /// Names likely to collide with something in the generated code.

@@ -348,6 +348,15 @@ fn graded_sphere_plate_on_the_gpu_matches_the_cpu_with_variable_h() {
     case_matches_cpu("sphere_plate_graded", &[("plate_coarse", "2")], 60, &["p", "h"], 2e-3);
 }
 
+// Water meeting a plate through interface particles (EK18 Eq 31): 150 steps are 2.2 µs of the
+// jet's impact, through the water hammer and the plate's first reflections; the water's free
+// surface and cavitation limit, the per-group total stress and the solid's energy across the
+// interface.
+#[test]
+fn water_jet_into_a_plate_on_the_gpu_matches_the_cpu_across_the_interface() {
+    case_matches_cpu("water_jet_plate_2d", &[], 150, &["p", "rho", "eps_p"], 2e-3);
+}
+
 // The fluid with each kind of wall: 300 steps (15 ms) of the dam break, the column well into its
 // collapse along the floor; ρ carries the continuity, the walls' pressure and the diffusion.
 
@@ -361,20 +370,20 @@ fn dam_break_with_adami_walls_on_the_gpu_matches_the_cpu() {
     case_matches_cpu("dam_break_2d", &[("boundary", "adami")], 300, &["rho", "p_over_rho2"], 2e-3);
 }
 
-// The lattice spring model: 3000 steps (0.14 s) of the cantilever as the tip load grows. The
+// The lattice spring model: 1200 steps (0.056 s) of the cantilever as the tip load grows. The
 // springs' forces come from stretches of 1e-7 to 1e-5 m between positions of up to 0.5 m, which
 // f32 resolves to 3e-8 m: the displacements (x − x0) are compared, relative to the largest, and
 // not the velocities, which are that rounding's time derivative.
 
 #[test]
 fn lattice_spring_cantilever_on_the_gpu_matches_the_cpu_in_displacement() {
-    let (cpu, gpu) = run_both(Path::new(&case("cantilever_lsm")), &[], 3000);
+    let (cpu, gpu) = run_both(Path::new(&case("cantilever_lsm")), &[], 1200);
     let displacement =
         |b: &dyn Fn(&str) -> Vec<f64>| -> Vec<f64> { b("x").iter().zip(b("x0")).map(|(x, x0)| x - x0).collect() };
     let a = displacement(&|f| field_by_id(&cpu.backend, f).1);
     let b = displacement(&|f| field_by_id(&gpu.backend, f).1);
     let largest = a.iter().fold(0.0f64, |m, d| m.max(d.abs()));
-    assert!(largest > 5e-4, "the tip has moved only {largest} m");
+    assert!(largest > 1e-4, "the tip has moved only {largest} m");
     let d = rel_diff(&a, &b);
     assert!(d <= 2e-3, "displacements differ by {d:e} of the largest ({largest} m)");
 }

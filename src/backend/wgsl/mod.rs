@@ -187,6 +187,7 @@ mod tests {
             "models/wcsph_adami.sph",
             "models/lsm_solid.sph",
             "models/wcsph_lsm.sph",
+            "models/ek18_fsi.sph",
         ] {
             let mut sources = Sources::new();
             let checked = check_stdlib_modules(&mut sources, &[m], Stdlib::locate());
