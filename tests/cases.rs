@@ -158,7 +158,7 @@ fn an_elastic_body_dropped_on_water_floats_at_archimedes_draft_without_touching_
 // - the water never within half a spacing of the plate (0.74 Δx measured), and the gap steady once
 //   the jet spreads: its mean after 5 µs within 0.15 Δx of its least (0.03 measured);
 // - no particle shooting: no plate particle faster than the jet that drives it, and no water
-//   faster than 1.8 × the jet (its side jet runs at 1.63–1.68 × at 0.25 and 0.125 mm);
+//   faster than 1.8 × the jet (its side jet runs at 1.63–1.69 × at 0.25 and 0.125 mm);
 // - the plate deflects away from the jet, by less than the jet's own travel in 20 µs (10 mm).
 #[test]
 fn a_water_jet_meets_a_plate_with_a_steady_gap_and_the_water_hammer_pressure() {

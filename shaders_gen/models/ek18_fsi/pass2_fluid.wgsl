@@ -468,18 +468,17 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let r_ij = sqrt(r2);
             let W_ij = kernel_w(r_ij, h_ij);
             let gradW_ij = kernel_grad(r_ij, h_ij) * x_ij;
-            // pairsum momentum (stdlib/coupling/fluid_solid.sph:31)
+            // pairsum momentum (stdlib/coupling/fluid_solid.sph:36)
+            let p1 = ldj_rho(j, sgn);
             let c_i_2 = c_i;
             let c_j = ldj_c(j, sgn);
             let vr = dot((v_i - ldj_v(j, sgn)), x_ij);
             let hh = h_ij;
-            let p1 = (prm_eta_ratio(i) * hh);
-            let phi = ((hh * vr) / ((r_ij * r_ij) + (p1 * p1)));
+            let p2 = (prm_eta_ratio(i) * hh);
+            let phi = ((hh * vr) / ((r_ij * r_ij) + (p2 * p2)));
             let c_bar = ((c_i_2 + c_j) / 2.0);
             let rho_bar = (0.5 * (rho_i + ldj_rho(j, sgn)));
-            let pi_ij = select(0.0, (((((-prm_visc_a(i)) * c_bar) * phi) + (prm_visc_b(i) * (phi * phi))) / rho_bar), (vr < 0.0));
-            let p2 = ldj_rho(j, sgn);
-            dv = dv + (ldj_m(j, sgn) * (((div_m(sigma_i, (rho_i * rho_i)) + div_m(ldj_sigma(j, sgn), (p2 * p2))) - (pi_ij * eye())) * gradW_ij));
+            dv = dv + (ldj_m(j, sgn) * (((div_m(sigma_i, (rho_i * rho_i)) + div_m(ldj_sigma(j, sgn), (p1 * p1))) - (select(0.0, (((((-prm_visc_a(i)) * c_bar) * phi) + (prm_visc_b(i) * (phi * phi))) / rho_bar), (vr < 0.0)) * eye())) * gradW_ij));
         }
         }}}
     }

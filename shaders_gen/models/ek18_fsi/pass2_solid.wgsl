@@ -478,31 +478,28 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let r_ij = sqrt(r2);
             let W_ij = kernel_w(r_ij, h_ij);
             let gradW_ij = kernel_grad(r_ij, h_ij) * x_ij;
-            // pairsum momentum (stdlib/coupling/fluid_solid.sph:31)
+            // pairsum momentum (stdlib/coupling/fluid_solid.sph:36)
+            let p1 = ldj_rho(j, sgn);
             let c_i_2 = c_i;
             let c_j = ldj_c(j, sgn);
             let vr = dot((v_i - ldj_v(j, sgn)), x_ij);
             let hh = h_ij;
-            let p1 = (prm_eta_ratio(i) * hh);
-            let phi = ((hh * vr) / ((r_ij * r_ij) + (p1 * p1)));
+            let p2 = (prm_eta_ratio(i) * hh);
+            let phi = ((hh * vr) / ((r_ij * r_ij) + (p2 * p2)));
             let c_bar = ((c_i_2 + c_j) / 2.0);
             let rho_bar = (0.5 * (rho_i + ldj_rho(j, sgn)));
-            let pi_ij = select(0.0, (((((-prm_visc_a(i)) * c_bar) * phi) + (prm_visc_b(i) * (phi * phi))) / rho_bar), (vr < 0.0));
-            let p2 = ldj_rho(j, sgn);
-            dv = dv + (ldj_m(j, sgn) * (((div_m(sigma_i, (rho_i * rho_i)) + div_m(ldj_sigma(j, sgn), (p2 * p2))) - (pi_ij * eye())) * gradW_ij));
-            // pairsum energy (stdlib/coupling/fluid_solid.sph:36)
+            dv = dv + (ldj_m(j, sgn) * (((div_m(sigma_i, (rho_i * rho_i)) + div_m(ldj_sigma(j, sgn), (p1 * p1))) - (select(0.0, (((((-prm_visc_a(i)) * c_bar) * phi) + (prm_visc_b(i) * (phi * phi))) / rho_bar), (vr < 0.0)) * eye())) * gradW_ij));
+            // pairsum energy (stdlib/coupling/fluid_solid.sph:40)
+            let p3 = ldj_rho(j, sgn);
             let c_i_3 = c_i;
             let c_j_2 = ldj_c(j, sgn);
             let vr_2 = dot((v_i - ldj_v(j, sgn)), x_ij);
             let hh_2 = h_ij;
-            let p3 = (prm_eta_ratio(i) * hh_2);
-            let phi_2 = ((hh_2 * vr_2) / ((r_ij * r_ij) + (p3 * p3)));
+            let p4 = (prm_eta_ratio(i) * hh_2);
+            let phi_2 = ((hh_2 * vr_2) / ((r_ij * r_ij) + (p4 * p4)));
             let c_bar_2 = ((c_i_3 + c_j_2) / 2.0);
             let rho_bar_2 = (0.5 * (rho_i + ldj_rho(j, sgn)));
-            let pi_ij_2 = select(0.0, (((((-prm_visc_a(i)) * c_bar_2) * phi_2) + (prm_visc_b(i) * (phi_2 * phi_2))) / rho_bar_2), (vr_2 < 0.0));
-            let p4 = ldj_rho(j, sgn);
-            let A = ((div_m(sigma_i, (rho_i * rho_i)) + div_m(ldj_sigma(j, sgn), (p4 * p4))) - (pi_ij_2 * eye()));
-            de = de + (-((0.5 * ldj_m(j, sgn)) * dot((v_i - ldj_v(j, sgn)), (A * gradW_ij))));
+            de = de + (-((0.5 * ldj_m(j, sgn)) * dot((v_i - ldj_v(j, sgn)), (((div_m(sigma_i, (rho_i * rho_i)) + div_m(ldj_sigma(j, sgn), (p3 * p3))) - (select(0.0, (((((-prm_visc_a(i)) * c_bar_2) * phi_2) + (prm_visc_b(i) * (phi_2 * phi_2))) / rho_bar_2), (vr_2 < 0.0)) * eye())) * gradW_ij))));
         }
         }}}
     }
