@@ -35,7 +35,8 @@ enum Command {
         /// f32 or f64
         #[arg(long, value_enum, default_value_t = Precision::F64)]
         precision: Precision,
-        /// A resolution the case defines (ci, paper) or a particle spacing (0.005, "5 mm")
+        /// A resolution the case defines (ci, paper), a particle spacing (0.005, "5 mm"), or a
+        /// resolution's settings at another spacing (ci@2mm)
         #[arg(long)]
         resolution: Option<String>,
         /// Output directory (default: out/<case>)
@@ -67,6 +68,10 @@ enum Command {
         /// whatever the case's `[neighbours]` says; no pair is missed
         #[arg(long, value_name = "SKIN")]
         verlet: Option<f64>,
+        /// Run at three or more resolutions and report the error at each, the observed order and
+        /// a Richardson estimate: the file's `convergence` list, or these (--convergence=2mm,1mm,0.5mm)
+        #[arg(long, value_name = "RESOLUTIONS", num_args = 0..=1, require_equals = true, default_missing_value = "", conflicts_with = "resolution")]
+        convergence: Option<String>,
     },
     /// List the bundled cases
     Cases,
@@ -152,6 +157,7 @@ pub fn main() -> i32 {
             force,
             set,
             verlet,
+            convergence,
         } => {
             let opts = RunArgs {
                 backend,
@@ -166,6 +172,7 @@ pub fn main() -> i32 {
                 force,
                 set,
                 verlet,
+                convergence,
             };
             run_run(&case, opts)
         }
@@ -356,6 +363,7 @@ struct RunArgs {
     quiet: bool,
     force: bool,
     verlet: Option<f64>,
+    convergence: Option<String>,
 }
 
 fn run_run(case: &str, a: RunArgs) -> i32 {
@@ -385,7 +393,16 @@ fn run_run(case: &str, a: RunArgs) -> i32 {
         vtk: true,
         force: a.force,
     };
-    match run_file(&path, &opts) {
+    let outcome = match &a.convergence {
+        None => run_file(&path, &opts),
+        Some(list) if list.trim().is_empty() => crate::runner::declared_levels(&path)
+            .and_then(|levels| crate::runner::run_convergence(&path, &levels, &opts)),
+        Some(list) => {
+            let levels: Vec<String> = list.split(',').map(|l| l.trim().to_string()).filter(|l| !l.is_empty()).collect();
+            crate::runner::run_convergence(&path, &levels, &opts)
+        }
+    };
+    match outcome {
         Ok(o) => {
             let r = &o.report;
             eprintln!(

@@ -353,6 +353,7 @@ fn make_report<B: Backend>(
                 .iter()
                 .find(|r| scene.probes[r.probe].name == p.name)
                 .and_then(|r| r.reference.map(|x| x / r.scale)),
+            log_log: false,
         })
         .collect();
     let mut notes = vec![format!("resolution `{}`: particle spacing {} m", scene.resolution, scene.dx)];
@@ -378,7 +379,9 @@ fn make_report<B: Backend>(
         histories: plots,
         notes,
         resolution: scene.resolution.clone(),
+        dx: scene.dx,
         end_time: engine.time,
+        tables: vec![],
     }
 }
 
@@ -391,7 +394,7 @@ pub fn backend_failure(e: BackendError) -> RunFailure {
 /// across runs. Each run writes into `out/<run>/`, the study's report into `out/`.
 pub fn run_study(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailure> {
     use crate::scene::study;
-    let (st, runs) = prepare_study(path, opts)?;
+    let (st, runs, _) = prepare_study(path, opts)?;
     claim_out(opts)?;
     let mut outcomes: Vec<(study::RunSpec, RunOutcome)> = vec![];
     for (r, o) in runs {
@@ -466,6 +469,7 @@ pub fn run_study(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailur
             y_label: unit.unwrap_or_else(|| probe.clone()),
             series,
             reference: None,
+            log_log: false,
         });
     }
     for (r, o) in &outcomes {
@@ -503,7 +507,9 @@ pub fn run_study(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailur
         histories,
         notes,
         resolution: first.resolution.clone(),
+        dx: first.dx,
         end_time: first.end_time,
+        tables: vec![],
     };
     report::write(&opts.out, &report).map_err(|e| RunFailure::Run(format!("writing the report: {e}")))?;
     Ok(RunOutcome { report, out: opts.out.clone(), histories: vec![] })
@@ -538,8 +544,12 @@ fn recht_ipson_plot(
         y_label: format!("{y} [{unit}]"),
         series,
         reference: None,
+        log_log: false,
     }
 }
+
+/// A study, its runs with their options, and the spacing its case runs at.
+type PreparedStudy = (crate::scene::study::Study, Vec<(crate::scene::study::RunSpec, RunOptions)>, f64);
 
 /// Loads a study and checks everything it needs before its first run: every run's case loads and
 /// plans, and the results and plots name what the case reports. Returns the study and the runs to
@@ -547,11 +557,12 @@ fn recht_ipson_plot(
 fn prepare_study(
     path: &Path,
     opts: &RunOptions,
-) -> Result<(crate::scene::study::Study, Vec<(crate::scene::study::RunSpec, RunOptions)>), RunFailure> {
+) -> Result<PreparedStudy, RunFailure> {
     use crate::scene::study;
     let mut sources = Sources::new();
     let st = study::load(path, &mut sources).map_err(|d| input_error(&sources, &d))?;
-    let ci = opts.scene.resolution.as_deref().is_none_or(|r| r == "ci");
+    // `ci@2mm` (the CI settings at another spacing) makes the CI runs too.
+    let ci = opts.scene.resolution.as_deref().is_none_or(|r| scene::split_resolution(r).0 == "ci");
     let mut runs = vec![];
     for r in st.file.runs.iter().filter(|r| !ci || st.file.ci_runs.as_ref().is_none_or(|c| c.contains(&r.name))) {
         let mut o = opts.clone();
@@ -573,7 +584,7 @@ fn prepare_study(
     if !problems.is_empty() {
         return Err(input_error(&sources, &problems));
     }
-    Ok((st, runs))
+    Ok((st, runs, case.dx))
 }
 
 /// A name usable as a directory.
@@ -591,6 +602,107 @@ pub fn check_file(path: &Path, opts: &scene::Options) -> Result<(), RunFailure> 
         prepare_study(path, &o).map(|_| ())
     } else {
         prepare(path, opts).map(|_| ())
+    }
+}
+
+/// The resolutions a case or study file lists under `convergence`.
+pub fn declared_levels(path: &Path) -> Result<Vec<String>, RunFailure> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| RunFailure::Input(format!("error: cannot read `{}`: {e}\n", path.display())))?;
+    let text = crate::scene::template::expand(&text, &[]).unwrap_or(text);
+    let table: toml::Table = toml::from_str(&text).unwrap_or_default();
+    let levels = table
+        .get("convergence")
+        .and_then(|v| v.as_array())
+        .map(|a| a.iter().map(|v| v.as_str().map_or_else(|| v.to_string(), str::to_string)).collect::<Vec<_>>());
+    levels.ok_or_else(|| {
+        RunFailure::Input(format!(
+            "error: `{}` lists no `convergence` resolutions: add e.g. `convergence = [\"2 mm\", \"1 mm\", \"0.5 mm\"]` or give them: --convergence=2mm,1mm,0.5mm\n",
+            path.display()
+        ))
+    })
+}
+
+/// Runs a case or study at each of `levels` (resolution names or spacings, at least three) into
+/// `out/<level>/`, then writes into `out/` every result's value and error at each spacing, its
+/// observed order and Richardson estimate, and the error against wall time and particle count
+/// ([`report::convergence`]). A level whose run fails is reported and left out of the analysis.
+pub fn run_convergence(path: &Path, levels: &[String], opts: &RunOptions) -> Result<RunOutcome, RunFailure> {
+    let at = |level: &str| {
+        let mut o = opts.clone();
+        o.scene.resolution = Some(level.to_string());
+        o.out = opts.out.join(sanitize(level));
+        o
+    };
+    // Every level loads, and no two share a spacing, before the first run.
+    let mut spacings: Vec<(String, f64)> = vec![];
+    for level in levels {
+        let dx = spacing(path, &at(level).scene)?;
+        if let Some((other, _)) = spacings.iter().find(|(_, d)| (d - dx).abs() <= 1e-9 * dx) {
+            return Err(RunFailure::Input(format!(
+                "error: resolutions `{other}` and `{level}` have the same spacing ({dx} m)\n"
+            )));
+        }
+        spacings.push((level.clone(), dx));
+    }
+    if spacings.len() < 3 {
+        return Err(RunFailure::Input(format!(
+            "error: a convergence study needs at least three resolutions; got {}\n",
+            levels.join(", ")
+        )));
+    }
+    claim_out(opts)?;
+    let mut reports = vec![];
+    let mut notes = vec![];
+    for level in levels {
+        eprintln!("convergence: resolution `{level}`");
+        match run_file(path, &at(level)) {
+            Ok(o) => {
+                notes.push(format!(
+                    "`{level}`: {} particles, {} steps, {:.1} s; report in {}/",
+                    o.report.particles,
+                    o.report.steps,
+                    o.report.wall_s,
+                    sanitize(level)
+                ));
+                reports.push((level.clone(), o.report));
+            }
+            Err(RunFailure::Run(msg)) => {
+                notes.push(format!("`{level}` did not complete and is left out: {msg}"));
+            }
+            Err(e) => return Err(e),
+        }
+    }
+    let c = report::convergence::analyse(&reports);
+    let finest = reports.iter().min_by(|a, b| a.1.dx.total_cmp(&b.1.dx)).map(|(_, r)| r.clone()).unwrap_or_default();
+    let wall: f64 = reports.iter().map(|(_, r)| r.wall_s).sum();
+    let work: f64 = reports.iter().map(|(_, r)| r.particle_steps_per_s * r.wall_s).sum();
+    notes.extend(c.notes);
+    let report = RunReport {
+        case: format!("{}, convergence", finest.case),
+        steps: reports.iter().map(|(_, r)| r.steps).sum(),
+        wall_s: wall,
+        particle_steps_per_s: if wall > 0.0 { work / wall } else { 0.0 },
+        results: c.results,
+        histories: c.histories,
+        notes,
+        resolution: levels.join(", "),
+        tables: c.tables,
+        ..finest
+    };
+    report::write(&opts.out, &report).map_err(|e| RunFailure::Run(format!("writing the report: {e}")))?;
+    Ok(RunOutcome { report, out: opts.out.clone(), histories: vec![] })
+}
+
+/// The particle spacing a case or study runs at with `opts` (checking that it loads and plans).
+fn spacing(path: &Path, opts: &scene::Options) -> Result<f64, RunFailure> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| RunFailure::Input(format!("error: cannot read `{}`: {e}\n", path.display())))?;
+    if crate::scene::study::is_study(&text) {
+        let o = RunOptions { scene: opts.clone(), ..RunOptions::default() };
+        prepare_study(path, &o).map(|(_, _, dx)| dx)
+    } else {
+        prepare(path, opts).map(|(scene, _)| scene.dx)
     }
 }
 

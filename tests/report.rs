@@ -34,6 +34,7 @@ fn sample_report() -> RunReport {
                     Curve::new("exact", (0..20).map(|i| (i as f64 * 0.05, (-0.16 * i as f64 * 0.05).exp())).collect()),
                 ],
                 reference: None,
+                log_log: false,
             },
             History {
                 name: "mass".into(),
@@ -41,11 +42,14 @@ fn sample_report() -> RunReport {
                 y_label: "m [kg]".into(),
                 series: vec![Curve::new("total", vec![(0.0, 1.0), (1.0, 1.0)])],
                 reference: Some(1.0),
+                log_log: false,
             },
         ],
         notes: vec!["decay rate fitted on t in [0.1, 1]".into()],
         resolution: "64 x 64".into(),
+        dx: 1.0 / 64.0,
         end_time: 1.0,
+        tables: vec![],
     }
 }
 

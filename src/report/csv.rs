@@ -75,6 +75,7 @@ mod tests {
             y_label: format!("{name} [m]"),
             series: vec![Curve::new(name.to_string(), points)],
             reference: None,
+            log_log: false,
         }
     }
 

@@ -2,8 +2,8 @@
 //!
 //! The top level always has the keys `case`, `backend`, `precision`, `particles`, `steps`,
 //! `wall_s`, `particle_steps_per_s` and `results` (a list of `{quantity, unit, value, reference,
-//! rel_error, source}`), plus `bytes_per_particle`, `histories`, `notes`, `resolution` and
-//! `end_time`.
+//! rel_error, source}`), plus `bytes_per_particle`, `histories`, `notes`, `resolution`, `dx`,
+//! `end_time` and `tables`.
 //!
 //! JSON has no NaN or infinity: non-finite numbers are written as `null` (serde_json's
 //! behaviour) and read back as NaN, so a report of a diverged run still parses.
@@ -39,8 +39,22 @@ pub struct RunReport {
     pub notes: Vec<String>,
     #[serde(default)]
     pub resolution: String,
+    /// The resolution's particle spacing [m] (0 in reports written before it was recorded).
+    #[serde(default)]
+    pub dx: f64,
     #[serde(default, deserialize_with = "f64_or_nan")]
     pub end_time: f64,
+    /// Tables beyond the results, e.g. a convergence study's value at each resolution.
+    #[serde(default)]
+    pub tables: Vec<Table>,
+}
+
+/// A titled table of text cells, rendered as is into `report.md`.
+#[derive(Serialize, Deserialize, Clone, Debug, Default, PartialEq)]
+pub struct Table {
+    pub title: String,
+    pub header: Vec<String>,
+    pub rows: Vec<Vec<String>>,
 }
 
 /// One measured quantity, with an optional reference value to compare against.
@@ -90,6 +104,9 @@ pub struct History {
     /// An optional horizontal reference line at this y.
     #[serde(default)]
     pub reference: Option<f64>,
+    /// Both axes logarithmic (points with a coordinate ≤ 0 are left out).
+    #[serde(default)]
+    pub log_log: bool,
 }
 
 /// One named curve of a [`History`]: `(x, y)` points in order.

@@ -61,6 +61,16 @@ fn render_with(r: &RunReport, plot_errors: &[Option<String>]) -> String {
         s.push('\n');
     }
 
+    for t in &r.tables {
+        let _ = writeln!(s, "## {}\n", inline(&t.title));
+        let _ = writeln!(s, "| {} |", t.header.iter().map(|h| cell(h)).collect::<Vec<_>>().join(" | "));
+        let _ = writeln!(s, "|{}", "---|".repeat(t.header.len()));
+        for row in &t.rows {
+            let _ = writeln!(s, "| {} |", row.iter().map(|c| cell(c)).collect::<Vec<_>>().join(" | "));
+        }
+        s.push('\n');
+    }
+
     let _ = writeln!(s, "## Run\n");
     let _ = writeln!(s, "| | |\n|---|---|");
     let _ = writeln!(s, "| particles | {} |", r.particles);
@@ -71,6 +81,9 @@ fn render_with(r: &RunReport, plot_errors: &[Option<String>]) -> String {
     let _ = writeln!(s, "| backend | {} |", cell(&r.backend));
     let _ = writeln!(s, "| precision | {} |", cell(&r.precision));
     let _ = writeln!(s, "| resolution | {} |", cell(&r.resolution));
+    if r.dx > 0.0 {
+        let _ = writeln!(s, "| particle spacing | {} m |", fmt_num(r.dx));
+    }
     s.push('\n');
 
     if !r.bytes_per_particle.is_empty() {
@@ -164,7 +177,7 @@ pub fn fmt_percent(rel: f64) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::report::json::{Curve, GroupBytes, ResultRow};
+    use crate::report::json::{Curve, GroupBytes, ResultRow, Table};
 
     #[test]
     fn numbers() {
@@ -203,13 +216,21 @@ mod tests {
             }],
             notes: vec!["measured\nwith care".into()],
             resolution: "dx = 0.01 m".into(),
+            dx: 0.01,
             end_time: 0.5,
+            tables: vec![Table {
+                title: "At each resolution".into(),
+                header: vec!["resolution".into(), "value".into()],
+                rows: vec![vec!["ci".into(), "1 | 2".into()]],
+            }],
         };
         let md = render(&r);
         assert!(md.starts_with("# Run report: dam break\n"));
         assert!(md.contains("| front \\| x | m | 1 | 1.02 | +2.00 % | Martin & Moyce |"), "{md}");
         assert!(md.contains("| mass | kg |  | 3 |  |  |"), "{md}");
         assert!(md.contains("| fluid | 96 |"));
+        assert!(md.contains("## At each resolution\n\n| resolution | value |\n|---|---|\n| ci | 1 \\| 2 |\n"), "{md}");
+        assert!(md.contains("| particle spacing | 0.01 m |"), "{md}");
         assert!(md.contains("- measured\n  with care"));
         assert!(md.contains("![Kinetic energy](Kinetic_energy.svg)"));
         let md = render_with(&r, &[Some("bad range".into())]);

@@ -6,11 +6,13 @@
 //! - [`json`]: the machine-readable run report (`report.json`) and its types.
 //! - [`markdown`]: the human-readable run report (`report.md`) with embedded plots.
 //! - [`plot`]: SVG line plots of time histories.
+//! - [`convergence`]: a case run at several resolutions: error at each, observed order, Richardson.
 //! - [`csv`]: the time histories as `histories.csv`, one column per probe.
 //!
 //! [`write`] writes a whole report directory: `report.json`, `report.md`, `histories.csv` and one
 //! SVG per history.
 
+pub mod convergence;
 pub mod csv;
 pub mod json;
 pub mod markdown;

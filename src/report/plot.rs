@@ -25,19 +25,26 @@ const COLORS: [RGBColor; 8] = [
     RGBColor(23, 190, 207),
 ];
 
-/// Plots `h` as an SVG at `path`: labelled axes, one line per curve with a legend, and the
-/// optional reference as a dashed horizontal line.
+/// Plots `h` as an SVG at `path`: labelled axes (both logarithmic when `h.log_log`), one line per
+/// curve with a legend, and the optional reference as a dashed horizontal line.
 ///
 /// Non-finite points are skipped; a curve with a single finite point is drawn as a marker; an
 /// empty history, or one whose values are all equal, gets a padded range instead of a degenerate
 /// one.
 pub fn plot_history(path: &Path, h: &History) -> Result<(), String> {
+    // On log–log axes the points are drawn as their base-10 logarithms and the ticks labelled with
+    // the values themselves.
+    let axis = |v: f64| if h.log_log { v.log10() } else { v };
     let curves: Vec<(&str, Vec<(f64, f64)>)> = h
         .series
         .iter()
-        .map(|c| (c.name.as_str(), c.points.iter().copied().filter(|(x, y)| x.is_finite() && y.is_finite()).collect()))
+        .map(|c| {
+            let points = c.points.iter().map(|&(x, y)| (axis(x), axis(y)));
+            (c.name.as_str(), points.filter(|(x, y)| x.is_finite() && y.is_finite()).collect())
+        })
         .collect();
-    let reference = h.reference.filter(|r| r.is_finite());
+    let reference = h.reference.map(axis).filter(|r| r.is_finite());
+    let tick = |v: f64, span: f64| if h.log_log { fmt_tick(10f64.powf(v), 0.0) } else { fmt_tick(v, span) };
 
     let xs = curves.iter().flat_map(|(_, p)| p.iter().map(|&(x, _)| x));
     let ys = curves.iter().flat_map(|(_, p)| p.iter().map(|&(_, y)| y)).chain(reference);
@@ -60,8 +67,8 @@ pub fn plot_history(path: &Path, h: &History) -> Result<(), String> {
         .y_desc(h.y_label.as_str())
         .label_style(("sans-serif", 15))
         .axis_desc_style(("sans-serif", 18))
-        .x_label_formatter(&|v| fmt_tick(*v, x1 - x0))
-        .y_label_formatter(&|v| fmt_tick(*v, y1 - y0))
+        .x_label_formatter(&|v| tick(*v, x1 - x0))
+        .y_label_formatter(&|v| tick(*v, y1 - y0))
         .light_line_style(WHITE.mix(0.0))
         .draw()
         .map_err(|e| err(&e))?;
@@ -156,7 +163,14 @@ mod tests {
     }
 
     fn hist(series: Vec<Curve>, reference: Option<f64>) -> History {
-        History { name: "energy".into(), x_label: "t [s]".into(), y_label: "E [J]".into(), series, reference }
+        History {
+            name: "energy".into(),
+            x_label: "t [s]".into(),
+            y_label: "E [J]".into(),
+            series,
+            reference,
+            log_log: false,
+        }
     }
 
     #[test]
@@ -207,6 +221,21 @@ mod tests {
         }
         let huge = hist(vec![Curve::new("huge", vec![(0.0, -f64::MAX), (1.0, f64::MAX)])], None);
         assert!(plot_history(&dir.join("huge.svg"), &huge).is_err());
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn log_log_axes_label_ticks_with_values_and_drop_non_positive_points() {
+        let dir = tmpdir("loglog");
+        let path = dir.join("error.svg");
+        let mut h =
+            hist(vec![Curve::new("error", vec![(10.0, 0.1), (100.0, 0.01), (1000.0, 0.001), (0.0, 1.0)])], None);
+        h.log_log = true;
+        plot_history(&path, &h).unwrap();
+        let svg = std::fs::read_to_string(&path).unwrap();
+        // Ticks at powers of ten read as the values, not as their logarithms (1 … 3).
+        assert!(svg.contains("\n100\n") && svg.contains("\n0.01\n"), "{svg}");
+        assert!(svg.contains("<polyline"));
         std::fs::remove_dir_all(&dir).ok();
     }
 

@@ -155,8 +155,9 @@ fn resolution_set(text: &str, opts: &Options) -> Vec<(String, String)> {
         .clone()
         .or_else(|| table.get("default_resolution").and_then(|r| r.as_str()).map(str::to_string))
         .unwrap_or_else(|| "ci".into());
+    let (name, _) = super::spec::split_resolution(&wanted);
     let set =
-        table.get("resolutions").and_then(|r| r.get(&wanted)).and_then(|r| r.get("set")).and_then(|s| s.as_table());
+        table.get("resolutions").and_then(|r| r.get(name)).and_then(|r| r.get("set")).and_then(|s| s.as_table());
     set.map(|s| s.iter().map(|(k, v)| (k.clone(), super::study::text_of(v))).collect()).unwrap_or_default()
 }
 
@@ -275,10 +276,22 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
         .clone()
         .or_else(|| case.default_resolution.as_ref().map(|r| r.get_ref().clone()))
         .unwrap_or_else(|| "ci".to_string());
-    let dx = match resolutions.iter().find(|(n, _)| *n == wanted) {
-        Some((_, dx)) => *dx,
-        None => {
-            match quantity::parse(&wanted).ok().filter(|q| q.unit == m || q.unit == Unit::ONE) {
+    let (settings, at) = super::spec::split_resolution(&wanted);
+    let named = resolutions.iter().find(|(n, _)| n == settings).map(|(_, dx)| *dx);
+    let spacing = at.or(named.is_none().then_some(settings));
+    let dx = match (named, spacing) {
+        (Some(dx), None) => dx,
+        (None, Some(_)) if at.is_some() => {
+            let names: Vec<String> = resolutions.iter().map(|(n, _)| n.clone()).collect();
+            cx.diags.push(Diagnostic::error(
+                "C0006",
+                format!("unknown resolution `{settings}` in `{wanted}`: the case has {}", names.join(", ")),
+            ));
+            return None;
+        }
+        (_, spacing) => {
+            let spacing = spacing.unwrap_or_default();
+            match quantity::parse(spacing).ok().filter(|q| q.unit == m || q.unit == Unit::ONE) {
                 Some(q) if q.value > 0.0 => q.value,
                 _ => {
                     let names: Vec<String> = resolutions.iter().map(|(n, _)| n.clone()).collect();
@@ -291,7 +304,7 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
             }
         }
     };
-    let res_table = case.resolutions.get(&wanted).and_then(|r| match r.get_ref() {
+    let res_table = case.resolutions.get(settings).and_then(|r| match r.get_ref() {
         case::Resolution::Table(t) => Some(t),
         _ => None,
     });
@@ -775,10 +788,11 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
         bodies,
         mirrors,
         config,
-        resolution: wanted,
+        resolution: wanted.clone(),
         dx,
         time_scale,
-        tolerance: res_table.and_then(|t| t.tolerance),
+        // A tolerance holds at its resolution's own spacing only.
+        tolerance: res_table.filter(|_| at.is_none()).and_then(|t| t.tolerance),
         output_interval,
         output_fields,
         probes,

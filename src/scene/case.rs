@@ -34,6 +34,9 @@ pub struct CaseFile {
     /// The resolution used when none is asked for.
     #[serde(default)]
     pub default_resolution: Option<Spanned<String>>,
+    /// The resolutions `pairsum run --convergence` runs (names or spacings), at least three.
+    #[serde(default)]
+    pub convergence: Option<Vec<String>>,
     #[serde(default)]
     pub gravity: Option<Value>,
     /// Materials by name: `[materials.steel]` with parameter values.

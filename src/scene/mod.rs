@@ -11,4 +11,4 @@ pub mod study;
 pub mod template;
 
 pub use build::load;
-pub use spec::{Options, Scene};
+pub use spec::{split_resolution, Options, Scene};

@@ -10,7 +10,18 @@ use crate::ir::{FieldId, GroupId, Model};
 use crate::schedule::SceneSpec;
 use std::path::PathBuf;
 
-/// What to run: the resolution by name (`ci`, `paper`) or a spacing, and overrides.
+/// A resolution as asked for: a name (`ci`), a spacing (`"2 mm"`), or a named resolution's
+/// settings at another spacing (`ci@2mm`: its time scale, end time and parameters, this spacing).
+/// Returns the name whose settings apply and the spacing that replaces its own.
+pub fn split_resolution(wanted: &str) -> (&str, Option<&str>) {
+    match wanted.split_once('@') {
+        Some((name, spacing)) => (name.trim(), Some(spacing.trim())),
+        None => (wanted, None),
+    }
+}
+
+/// What to run: the resolution by name (`ci`, `paper`), a spacing, or a name's settings at a
+/// spacing (`ci@2mm`, see [`split_resolution`]), and overrides.
 #[derive(Clone, Debug, Default)]
 pub struct Options {
     pub resolution: Option<String>,

@@ -27,6 +27,9 @@ pub struct StudyFile {
     /// Probes whose histories are plotted together, one curve per run.
     #[serde(default)]
     pub plots: Vec<String>,
+    /// The resolutions `pairsum run --convergence` runs the whole study at, at least three.
+    #[serde(default)]
+    pub convergence: Option<Vec<String>>,
 }
 
 #[derive(Deserialize, Debug, Clone)]

@@ -1,0 +1,282 @@
+//! Speed against error across resolutions: the reports of one case (or study) run at three or more
+//! particle spacings become each result's value and error at every spacing, its observed order of
+//! convergence and a Richardson estimate of its value at zero spacing, and its error plotted
+//! against wall time and against particle count. Plain `f64` data in, report parts out.
+
+use super::json::{Curve, History, ResultRow, RunReport, Table};
+use super::markdown::{fmt_num, fmt_percent};
+
+/// The observed order `p` of `f(h) = f0 + C h^p` through three points, coarse to fine
+/// (`h[0] > h[1] > h[2]`). `None` when the differences do not shrink with one sign (the values
+/// oscillate, stall or diverge) or when `p` would lie outside [0.05, 10].
+pub fn observed_order(h: [f64; 3], f: [f64; 3]) -> Option<f64> {
+    let (d1, d2) = (f[1] - f[0], f[2] - f[1]);
+    if d1 * d2 <= 0.0 || !(d1 * d2).is_finite() {
+        return None;
+    }
+    let ratio = d2 / d1;
+    // ratio = g(p), which falls from ln(h1/h2)/ln(h0/h1) at p → 0 towards 0 as p grows.
+    let g = |p: f64| (h[1].powf(p) - h[2].powf(p)) / (h[0].powf(p) - h[1].powf(p));
+    let (mut lo, mut hi) = (0.05, 10.0);
+    if !(ratio < g(lo) && ratio > g(hi)) {
+        return None;
+    }
+    for _ in 0..100 {
+        let mid = 0.5 * (lo + hi);
+        if g(mid) > ratio {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    Some(0.5 * (lo + hi))
+}
+
+/// Richardson's estimate of `f0` in `f(h) = f0 + C h^p` from the two finest points of three.
+pub fn richardson(h: [f64; 3], f: [f64; 3], p: f64) -> f64 {
+    f[2] + (f[2] - f[1]) * h[2].powf(p) / (h[1].powf(p) - h[2].powf(p))
+}
+
+/// The slope `q` of a least-squares line through `(ln h, ln |e|)`: the error falls as `h^q`.
+/// `None` with fewer than two non-zero errors at distinct spacings.
+pub fn error_order(points: &[(f64, f64)]) -> Option<f64> {
+    let pts: Vec<(f64, f64)> = points
+        .iter()
+        .filter(|(h, e)| *h > 0.0 && e.is_finite() && *e != 0.0)
+        .map(|(h, e)| (h.ln(), e.abs().ln()))
+        .collect();
+    let n = pts.len() as f64;
+    let (mx, my) = (pts.iter().map(|p| p.0).sum::<f64>() / n, pts.iter().map(|p| p.1).sum::<f64>() / n);
+    let sxx: f64 = pts.iter().map(|p| (p.0 - mx).powi(2)).sum();
+    let sxy: f64 = pts.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
+    (pts.len() >= 2 && sxx > 1e-24).then(|| sxy / sxx)
+}
+
+/// What a convergence study adds to its report.
+#[derive(Debug, Default)]
+pub struct Convergence {
+    pub results: Vec<ResultRow>,
+    pub tables: Vec<Table>,
+    pub histories: Vec<History>,
+    pub notes: Vec<String>,
+}
+
+/// One result followed across the resolutions (coarse to fine).
+struct Followed<'a> {
+    finest: &'a ResultRow,
+    values: Vec<f64>,
+}
+
+impl Followed<'_> {
+    fn errors(&self) -> Option<Vec<f64>> {
+        let r = self.finest.reference.filter(|r| *r != 0.0 && r.is_finite())?;
+        Some(self.values.iter().map(|v| (v - r) / r.abs()).collect())
+    }
+}
+
+/// The study across `levels` (each the name a resolution was asked by and its run's report), in
+/// any order: they are sorted coarse to fine by spacing. Every result of the finest run is
+/// followed across the runs that report it; the order and the Richardson estimate use the three
+/// finest spacings.
+pub fn analyse(levels: &[(String, RunReport)]) -> Convergence {
+    let mut levels: Vec<&(String, RunReport)> = levels.iter().collect();
+    levels.sort_by(|a, b| b.1.dx.total_cmp(&a.1.dx));
+    let Some(finest) = levels.last() else { return Convergence::default() };
+    let h: Vec<f64> = levels.iter().map(|l| l.1.dx).collect();
+    let followed: Vec<Followed> = finest
+        .1
+        .results
+        .iter()
+        .map(|row| Followed {
+            finest: row,
+            values: levels
+                .iter()
+                .map(|l| l.1.results.iter().find(|r| r.quantity == row.quantity).map_or(f64::NAN, |r| r.value))
+                .collect(),
+        })
+        .collect();
+
+    let mut out =
+        Convergence { tables: vec![levels_table(&levels), values_table(&levels, &followed)], ..Default::default() };
+    let mut summary = vec![];
+    for q in &followed {
+        let row = q.finest;
+        out.results.push(row.clone());
+        let n = h.len();
+        let order = (n >= 3)
+            .then(|| {
+                let (h3, f3) = ([h[n - 3], h[n - 2], h[n - 1]], [q.values[n - 3], q.values[n - 2], q.values[n - 1]]);
+                observed_order(h3, f3).map(|p| (p, richardson(h3, f3, p)))
+            })
+            .flatten();
+        let slope = q.errors().and_then(|e| error_order(&h.iter().copied().zip(e).collect::<Vec<_>>()));
+        if let Some((p, f0)) = order {
+            let mut est =
+                ResultRow::new(format!("{}, Richardson estimate", row.quantity), &row.unit, f0, row.reference);
+            est.source = row.source.clone();
+            out.results.push(est);
+            out.results.push(ResultRow::new(format!("{}, observed order", row.quantity), "", p, None));
+        }
+        if let Some(s) = slope {
+            out.results.push(ResultRow::new(format!("{}, error order", row.quantity), "", s, None));
+        }
+        summary.push(vec![
+            row.quantity.clone(),
+            row.reference.map(fmt_num).unwrap_or_default(),
+            order.map_or("not monotone".into(), |(p, _)| format!("{p:.2}")),
+            order.map(|(_, f0)| fmt_num(f0)).unwrap_or_default(),
+            order
+                .and_then(|(_, f0)| row.reference.filter(|r| *r != 0.0).map(|r| fmt_percent((f0 - r) / r.abs())))
+                .unwrap_or_default(),
+            slope.map(|s| format!("{s:.2}")).unwrap_or_default(),
+        ]);
+    }
+    out.tables.push(Table {
+        title: "Convergence".into(),
+        header: ["quantity", "reference", "observed order p", "Richardson estimate", "its error", "error order q"]
+            .map(String::from)
+            .to_vec(),
+        rows: summary,
+    });
+    out.histories = error_plots(&levels, &followed);
+    out.notes = vec![
+        "Observed order p: through the three finest spacings, f(Δx) = f0 + C Δx^p; \"not monotone\" when their differences change sign or p would lie outside [0.05, 10]. Richardson estimate: that f0.".into(),
+        "Error order q: the least-squares slope of ln |error| against ln Δx over every resolution (the error falls as Δx^q).".into(),
+    ];
+    out
+}
+
+fn levels_table(levels: &[&(String, RunReport)]) -> Table {
+    Table {
+        title: "Each resolution".into(),
+        header: ["resolution", "Δx [m]", "particles", "steps", "wall time [s]", "particle-steps/s"]
+            .map(String::from)
+            .to_vec(),
+        rows: levels
+            .iter()
+            .map(|(name, r)| {
+                vec![
+                    name.clone(),
+                    fmt_num(r.dx),
+                    r.particles.to_string(),
+                    r.steps.to_string(),
+                    fmt_num(r.wall_s),
+                    fmt_num(r.particle_steps_per_s),
+                ]
+            })
+            .collect(),
+    }
+}
+
+fn values_table(levels: &[&(String, RunReport)], followed: &[Followed]) -> Table {
+    let mut header: Vec<String> = ["quantity", "unit", "reference"].map(String::from).to_vec();
+    header.extend(levels.iter().map(|(name, r)| format!("{name} (Δx = {})", fmt_num(r.dx))));
+    let rows = followed
+        .iter()
+        .map(|q| {
+            let errors = q.errors();
+            let mut row = vec![
+                q.finest.quantity.clone(),
+                q.finest.unit.clone(),
+                q.finest.reference.map(fmt_num).unwrap_or_default(),
+            ];
+            row.extend(q.values.iter().enumerate().map(|(i, v)| match errors.as_ref() {
+                Some(e) if v.is_finite() => format!("{} ({})", fmt_num(*v), fmt_percent(e[i])),
+                _ => fmt_num(*v),
+            }));
+            row
+        })
+        .collect();
+    Table { title: "Value (and error) at each resolution".into(), header, rows }
+}
+
+/// |error| against wall time and against particle count, log–log, one curve per result with a
+/// reference.
+fn error_plots(levels: &[&(String, RunReport)], followed: &[Followed]) -> Vec<History> {
+    let with_errors: Vec<(&str, Vec<f64>)> =
+        followed.iter().filter_map(|q| Some((q.finest.quantity.as_str(), q.errors()?))).collect();
+    if with_errors.is_empty() {
+        return vec![];
+    }
+    let plot = |name: &str, x_label: &str, x: &dyn Fn(&RunReport) -> f64| History {
+        name: name.into(),
+        x_label: x_label.into(),
+        y_label: "|relative error|".into(),
+        series: with_errors
+            .iter()
+            .map(|(q, e)| Curve::new(*q, levels.iter().zip(e).map(|(l, e)| (x(&l.1), e.abs())).collect()))
+            .collect(),
+        reference: None,
+        log_log: true,
+    };
+    vec![
+        plot("error against wall time", "wall time [s]", &|r| r.wall_s),
+        plot("error against particles", "particles", &|r| r.particles as f64),
+    ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn order_and_richardson_recover_a_power_law() {
+        for (h, p_true) in [([4.0, 2.0, 1.0], 2.0), ([3.0, 2.0, 1.2], 1.3), ([1.0, 0.5, 0.25], 0.7)] {
+            let f = h.map(|h: f64| 5.0 - 0.3 * h.powf(p_true));
+            let p = observed_order(h, f).expect("an order");
+            assert!((p - p_true).abs() < 1e-9, "{p} vs {p_true}");
+            assert!((richardson(h, f, p) - 5.0).abs() < 1e-9);
+        }
+    }
+
+    #[test]
+    fn no_order_when_values_oscillate_stall_or_diverge() {
+        let h = [4.0, 2.0, 1.0];
+        assert_eq!(observed_order(h, [1.0, 2.0, 1.5]), None, "oscillating");
+        assert_eq!(observed_order(h, [1.0, 1.0, 1.0]), None, "stalled");
+        assert_eq!(observed_order(h, [1.0, 2.0, 4.0]), None, "diverging: the differences grow");
+        assert_eq!(observed_order(h, [1.0, f64::NAN, 2.0]), None);
+    }
+
+    #[test]
+    fn error_order_is_the_log_log_slope() {
+        let pts: Vec<(f64, f64)> = [1.0, 0.5, 0.25].iter().map(|h: &f64| (*h, -0.2 * h.powi(2))).collect();
+        assert!((error_order(&pts).unwrap() - 2.0).abs() < 1e-12);
+        assert_eq!(error_order(&[(1.0, 0.1)]), None);
+        assert_eq!(error_order(&[(1.0, 0.1), (1.0, 0.2)]), None);
+    }
+
+    fn level(name: &str, dx: f64, value: f64, wall: f64) -> (String, RunReport) {
+        let report = RunReport {
+            dx,
+            wall_s: wall,
+            particles: (1.0 / dx) as usize,
+            results: vec![
+                ResultRow::new("crater", "m", value, Some(10.0)),
+                ResultRow::new("gap", "m", 2.0 * value, None),
+            ],
+            ..Default::default()
+        };
+        (name.into(), report)
+    }
+
+    #[test]
+    fn analyse_follows_each_result_across_levels_given_in_any_order() {
+        // crater = 10 − 4 Δx²: order 2, Richardson exactly 10.
+        let levels = vec![level("fine", 0.25, 9.75, 8.0), level("coarse", 1.0, 6.0, 0.5), level("ci", 0.5, 9.0, 1.0)];
+        let c = analyse(&levels);
+        let value = |q: &str| c.results.iter().find(|r| r.quantity == q).map(|r| r.value);
+        assert_eq!(value("crater"), Some(9.75), "the finest run's value");
+        assert!((value("crater, observed order").unwrap() - 2.0).abs() < 1e-9);
+        assert!((value("crater, Richardson estimate").unwrap() - 10.0).abs() < 1e-9);
+        assert!((value("crater, error order").unwrap() - 2.0).abs() < 1e-9);
+        assert!((value("gap, Richardson estimate").unwrap() - 20.0).abs() < 1e-9);
+        assert_eq!(value("gap, error order"), None, "no reference, no error");
+        let values = &c.tables[1];
+        assert_eq!(values.header[3..], ["coarse (Δx = 1)", "ci (Δx = 0.5)", "fine (Δx = 0.25)"]);
+        assert_eq!(values.rows[0][3], "6 (-40.00 %)");
+        let wall = &c.histories[0];
+        assert!(wall.log_log && wall.series.len() == 1, "one curve: the result with a reference");
+        assert_eq!(wall.series[0].points, vec![(0.5, 0.4), (1.0, 0.1), (8.0, 0.025)]);
+    }
+}
