@@ -554,10 +554,7 @@ type PreparedStudy = (crate::scene::study::Study, Vec<(crate::scene::study::RunS
 /// Loads a study and checks everything it needs before its first run: every run's case loads and
 /// plans, and the results and plots name what the case reports. Returns the study and the runs to
 /// make (the CI subset at the CI resolution), each with its options.
-fn prepare_study(
-    path: &Path,
-    opts: &RunOptions,
-) -> Result<PreparedStudy, RunFailure> {
+fn prepare_study(path: &Path, opts: &RunOptions) -> Result<PreparedStudy, RunFailure> {
     use crate::scene::study;
     let mut sources = Sources::new();
     let st = study::load(path, &mut sources).map_err(|d| input_error(&sources, &d))?;

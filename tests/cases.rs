@@ -524,3 +524,62 @@ fn a_result_at_a_time_without_its_time_a_material_binding_gravity_and_a_tilted_2
     assert!(err.contains(&format!("bad.toml:{}:", line_of(&tilted, "rotation = "))), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn a_convergence_study_reports_every_spacing_the_observed_order_and_richardsons_estimate() {
+    let dir = out_dir("convergence");
+    let wave = case("elastic_wave");
+    let run = |levels: &str| {
+        let out = Command::new(env!("CARGO_BIN_EXE_pairsum"))
+            .args(["run", wave.to_str().unwrap(), "--backend", "cpu", "--quiet", "--out", dir.to_str().unwrap()])
+            .arg(format!("--convergence={levels}"))
+            .output()
+            .expect("runs");
+        (out.status.code(), String::from_utf8_lossy(&out.stderr).into_owned())
+    };
+    // Before any run: two levels are too few, and `ci` is 2 mm.
+    let (code, err) = run("4mm,2mm");
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("at least three resolutions"), "{err}");
+    let (code, err) = run("ci,2mm,1mm");
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("`ci` and `2mm` have the same spacing"), "{err}");
+    assert!(!dir.exists(), "nothing is written before the levels check");
+
+    let (code, err) = run("1mm,4mm,2mm");
+    assert_eq!(code, Some(0), "{err}");
+    let read = |path: PathBuf| {
+        pairsum::report::json::from_json(&std::fs::read_to_string(&path).expect("a report")).expect("parses")
+    };
+    let report = read(dir.join("report.json"));
+    let value = |q: &str| report.results.iter().find(|r| r.quantity == q).map(|r| r.value);
+    // Each level's own report, coarse to fine, and the order and limit recomputed from them.
+    let levels: Vec<(f64, f64)> = ["4mm", "2mm", "1mm"]
+        .iter()
+        .map(|l| {
+            let r = read(dir.join(l).join("report.json"));
+            (r.dx, r.results.iter().find(|x| x.quantity == "wave_speed").expect("wave_speed").value)
+        })
+        .collect();
+    assert_eq!(levels.iter().map(|l| l.0).collect::<Vec<_>>(), [0.004, 0.002, 0.001]);
+    let f: Vec<f64> = levels.iter().map(|l| l.1).collect();
+    let p = ((f[1] - f[0]) / (f[2] - f[1])).ln() / 2f64.ln();
+    let limit = f[2] + (f[2] - f[1]) / (2f64.powf(p) - 1.0);
+    assert!((value("wave_speed, observed order").expect("an order") - p).abs() < 1e-6, "{p}");
+    assert!((value("wave_speed, Richardson estimate").expect("an estimate") - limit).abs() < 1e-6 * limit);
+    assert_eq!(value("wave_speed"), Some(f[2]), "the finest run's value");
+    // The bar's wave speed nears √(E/ρ) as the spacing shrinks.
+    let c = (100e6f64 / 1000.0).sqrt();
+    assert!((f[2] - c).abs() < (f[1] - c).abs() && (f[1] - c).abs() < (f[0] - c).abs(), "{f:?} vs {c}");
+    let q = value("wave_speed, error order").expect("an error order");
+    let q_fit = ((f[0] - c).abs().ln() - (f[2] - c).abs().ln()) / 4f64.ln();
+    assert!(q > 0.5 && (q - q_fit).abs() < 0.3, "{q} vs end-to-end {q_fit}");
+    let md = std::fs::read_to_string(dir.join("report.md")).expect("report.md");
+    for section in ["## Each resolution", "## Value (and error) at each resolution", "## Convergence"] {
+        assert!(md.contains(section), "{section} in\n{md}");
+    }
+    for plot in ["error_against_wall_time.svg", "error_against_particles.svg"] {
+        assert!(dir.join(plot).is_file(), "{plot}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

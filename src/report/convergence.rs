@@ -6,6 +6,51 @@
 use super::json::{Curve, History, ResultRow, RunReport, Table};
 use super::markdown::{fmt_num, fmt_percent};
 
+/// How three values, coarse to fine, behave.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Trend {
+    /// They approach a limit as `f0 + C h^p`.
+    Converging { order: f64, limit: f64 },
+    /// Their differences change sign.
+    Oscillating,
+    /// Their differences keep one sign but do not shrink fast enough for an order in [0.05, 10]
+    /// (or shrink faster than that).
+    NoOrder,
+    /// The three are equal.
+    Unchanged,
+    /// A value is missing (a run did not report it).
+    Missing,
+}
+
+impl Trend {
+    /// Three points, coarse to fine (`h[0] > h[1] > h[2]`).
+    pub fn of(h: [f64; 3], f: [f64; 3]) -> Trend {
+        let (d1, d2) = (f[1] - f[0], f[2] - f[1]);
+        if !(d1.is_finite() && d2.is_finite()) {
+            Trend::Missing
+        } else if d1 == 0.0 && d2 == 0.0 {
+            Trend::Unchanged
+        } else if d1 * d2 <= 0.0 {
+            Trend::Oscillating
+        } else {
+            match observed_order(h, f) {
+                Some(order) => Trend::Converging { order, limit: richardson(h, f, order) },
+                None => Trend::NoOrder,
+            }
+        }
+    }
+
+    fn describe(&self) -> String {
+        match self {
+            Trend::Converging { order, .. } => format!("{order:.2}"),
+            Trend::Oscillating => "none: oscillates".into(),
+            Trend::NoOrder => "none: differences do not shrink".into(),
+            Trend::Unchanged => "none: unchanged".into(),
+            Trend::Missing => "none: a value is missing".into(),
+        }
+    }
+}
+
 /// The observed order `p` of `f(h) = f0 + C h^p` through three points, coarse to fine
 /// (`h[0] > h[1] > h[2]`). `None` when the differences do not shrink with one sign (the values
 /// oscillate, stall or diverge) or when `p` would lie outside [0.05, 10].
@@ -38,11 +83,12 @@ pub fn richardson(h: [f64; 3], f: [f64; 3], p: f64) -> f64 {
 }
 
 /// The slope `q` of a least-squares line through `(ln h, ln |e|)`: the error falls as `h^q`.
-/// `None` with fewer than two non-zero errors at distinct spacings.
+/// `None` with fewer than two errors above rounding (1e-9) at distinct spacings.
 pub fn error_order(points: &[(f64, f64)]) -> Option<f64> {
     let pts: Vec<(f64, f64)> = points
         .iter()
-        .filter(|(h, e)| *h > 0.0 && e.is_finite() && *e != 0.0)
+        // An error at rounding level (an exact result) has no order.
+        .filter(|(h, e)| *h > 0.0 && e.is_finite() && e.abs() > 1e-9)
         .map(|(h, e)| (h.ln(), e.abs().ln()))
         .collect();
     let n = pts.len() as f64;
@@ -103,12 +149,12 @@ pub fn analyse(levels: &[(String, RunReport)]) -> Convergence {
         let row = q.finest;
         out.results.push(row.clone());
         let n = h.len();
-        let order = (n >= 3)
-            .then(|| {
-                let (h3, f3) = ([h[n - 3], h[n - 2], h[n - 1]], [q.values[n - 3], q.values[n - 2], q.values[n - 1]]);
-                observed_order(h3, f3).map(|p| (p, richardson(h3, f3, p)))
-            })
-            .flatten();
+        let trend = (n >= 3)
+            .then(|| Trend::of([h[n - 3], h[n - 2], h[n - 1]], [q.values[n - 3], q.values[n - 2], q.values[n - 1]]));
+        let order = match trend {
+            Some(Trend::Converging { order, limit }) => Some((order, limit)),
+            _ => None,
+        };
         let slope = q.errors().and_then(|e| error_order(&h.iter().copied().zip(e).collect::<Vec<_>>()));
         if let Some((p, f0)) = order {
             let mut est =
@@ -123,7 +169,7 @@ pub fn analyse(levels: &[(String, RunReport)]) -> Convergence {
         summary.push(vec![
             row.quantity.clone(),
             row.reference.map(fmt_num).unwrap_or_default(),
-            order.map_or("not monotone".into(), |(p, _)| format!("{p:.2}")),
+            trend.map_or("none: fewer than three runs".into(), |t| t.describe()),
             order.map(|(_, f0)| fmt_num(f0)).unwrap_or_default(),
             order
                 .and_then(|(_, f0)| row.reference.filter(|r| *r != 0.0).map(|r| fmt_percent((f0 - r) / r.abs())))
@@ -140,7 +186,7 @@ pub fn analyse(levels: &[(String, RunReport)]) -> Convergence {
     });
     out.histories = error_plots(&levels, &followed);
     out.notes = vec![
-        "Observed order p: through the three finest spacings, f(Δx) = f0 + C Δx^p; \"not monotone\" when their differences change sign or p would lie outside [0.05, 10]. Richardson estimate: that f0.".into(),
+        "Observed order p: through the three finest spacings, f(Δx) = f0 + C Δx^p; none when their differences change sign or do not shrink enough for p in [0.05, 10]. Richardson estimate: that f0. It is trustworthy only in the asymptotic range: a p far from the scheme's order, or from the error order q, says the spacings are not there yet.".into(),
         "Error order q: the least-squares slope of ln |error| against ln Δx over every resolution (the error falls as Δx^q).".into(),
     ];
     out
@@ -236,6 +282,12 @@ mod tests {
         assert_eq!(observed_order(h, [1.0, 1.0, 1.0]), None, "stalled");
         assert_eq!(observed_order(h, [1.0, 2.0, 4.0]), None, "diverging: the differences grow");
         assert_eq!(observed_order(h, [1.0, f64::NAN, 2.0]), None);
+        assert_eq!(Trend::of(h, [1.0, 2.0, 1.5]), Trend::Oscillating);
+        assert_eq!(Trend::of(h, [1.0, 1.0, 1.0]), Trend::Unchanged);
+        assert_eq!(Trend::of(h, [1.0, 2.0, 4.0]), Trend::NoOrder);
+        assert_eq!(Trend::of(h, [1.0, f64::NAN, 2.0]), Trend::Missing);
+        let Trend::Converging { order, limit } = Trend::of(h, [1.0, 2.0, 2.5]) else { panic!("converges") };
+        assert!((order - 1.0).abs() < 1e-9 && (limit - 3.0).abs() < 1e-9, "{order} {limit}");
     }
 
     #[test]
@@ -244,6 +296,7 @@ mod tests {
         assert!((error_order(&pts).unwrap() - 2.0).abs() < 1e-12);
         assert_eq!(error_order(&[(1.0, 0.1)]), None);
         assert_eq!(error_order(&[(1.0, 0.1), (1.0, 0.2)]), None);
+        assert_eq!(error_order(&[(1.0, 1e-16), (0.5, -2e-16), (0.25, 0.0)]), None, "exact up to rounding");
     }
 
     fn level(name: &str, dx: f64, value: f64, wall: f64) -> (String, RunReport) {

@@ -156,8 +156,7 @@ fn resolution_set(text: &str, opts: &Options) -> Vec<(String, String)> {
         .or_else(|| table.get("default_resolution").and_then(|r| r.as_str()).map(str::to_string))
         .unwrap_or_else(|| "ci".into());
     let (name, _) = super::spec::split_resolution(&wanted);
-    let set =
-        table.get("resolutions").and_then(|r| r.get(name)).and_then(|r| r.get("set")).and_then(|s| s.as_table());
+    let set = table.get("resolutions").and_then(|r| r.get(name)).and_then(|r| r.get("set")).and_then(|s| s.as_table());
     set.map(|s| s.iter().map(|(k, v)| (k.clone(), super::study::text_of(v))).collect()).unwrap_or_default()
 }
 

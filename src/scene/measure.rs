@@ -306,27 +306,30 @@ impl Axis {
 /// ring's share of its initial count first reaches one half, interpolated between rings.
 fn crater_diameter(x: &[[f64; 3]], body: &[u32], scene: &Scene) -> f64 {
     let (Some(axis), Some(plate)) = (Axis::of(scene), scene.bodies.get(1)) else { return f64::NAN };
-    let initial: Vec<(f64, f64)> = plate.particles.clone().map(|k| axis.coords(scene.particles.x[k])).collect();
+    let initial: Vec<[f64; 3]> = plate.particles.clone().map(|k| scene.particles.x[k]).collect();
+    let now = x.iter().zip(body).filter(|(_, b)| **b == 1).map(|(p, _)| *p);
+    hole_diameter(&axis, &initial, now, scene.dx)
+}
+
+/// [`crater_diameter`] of a plate whose particles were at `initial` and are now at `now`.
+fn hole_diameter(axis: &Axis, initial: &[[f64; 3]], now: impl Iterator<Item = [f64; 3]>, ring: f64) -> f64 {
+    let initial: Vec<(f64, f64)> = initial.iter().map(|p| axis.coords(*p)).collect();
     let (lo, hi) = initial.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, p| (a.0.min(p.0), a.1.max(p.0)));
     let t = hi - lo;
-    let ring = scene.dx;
     let r_max = initial.iter().map(|p| p.1).fold(0.0, f64::max);
     let n = (r_max / ring).ceil() as usize + 1;
     let mut before = vec![0.0; n];
     for p in &initial {
         before[((p.1 / ring) as usize).min(n - 1)] += 1.0;
     }
-    let mut now = vec![0.0; n];
-    for (k, p) in x.iter().enumerate() {
-        if body[k] != 1 {
-            continue;
-        }
-        let (s, r) = axis.coords(*p);
+    let mut after = vec![0.0; n];
+    for p in now {
+        let (s, r) = axis.coords(p);
         if s >= lo - t && s <= hi + t && r < r_max {
-            now[((r / ring) as usize).min(n - 1)] += 1.0;
+            after[((r / ring) as usize).min(n - 1)] += 1.0;
         }
     }
-    let share: Vec<f64> = before.iter().zip(&now).map(|(b, a)| if *b > 0.0 { a / b } else { 1.0 }).collect();
+    let share: Vec<f64> = before.iter().zip(&after).map(|(b, a)| if *b > 0.0 { a / b } else { 1.0 }).collect();
     match share.iter().position(|s| *s >= 0.5) {
         Some(0) => 0.0,
         Some(k) => {
@@ -507,6 +510,57 @@ mod tests {
             source: None,
             tolerance: None,
             tolerance_why: None,
+        }
+    }
+
+    /// A plate 3 particles thick, Δx = 1 mm, 40 mm across, on a square lattice normal to z.
+    fn plate() -> Vec<[f64; 3]> {
+        let mut p = vec![];
+        for i in -20..20 {
+            for j in -20..20 {
+                for k in 0..3 {
+                    p.push([(i as f64 + 0.5) * 1e-3, (j as f64 + 0.5) * 1e-3, -(k as f64 + 0.5) * 1e-3]);
+                }
+            }
+        }
+        p
+    }
+
+    #[test]
+    fn the_crater_of_a_plate_with_a_punched_hole_is_the_hole() {
+        let axis = Axis { origin: [0.0; 3], dir: [0.0, 0.0, -1.0] };
+        let initial = plate();
+        for radius in [3e-3, 5.5e-3, 10e-3] {
+            let r = |p: &[f64; 3]| (p[0] * p[0] + p[1] * p[1]).sqrt();
+            let punched = initial.iter().filter(|p| r(p) >= radius).copied();
+            let d = hole_diameter(&axis, &initial, punched, 1e-3);
+            // Rings of one spacing: the edge is found within half a spacing on the radius.
+            assert!((d - 2.0 * radius).abs() <= 1e-3, "hole of radius {radius}: crater {d}");
+            // Material pushed out of the hole and gone (beyond the slab widened by its thickness)
+            // does not count; material bent into a lip within it does.
+            let ejected = initial.iter().map(|p| if r(p) < radius { [p[0], p[1], p[2] - 0.1] } else { *p });
+            assert!((hole_diameter(&axis, &initial, ejected, 1e-3) - d).abs() < 1e-12);
+            let lip = initial.iter().map(|p| if r(p) < radius { [p[0], p[1], p[2] - 2e-3] } else { *p });
+            assert_eq!(hole_diameter(&axis, &initial, lip, 1e-3), 0.0);
+        }
+        assert_eq!(hole_diameter(&axis, &initial, initial.iter().copied(), 1e-3), 0.0, "no hole");
+    }
+
+    #[test]
+    fn interpenetration_is_measured_on_a_constructed_overlap() {
+        // Two 5 × 5 × 5 cubes of spacing 1, the second shifted by 5 − overlap along x.
+        let cube = |shift: f64| -> Vec<[f64; 3]> {
+            (0..125).map(|n| [(n % 5) as f64 + shift, ((n / 5) % 5) as f64, (n / 25) as f64]).collect()
+        };
+        for (gap, close) in [(1.0, 0), (0.6, 0), (0.3, 50), (-0.2, 50)] {
+            // The second cube's first layer is `gap` beyond the first cube's last (x = 4).
+            let mut x = cube(0.0);
+            x.extend(cube(4.0 + gap));
+            let body: Vec<u32> = (0..250).map(|k| u32::from(k >= 125)).collect();
+            let (least, n) = interbody(&x, &body, 3, 1.0);
+            assert!((least - gap.abs()).abs() < 1e-12, "gap {gap}: least {least}");
+            // Within Δx/2: the facing layer of each cube (25 + 25 particles).
+            assert_eq!(n, close, "gap {gap}");
         }
     }
 
