@@ -72,6 +72,10 @@ enum Command {
         /// a Richardson estimate: the file's `convergence` list, or these (--convergence=2mm,1mm,0.5mm)
         #[arg(long, value_name = "RESOLUTIONS", num_args = 0..=1, require_equals = true, default_missing_value = "", conflicts_with = "resolution")]
         convergence: Option<String>,
+        /// With --convergence: run nothing, analyse again the reports an earlier --convergence
+        /// wrote into --out
+        #[arg(long, requires = "convergence")]
+        reanalyse: bool,
     },
     /// List the bundled cases
     Cases,
@@ -158,6 +162,7 @@ pub fn main() -> i32 {
             set,
             verlet,
             convergence,
+            reanalyse,
         } => {
             let opts = RunArgs {
                 backend,
@@ -173,6 +178,7 @@ pub fn main() -> i32 {
                 set,
                 verlet,
                 convergence,
+                reanalyse,
             };
             run_run(&case, opts)
         }
@@ -364,6 +370,7 @@ struct RunArgs {
     force: bool,
     verlet: Option<f64>,
     convergence: Option<String>,
+    reanalyse: bool,
 }
 
 fn run_run(case: &str, a: RunArgs) -> i32 {
@@ -396,10 +403,10 @@ fn run_run(case: &str, a: RunArgs) -> i32 {
     let outcome = match &a.convergence {
         None => run_file(&path, &opts),
         Some(list) if list.trim().is_empty() => crate::runner::declared_levels(&path)
-            .and_then(|levels| crate::runner::run_convergence(&path, &levels, &opts)),
+            .and_then(|levels| crate::runner::run_convergence(&path, &levels, &opts, a.reanalyse)),
         Some(list) => {
             let levels: Vec<String> = list.split(',').map(|l| l.trim().to_string()).filter(|l| !l.is_empty()).collect();
-            crate::runner::run_convergence(&path, &levels, &opts)
+            crate::runner::run_convergence(&path, &levels, &opts, a.reanalyse)
         }
     };
     match outcome {

@@ -624,7 +624,14 @@ pub fn declared_levels(path: &Path) -> Result<Vec<String>, RunFailure> {
 /// `out/<level>/`, then writes into `out/` every result's value and error at each spacing, its
 /// observed order and Richardson estimate, and the error against wall time and particle count
 /// ([`report::convergence`]). A level whose run fails is reported and left out of the analysis.
-pub fn run_convergence(path: &Path, levels: &[String], opts: &RunOptions) -> Result<RunOutcome, RunFailure> {
+/// With `reanalyse`, nothing runs: the levels' reports that an earlier convergence run wrote into
+/// `out/<level>/` are analysed again (after a change to the analysis).
+pub fn run_convergence(
+    path: &Path,
+    levels: &[String],
+    opts: &RunOptions,
+    reanalyse: bool,
+) -> Result<RunOutcome, RunFailure> {
     let at = |level: &str| {
         let mut o = opts.clone();
         o.scene.resolution = Some(level.to_string());
@@ -648,21 +655,28 @@ pub fn run_convergence(path: &Path, levels: &[String], opts: &RunOptions) -> Res
             levels.join(", ")
         )));
     }
-    claim_out(opts)?;
+    if !reanalyse {
+        claim_out(opts)?;
+    }
     let mut reports = vec![];
     let mut notes = vec![];
     for level in levels {
-        eprintln!("convergence: resolution `{level}`");
-        match run_file(path, &at(level)) {
-            Ok(o) => {
+        let outcome = if reanalyse {
+            earlier_report(&at(level).out)
+        } else {
+            eprintln!("convergence: resolution `{level}`");
+            run_file(path, &at(level)).map(|o| o.report)
+        };
+        match outcome {
+            Ok(r) => {
                 notes.push(format!(
                     "`{level}`: {} particles, {} steps, {:.1} s; report in {}/",
-                    o.report.particles,
-                    o.report.steps,
-                    o.report.wall_s,
+                    r.particles,
+                    r.steps,
+                    r.wall_s,
                     sanitize(level)
                 ));
-                reports.push((level.clone(), o.report));
+                reports.push((level.clone(), r));
             }
             Err(RunFailure::Run(msg)) => {
                 notes.push(format!("`{level}` did not complete and is left out: {msg}"));
@@ -689,6 +703,19 @@ pub fn run_convergence(path: &Path, levels: &[String], opts: &RunOptions) -> Res
     };
     report::write(&opts.out, &report).map_err(|e| RunFailure::Run(format!("writing the report: {e}")))?;
     Ok(RunOutcome { report, out: opts.out.clone(), histories: vec![] })
+}
+
+/// The report a completed run wrote into `dir`; a run that did not complete is a `Run` failure.
+fn earlier_report(dir: &Path) -> Result<RunReport, RunFailure> {
+    let path = dir.join("report.json");
+    let text = std::fs::read_to_string(&path)
+        .map_err(|e| RunFailure::Input(format!("error: no report of an earlier run at `{}`: {e}\n", path.display())))?;
+    let r = report::json::from_json(&text)
+        .map_err(|e| RunFailure::Input(format!("error: `{}` is no pairsum report: {e}\n", path.display())))?;
+    match r.notes.iter().find(|n| n.starts_with("the run did not complete")) {
+        Some(n) => Err(RunFailure::Run(n.clone())),
+        None => Ok(r),
+    }
 }
 
 /// The particle spacing a case or study runs at with `opts` (checking that it loads and plans).

@@ -529,14 +529,16 @@ fn a_result_at_a_time_without_its_time_a_material_binding_gravity_and_a_tilted_2
 fn a_convergence_study_reports_every_spacing_the_observed_order_and_richardsons_estimate() {
     let dir = out_dir("convergence");
     let wave = case("elastic_wave");
-    let run = |levels: &str| {
+    let run_with = |levels: &str, more: &[&str]| {
         let out = Command::new(env!("CARGO_BIN_EXE_pairsum"))
             .args(["run", wave.to_str().unwrap(), "--backend", "cpu", "--quiet", "--out", dir.to_str().unwrap()])
             .arg(format!("--convergence={levels}"))
+            .args(more)
             .output()
             .expect("runs");
         (out.status.code(), String::from_utf8_lossy(&out.stderr).into_owned())
     };
+    let run = |levels: &str| run_with(levels, &[]);
     // Before any run: two levels are too few, and `ci` is 2 mm.
     let (code, err) = run("4mm,2mm");
     assert_eq!(code, Some(1), "{err}");
@@ -581,5 +583,10 @@ fn a_convergence_study_reports_every_spacing_the_observed_order_and_richardsons_
     for plot in ["error_against_wall_time.svg", "error_against_particles.svg"] {
         assert!(dir.join(plot).is_file(), "{plot}");
     }
+    // Analysed again from the levels' reports, without running: the same results.
+    std::fs::remove_file(dir.join("report.json")).expect("remove");
+    let (code, err) = run_with("1mm,4mm,2mm", &["--reanalyse"]);
+    assert_eq!(code, Some(0), "{err}");
+    assert_eq!(read(dir.join("report.json")).results, report.results);
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -18,6 +18,7 @@ const MODELS: &[&str] = &[
     "ek18_solid",
     "ek18_solid_cspm",
     "ek18_solid_variable_h",
+    "ek18_solid_failure",
     "fans_solid",
     "fans_solid_plain",
     "ftlr19_perforation",

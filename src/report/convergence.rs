@@ -26,9 +26,11 @@ impl Trend {
     /// Three points, coarse to fine (`h[0] > h[1] > h[2]`).
     pub fn of(h: [f64; 3], f: [f64; 3]) -> Trend {
         let (d1, d2) = (f[1] - f[0], f[2] - f[1]);
+        // Differences at rounding level are none.
+        let noise = 1e-9 * f.iter().fold(0.0, |a: f64, v| a.max(v.abs()));
         if !(d1.is_finite() && d2.is_finite()) {
             Trend::Missing
-        } else if d1 == 0.0 && d2 == 0.0 {
+        } else if d1.abs() <= noise && d2.abs() <= noise {
             Trend::Unchanged
         } else if d1 * d2 <= 0.0 {
             Trend::Oscillating
@@ -284,6 +286,7 @@ mod tests {
         assert_eq!(observed_order(h, [1.0, f64::NAN, 2.0]), None);
         assert_eq!(Trend::of(h, [1.0, 2.0, 1.5]), Trend::Oscillating);
         assert_eq!(Trend::of(h, [1.0, 1.0, 1.0]), Trend::Unchanged);
+        assert_eq!(Trend::of(h, [2190.04, 2190.04 + 1e-12, 2190.04 + 1.5e-12]), Trend::Unchanged, "rounding");
         assert_eq!(Trend::of(h, [1.0, 2.0, 4.0]), Trend::NoOrder);
         assert_eq!(Trend::of(h, [1.0, f64::NAN, 2.0]), Trend::Missing);
         let Trend::Converging { order, limit } = Trend::of(h, [1.0, 2.0, 2.5]) else { panic!("converges") };

@@ -188,6 +188,7 @@ mod tests {
             "models/lsm_solid.sph",
             "models/wcsph_lsm.sph",
             "models/ek18_fsi.sph",
+            "models/ek18_solid_failure.sph",
         ] {
             let mut sources = Sources::new();
             let checked = check_stdlib_modules(&mut sources, &[m], Stdlib::locate());
