@@ -312,6 +312,10 @@ fn template_parameters_resolutions_and_measures_are_checked_with_clear_errors() 
     let (code, err) = run(&["run", cube, "--backend", "cpu", "--resolution", "finest"]);
     assert_eq!(code, Some(1), "{err}");
     assert!(err.contains("unknown resolution `finest`") && err.contains("ci, paper"), "{err}");
+    // A named resolution's settings at another spacing: the name must exist.
+    let (code, err) = run(&["run", cube, "--backend", "cpu", "--resolution", "cj@1mm"]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("unknown resolution `cj` in `cj@1mm`: the case has ci, paper"), "{err}");
     // A misspelt measure, at its line and column, with the known ones.
     let dir = out_dir("badmeasure");
     std::fs::create_dir_all(&dir).expect("dir");
@@ -589,4 +593,18 @@ fn a_convergence_study_reports_every_spacing_the_observed_order_and_richardsons_
     assert_eq!(code, Some(0), "{err}");
     assert_eq!(read(dir.join("report.json")).results, report.results);
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_named_resolution_at_another_spacing_keeps_its_settings() {
+    let scene = |res: &str| {
+        let opts = pairsum::scene::Options { resolution: Some(res.into()), ..Default::default() };
+        prepare(&case("tensile_test"), &opts).unwrap_or_else(|e| panic!("{res}: {e}")).0
+    };
+    // `ci` is 1 mm with a time scale of 0.05; a bare spacing takes none of it.
+    let (ci, at, bare) = (scene("ci"), scene("ci@2mm"), scene("2 mm"));
+    assert_eq!((ci.dx, ci.time_scale), (0.001, 0.05));
+    assert_eq!((at.dx, at.time_scale), (0.002, 0.05));
+    assert_eq!((bare.dx, bare.time_scale), (0.002, 1.0));
+    assert!(at.particles.x.len() < ci.particles.x.len());
 }
