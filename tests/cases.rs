@@ -256,7 +256,7 @@ fn a_case_file_with_a_wrong_unit_gets_a_spanned_diagnostic_and_exit_1() {
     let text = std::fs::read_to_string(case("elastic_wave"))
         .expect("case")
         .replace("dim = 1", "dim = 1\nintegrator_typo = \"euler\"");
-    std::fs::write(&bad, text).expect("write");
+    std::fs::write(&bad, &text).expect("write");
     let out = Command::new(env!("CARGO_BIN_EXE_pairsum")).args(["run", bad.to_str().unwrap()]).output().expect("runs");
     assert_eq!(out.status.code(), Some(1));
     let stderr = String::from_utf8_lossy(&out.stderr);
