@@ -592,8 +592,7 @@ fn sanitize(s: &str) -> String {
 /// Checks a case or a study without running it: the case loads and plans; a study's every run
 /// loads and plans, and its results name what its case reports.
 pub fn check_file(path: &Path, opts: &scene::Options) -> Result<(), RunFailure> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| RunFailure::Input(format!("error: cannot read `{}`: {e}\n", path.display())))?;
+    let text = read_text(path)?;
     if crate::scene::study::is_study(&text) {
         let o = RunOptions { scene: opts.clone(), ..RunOptions::default() };
         prepare_study(path, &o).map(|_| ())
@@ -604,8 +603,7 @@ pub fn check_file(path: &Path, opts: &scene::Options) -> Result<(), RunFailure> 
 
 /// The resolutions a case or study file lists under `convergence`.
 pub fn declared_levels(path: &Path) -> Result<Vec<String>, RunFailure> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| RunFailure::Input(format!("error: cannot read `{}`: {e}\n", path.display())))?;
+    let text = read_text(path)?;
     let text = crate::scene::template::expand(&text, &[]).unwrap_or(text);
     let table: toml::Table = toml::from_str(&text).unwrap_or_default();
     let levels = table
@@ -720,8 +718,7 @@ fn earlier_report(dir: &Path) -> Result<RunReport, RunFailure> {
 
 /// The particle spacing a case or study runs at with `opts` (checking that it loads and plans).
 fn spacing(path: &Path, opts: &scene::Options) -> Result<f64, RunFailure> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| RunFailure::Input(format!("error: cannot read `{}`: {e}\n", path.display())))?;
+    let text = read_text(path)?;
     if crate::scene::study::is_study(&text) {
         let o = RunOptions { scene: opts.clone(), ..RunOptions::default() };
         prepare_study(path, &o).map(|(_, _, dx)| dx)
@@ -730,10 +727,15 @@ fn spacing(path: &Path, opts: &scene::Options) -> Result<f64, RunFailure> {
     }
 }
 
+/// A case or study file's text.
+fn read_text(path: &Path) -> Result<String, RunFailure> {
+    std::fs::read_to_string(path)
+        .map_err(|e| RunFailure::Input(format!("error: cannot read `{}`: {e}\n", path.display())))
+}
+
 /// Runs a case or a study, whichever the file is.
 pub fn run_file(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailure> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| RunFailure::Input(format!("error: cannot read `{}`: {e}\n", path.display())))?;
+    let text = read_text(path)?;
     if crate::scene::study::is_study(&text) {
         run_study(path, opts)
     } else {

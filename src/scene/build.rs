@@ -277,10 +277,9 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
         .unwrap_or_else(|| "ci".to_string());
     let (settings, at) = super::spec::split_resolution(&wanted);
     let named = resolutions.iter().find(|(n, _)| n == settings).map(|(_, dx)| *dx);
-    let spacing = at.or(named.is_none().then_some(settings));
-    let dx = match (named, spacing) {
+    let dx = match (named, at) {
         (Some(dx), None) => dx,
-        (None, Some(_)) if at.is_some() => {
+        (None, Some(_)) => {
             let names: Vec<String> = resolutions.iter().map(|(n, _)| n.clone()).collect();
             cx.diags.push(Diagnostic::error(
                 "C0006",
@@ -288,9 +287,9 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
             ));
             return None;
         }
-        (_, spacing) => {
-            let spacing = spacing.unwrap_or_default();
-            match quantity::parse(spacing).ok().filter(|q| q.unit == m || q.unit == Unit::ONE) {
+        // `name@spacing` with a known name, or a bare spacing.
+        (_, at) => {
+            match quantity::parse(at.unwrap_or(settings)).ok().filter(|q| q.unit == m || q.unit == Unit::ONE) {
                 Some(q) if q.value > 0.0 => q.value,
                 _ => {
                     let names: Vec<String> = resolutions.iter().map(|(n, _)| n.clone()).collect();
