@@ -275,3 +275,65 @@ fn reflected_at_a_plane(m: &pairsum::ir::Model) {
         }
     }
 }
+
+/// A block of aluminium that has failed everywhere (ε_f = 0), pulled apart by a uniform expansion
+/// v = k x. Failed material carries no tension, so nothing slows the expansion and no work is done:
+/// the kinetic energy stays and so does the internal energy. The energy equation must use the
+/// stress momentum uses (energy/solid_failing.sph); with the intact stress's work the tension of the
+/// thinning particles would heat them. Returns (relative change of the total energy, least ρ/ρ0).
+fn failed_block_pulled_apart(model_text: &str) -> (f64, f64) {
+    let m = model(model_text);
+    let (n, dx, k) = (6, 1e-3, 2e4);
+    let mut inp = input(3, lattice(3, n, dx), dx);
+    let centre = 0.5 * (n - 1) as f64 * dx;
+    inp.v = inp.x.iter().map(|p| [k * (p[0] - centre), k * (p[1] - centre), k * (p[2] - centre)]).collect();
+    let values = [
+        ("rho0", 2710.0),
+        ("c0", 6320.0),
+        ("S_s", 1.337),
+        ("gamma0", 2.1),
+        ("G", 26e9),
+        ("jc_A", 265e6),
+        ("jc_B", 426e6),
+        ("jc_C", 0.015),
+        ("jc_m", 1.0),
+        ("jc_n", 0.34),
+        ("T_melt", 925.0),
+        ("C_v", 896.0),
+        ("h_ratio", 1.3),
+        ("eps_f", 0.0),
+        ("p_spall", 1e9),
+    ];
+    let mat = material(&m, &values.map(|(name, v)| (name, vec![v])));
+    let b = backend::<f64>(&m, &scene(&m, 3, &["D"], IntegratorKind::PredictorCorrector), &inp, &[mat], vec![]);
+    let total = |b: &CpuBackend<f64>| {
+        let (_, v) = field_by_id(b, "v");
+        let (_, e) = field_by_id(b, "e");
+        let (_, mass) = field_by_id(b, "m");
+        (0..mass.len())
+            .map(|i| mass[i] * (0.5 * (v[3 * i].powi(2) + v[3 * i + 1].powi(2) + v[3 * i + 2].powi(2)) + e[i]))
+            .sum::<f64>()
+    };
+    let e0 = total(&b);
+    let mut e = engine(b, 1.0);
+    for _ in 0..60 {
+        e.step().expect("step");
+    }
+    let (_, d) = field_by_id(&e.backend, "D");
+    assert!(d.iter().all(|&d| d >= 1.0), "every particle has failed");
+    let (_, rho) = field_by_id(&e.backend, "rho");
+    let least = rho.iter().cloned().fold(f64::INFINITY, f64::min) / 2710.0;
+    ((total(&e.backend) - e0) / e0, least)
+}
+
+#[test]
+fn failed_material_pulled_apart_does_no_work_and_keeps_its_density() {
+    // The hypervelocity impact's solid: energy is conserved, and continuity thins the block.
+    let (de, least) = failed_block_pulled_apart("use models::ek18_solid_failure\n");
+    assert!(de.abs() < 1e-6, "total energy changed by {de:e}");
+    assert!(least < 0.95, "the block did not thin: least ρ/ρ0 = {least}");
+    // With the density floor of the perforation model, a failed particle stays at ρ0 or above.
+    let (de, least) = failed_block_pulled_apart("use models::ek18_solid_failure\nuse damage::failed_density_floor\n");
+    assert!(de.abs() < 1e-6, "total energy changed by {de:e}");
+    assert!(least >= 1.0, "a failed particle thinned to {least} ρ0");
+}

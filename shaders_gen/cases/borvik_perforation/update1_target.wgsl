@@ -346,6 +346,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // damage
     var D_i: f32 = ld_D(i);
     D_i = select(D_i, 1.0, (eps_p_i >= prm_eps_crit(i)));
+    // failed_density_floor
+    rho_i = select(rho_i, max(rho_i, prm_rho0(i)), (D_i >= 1.0));
     // eos
     var p_i: f32 = ld_p(i);
     var c_i: f32 = ld_c(i);

@@ -353,6 +353,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     eps_p_i = (eps_p_i + d_2);
     // damage
     D_i = select(D_i, 1.0, (eps_p_i >= prm_eps_crit(i)));
+    // failed_density_floor
+    rho_i = select(rho_i, max(rho_i, prm_rho0(i)), (D_i >= 1.0));
     // eos
     var p_i: f32 = ld_p(i);
     var c_i: f32 = ld_c(i);
