@@ -35,8 +35,8 @@ pub struct Drift {
 
 impl Drift {
     /// Whether a pair outside lists built with a skin of length `skin` may now lie within its
-    /// cut-off. A pair (i, j) outside i's list was at least `support·(h_i + h_max)/2 + skin ≥
-    /// support·h_ij + skin` apart; it has come closer by at most twice the largest displacement
+    /// cut-off. A pair (i, j) outside i's list was at least `support·h_ij + skin` apart (each
+    /// pair's own reach, `h_ij = (h_i + h_j)/2`); it has come closer by at most twice the largest displacement
     /// and its cut-off has grown by at most `support · h_growth`.
     pub fn exceeds(&self, skin: f64, support: f64) -> bool {
         let reach = 2.0 * self.displacement + support * self.h_growth;

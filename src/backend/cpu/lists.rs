@@ -165,7 +165,10 @@ pub fn beyond_reach<T: Real>(xi: [T; 3], t: u32, mirrors: &[Mirror], radius: f64
         .any(|(m, mirror)| t >> m & 1 == 1 && (xi[mirror.axis].to_f64() - mirror.offset).abs() >= radius)
 }
 
-/// Every particle or image within i's build radius: its cut-off reach plus the skin.
+/// Every particle or image within the pair's build reach: its own cut-off `support · h_ij` plus
+/// the skin (the cells searched reach `support · (h_i + h_max)/2` plus the skin, which holds
+/// every such pair). With particles of several sizes a fine particle's list then holds its
+/// neighbours, not every particle a coarse one's reach could bring in.
 fn collect<T: Real, const D: usize>(
     grid: &Grid,
     inp: &BuildInput<T>,
@@ -177,7 +180,8 @@ fn collect<T: Real, const D: usize>(
     let mut xi = [T::zero(); 3];
     xi[..D].copy_from_slice(&inp.x[i * D..i * D + D]);
     // h_ij ≤ (h_i + h_max)/2: no neighbour lies beyond support · that.
-    let radius = inp.support * 0.5 * (inp.h[i].to_f64() + inp.h_max) + skin;
+    let hi = inp.h[i].to_f64();
+    let radius = inp.support * 0.5 * (hi + inp.h_max) + skin;
     let order = grid.order();
     for t in 0..1u32 << inp.mirrors.len() {
         if beyond_reach(xi, t, inp.mirrors, radius) {
@@ -196,7 +200,8 @@ fn collect<T: Real, const D: usize>(
                 }
                 let xj = &inp.x[j as usize * D..j as usize * D + D];
                 let r2: f64 = (0..D).map(|c| (yi[c] - xj[c]).to_f64().powi(2)).sum();
-                if r2 < radius * radius {
+                let reach = inp.support * 0.5 * (hi + inp.h[j as usize].to_f64()) + skin;
+                if r2 < reach * reach {
                     out.push(j | t << TRANSFORM_SHIFT);
                 }
             }

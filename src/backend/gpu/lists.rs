@@ -156,8 +156,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let h_max = bitcast<f32>(grid[9]);
     // The 3^d cells around i hold everything within a cell size: a skin from an earlier full
     // build, with a larger h_max then, may not reach further (the adaptive search's rebuilds).
-    let radius = min(params.support * 0.5 * (hi + h_max) + bitcast<f32>(atomicLoad(&lists[8])),
-                     bitcast<f32>(grid[3]));
+    let skin_len = bitcast<f32>(atomicLoad(&lists[8]));
+    let radius = min(params.support * 0.5 * (hi + h_max) + skin_len, bitcast<f32>(grid[3]));
     let stride = atomicLoad(&lists[0]);
     let first = 16u + n + i * stride;
     var count = 0u;
@@ -185,7 +185,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 let j = sorted_particle(s);
                 if (tr == 0u && j == i) { continue; }
                 let d = yi - pos(j);
-                if (dot(d, d) < radius * radius) {
+                // Each pair's own reach: its cut-off support · h_ij plus the skin.
+                let reach = min(params.support * 0.5 * (hi + data[params.h_offset + j]) + skin_len, radius);
+                if (dot(d, d) < reach * reach) {
                     if (count < stride) { atomicStore(&lists[first + count], j | (tr << 29u)); }
                     count++;
                 }
