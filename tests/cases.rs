@@ -465,6 +465,29 @@ fn a_node_list_as_a_region_is_a_clear_error() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// `fill` takes "cells" or "nodes", and a node list, which places its own particles, takes none.
+#[test]
+fn a_wrong_fill_is_a_clear_error() {
+    let text = std::fs::read_to_string(case("rings_2d")).expect("case");
+    let dir = out_dir("fill");
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::copy(case("rings_2d").with_extension("sph"), dir.join("rings_2d.sph")).unwrap();
+    std::fs::write(dir.join("dots.csv"), "x,y,z\n0,0.3,0\n0.01,0.3,0\n0.02,0.3,0\n").unwrap();
+    let path = dir.join("rings_2d.toml");
+    let body = "[[bodies]]\nname = \"dots\"\ngroup = \"solid\"\nmaterial = \"rubber\"\n";
+    for (extra, wanted) in [
+        ("shape = { nodes = { file = \"dots.csv\" } }\nfill = \"nodes\"", "C0036"),
+        ("shape = { disc = { center = [0, \"0.3 m\"], radius = \"10 mm\" } }\nfill = \"corners\"", "corners"),
+    ] {
+        let bad = format!("{text}\n{body}{extra}\n");
+        std::fs::write(&path, &bad).unwrap();
+        let err = prepare(&path, &Default::default()).err().map(|e| e.to_string()).expect("an error");
+        let line = bad.lines().position(|l| l.starts_with("fill = ")).unwrap() + 1;
+        assert!(err.contains(wanted) && err.contains(&format!("rings_2d.toml:{line}:")), "{err}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// A wrong `[neighbours]` table is an error at its line: an unknown search, a skin beyond the
 /// cut-off, an adaptive search without its field or on a field the model lacks.
 #[test]

@@ -3,8 +3,8 @@
 //! positioned errors, fuzzing) and spacing estimation (regular and graded lattices).
 
 use pairsum::scene::geometry::{
-    estimate_spacing, fill, fill_graded, fill_with, read_csv_nodes, read_lsdyna_nodes, Fill, GeometryError, NodeList,
-    Particles, Primitive, MAX_PARTICLES,
+    at_corners, estimate_spacing, fill, fill_graded, fill_with, read_csv_nodes, read_lsdyna_nodes, Fill, GeometryError,
+    NodeList, Particles, Primitive, MAX_PARTICLES,
 };
 use std::f64::consts::PI;
 
@@ -322,6 +322,97 @@ fn graded_sphere_with_a_fine_box_and_a_non_integer_ratio() {
             }
         }
     }
+}
+
+// ---------------------------------------------------------------- node-centred fills
+
+/// Node-centred fills: one volume and spacing per particle, unused coordinates 0, volumes positive.
+fn check_nodes(p: &Particles, dim: usize) {
+    assert_eq!(p.positions.len(), p.volumes.len());
+    assert_eq!(p.positions.len(), p.spacing.len());
+    assert!(p.positions.iter().all(|x| x[dim..].iter().all(|&c| c == 0.0)));
+    assert!(p.volumes.iter().all(|&v| v > 0.0));
+}
+
+/// The volume-weighted centroid of a fill.
+fn volume_centroid(p: &Particles) -> [f64; 3] {
+    let mut c = [0.0; 3];
+    for (x, v) in p.positions.iter().zip(&p.volumes) {
+        for a in 0..3 {
+            c[a] += x[a] * v;
+        }
+    }
+    c.map(|s| s / p.total_volume())
+}
+
+#[test]
+fn node_centred_box_has_particles_on_its_faces_with_lumped_volumes() {
+    // EK18 §4's uniform plate: 200 × 200 × 10 mm at 5 mm is 41 × 41 × 3 = 5,043 nodes.
+    let dx = 0.005;
+    let plate = Primitive::Box { min: [-0.1, -0.1, -0.01], max: [0.1, 0.1, 0.0] };
+    let p = at_corners(&fill(&plate, dx, 3).unwrap(), 3);
+    assert_eq!(p.len(), 5043);
+    check_nodes(&p, 3);
+    assert!(close(p.total_volume(), 0.2 * 0.2 * 0.01, 1e-12));
+    for (x, (v, s)) in p.positions.iter().zip(p.volumes.iter().zip(&p.spacing)) {
+        // On the lattice of the box's corners, and inside the box.
+        let on_face = |a: usize, lo: f64, hi: f64| {
+            let k = (x[a] - lo) / dx;
+            assert!((k - k.round()).abs() < 1e-9 && x[a] >= lo - 1e-12 && x[a] <= hi + 1e-12, "{x:?}");
+            (x[a] - lo).abs() < 1e-12 || (x[a] - hi).abs() < 1e-12
+        };
+        let faces = [on_face(0, -0.1, 0.1), on_face(1, -0.1, 0.1), on_face(2, -0.01, 0.0)];
+        // A half on a face, a quarter on an edge, an eighth at a corner.
+        let expect = dx.powi(3) * 0.5f64.powi(faces.iter().filter(|f| **f).count() as i32);
+        assert!(close(*v, expect, 1e-12), "volume {v} at {x:?}");
+        assert_eq!(*s, dx);
+    }
+    // Three layers through the thickness, where the cell-centred fill has two.
+    let mut layers: Vec<i64> = p.positions.iter().map(|x| (x[2] / dx).round() as i64).collect();
+    layers.sort_unstable();
+    layers.dedup();
+    assert_eq!(layers, vec![-2, -1, 0]);
+    // 2D: a rectangle of 4 × 2 cells has 5 × 3 nodes; 1D: a bar of 4 cells has 5.
+    let rect = Primitive::Box { min: [0.0; 3], max: [0.4, 0.2, 0.0] };
+    let p2 = at_corners(&fill(&rect, 0.1, 2).unwrap(), 2);
+    assert_eq!(p2.len(), 15);
+    assert!(close(p2.total_volume(), 0.08, 1e-12));
+    let bar = Primitive::Box { min: [0.0; 3], max: [0.4, 0.0, 0.0] };
+    let p1 = at_corners(&fill(&bar, 0.1, 1).unwrap(), 1);
+    assert_eq!(p1.volumes, vec![0.05, 0.1, 0.1, 0.1, 0.05]);
+}
+
+#[test]
+fn node_centred_graded_plate_keeps_two_layers_where_coarse() {
+    // EK18 §4's graded plate: 5 mm within 40 mm of the axis, 10 mm beyond, 10 mm thick.
+    let plate = Primitive::Box { min: [-0.1, -0.1, -0.01], max: [0.1, 0.1, 0.0] };
+    let region = Primitive::Cylinder { base: [0.0, 0.0, -0.02], axis: [0.0, 0.0, 1.0], radius: 0.04, length: 0.04 };
+    let (f, c) = (0.005, 0.01);
+    let cells = fill_graded(&plate, f, c, &region, 3).unwrap();
+    let p = at_corners(&cells, 3);
+    check_nodes(&p, 3);
+    assert!(close(p.total_volume(), 0.2 * 0.2 * 0.01, 1e-12));
+    // The corners share each cell's volume equally, so the volume's centroid is the cells'.
+    let (a, b) = (volume_centroid(&p), volume_centroid(&cells));
+    assert!((0..3).all(|k| (a[k] - b[k]).abs() < 1e-12), "{a:?} vs {b:?}");
+    assert!(min_pair_distance(&p.positions) >= f * (1.0 - 1e-9));
+    // Layers through the thickness: three in the fine part, two (both faces) in the coarse one.
+    let layers_at = |r_lo: f64, r_hi: f64| {
+        let mut z: Vec<i64> = p
+            .positions
+            .iter()
+            .filter(|x| (r_lo..r_hi).contains(&x[0].hypot(x[1])))
+            .map(|x| (x[2] / f).round() as i64)
+            .collect();
+        z.sort_unstable();
+        z.dedup();
+        z
+    };
+    assert_eq!(layers_at(0.0, 0.03), vec![-2, -1, 0]);
+    assert_eq!(layers_at(0.07, 0.09), vec![-2, 0]);
+    // Spacings: fine inside, coarse outside, their mean where a node joins both.
+    assert!(p.spacing.iter().all(|&s| (f - 1e-15..=c + 1e-15).contains(&s)));
+    assert!(p.spacing.iter().any(|&s| s > f && s < c));
 }
 
 #[test]

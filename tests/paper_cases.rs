@@ -124,14 +124,25 @@ fn cube_on_cube_bodies_stay_apart_with_and_without_cspm() {
 #[test]
 fn graded_plate_keeps_the_sphere_and_the_flow_stress_of_the_uniform_one() {
     let o = run_ci("sphere_plate_graded_study");
-    // EK18 Table 4: "almost identical"; here the 10 mm plate is two particle layers at 5 mm and
-    // one where graded to 10 mm, so the graded plate is softer away from the impact.
+    // EK18 Table 4: "almost identical". With the plate at its mesh nodes, as EK18's (three layers
+    // through the 10 mm at 5 mm, two where graded to 10 mm), the graded plate deflects as the
+    // uniform one (+1.7 % at CI), slows the sphere a little less (+8.2 %) and flows alike (−0.6 %).
     let dv = value(&o, "sphere residual velocity, graded vs uniform");
+    let dd = value(&o, "plate deflection, graded vs uniform");
     let ds = value(&o, "peak flow stress, graded vs uniform");
-    assert!(dv.abs() < 0.25, "sphere residual velocity differs by {:+.1} %", 100.0 * dv);
+    assert!(dv.abs() < 0.15, "sphere residual velocity differs by {:+.1} %", 100.0 * dv);
+    assert!(dd.abs() < 0.10, "plate deflection differs by {:+.1} %", 100.0 * dd);
     assert!(ds.abs() < 0.05, "peak flow stress differs by {:+.1} %", 100.0 * ds);
-    let uniform = value(&o, "uniform: sphere_residual_velocity");
-    assert!(uniform > 0.0 && uniform < 1000.0, "the sphere perforates and slows: {uniform}");
+    // At the cell centres the graded plate is one layer where coarse and deflects a third less
+    // (−32 % at CI): the node-centred fill is what makes the two plates alike.
+    let cells = value(&o, "cells: plate deflection, graded vs uniform");
+    assert!(dd.abs() < cells.abs() / 3.0, "deflection: {dd:+.3} at the nodes, {cells:+.3} at the cell centres");
+    let cells_ds = value(&o, "cells: peak flow stress, graded vs uniform");
+    assert!(cells_ds.abs() < 0.05, "cells: peak flow stress differs by {:+.1} %", 100.0 * cells_ds);
+    for run in ["uniform", "cells_uniform"] {
+        let v = value(&o, &format!("{run}: sphere_residual_velocity"));
+        assert!(v > 0.0 && v < 1000.0, "{run}: the sphere perforates and slows: {v}");
+    }
 }
 
 #[test]

@@ -886,7 +886,10 @@ fn place(
                 "body `{name}`: a particle at {:?} lies within a quarter spacing of a symmetry plane, too close to its mirror image",
                 placed.positions[*k]
             ),
-            "make the shape's extent across the plane a whole number of spacings",
+            match body.fill_at() {
+                case::FillAt::Cells => "make the shape's extent across the plane a whole number of spacings",
+                case::FillAt::Nodes => "a node-centred fill puts particles on a plane through the body: use `fill = \"cells\"`",
+            },
         );
         return None;
     }
@@ -910,6 +913,12 @@ fn place_whole(
     let name = body.name.get_ref();
     let span = body.shape.span();
     if let case::Shape::Nodes { file, scale } = body.shape.get_ref() {
+        if let Some(span) = body.refine.as_ref().map(|r| r.region.span()).or(body.fill.as_ref().map(|f| f.span())) {
+            let msg =
+                format!("body `{name}`: a node list places its own particles; `refine` and `fill` are for shapes");
+            cx.err(span, "C0036", msg, "not for a node list");
+            return None;
+        }
         let p = dir.join(file.get_ref());
         let text = match std::fs::read_to_string(&p) {
             Ok(t) => t,
@@ -976,6 +985,10 @@ fn place_whole(
             }
             geometry::fill_with(&shape, &geometry::Fill { spacing, origin: Some(origin) }, cx.dim)
         }
+    };
+    let filled = match body.fill_at() {
+        case::FillAt::Cells => filled,
+        case::FillAt::Nodes => filled.map(|cells| geometry::at_corners(&cells, cx.dim)),
     };
     match filled {
         Ok(p) if !p.is_empty() => Some(p),

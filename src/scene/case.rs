@@ -109,6 +109,27 @@ pub struct Body {
     /// A finer spacing (a multiple of dx) inside this region of the body.
     #[serde(default)]
     pub refine: Option<Refine>,
+    /// Particles at the lattice's cell centres (default) or at its cells' corners.
+    #[serde(default)]
+    pub fill: Option<Spanned<FillAt>>,
+}
+
+impl Body {
+    /// Where the body's particles sit in their cells (cell centres unless `fill` says otherwise).
+    pub fn fill_at(&self) -> FillAt {
+        self.fill.as_ref().map(|f| *f.get_ref()).unwrap_or_default()
+    }
+}
+
+/// Where a body's particles sit in the cells of its lattice (`fill = "cells"` or `"nodes"`).
+#[derive(Deserialize, Debug, Default, Clone, Copy, PartialEq)]
+#[serde(rename_all = "snake_case")]
+pub enum FillAt {
+    /// At the cell centres: a box `[0, L]` holds `dx/2, 3dx/2, …`.
+    #[default]
+    Cells,
+    /// At the cells' corners, each with its share of the cells around it (EK18's mesh nodes).
+    Nodes,
 }
 
 #[derive(Deserialize, Debug)]

@@ -1,10 +1,10 @@
-//! Filling primitives with particles: a uniform lattice ([`fill`], [`fill_with`]) and a two-level
-//! graded lattice ([`fill_graded`]).
+//! Filling primitives with particles: a uniform lattice ([`fill`], [`fill_with`]), a two-level
+//! graded lattice ([`fill_graded`]), and either one node-centred ([`at_corners`]).
 
 use super::lattice::{collect, count, scan, IndexBox, Lattice, REL_TOL};
 use super::primitive::{finite_point, positive, Primitive, Shape};
 use super::{GeometryError, MAX_PARTICLES};
-use std::collections::HashSet;
+use std::collections::{BTreeMap, HashSet};
 
 /// How to fill a shape: the lattice spacing and, optionally, where to anchor the lattice.
 #[derive(Clone, Debug, PartialEq)]
@@ -277,4 +277,50 @@ impl Grading {
         }
         IndexBox { lo, hi }
     }
+}
+
+/// The node-centred form of a cell-centred fill (EK18 §4: particles at the nodes of a hexahedral
+/// mesh): the same cells — each particle's cell of its own spacing around it — with the particles
+/// at their corners instead of their centres. A corner shared by several cells is one particle,
+/// whose volume is `1/2^dim` of each of its cells' (so a box's face nodes get a half, its edges a
+/// quarter, its corners an eighth, and the total is the fill's) and whose spacing is the mean of
+/// its cells' spacings. A body then has a particle layer on each of its faces: a plate `t` thick
+/// filled at `t` has two layers, where the cell-centred fill has one.
+///
+/// Corners closer than a quarter of the finest spacing are one node (exact for the fills of this
+/// module when coarse/fine is a whole number or a half-integer); particles come in lattice order.
+pub fn at_corners(cells: &Particles, dim: usize) -> Particles {
+    let fine = cells.spacing.iter().copied().fold(f64::INFINITY, f64::min);
+    let Some(anchor) = cells.positions.first() else { return cells.clone() };
+    let step = 0.5 * fine;
+    let key = |p: [f64; 3]| -> [i64; 3] {
+        let mut k = [0; 3];
+        for a in 0..dim {
+            k[a] = ((p[a] - anchor[a]) / step).round() as i64;
+        }
+        k
+    };
+    // [z, y, x] keys: particles in lattice order. Value: position, volume, spacing sum, cells.
+    let mut nodes: BTreeMap<[i64; 3], ([f64; 3], f64, f64, u32)> = BTreeMap::new();
+    let share = 0.5f64.powi(dim as i32);
+    for ((centre, &vol), &s) in cells.positions.iter().zip(&cells.volumes).zip(&cells.spacing) {
+        for corner in 0..1usize << dim {
+            let mut p = *centre;
+            for (a, c) in p.iter_mut().enumerate().take(dim) {
+                *c += if corner >> a & 1 == 1 { 0.5 * s } else { -0.5 * s };
+            }
+            let [x, y, z] = key(p);
+            let node = nodes.entry([z, y, x]).or_insert((p, 0.0, 0.0, 0));
+            node.1 += share * vol;
+            node.2 += s;
+            node.3 += 1;
+        }
+    }
+    let mut out = Particles { volume_scale: cells.volume_scale, ..Particles::default() };
+    for (p, vol, spacing_sum, count) in nodes.into_values() {
+        out.positions.push(p);
+        out.volumes.push(vol);
+        out.spacing.push(spacing_sum / count as f64);
+    }
+    out
 }
