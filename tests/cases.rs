@@ -19,6 +19,17 @@ fn out_dir(tag: &str) -> PathBuf {
     d
 }
 
+/// The rings case copied into a fresh folder (its model beside it): its text, the folder and the
+/// path its case file is to be written to.
+fn rings_copy(tag: &str) -> (String, PathBuf, PathBuf) {
+    let text = std::fs::read_to_string(case("rings_2d")).expect("case");
+    let dir = out_dir(tag);
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::copy(case("rings_2d").with_extension("sph"), dir.join("rings_2d.sph")).unwrap();
+    let path = dir.join("rings_2d.toml");
+    (text, dir, path)
+}
+
 /// Runs a case on the CPU at CI resolution and checks every result against its tolerance.
 fn run_and_check(name: &str, precision: Precision) {
     run_and_check_with(name, &[], precision);
@@ -438,11 +449,7 @@ fn two_rings_in_2d_collide_conserving_momentum() {
 /// A point of a 2D case with a z coordinate is an error, not silently dropped.
 #[test]
 fn a_coordinate_beyond_the_cases_axes_is_an_error() {
-    let text = std::fs::read_to_string(case("rings_2d")).expect("case");
-    let dir = out_dir("beyond-axes");
-    std::fs::create_dir_all(&dir).unwrap();
-    std::fs::copy(case("rings_2d").with_extension("sph"), dir.join("rings_2d.sph")).unwrap();
-    let path = dir.join("rings_2d.toml");
+    let (text, dir, path) = rings_copy("beyond-axes");
     std::fs::write(&path, text.replace(r#"base = ["45 mm", 0, 0]"#, r#"base = ["45 mm", 0, "1 mm"]"#)).unwrap();
     let err = prepare(&path, &Default::default()).err().map(|e| e.to_string()).expect("an error");
     assert!(err.contains("C0002") && err.contains("component z"), "{err}");
@@ -452,11 +459,7 @@ fn a_coordinate_beyond_the_cases_axes_is_an_error() {
 /// A node list given as a region was dropped without a word and the case failed with no message.
 #[test]
 fn a_node_list_as_a_region_is_a_clear_error() {
-    let text = std::fs::read_to_string(case("rings_2d")).expect("case");
-    let dir = out_dir("nodes-region");
-    std::fs::create_dir_all(&dir).unwrap();
-    std::fs::copy(case("rings_2d").with_extension("sph"), dir.join("rings_2d.sph")).unwrap();
-    let path = dir.join("rings_2d.toml");
+    let (text, dir, path) = rings_copy("nodes-region");
     let bad = format!("{text}\n[[constraints]]\nbody = \"left\"\nregion = {{ nodes = {{ file = \"grip.csv\" }} }}\n");
     std::fs::write(&path, &bad).unwrap();
     let err = prepare(&path, &Default::default()).err().map(|e| e.to_string()).expect("an error");
@@ -468,12 +471,8 @@ fn a_node_list_as_a_region_is_a_clear_error() {
 /// `fill` takes "cells" or "nodes", and a node list, which places its own particles, takes none.
 #[test]
 fn a_wrong_fill_is_a_clear_error() {
-    let text = std::fs::read_to_string(case("rings_2d")).expect("case");
-    let dir = out_dir("fill");
-    std::fs::create_dir_all(&dir).unwrap();
-    std::fs::copy(case("rings_2d").with_extension("sph"), dir.join("rings_2d.sph")).unwrap();
+    let (text, dir, path) = rings_copy("fill");
     std::fs::write(dir.join("dots.csv"), "x,y,z\n0,0.3,0\n0.01,0.3,0\n0.02,0.3,0\n").unwrap();
-    let path = dir.join("rings_2d.toml");
     let body = "[[bodies]]\nname = \"dots\"\ngroup = \"solid\"\nmaterial = \"rubber\"\n";
     for (extra, wanted) in [
         ("shape = { nodes = { file = \"dots.csv\" } }\nfill = \"nodes\"", "C0036"),
@@ -492,11 +491,7 @@ fn a_wrong_fill_is_a_clear_error() {
 /// cut-off, an adaptive search without its field or on a field the model lacks.
 #[test]
 fn a_wrong_neighbour_search_is_a_clear_error() {
-    let text = std::fs::read_to_string(case("rings_2d")).expect("case");
-    let dir = out_dir("neighbours");
-    std::fs::create_dir_all(&dir).unwrap();
-    std::fs::copy(case("rings_2d").with_extension("sph"), dir.join("rings_2d.sph")).unwrap();
-    let path = dir.join("rings_2d.toml");
+    let (text, dir, path) = rings_copy("neighbours");
     for (table, wanted, key) in [
         ("search = \"octree\"", "unknown neighbour search `octree`", "search"),
         ("search = \"verlet\"\nskin = 1.5", "between 0 and 1", "skin"),
