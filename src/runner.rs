@@ -421,7 +421,7 @@ pub fn run_study(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailur
         // `study::validate` has checked every result before the runs.
         let Some(across) = sr.across() else { continue };
         let value = match across {
-            study::Across::RechtIpson { x, y } => {
+            study::Across::RechtIpson { x, y, held } => {
                 let points: Vec<(f64, f64)> = outcomes
                     .iter()
                     .filter_map(|(r, o)| {
@@ -434,7 +434,7 @@ pub fn run_study(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailur
                         Some((xv, yv.max(0.0)))
                     })
                     .collect();
-                let fit = study::fit_recht_ipson(&points);
+                let fit = study::fit_recht_ipson(&points, held);
                 histories.push(recht_ipson_plot(quantity, &x, &y, &unit, &points, fit, reference));
                 fit.map(|f| f.v_bl).unwrap_or(f64::NAN)
             }

@@ -487,6 +487,25 @@ fn a_wrong_fill_is_a_clear_error() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// A Recht–Ipson fit may hold `a` and `p`, within their ranges; outside them it is C0031 at the
+/// result.
+#[test]
+fn a_held_recht_ipson_constant_out_of_range_is_a_clear_error() {
+    let dir = out_dir("held-fit");
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::copy(case("borvik_perforation"), dir.join("borvik_perforation.toml")).unwrap();
+    let text = std::fs::read_to_string(case("borvik_8mm")).expect("study");
+    assert!(text.contains("a = 0.909\n"), "the study holds a = 0.909");
+    let path = dir.join("borvik_8mm.toml");
+    std::fs::write(&path, text.replace("a = 0.909\n", "a = 1.5\n")).unwrap();
+    let err = pairsum::runner::check_file(&path, &Default::default()).err().map(|e| e.to_string()).expect("an error");
+    let line = text.lines().position(|l| l.starts_with("quantity = \"ballistic_limit_plugging\"")).unwrap() + 1;
+    assert!(err.contains("C0031") && err.contains(&format!("borvik_8mm.toml:{line}:")), "{err}");
+    std::fs::write(&path, &text).unwrap();
+    assert!(pairsum::runner::check_file(&path, &Default::default()).is_ok());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// A wrong `[neighbours]` table is an error at its line: an unknown search, a skin beyond the
 /// cut-off, an adaptive search without its field or on a field the model lacks.
 #[test]

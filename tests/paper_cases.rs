@@ -82,13 +82,12 @@ fn borvik_8mm_plate_is_perforated_without_gaining_energy() {
         let plug = value(&o, &format!("{v}: plug_residual_velocity"));
         assert!((0.0..1.5 * v_i).contains(&plug), "{v} m/s: plug {plug}");
     }
-    // The ballistic limit from a Recht–Ipson fit of these three runs (a plate of 40 mm radius,
-    // four particles through the thickness, C_CFL 0.3): -8 %. Three runs well above the limit
-    // fix the curve's three constants exactly, so the limit moves a lot with small changes in
-    // them (-17 % before failed particles were kept in compression, -29 % before their energy
-    // took their own stress, with residuals 0.1-1.5 % apart; -34 / -29 / +0 % at 2.667 / 2 /
-    // 1.6 mm); the fine study's fit of seven runs is the figure to quote (docs/results/).
-    within(&o, "ballistic_limit", 0.35);
+    // The ballistic limit from Recht and Ipson's plugging curve (p = 2, a = m_p / (m_p + m_plug)
+    // = 0.909) through these three runs, on a plate of 40 mm radius with four particles through
+    // the thickness: +5.7 %; +2.5 / +5.7 / +7.9 % at 2.667 / 2 / 1.6 mm, Richardson +9.3 %. The
+    // free fit (a and p fitted too) has three unknowns for three runs and swings (−49 % here);
+    // the fine study's seven runs on the full plate are the figures to quote (docs/results/).
+    within(&o, "ballistic_limit_plugging", 0.15);
 }
 
 #[test]

@@ -53,6 +53,12 @@ pub struct StudyResult {
     pub x: Option<String>,
     #[serde(default)]
     pub y: Option<String>,
+    /// `recht_ipson`: the curve's `a` and `p` held at these values instead of fitted (Recht and
+    /// Ipson's plugging form: p = 2, a = m_p / (m_p + m_plug)).
+    #[serde(default)]
+    pub a: Option<f64>,
+    #[serde(default)]
+    pub p: Option<f64>,
     /// Two runs: wall time of the first over the second.
     #[serde(default)]
     pub ratio: Option<[String; 2]>,
@@ -89,8 +95,9 @@ pub struct Study {
 /// What a study result computes across its runs.
 #[derive(Clone, Debug)]
 pub enum Across {
-    /// A Recht–Ipson fit of the case's result `y` against the run parameter `x`.
-    RechtIpson { x: String, y: String },
+    /// A Recht–Ipson fit of the case's result `y` against the run parameter `x`, with `a` and
+    /// `p` held where given.
+    RechtIpson { x: String, y: String, held: Held },
     /// The wall time of the first run over the second's.
     Ratio([String; 2]),
     /// (second − first) / |first| of the case's result `of`.
@@ -104,7 +111,9 @@ impl StudyResult {
     pub fn across(&self) -> Option<Across> {
         if self.fit.is_some() {
             return match (self.fit.as_deref(), &self.x, &self.y) {
-                (Some("recht_ipson"), Some(x), Some(y)) => Some(Across::RechtIpson { x: x.clone(), y: y.clone() }),
+                (Some("recht_ipson"), Some(x), Some(y)) => {
+                    Some(Across::RechtIpson { x: x.clone(), y: y.clone(), held: Held { a: self.a, p: self.p } })
+                }
                 _ => None,
             };
         }
@@ -141,7 +150,13 @@ pub fn validate(study: &Study, case_results: &[String], case_probes: &[String]) 
                 );
                 continue;
             }
-            Some(Across::RechtIpson { x, y }) => {
+            Some(Across::RechtIpson { x, y, held }) => {
+                if held.a.is_some_and(|a| !(a > 0.0 && a <= 1.0)) || held.p.is_some_and(|p| !(1.0..=4.0).contains(&p)) {
+                    err(
+                        format!("a Recht–Ipson curve with a = {:?}, p = {:?}", held.a, held.p),
+                        "hold `a` within (0, 1] and `p` within [1, 4], or leave them out to fit them".into(),
+                    );
+                }
                 if let Some(r) = study
                     .file
                     .runs
@@ -247,9 +262,19 @@ impl RechtIpson {
     }
 }
 
+/// The constants of a Recht–Ipson curve held instead of fitted.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Held {
+    pub a: Option<f64>,
+    pub p: Option<f64>,
+}
+
 /// Least-squares fit over (impact, residual) pairs. Runs that did not perforate (residual 0)
-/// bound the limit from below; `a` is linear and solved exactly for each (p, v_bl) of a search.
-pub fn fit_recht_ipson(points: &[(f64, f64)]) -> Option<RechtIpson> {
+/// bound the limit from below; `a` is linear and solved exactly for each (p, v_bl) of a search,
+/// unless `held` gives it (and `p`). With three runs and nothing held the fit has as many unknowns
+/// as points and its limit swings with small changes in them; holding `a` and `p` at Recht and
+/// Ipson's plugging values leaves the limit alone to fit.
+pub fn fit_recht_ipson(points: &[(f64, f64)], held: Held) -> Option<RechtIpson> {
     let stopped = points.iter().filter(|p| p.1 <= 0.0).map(|p| p.0).fold(0.0, f64::max);
     let through: Vec<(f64, f64)> = points.iter().copied().filter(|p| p.1 > 0.0).collect();
     let lowest = through.iter().map(|p| p.0).fold(f64::INFINITY, f64::min);
@@ -257,8 +282,11 @@ pub fn fit_recht_ipson(points: &[(f64, f64)]) -> Option<RechtIpson> {
         return None;
     }
     let mut best: Option<RechtIpson> = None;
-    for pi in 0..=300 {
-        let p = 1.0 + pi as f64 * 0.01;
+    let ps: Vec<f64> = match held.p {
+        Some(p) => vec![p],
+        None => (0..=300).map(|pi| 1.0 + pi as f64 * 0.01).collect(),
+    };
+    for p in ps {
         for bi in 0..=400 {
             let v_bl = stopped + (lowest - stopped) * bi as f64 / 400.0;
             if v_bl >= lowest {
@@ -270,7 +298,7 @@ pub fn fit_recht_ipson(points: &[(f64, f64)]) -> Option<RechtIpson> {
             if ff <= 0.0 {
                 continue;
             }
-            let a = (fy / ff).clamp(0.0, 1.0);
+            let a = held.a.unwrap_or((fy / ff).clamp(0.0, 1.0));
             let sse: f64 = f.iter().zip(&through).map(|(x, (_, y))| (y - a * x).powi(2)).sum();
             let rms = (sse / through.len() as f64).sqrt();
             if best.is_none_or(|b| rms < b.rms) {
@@ -290,8 +318,24 @@ mod tests {
         let truth = RechtIpson { a: 0.79, p: 2.2, v_bl: 152.5, rms: 0.0 };
         let pts: Vec<(f64, f64)> =
             [137.4, 152.0, 156.0, 165.2, 190.7, 250.8, 298.0].iter().map(|v| (*v, truth.residual(*v))).collect();
-        let fit = fit_recht_ipson(&pts).expect("fits");
+        let fit = fit_recht_ipson(&pts, Held::default()).expect("fits");
         assert!((fit.v_bl - 152.5).abs() < 1.5, "{fit:?}");
         assert!(fit.rms < 1.0, "{fit:?}");
+    }
+
+    #[test]
+    fn recht_ipson_with_a_and_p_held_fits_the_limit_alone() {
+        let truth = RechtIpson { a: 0.909, p: 2.0, v_bl: 152.5, rms: 0.0 };
+        let held = Held { a: Some(0.909), p: Some(2.0) };
+        // Three runs well above the limit, a few per cent off the curve: the limit stays close.
+        let pts: Vec<(f64, f64)> =
+            [(298.0, 1.03), (250.8, 0.97), (190.7, 1.02)].iter().map(|(v, k)| (*v, k * truth.residual(*v))).collect();
+        let fit = fit_recht_ipson(&pts, held).expect("fits");
+        assert_eq!((fit.a, fit.p), (0.909, 2.0));
+        assert!((fit.v_bl - 152.5).abs() < 10.0, "{fit:?}");
+        // On the curve itself, exactly (to the search's step of a 400th of the bracket).
+        let exact: Vec<(f64, f64)> = [298.0, 190.7].iter().map(|v| (*v, truth.residual(*v))).collect();
+        let fit = fit_recht_ipson(&exact, held).expect("fits");
+        assert!((fit.v_bl - 152.5).abs() < 0.5, "{fit:?}");
     }
 }
