@@ -95,6 +95,7 @@ fn input_error(sources: &Sources, diags: &[Diagnostic]) -> RunFailure {
 pub fn prepare(path: &Path, opts: &scene::Options) -> Result<(Scene, Plan), RunFailure> {
     let mut sources = Sources::new();
     let scene = scene::load(path, &mut sources, opts).map_err(|d| input_error(&sources, &d))?;
+    eprint!("{}", scene.warnings);
     let plan = Plan::build(&scene.model, &scene.spec, scene.kernel.as_deref()).map_err(|e| {
         let d = (*e.0).note(format!("while planning the case `{}`", path.display()));
         input_error(&sources, &[d])

@@ -487,6 +487,33 @@ fn a_wrong_fill_is_a_clear_error() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// A box that is not a whole number of spacings holds more (or less) material than it says: the
+/// case loads, with warning C0037 at the box giving the excess; a box that is one gets none.
+#[test]
+fn a_box_that_is_no_whole_number_of_spacings_is_warned_of() {
+    let (text, dir, path) = rings_copy("overhang");
+    let body = "[[bodies]]\nname = \"block\"\ngroup = \"solid\"\nmaterial = \"rubber\"\n";
+    for (top, warned) in [("306.5 mm", true), ("305 mm", false)] {
+        let shape = format!("shape = {{ box = {{ min = [0, \"300 mm\"], max = [\"10 mm\", \"{top}\"] }} }}");
+        let case_text = format!("{text}\n{body}{shape}\n");
+        std::fs::write(&path, &case_text).unwrap();
+        let (scene, _) = prepare(&path, &Default::default()).expect("the case loads");
+        let line = case_text.lines().position(|l| l.starts_with("shape = { box")).unwrap() + 1;
+        if warned {
+            // At 2.5 mm, 6.5 mm is 2.6 spacings and takes 3 rows, 7.5 mm: 15.4 % more.
+            let w = &scene.warnings;
+            assert!(
+                w.contains("C0037") && w.contains("15.4 % more") && w.contains("y (0.0065 m = 2.60 spacings)"),
+                "{w}"
+            );
+            assert!(w.contains(&format!("rings_2d.toml:{line}:")), "{w}");
+        } else {
+            assert!(scene.warnings.is_empty(), "{}", scene.warnings);
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// A Recht–Ipson fit may hold `a` and `p`, within their ranges; outside them it is C0031 at the
 /// result.
 #[test]

@@ -191,7 +191,10 @@ pub fn load(path: &Path, sources: &mut Sources, opts: &Options) -> Result<Scene,
     let mut cx = Ctx { file, dim, diags: &mut diags };
     let scene = build(&case, path, &dir, model, opts, &mut cx);
     match scene {
-        Some(s) if !diags.iter().any(|d| d.is_error()) => Ok(s),
+        Some(mut s) if !diags.iter().any(|d| d.is_error()) => {
+            s.warnings = crate::diag::render(sources, &diags);
+            Ok(s)
+        }
         _ => Err(diags),
     }
 }
@@ -775,6 +778,7 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
     }
     let _ = GroupSet::default();
     Some(Scene {
+        warnings: String::new(),
         name: case.name.get_ref().clone(),
         title: case.title.clone().unwrap_or_default(),
         path: path.to_path_buf(),
@@ -986,6 +990,9 @@ fn place_whole(
             geometry::fill_with(&shape, &geometry::Fill { spacing, origin: Some(origin) }, cx.dim)
         }
     };
+    if let (Ok(cells), Primitive::Box { min, max }, None) = (&filled, &shape, &body.refine) {
+        warn_box_overhang(name, span.clone(), (min, max), spacing, cells.total_volume(), cx);
+    }
     let filled = match body.fill_at() {
         case::FillAt::Cells => filled,
         case::FillAt::Nodes => filled.map(|cells| geometry::at_corners(&cells, cx.dim)),
@@ -1039,6 +1046,39 @@ fn initial_value(
             None
         }
     }
+}
+
+/// Warns (C0037) when a box is not a whole number of spacings along an axis: its cell-centred
+/// lattice then holds more or less volume, and mass, than the box (a 4 mm plate at 1.41 mm holds
+/// three layers, 4.24 mm of material).
+fn warn_box_overhang(
+    name: &str,
+    span: std::ops::Range<usize>,
+    (min, max): (&[f64; 3], &[f64; 3]),
+    spacing: f64,
+    filled: f64,
+    cx: &mut Ctx,
+) {
+    let exact: f64 = (0..cx.dim).map(|a| max[a] - min[a]).product();
+    let excess = filled / exact - 1.0;
+    if excess.abs() <= 0.01 {
+        return;
+    }
+    let axes: Vec<String> = (0..cx.dim)
+        .map(|a| (a, (max[a] - min[a]) / spacing))
+        .filter(|(_, n)| (n - n.round()).abs() > 1e-6)
+        .map(|(a, n)| format!("{} ({:.4} m = {n:.2} spacings)", ["x", "y", "z"][a], max[a] - min[a]))
+        .collect();
+    let more = if excess > 0.0 { "more" } else { "less" };
+    let msg = format!(
+        "body `{name}`: its particles hold {:.1} % {more} volume, and mass, than its box, which is not a whole number of spacings ({spacing} m) along {}",
+        100.0 * excess.abs(),
+        axes.join(", ")
+    );
+    let d = Diagnostic::warning("C0037", msg)
+        .at(cx.span(span), "this box")
+        .help("choose a spacing that divides the box, or a box that is a whole number of spacings");
+    cx.diags.push(d);
 }
 
 fn primitive(s: &case::Shape, cx: &mut Ctx) -> Option<Primitive> {

@@ -96,6 +96,8 @@ pub struct ResultSpec {
 }
 
 pub struct Scene {
+    /// The case's warnings, rendered with file, line and column (empty when there are none).
+    pub warnings: String,
     pub name: String,
     pub title: String,
     pub path: PathBuf,
