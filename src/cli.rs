@@ -241,9 +241,12 @@ fn run_check(paths: &[PathBuf], deny_warnings: bool) -> i32 {
     }
     for case in &cases {
         n += 1;
-        if let Err(e) = crate::runner::check_file(case, &crate::scene::Options::default()) {
-            eprint!("{e}");
-            errors += 1;
+        match crate::runner::check_file(case, &crate::scene::Options::default()) {
+            Ok(w) => warnings += w,
+            Err(e) => {
+                eprint!("{e}");
+                errors += 1;
+            }
         }
     }
     if errors > 0 {
@@ -451,7 +454,8 @@ fn run_plan(path: &Path, dim: usize, integrator: &str, precision: Precision, opt
     }
     if path.extension().is_some_and(|e| e == "toml") {
         return match crate::runner::prepare(path, opts) {
-            Ok((_, plan)) => {
+            Ok((scene, plan)) => {
+                eprint!("{}", scene.warnings.concat());
                 print!("{}", plan.describe(real));
                 0
             }

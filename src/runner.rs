@@ -95,7 +95,6 @@ fn input_error(sources: &Sources, diags: &[Diagnostic]) -> RunFailure {
 pub fn prepare(path: &Path, opts: &scene::Options) -> Result<(Scene, Plan), RunFailure> {
     let mut sources = Sources::new();
     let scene = scene::load(path, &mut sources, opts).map_err(|d| input_error(&sources, &d))?;
-    eprint!("{}", scene.warnings);
     let plan = Plan::build(&scene.model, &scene.spec, scene.kernel.as_deref()).map_err(|e| {
         let d = (*e.0).note(format!("while planning the case `{}`", path.display()));
         input_error(&sources, &[d])
@@ -106,6 +105,7 @@ pub fn prepare(path: &Path, opts: &scene::Options) -> Result<(Scene, Plan), RunF
 /// Runs a case on the chosen backend and writes its outputs and report into `opts.out`.
 pub fn run_case(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailure> {
     let (scene, plan) = prepare(path, &opts.scene)?;
+    eprint!("{}", scene.warnings.concat());
     claim_out(opts)?;
     match opts.backend {
         BackendChoice::Cpu => run_cpu_precision(scene, plan, opts),
@@ -591,14 +591,18 @@ fn sanitize(s: &str) -> String {
 }
 
 /// Checks a case or a study without running it: the case loads and plans; a study's every run
-/// loads and plans, and its results name what its case reports.
-pub fn check_file(path: &Path, opts: &scene::Options) -> Result<(), RunFailure> {
+/// loads and plans, and its results name what its case reports. Prints a case's warnings and
+/// returns how many (a study's runs print theirs when they run).
+pub fn check_file(path: &Path, opts: &scene::Options) -> Result<usize, RunFailure> {
     let text = read_text(path)?;
     if crate::scene::study::is_study(&text) {
         let o = RunOptions { scene: opts.clone(), ..RunOptions::default() };
-        prepare_study(path, &o).map(|_| ())
+        prepare_study(path, &o).map(|_| 0)
     } else {
-        prepare(path, opts).map(|_| ())
+        prepare(path, opts).map(|(scene, _)| {
+            eprint!("{}", scene.warnings.concat());
+            scene.warnings.len()
+        })
     }
 }
 

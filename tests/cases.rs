@@ -501,14 +501,14 @@ fn a_box_that_is_no_whole_number_of_spacings_is_warned_of() {
         let line = case_text.lines().position(|l| l.starts_with("shape = { box")).unwrap() + 1;
         if warned {
             // At 2.5 mm, 6.5 mm is 2.6 spacings and takes 3 rows, 7.5 mm: 15.4 % more.
-            let w = &scene.warnings;
+            let w = scene.warnings.concat();
             assert!(
                 w.contains("C0037") && w.contains("15.4 % more") && w.contains("y (0.0065 m = 2.60 spacings)"),
                 "{w}"
             );
             assert!(w.contains(&format!("rings_2d.toml:{line}:")), "{w}");
         } else {
-            assert!(scene.warnings.is_empty(), "{}", scene.warnings);
+            assert!(scene.warnings.is_empty(), "{}", scene.warnings.concat());
         }
     }
     let _ = std::fs::remove_dir_all(&dir);

@@ -192,7 +192,7 @@ pub fn load(path: &Path, sources: &mut Sources, opts: &Options) -> Result<Scene,
     let scene = build(&case, path, &dir, model, opts, &mut cx);
     match scene {
         Some(mut s) if !diags.iter().any(|d| d.is_error()) => {
-            s.warnings = crate::diag::render(sources, &diags);
+            s.warnings = diags.iter().map(|d| crate::diag::render(sources, std::slice::from_ref(d))).collect();
             Ok(s)
         }
         _ => Err(diags),
@@ -778,7 +778,7 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
     }
     let _ = GroupSet::default();
     Some(Scene {
-        warnings: String::new(),
+        warnings: vec![],
         name: case.name.get_ref().clone(),
         title: case.title.clone().unwrap_or_default(),
         path: path.to_path_buf(),

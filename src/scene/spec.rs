@@ -96,8 +96,9 @@ pub struct ResultSpec {
 }
 
 pub struct Scene {
-    /// The case's warnings, rendered with file, line and column (empty when there are none).
-    pub warnings: String,
+    /// The case's warnings, each rendered with file, line and column; a run, `pairsum plan` and
+    /// `pairsum check` print them, loading does not.
+    pub warnings: Vec<String>,
     pub name: String,
     pub title: String,
     pub path: PathBuf,
