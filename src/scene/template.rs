@@ -25,6 +25,7 @@ fn as_text(v: &toml::Value) -> String {
 
 /// The case text read as TOML with every `${name}` replaced by 0, so that the `[parameters]` and
 /// the resolutions can be read before the values are known (a placeholder may stand for a number).
+/// The 0 is padded with spaces to the placeholder's length, so that an error's span is the text's.
 pub fn skeleton(text: &str) -> Result<toml::Table, toml::de::Error> {
     let mut out = String::with_capacity(text.len());
     let mut rest = text;
@@ -33,6 +34,7 @@ pub fn skeleton(text: &str) -> Result<toml::Table, toml::de::Error> {
         match rest[k..].find('}') {
             Some(close) => {
                 out.push('0');
+                out.push_str(&" ".repeat(close));
                 rest = &rest[k + close + 1..];
             }
             None => {
@@ -50,8 +52,12 @@ pub fn expand(text: &str, set: &[(String, String)]) -> Result<String, TemplateEr
     if !text.contains("${") && set.is_empty() {
         return Ok(text.to_string());
     }
-    let defaults: toml::Table =
-        skeleton(text).ok().and_then(|t| t.get("parameters").and_then(|p| p.as_table()).cloned()).unwrap_or_default();
+    // A text that is not TOML is reported as such here: its parameters cannot be read.
+    let table = skeleton(text).map_err(|e| {
+        let span = e.span().unwrap_or(0..0);
+        TemplateError { start: span.start, end: span.end, message: e.message().to_string() }
+    })?;
+    let defaults = table.get("parameters").and_then(|p| p.as_table()).cloned().unwrap_or_default();
     for (name, _) in set {
         if !defaults.contains_key(name) {
             let names: Vec<&String> = defaults.keys().collect();
@@ -105,5 +111,13 @@ mod tests {
         assert!(out.contains("velocity = \"-250.8 m/s\"") && out.contains("thick = \"8 mm\""), "{out}");
         assert_eq!(out.lines().count(), text.lines().count());
         assert!(expand("x = \"${nope}\"", &[]).expect_err("error").message.contains("nope"));
+    }
+
+    #[test]
+    fn a_text_that_is_not_toml_is_reported_where_it_breaks_not_as_a_missing_parameter() {
+        let text = "[parameters]\nv = 1\n[b]\nspeed = \"${v} m/s\"\ntolerance = TOL\n";
+        let e = expand(text, &[]).expect_err("an error");
+        assert_eq!(&text[e.start..e.start + 3], "TOL", "{}", e.message);
+        assert!(!e.message.contains("names no entry"), "{}", e.message);
     }
 }
