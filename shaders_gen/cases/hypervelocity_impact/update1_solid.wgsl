@@ -127,28 +127,36 @@ fn st_eps_p(i: u32, v: f32) {
     let b = u32(info[15 + G] + i32(i) * 1);
     data[b] = v;
 }
-fn ld_T(i: u32) -> f32 {
+fn ld_deps_p(i: u32) -> f32 {
     let b = u32(info[16 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_deps_p(i: u32, v: f32) {
+    let b = u32(info[16 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_T(i: u32) -> f32 {
+    let b = u32(info[17 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_T(i: u32, v: f32) {
-    let b = u32(info[16 + G] + i32(i) * 1);
+    let b = u32(info[17 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_drho(i: u32) -> f32 {
-    let b = u32(info[17 + G] + i32(i) * 1);
+    let b = u32(info[18 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho(i: u32, v: f32) {
-    let b = u32(info[17 + G] + i32(i) * 1);
+    let b = u32(info[18 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_ds(i: u32) -> mat3x3<f32> {
-    let b = u32(info[18 + G] + i32(i) * 6);
+    let b = u32(info[19 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_ds(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[18 + G] + i32(i) * 6);
+    let b = u32(info[19 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -157,57 +165,57 @@ fn st_ds(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_de(i: u32) -> f32 {
-    let b = u32(info[19 + G] + i32(i) * 1);
+    let b = u32(info[20 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_de(i: u32, v: f32) {
-    let b = u32(info[19 + G] + i32(i) * 1);
+    let b = u32(info[20 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_dv(i: u32) -> vec3<f32> {
-    let b = u32(info[20 + G] + i32(i) * 3);
+    let b = u32(info[21 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_dv(i: u32, v: vec3<f32>) {
-    let b = u32(info[20 + G] + i32(i) * 3);
+    let b = u32(info[21 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_x_0(i: u32) -> vec3<f32> {
-    let b = u32(info[21 + G] + i32(i) * 3);
+    let b = u32(info[22 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_x_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[21 + G] + i32(i) * 3);
+    let b = u32(info[22 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_v_0(i: u32) -> vec3<f32> {
-    let b = u32(info[22 + G] + i32(i) * 3);
+    let b = u32(info[23 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_v_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[22 + G] + i32(i) * 3);
+    let b = u32(info[23 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_rho_0(i: u32) -> f32 {
-    let b = u32(info[23 + G] + i32(i) * 1);
+    let b = u32(info[24 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho_0(i: u32, v: f32) {
-    let b = u32(info[23 + G] + i32(i) * 1);
+    let b = u32(info[24 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s_0(i: u32) -> mat3x3<f32> {
-    let b = u32(info[24 + G] + i32(i) * 6);
+    let b = u32(info[25 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s_0(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[24 + G] + i32(i) * 6);
+    let b = u32(info[25 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -216,75 +224,91 @@ fn st_s_0(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_e_0(i: u32) -> f32 {
-    let b = u32(info[25 + G] + i32(i) * 1);
+    let b = u32(info[26 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_e_0(i: u32, v: f32) {
-    let b = u32(info[25 + G] + i32(i) * 1);
+    let b = u32(info[26 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 0u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 5u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 6u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 7u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 8u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 12u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 13u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 14u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 15u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 16u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 17u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 18u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 19u;
-    return params[b];
-}
-fn prm_eps_f(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 19u;
     return params[b];
 }
 fn prm_p_spall(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 20u;
+    return params[b];
+}
+fn prm_D1(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 21u;
+    return params[b];
+}
+fn prm_D2(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 22u;
+    return params[b];
+}
+fn prm_D3(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 23u;
+    return params[b];
+}
+fn prm_D4(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 24u;
+    return params[b];
+}
+fn prm_D5(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 25u;
     return params[b];
 }
 fn prm_C_v(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 26u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -317,6 +341,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     T_i = (prm_T_room(i) + (max(e_i, 0.0) / prm_C_v(i)));
     // radial_return
     var eps_p_i: f32 = ld_eps_p(i);
+    var deps_p_i: f32 = ld_deps_p(i);
     let sig_eq = sqrt(((3.0 * 0.5) * ddot(s_i, s_i)));
     let eps_p = eps_p_i;
     let e = ld_edot(i);
@@ -325,15 +350,30 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let T = T_i;
     let hardening = (prm_jc_A(i) + (prm_jc_B(i) * pow(max(eps_p, 0.0), prm_jc_n(i))));
     let rate = (1.0 + (prm_jc_C(i) * log(max((rate_p / prm_eps_rate0(i)), 1.0))));
-    let t_star = min(max(((T - prm_T_room(i)) / (prm_T_melt(i) - prm_T_room(i))), 0.0), 1.0);
-    let sigma_y = ((hardening * rate) * (1.0 - pow(t_star, prm_jc_m(i))));
+    let T_2 = T;
+    let sigma_y = ((hardening * rate) * (1.0 - pow(min(max(((T_2 - prm_T_room(i)) / (prm_T_melt(i) - prm_T_room(i))), 0.0), 1.0), prm_jc_m(i))));
     let c_y = min(1.0, (sigma_y / max(sig_eq, 1e-30)));
     let d_2 = (((1.0 - c_y) / (3.0 * prm_G(i))) * sig_eq);
     s_i = (c_y * s_i);
     eps_p_i = (eps_p_i + d_2);
-    // spall_damage
+    deps_p_i = d_2;
+    // damage
     var D_i: f32 = ld_D(i);
-    D_i = select(D_i, 1.0, ((eps_p_i >= prm_eps_f(i)) || (ld_p(i) <= (-prm_p_spall(i)))));
+    let p = ld_p(i);
+    let s_2 = s_i;
+    let edot = ld_edot(i);
+    let T_3 = T_i;
+    let sigma_m = (-p);
+    let s_3 = s_2;
+    let sigma_eq = sqrt((1.5 * ddot(s_3, s_3)));
+    let e_2 = edot;
+    let d_3 = dev(e_2);
+    let rate_2 = (sqrt(((2.0 / 3.0) * ddot(d_3, d_3))) / prm_eps_rate0(i));
+    let T_4 = T_3;
+    let t_star = min(max(((T_4 - prm_T_room(i)) / (prm_T_melt(i) - prm_T_room(i))), 0.0), 1.0);
+    let triax = (sigma_m / max(sigma_eq, 1e-30));
+    let accumulated = min((D_i + (deps_p_i / max((((prm_D1(i) + (prm_D2(i) * exp((prm_D3(i) * triax)))) * (1.0 + (prm_D4(i) * log(max(rate_2, 1.0))))) * (1.0 + (prm_D5(i) * t_star))), 1e-12))), 1.0);
+    D_i = select(accumulated, 1.0, (ld_p(i) <= (-prm_p_spall(i))));
     // eos
     var p_i: f32 = ld_p(i);
     var c_i: f32 = ld_c(i);
@@ -355,5 +395,6 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     st_c(i, c_i);
     st_D(i, D_i);
     st_eps_p(i, eps_p_i);
+    st_deps_p(i, deps_p_i);
     st_T(i, T_i);
 }

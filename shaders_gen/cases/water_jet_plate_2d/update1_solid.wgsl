@@ -308,8 +308,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let T = T_i;
     let hardening = (prm_jc_A(i) + (prm_jc_B(i) * pow(max(eps_p, 0.0), prm_jc_n(i))));
     let rate = (1.0 + (prm_jc_C(i) * log(max((rate_p / prm_eps_rate0(i)), 1.0))));
-    let t_star = min(max(((T - prm_T_room(i)) / (prm_T_melt(i) - prm_T_room(i))), 0.0), 1.0);
-    let sigma_y = ((hardening * rate) * (1.0 - pow(t_star, prm_jc_m(i))));
+    let T_2 = T;
+    let sigma_y = ((hardening * rate) * (1.0 - pow(min(max(((T_2 - prm_T_room(i)) / (prm_T_melt(i) - prm_T_room(i))), 0.0), 1.0), prm_jc_m(i))));
     let c_y = min(1.0, (sigma_y / max(sig_eq, 1e-30)));
     let d_2 = (((1.0 - c_y) / (3.0 * prm_G(i))) * sig_eq);
     s_i = (c_y * s_i);

@@ -370,25 +370,28 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let T = ld_T(i);
     let hardening = (prm_jc_A(i) + (prm_jc_B(i) * pow(max(eps_p, 0.0), prm_jc_n(i))));
     let rate = (1.0 + (prm_jc_C(i) * log(max((rate_p / prm_eps_rate0(i)), 1.0))));
-    let t_star = min(max(((T - prm_T_room(i)) / (prm_T_melt(i) - prm_T_room(i))), 0.0), 1.0);
-    let sigma_y = ((hardening * rate) * (1.0 - pow(t_star, prm_jc_m(i))));
+    let T_2 = T;
+    let sigma_y = ((hardening * rate) * (1.0 - pow(min(max(((T_2 - prm_T_room(i)) / (prm_T_melt(i) - prm_T_room(i))), 0.0), 1.0), prm_jc_m(i))));
     let c_y = min(1.0, (sigma_y / max(sig_eq, 1e-30)));
     let d_2 = (((1.0 - c_y) / (3.0 * prm_G(i))) * sig_eq);
     s_i = (c_y * s_i);
     eps_p_i = (eps_p_i + d_2);
     deps_p_i = d_2;
     // damage
-    let sigma_m = (-ld_p(i));
-    let sigma_m_2 = sigma_m;
+    let p = ld_p(i);
     let s_2 = s_i;
-    let sigma_eq = sqrt((1.5 * ddot(s_2, s_2)));
-    let e_2 = ld_edot(i);
+    let edot = ld_edot(i);
+    let T_3 = ld_T(i);
+    let sigma_m = (-p);
+    let s_3 = s_2;
+    let sigma_eq = sqrt((1.5 * ddot(s_3, s_3)));
+    let e_2 = edot;
     let d_3 = dev(e_2);
     let rate_2 = (sqrt(((2.0 / 3.0) * ddot(d_3, d_3))) / prm_eps_rate0(i));
-    let t_star_2 = ((ld_T(i) - prm_T_room(i)) / (prm_T_melt(i) - prm_T_room(i)));
-    let triax = (sigma_m_2 / max(sigma_eq, 1e-30));
-    let eps_f = (((prm_D1(i) + (prm_D2(i) * exp((prm_D3(i) * triax)))) * (1.0 + (prm_D4(i) * log(max(rate_2, 1.0))))) * (1.0 + (prm_D5(i) * t_star_2)));
-    D_i = min((D_i + (deps_p_i / max(eps_f, 1e-12))), 1.0);
+    let T_4 = T_3;
+    let t_star = min(max(((T_4 - prm_T_room(i)) / (prm_T_melt(i) - prm_T_room(i))), 0.0), 1.0);
+    let triax = (sigma_m / max(sigma_eq, 1e-30));
+    D_i = min((D_i + (deps_p_i / max((((prm_D1(i) + (prm_D2(i) * exp((prm_D3(i) * triax)))) * (1.0 + (prm_D4(i) * log(max(rate_2, 1.0))))) * (1.0 + (prm_D5(i) * t_star))), 1e-12))), 1.0);
     // failed_density_floor
     rho_i = select(rho_i, max(rho_i, prm_rho0(i)), (D_i >= 1.0));
     // eos
