@@ -21,6 +21,8 @@ pub enum Measure {
     KineticEnergy,
     MaxSpeed,
     CraterDiameter,
+    /// The crater in the plate's intact material: failed particles (`D ≥ 1`) do not count.
+    IntactCraterDiameter,
     DebrisLength,
     DebrisWidth,
     DebrisLengthToWidth,
@@ -29,7 +31,7 @@ pub enum Measure {
 }
 
 impl Measure {
-    pub const ALL: [Measure; 12] = [
+    pub const ALL: [Measure; 13] = [
         Measure::MinPairDistance,
         Measure::MaxNeighbourGap,
         Measure::MinInterbodyDistance,
@@ -38,6 +40,7 @@ impl Measure {
         Measure::KineticEnergy,
         Measure::MaxSpeed,
         Measure::CraterDiameter,
+        Measure::IntactCraterDiameter,
         Measure::DebrisLength,
         Measure::DebrisWidth,
         Measure::DebrisLengthToWidth,
@@ -55,6 +58,7 @@ impl Measure {
             Measure::KineticEnergy => "kinetic_energy",
             Measure::MaxSpeed => "max_speed",
             Measure::CraterDiameter => "crater_diameter",
+            Measure::IntactCraterDiameter => "intact_crater_diameter",
             Measure::DebrisLength => "debris_length",
             Measure::DebrisWidth => "debris_width",
             Measure::DebrisLengthToWidth => "debris_length_to_width",
@@ -71,6 +75,7 @@ impl Measure {
         match self {
             Measure::MinInterbodyDistance | Measure::Interpenetrated | Measure::CraterDiameter => &["x"],
             Measure::MinPairDistance | Measure::MaxNeighbourGap => &["x", "dx"],
+            Measure::IntactCraterDiameter => &["x", "D"],
             Measure::DebrisLength | Measure::DebrisWidth | Measure::DebrisLengthToWidth => &["x"],
             Measure::FrontPosition | Measure::PlugVelocity => &["x", "v"],
             Measure::KineticEnergy => &["v", "m"],
@@ -193,7 +198,8 @@ fn measure(m: Measure, scene: &Scene, b: &dyn Backend) -> Result<f64, BackendErr
         Measure::MaxNeighbourGap => spacing_extremes(&x, b)?.1,
         Measure::KineticEnergy => kinetic_energy(b)?,
         Measure::MaxSpeed => speeds(b)?.into_iter().fold(0.0, f64::max),
-        Measure::CraterDiameter => crater_diameter(&x, &which, scene),
+        Measure::CraterDiameter => crater_diameter(&x, &which, scene, None),
+        Measure::IntactCraterDiameter => crater_diameter(&x, &which, scene, damage(b)?.as_deref()),
         Measure::DebrisLength => debris(&x, scene).0,
         Measure::DebrisWidth => debris(&x, scene).1,
         Measure::DebrisLengthToWidth => {
@@ -304,11 +310,24 @@ impl Axis {
 /// only within the plate's initial slab widened by its thickness on each side (so that bent or
 /// lipped material still counts, and ejected material does not). The crater's radius is where the
 /// ring's share of its initial count first reaches one half, interpolated between rings.
-fn crater_diameter(x: &[[f64; 3]], body: &[u32], scene: &Scene) -> f64 {
+/// Given the damage `D` of every particle, only the intact ones (`D < 1`) count: a failed particle
+/// carries no tension, so it is loose fragments that a recovered plate would not hold.
+fn crater_diameter(x: &[[f64; 3]], body: &[u32], scene: &Scene, damage: Option<&[f64]>) -> f64 {
     let (Some(axis), Some(plate)) = (Axis::of(scene), scene.bodies.get(1)) else { return f64::NAN };
     let initial: Vec<[f64; 3]> = plate.particles.clone().map(|k| scene.particles.x[k]).collect();
-    let now = x.iter().zip(body).filter(|(_, b)| **b == 1).map(|(p, _)| *p);
-    hole_diameter(&axis, &initial, now, scene.dx)
+    hole_diameter(&axis, &initial, plate_now(x, body, damage), scene.dx)
+}
+
+/// Where the second body's particles are now, only the intact ones (`D < 1`) given the damage.
+fn plate_now<'a>(x: &'a [[f64; 3]], body: &'a [u32], damage: Option<&'a [f64]>) -> impl Iterator<Item = [f64; 3]> + 'a {
+    let intact = move |k: usize| damage.is_none_or(|d| d[k] < 1.0);
+    (0..x.len()).filter(move |k| body[*k] == 1 && intact(*k)).map(|k| x[k])
+}
+
+/// The damage `D` of every particle, or none where the model has no damage (nothing has failed).
+fn damage(b: &dyn Backend) -> Result<Option<Vec<f64>>, BackendError> {
+    let Some(d) = b.plan().model.field_id("D") else { return Ok(None) };
+    Ok(b.read(d)?.map(|(_, d)| d))
 }
 
 /// [`crater_diameter`] of a plate whose particles were at `initial` and are now at `now`.
@@ -544,6 +563,24 @@ mod tests {
             assert_eq!(hole_diameter(&axis, &initial, lip, 1e-3), 0.0);
         }
         assert_eq!(hole_diameter(&axis, &initial, initial.iter().copied(), 1e-3), 0.0, "no hole");
+    }
+
+    #[test]
+    fn the_intact_crater_leaves_out_the_failed_rim_and_the_crater_keeps_it() {
+        let axis = Axis { origin: [0.0; 3], dir: [0.0, 0.0, -1.0] };
+        let initial = plate();
+        let r = |p: &[f64; 3]| (p[0] * p[0] + p[1] * p[1]).sqrt();
+        // A hole of radius 5 mm, its rim failed out to 8 mm.
+        let x: Vec<[f64; 3]> = initial.iter().filter(|p| r(p) >= 5e-3).copied().collect();
+        let body = vec![1; x.len()];
+        let damage: Vec<f64> = x.iter().map(|p| if r(p) < 8e-3 { 1.0 } else { 0.3 }).collect();
+        let all = hole_diameter(&axis, &initial, plate_now(&x, &body, None), 1e-3);
+        let intact = hole_diameter(&axis, &initial, plate_now(&x, &body, Some(&damage)), 1e-3);
+        assert!((all - 10e-3).abs() <= 1e-3, "crater {all}");
+        assert!((intact - 16e-3).abs() <= 1e-3, "intact crater {intact}");
+        // Another body's particles never count.
+        let other: Vec<u32> = x.iter().map(|p| u32::from(r(p) >= 8e-3)).collect();
+        assert_eq!(hole_diameter(&axis, &initial, plate_now(&x, &other, None), 1e-3), intact);
     }
 
     #[test]
