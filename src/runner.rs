@@ -411,6 +411,7 @@ pub fn run_study(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailur
     let (backend, precision) = (first.backend.clone(), first.precision.clone());
     let mut results = vec![];
     let mut histories = vec![];
+    let (mut fit_rows, mut fit_notes) = (vec![], vec![]);
     let value_of = |run: &str, q: &str| -> Option<f64> {
         outcomes.iter().find(|(r, _)| r.name == run)?.1.report.results.iter().find(|x| x.quantity == q).map(|x| x.value)
     };
@@ -437,6 +438,18 @@ pub fn run_study(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailur
                     .collect();
                 let fit = study::fit_recht_ipson(&points, held);
                 histories.push(recht_ipson_plot(quantity, &x, &y, &unit, &points, fit, reference));
+                if let Some(f) = fit {
+                    fit_rows.push(ResultRow::new(format!("{quantity}, fit rms"), unit.clone(), f.rms, None));
+                    let through: Vec<f64> = points.iter().map(|p| p.1).filter(|r| *r > 0.0).collect();
+                    let mean = through.iter().sum::<f64>() / through.len() as f64;
+                    fit_notes.push(format!(
+                        "`{quantity}`: the curve misses the runs that perforated by {:.3} {unit} rms, {:.0} % of \
+                         their mean residual; where that is large the runs do not follow a Recht–Ipson curve \
+                         and its limit means little",
+                        f.rms,
+                        100.0 * f.rms / mean
+                    ));
+                }
                 fit.map(|f| f.v_bl).unwrap_or(f64::NAN)
             }
             study::Across::Ratio([a, b]) => match (wall_of(&a), wall_of(&b)) {
@@ -455,6 +468,7 @@ pub fn run_study(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailur
         }
         results.push(row);
     }
+    results.append(&mut fit_rows);
     for probe in &st.file.plots {
         let series: Vec<Curve> = outcomes
             .iter()
@@ -485,6 +499,7 @@ pub fn run_study(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailur
     let work: f64 = outcomes.iter().map(|(_, o)| o.report.particles as f64 * o.report.steps as f64).sum();
     let mut notes = vec![format!("{} runs of `{}`", outcomes.len(), st.case_path.display())];
     notes.extend(st.file.notes.iter().cloned());
+    notes.extend(fit_notes);
     for (r, o) in &outcomes {
         notes.push(format!(
             "run `{}`: {} particles, {} steps, {:.1} s; report in {}/",

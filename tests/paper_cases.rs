@@ -92,6 +92,18 @@ fn borvik_8mm_plate_is_perforated_without_gaining_energy() {
     // the fine study's seven runs on the full plate (700 µs) are the figures to quote: −4.3 %
     // (docs/results/borvik_8mm_fine/).
     within(&o, "ballistic_limit_plugging", 0.15);
+    // The fit's rms, recomputed from the runs and the fitted limit on the plugging curve.
+    let v_bl = value(&o, "ballistic_limit_plugging");
+    let misses: Vec<f64> = ["298", "250.8", "190.7"]
+        .iter()
+        .map(|v| {
+            let v_i: f64 = v.parse().unwrap();
+            value(&o, &format!("{v}: projectile_residual_velocity")) - 0.909 * (v_i * v_i - v_bl * v_bl).sqrt()
+        })
+        .collect();
+    let rms = (misses.iter().map(|m| m * m).sum::<f64>() / 3.0).sqrt();
+    let reported = value(&o, "ballistic_limit_plugging, fit rms");
+    assert!((reported - rms).abs() <= 1e-9 * rms.max(1.0), "fit rms {reported}, recomputed {rms}");
 }
 
 #[test]
