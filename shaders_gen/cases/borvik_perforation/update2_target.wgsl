@@ -403,20 +403,23 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     eps_p_i = (eps_p_i + d_2);
     deps_p_i = d_2;
     // damage
+    let D = D_i;
+    let deps_p = deps_p_i;
     let p = ld_p(i);
     let s_2 = s_i;
     let edot = ld_edot(i);
     let T_3 = ld_T(i);
-    let sigma_m = (-p);
+    let p_2 = p;
     let s_3 = s_2;
-    let sigma_eq = sqrt((1.5 * ddot(s_3, s_3)));
-    let e_2 = edot;
+    let edot_2 = edot;
+    let T_4 = T_3;
+    let e_2 = edot_2;
     let d_3 = dev(e_2);
     let rate_2 = (sqrt(((2.0 / 3.0) * ddot(d_3, d_3))) / prm_eps_rate0(i));
-    let T_4 = T_3;
-    let t_star = min(max(((T_4 - prm_T_room(i)) / (prm_T_melt(i) - prm_T_room(i))), 0.0), 1.0);
-    let triax = (sigma_m / max(sigma_eq, 1e-30));
-    D_i = min((D_i + (deps_p_i / max((((prm_D1(i) + (prm_D2(i) * exp((prm_D3(i) * triax)))) * (1.0 + (prm_D4(i) * log(max(rate_2, 1.0))))) * (1.0 + (prm_D5(i) * t_star))), 1e-12))), 1.0);
+    let s_4 = s_3;
+    let triax = ((-p_2) / max(sqrt((1.5 * ddot(s_4, s_4))), 1e-30));
+    let T_5 = T_4;
+    D_i = min((D + (deps_p / max((((prm_D1(i) + (prm_D2(i) * exp((prm_D3(i) * triax)))) * (1.0 + (prm_D4(i) * log(max(rate_2, 1.0))))) * (1.0 + (prm_D5(i) * min(max(((T_5 - prm_T_room(i)) / (prm_T_melt(i) - prm_T_room(i))), 0.0), 1.0)))), 1e-12))), 1.0);
     // failed_density_floor
     rho_i = select(rho_i, max(rho_i, prm_rho0(i)), (D_i >= 1.0));
     // eos
