@@ -55,8 +55,19 @@ fn syntax_error(file: u32, text: &str, e: pest::error::Error<Rule>) -> Diagnosti
         pest::error::ErrorVariant::ParsingError { positives, .. } => describe_expected(positives),
         pest::error::ErrorVariant::CustomError { message } => message.clone(),
     };
-    Diagnostic::error("E0001", format!("syntax error: expected {expected}, found {found}"))
-        .at(span, format!("expected {expected}"))
+    let d = Diagnostic::error("E0001", format!("syntax error: expected {expected}, found {found}"))
+        .at(span, format!("expected {expected}"));
+    if begins_line_with_paren(text, pos) {
+        d.help("a line that begins with `(` starts a new statement; to continue the expression above, end its line with the operator")
+    } else {
+        d
+    }
+}
+
+/// Whether `pos` is a `(` with nothing but spaces before it on its line.
+fn begins_line_with_paren(text: &str, pos: usize) -> bool {
+    let line_start = text[..pos.min(text.len())].rfind('\n').map_or(0, |k| k + 1);
+    text[pos.min(text.len())..].starts_with('(') && text[line_start..pos].trim().is_empty()
 }
 
 fn describe_expected(rules: &[Rule]) -> String {
@@ -78,7 +89,7 @@ fn rule_text(r: Rule) -> &'static str {
     match r {
         EOI => "the end of the file",
         file => "an item",
-        ident | name => "a name",
+        ident | name | callee => "a name",
         side => "`i` or `j`",
         number | number_lit => "a number",
         expr | primary | operand | prefix | neg | not | call | paren | bool_lit | in_group => "an expression",
