@@ -395,7 +395,7 @@ pub fn backend_failure(e: BackendError) -> RunFailure {
 /// across runs. Each run writes into `out/<run>/`, the study's report into `out/`.
 pub fn run_study(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailure> {
     use crate::scene::study;
-    let (st, runs, _) = prepare_study(path, opts)?;
+    let PreparedStudy { study: st, runs, .. } = prepare_study(path, opts)?;
     claim_out(opts)?;
     let mut outcomes: Vec<(study::RunSpec, RunOutcome)> = vec![];
     for (r, o) in runs {
@@ -564,8 +564,14 @@ fn recht_ipson_plot(
     }
 }
 
-/// A study, its runs with their options, and the spacing its case runs at.
-type PreparedStudy = (crate::scene::study::Study, Vec<(crate::scene::study::RunSpec, RunOptions)>, f64);
+/// A study, its runs with their options, the spacing its case runs at, and the distinct warnings
+/// its runs' scenes raise.
+struct PreparedStudy {
+    study: crate::scene::study::Study,
+    runs: Vec<(crate::scene::study::RunSpec, RunOptions)>,
+    dx: f64,
+    warnings: Vec<String>,
+}
 
 /// Loads a study and checks everything it needs before its first run: every run's case loads and
 /// plans, and the results and plots name what the case reports. Returns the study and the runs to
@@ -585,9 +591,15 @@ fn prepare_study(path: &Path, opts: &RunOptions) -> Result<PreparedStudy, RunFai
         runs.push((r.clone(), o));
     }
     let mut case = None;
+    let mut warnings: Vec<String> = vec![];
     for (r, o) in &runs {
         let (scene, _) = prepare(&st.case_path, &o.scene)
             .map_err(|e| RunFailure::Input(format!("study `{}`, run `{}`:\n{e}", st.file.name, r.name)))?;
+        for w in &scene.warnings {
+            if !warnings.contains(w) {
+                warnings.push(w.clone());
+            }
+        }
         case.get_or_insert(scene);
     }
     let case = case.ok_or_else(|| RunFailure::Input(format!("study `{}` has no runs to make\n", st.file.name)))?;
@@ -597,7 +609,7 @@ fn prepare_study(path: &Path, opts: &RunOptions) -> Result<PreparedStudy, RunFai
     if !problems.is_empty() {
         return Err(input_error(&sources, &problems));
     }
-    Ok((st, runs, case.dx))
+    Ok(PreparedStudy { study: st, runs, dx: case.dx, warnings })
 }
 
 /// A name usable as a directory.
@@ -606,19 +618,21 @@ fn sanitize(s: &str) -> String {
 }
 
 /// Checks a case or a study without running it: the case loads and plans; a study's every run
-/// loads and plans, and its results name what its case reports. Prints a case's warnings and
-/// returns how many (a study's runs print theirs when they run).
+/// loads and plans, and its results name what its case reports. Prints the warnings (a study's:
+/// those of its runs, each once) and returns how many.
 pub fn check_file(path: &Path, opts: &scene::Options) -> Result<usize, RunFailure> {
     let text = read_text(path)?;
     if crate::scene::study::is_study(&text) {
         let o = RunOptions { scene: opts.clone(), ..RunOptions::default() };
-        prepare_study(path, &o).map(|_| 0)
+        prepare_study(path, &o).map(|p| print_warnings(&p.warnings))
     } else {
-        prepare(path, opts).map(|(scene, _)| {
-            eprint!("{}", scene.warnings.concat());
-            scene.warnings.len()
-        })
+        prepare(path, opts).map(|(scene, _)| print_warnings(&scene.warnings))
     }
+}
+
+fn print_warnings(warnings: &[String]) -> usize {
+    eprint!("{}", warnings.concat());
+    warnings.len()
 }
 
 /// The resolutions a case or study file lists under `convergence`.
@@ -741,7 +755,7 @@ fn spacing(path: &Path, opts: &scene::Options) -> Result<f64, RunFailure> {
     let text = read_text(path)?;
     if crate::scene::study::is_study(&text) {
         let o = RunOptions { scene: opts.clone(), ..RunOptions::default() };
-        prepare_study(path, &o).map(|(_, _, dx)| dx)
+        prepare_study(path, &o).map(|p| p.dx)
     } else {
         prepare(path, opts).map(|(scene, _)| scene.dx)
     }

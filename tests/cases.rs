@@ -533,6 +533,32 @@ fn a_held_recht_ipson_constant_out_of_range_is_a_clear_error() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// Checking a study reports its runs' warnings, each once: a cube that is not a whole number of
+/// spacings warns (C0037) in both runs of a two-run study, and the study counts it once, as the
+/// case alone does.
+#[test]
+fn checking_a_study_reports_its_case_warnings_once() {
+    let dir = out_dir("study-warnings");
+    std::fs::create_dir_all(&dir).unwrap();
+    let text = std::fs::read_to_string(case("cube_on_cube")).expect("case");
+    let cube = "max = [\"5 mm\", \"5 mm\", \"10.5 mm\"]";
+    assert!(text.contains(cube), "the upper cube's box");
+    let path = dir.join("cube_on_cube.toml");
+    std::fs::write(&path, text.replace(cube, "max = [\"5.3 mm\", \"5 mm\", \"10.5 mm\"]")).unwrap();
+    let study = dir.join("study.toml");
+    std::fs::write(
+        &study,
+        "name = \"s\"\ncase = \"cube_on_cube.toml\"\n[[runs]]\nname = \"a\"\nset = { v_impact = 400 }\n[[runs]]\nname = \"b\"\nset = { v_impact = 600 }\n",
+    )
+    .unwrap();
+    let alone = pairsum::runner::check_file(&path, &Default::default()).expect("the case checks");
+    assert!(alone >= 1, "the overhanging cube warns");
+    assert_eq!(pairsum::runner::check_file(&study, &Default::default()).expect("the study checks"), alone);
+    std::fs::write(&path, &text).unwrap();
+    assert_eq!(pairsum::runner::check_file(&study, &Default::default()).expect("the study checks"), 0);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// A wrong `[neighbours]` table is an error at its line: an unknown search, a skin beyond the
 /// cut-off, an adaptive search without its field or on a field the model lacks.
 #[test]
