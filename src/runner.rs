@@ -440,14 +440,12 @@ pub fn run_study(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailur
                 histories.push(recht_ipson_plot(quantity, &x, &y, &unit, &points, fit, reference));
                 if let Some(f) = fit {
                     fit_rows.push(ResultRow::new(format!("{quantity}, fit rms"), unit.clone(), f.rms, None));
-                    let through: Vec<f64> = points.iter().map(|p| p.1).filter(|r| *r > 0.0).collect();
-                    let mean = through.iter().sum::<f64>() / through.len() as f64;
                     fit_notes.push(format!(
                         "`{quantity}`: the curve misses the runs that perforated by {:.3} {unit} rms, {:.0} % of \
                          their mean residual; where that is large the runs do not follow a Recht–Ipson curve \
                          and its limit means little",
                         f.rms,
-                        100.0 * f.rms / mean
+                        100.0 * f.rms / f.mean_residual
                     ));
                 }
                 fit.map(|f| f.v_bl).unwrap_or(f64::NAN)

@@ -249,7 +249,10 @@ pub struct RechtIpson {
     pub a: f64,
     pub p: f64,
     pub v_bl: f64,
+    /// How far the curve misses the runs that perforated, root mean square.
     pub rms: f64,
+    /// The mean residual of the runs that perforated, the scale `rms` is read against.
+    pub mean_residual: f64,
 }
 
 impl RechtIpson {
@@ -281,6 +284,7 @@ pub fn fit_recht_ipson(points: &[(f64, f64)], held: Held) -> Option<RechtIpson> 
     if through.len() < 2 {
         return None;
     }
+    let mean_residual = through.iter().map(|p| p.1).sum::<f64>() / through.len() as f64;
     let mut best: Option<RechtIpson> = None;
     let ps: Vec<f64> = match held.p {
         Some(p) => vec![p],
@@ -302,7 +306,7 @@ pub fn fit_recht_ipson(points: &[(f64, f64)], held: Held) -> Option<RechtIpson> 
             let sse: f64 = f.iter().zip(&through).map(|(x, (_, y))| (y - a * x).powi(2)).sum();
             let rms = (sse / through.len() as f64).sqrt();
             if best.is_none_or(|b| rms < b.rms) {
-                best = Some(RechtIpson { a, p, v_bl, rms });
+                best = Some(RechtIpson { a, p, v_bl, rms, mean_residual });
             }
         }
     }
@@ -315,7 +319,7 @@ mod tests {
 
     #[test]
     fn recht_ipson_recovers_its_own_curve() {
-        let truth = RechtIpson { a: 0.79, p: 2.2, v_bl: 152.5, rms: 0.0 };
+        let truth = RechtIpson { a: 0.79, p: 2.2, v_bl: 152.5, rms: 0.0, mean_residual: 0.0 };
         let pts: Vec<(f64, f64)> =
             [137.4, 152.0, 156.0, 165.2, 190.7, 250.8, 298.0].iter().map(|v| (*v, truth.residual(*v))).collect();
         let fit = fit_recht_ipson(&pts, Held::default()).expect("fits");
@@ -325,7 +329,7 @@ mod tests {
 
     #[test]
     fn recht_ipson_with_a_and_p_held_fits_the_limit_alone() {
-        let truth = RechtIpson { a: 0.909, p: 2.0, v_bl: 152.5, rms: 0.0 };
+        let truth = RechtIpson { a: 0.909, p: 2.0, v_bl: 152.5, rms: 0.0, mean_residual: 0.0 };
         let held = Held { a: Some(0.909), p: Some(2.0) };
         // Three runs well above the limit, a few per cent off the curve: the limit stays close.
         let pts: Vec<(f64, f64)> =
@@ -337,5 +341,6 @@ mod tests {
         let exact: Vec<(f64, f64)> = [298.0, 190.7].iter().map(|v| (*v, truth.residual(*v))).collect();
         let fit = fit_recht_ipson(&exact, held).expect("fits");
         assert!((fit.v_bl - 152.5).abs() < 0.5, "{fit:?}");
+        assert!((fit.mean_residual - (exact[0].1 + exact[1].1) / 2.0).abs() < 1e-9, "{fit:?}");
     }
 }
