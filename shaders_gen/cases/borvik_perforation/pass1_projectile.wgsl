@@ -662,18 +662,18 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 let A = ((div_m(sig_i, (rho_i * rho_i)) + div_m(sig_j, (p2 * p2))) - (pi_ij * eye()));
                 de = de + (-((0.5 * ldj_m(j, sgn)) * dot((v_i - ldj_v(j, sgn)), (A * gradW_ij))));
             }
-            // pairsum contact (stdlib/contact/penalty.sph:15)
+            // pairsum contact (stdlib/contact/penalty.sph:22)
             let pen = (((dx_i + ldj_dx(j, sgn)) / 2.0) - r_ij);
             if ((((body_i != ldj_body(j, sgn)) && (pen > 0.0)) && (r_ij > 0.0))) {
                 let n_2 = (x_ij / r_ij);
-                let f1 = (((ldj_m(j, sgn) / m_i) * pen) / (dt * dt));
-                let f2 = (((sqrt(((h_i * ldj_h(j, sgn)) / (h_i + ldj_h(j, sgn)))) * ((prm_G(i) * prm_G(j)) / (prm_G(i) + prm_G(j)))) * (pen * sqrt(pen))) / m_i);
+                let f1 = (((((2.0 * m_i) * ldj_m(j, sgn)) / (m_i + ldj_m(j, sgn))) * pen) / (dt * dt));
+                let f2 = ((sqrt(((h_i * ldj_h(j, sgn)) / (h_i + ldj_h(j, sgn)))) * ((prm_G(i) * prm_G(j)) / (prm_G(i) + prm_G(j)))) * (pen * sqrt(pen)));
                 let pen_rate = ((-dot(x_ij, (v_i - ldj_v(j, sgn)))) / r_ij);
                 let p3 = ldj_h(j, sgn);
                 let p4 = ldj_h(j, sgn);
                 let mass = ((((rho_i * ldj_rho(j, sgn)) * (h_i * h_i * h_i)) * (p3 * p3 * p3)) / ((rho_i * (h_i * h_i * h_i)) + (ldj_rho(j, sgn) * (p4 * p4 * p4))));
-                let f3 = select(0.0, (((mass / m_i) * pen_rate) / dt), (pen_rate > 0.0));
-                a_contact = a_contact + ((prm_K_p(i) * max(max(f1, f2), f3)) * n_2);
+                let f3 = select(0.0, ((mass * pen_rate) / dt), (pen_rate > 0.0));
+                a_contact = a_contact + (((prm_K_p(i) * max(max(f1, f2), f3)) / m_i) * n_2);
             }
         }
         }}}
