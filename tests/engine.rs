@@ -60,6 +60,25 @@ fn momentum(b: &impl Backend) -> ([f64; 3], f64) {
     (p, scale)
 }
 
+/// Runs `steps` steps and asserts that the total momentum stays to round-off; the engine after.
+fn run_keeping_momentum(b: CpuBackend<f64>, steps: usize, what: &str) -> Engine<CpuBackend<f64>> {
+    let (p0, scale) = momentum(&b);
+    let mut e = engine(b, 1.0);
+    for _ in 0..steps {
+        e.step().expect("step");
+    }
+    let (p1, _) = momentum(&e.backend);
+    for a in 0..3 {
+        assert!(
+            (p1[a] - p0[a]).abs() < 1e-12 * scale,
+            "{what}: momentum {a} drifted from {} to {} (scale {scale})",
+            p0[a],
+            p1[a]
+        );
+    }
+    e
+}
+
 #[test]
 fn linear_momentum_is_conserved_to_round_off_in_a_closed_elastic_collision() {
     let m = elastic();
@@ -71,20 +90,7 @@ fn linear_momentum_is_conserved_to_round_off_in_a_closed_elastic_collision() {
             v[1] = 0.3 * ((k * 37 % 11) as f64 - 5.0);
         }
         let b = backend::<f64>(&m, &scene(&m, 3, &["m"], integrator), &inp, &[steel(&m)], vec![]);
-        let (p0, scale) = momentum(&b);
-        let mut e = engine(b, 1.0);
-        for _ in 0..150 {
-            e.step().expect("step");
-        }
-        let (p1, _) = momentum(&e.backend);
-        for a in 0..3 {
-            assert!(
-                (p1[a] - p0[a]).abs() < 1e-12 * scale,
-                "{integrator:?}: momentum {a} drifted from {} to {} (scale {scale})",
-                p0[a],
-                p1[a]
-            );
-        }
+        let e = run_keeping_momentum(b, 150, &format!("{integrator:?}"));
         // The blocks did collide: their stress is no longer zero.
         let (_, s) = field_by_id(&e.backend, "p");
         assert!(s.iter().any(|p| p.abs() > 1e6), "{integrator:?}: no collision happened");
@@ -386,15 +392,8 @@ fn penalty_contact_conserves_momentum_between_particles_of_unequal_mass() {
         &[steel(77e9), steel(75e9)],
         vec![],
     );
-    let (p0, scale) = momentum(&b);
-    let mut e = engine(b, 1.0);
-    for _ in 0..200 {
-        e.step().expect("step");
-    }
-    let (p1, _) = momentum(&e.backend);
-    for a in 0..3 {
-        assert!((p1[a] - p0[a]).abs() < 1e-12 * scale, "momentum {a} went from {} to {} (scale {scale})", p0[a], p1[a]);
-    }
+    let (p0, _) = momentum(&b);
+    let e = run_keeping_momentum(b, 200, "contact");
     // The blocks did meet: the fine one carries a share of the momentum.
     let (_, v) = field_by_id(&e.backend, "v");
     let (_, mass) = field_by_id(&e.backend, "m");
