@@ -286,7 +286,8 @@ fn reflected_at_a_plane(m: &pairsum::ir::Model) {
 /// apart by a uniform expansion v = k x. Failed material carries no tension, so nothing slows the
 /// expansion and no work is done: the kinetic energy stays and so does the internal energy. The
 /// energy equation must use the stress momentum uses (energy/solid_failing.sph); with the intact
-/// stress's work the tension of the thinning particles would heat them. Returns (relative change of the total energy, least ρ/ρ0).
+/// stress's work the tension of the thinning particles would heat them. Returns (relative change
+/// of the total energy, least ρ/ρ0).
 fn failed_block_pulled_apart(model_text: &str) -> (f64, f64) {
     let m = model(model_text);
     let (n, dx, k) = (6, 1e-3, 2e4);

@@ -66,8 +66,9 @@ fn syntax_error(file: u32, text: &str, e: pest::error::Error<Rule>) -> Diagnosti
 
 /// Whether `pos` is a `(` with nothing but spaces before it on its line.
 fn begins_line_with_paren(text: &str, pos: usize) -> bool {
-    let line_start = text[..pos.min(text.len())].rfind('\n').map_or(0, |k| k + 1);
-    text[pos.min(text.len())..].starts_with('(') && text[line_start..pos].trim().is_empty()
+    let pos = pos.min(text.len());
+    let line_start = text[..pos].rfind('\n').map_or(0, |k| k + 1);
+    text[pos..].starts_with('(') && text[line_start..pos].trim().is_empty()
 }
 
 fn describe_expected(rules: &[Rule]) -> String {
