@@ -72,9 +72,9 @@ enum Command {
         /// a Richardson estimate: the file's `convergence` list, or these (--convergence=2mm,1mm,0.5mm)
         #[arg(long, value_name = "RESOLUTIONS", num_args = 0..=1, require_equals = true, default_missing_value = "", conflicts_with = "resolution")]
         convergence: Option<String>,
-        /// With --convergence: run nothing, analyse again the reports an earlier --convergence
-        /// wrote into --out
-        #[arg(long, requires = "convergence")]
+        /// Run nothing: analyse again the reports that an earlier run of this study (with
+        /// --convergence, of these resolutions) wrote into --out
+        #[arg(long)]
         reanalyse: bool,
     },
     /// List the bundled cases
@@ -404,6 +404,7 @@ fn run_run(case: &str, a: RunArgs) -> i32 {
         force: a.force,
     };
     let outcome = match &a.convergence {
+        None if a.reanalyse => crate::runner::reanalyse_file(&path, &opts),
         None => run_file(&path, &opts),
         Some(list) if list.trim().is_empty() => crate::runner::declared_levels(&path)
             .and_then(|levels| crate::runner::run_convergence(&path, &levels, &opts, a.reanalyse)),

@@ -393,14 +393,22 @@ pub fn backend_failure(e: BackendError) -> RunFailure {
 
 /// Runs a study: every run of its case (the CI subset at the CI resolution), then the results
 /// across runs. Each run writes into `out/<run>/`, the study's report into `out/`.
-pub fn run_study(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailure> {
+/// With `reanalyse`, nothing runs: the reports its runs wrote into `out/<run>/` in an earlier
+/// run of the study are analysed again (after a change to the study's results or the analysis).
+pub fn run_study(path: &Path, opts: &RunOptions, reanalyse: bool) -> Result<RunOutcome, RunFailure> {
     use crate::scene::study;
     let PreparedStudy { study: st, runs, .. } = prepare_study(path, opts)?;
-    claim_out(opts)?;
+    if !reanalyse {
+        claim_out(opts)?;
+    }
     let mut outcomes: Vec<(study::RunSpec, RunOutcome)> = vec![];
     for (r, o) in runs {
-        eprintln!("{}: run `{}`", st.file.name, r.name);
-        let outcome = run_case(&st.case_path, &o)?;
+        let outcome = if reanalyse {
+            earlier_outcome(&o.out)?
+        } else {
+            eprintln!("{}: run `{}`", st.file.name, r.name);
+            run_case(&st.case_path, &o)?
+        };
         outcomes.push((r, outcome));
     }
     let first = &outcomes
@@ -692,7 +700,7 @@ pub fn run_convergence(
     let mut notes = vec![];
     for level in levels {
         let outcome = if reanalyse {
-            earlier_report(&at(level).out)
+            reanalyse_file(path, &at(level)).map(|o| o.report)
         } else {
             eprintln!("convergence: resolution `{level}`");
             run_file(path, &at(level)).map(|o| o.report)
@@ -735,6 +743,15 @@ pub fn run_convergence(
     Ok(RunOutcome { report, out: opts.out.clone(), histories: vec![] })
 }
 
+/// A completed run's report and probe histories, read back from what it wrote into `dir`.
+fn earlier_outcome(dir: &Path) -> Result<RunOutcome, RunFailure> {
+    let report = earlier_report(dir)?;
+    // A run's report plots each probe alone, named as the probe (`make_report`).
+    let histories =
+        report.histories.iter().filter_map(|h| Some((h.name.clone(), h.series.first()?.points.clone()))).collect();
+    Ok(RunOutcome { report, out: dir.to_path_buf(), histories })
+}
+
 /// The report a completed run wrote into `dir`; a run that did not complete is a `Run` failure.
 fn earlier_report(dir: &Path) -> Result<RunReport, RunFailure> {
     let path = dir.join("report.json");
@@ -769,8 +786,19 @@ fn read_text(path: &Path) -> Result<String, RunFailure> {
 pub fn run_file(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailure> {
     let text = read_text(path)?;
     if crate::scene::study::is_study(&text) {
-        run_study(path, opts)
+        run_study(path, opts, false)
     } else {
         run_case(path, opts)
+    }
+}
+
+/// Analyses again, without running, what an earlier run of a case or study wrote into `opts.out`:
+/// a study's results are recomputed from its runs' reports; a case's report is read as it is.
+pub fn reanalyse_file(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailure> {
+    let text = read_text(path)?;
+    if crate::scene::study::is_study(&text) {
+        run_study(path, opts, true)
+    } else {
+        earlier_outcome(&opts.out)
     }
 }

@@ -559,6 +559,53 @@ fn checking_a_study_reports_its_case_warnings_once() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// A study analysed again from its runs' reports, without running: the same results and plots,
+/// a result added to the study file afterwards computed from the runs already made, and a missing
+/// run's report named.
+#[test]
+fn a_study_is_analysed_again_from_its_runs_reports_without_running() {
+    use pairsum::runner::{reanalyse_file, run_file};
+    let dir = out_dir("study-reanalyse");
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::copy(case("cube_on_cube"), dir.join("cube_on_cube.toml")).unwrap();
+    let study = dir.join("study.toml");
+    let runs = "name = \"s\"\ncase = \"cube_on_cube.toml\"\nplots = [\"min_distance\"]\n\
+                [[runs]]\nname = \"a\"\nset = { v_impact = 400 }\n[[runs]]\nname = \"b\"\nset = { v_impact = 600 }\n";
+    std::fs::write(&study, runs).unwrap();
+    let opts = RunOptions {
+        backend: BackendChoice::Cpu,
+        scene: pairsum::scene::Options { resolution: Some("1 mm".into()), ..Default::default() },
+        out: dir.join("out"),
+        vtk: false,
+        ..Default::default()
+    };
+    let made = run_file(&study, &opts).expect("the study runs").report;
+    let again = reanalyse_file(&study, &opts).expect("the study is analysed again").report;
+    assert_eq!(again.results, made.results);
+    assert_eq!(again.histories, made.histories);
+    assert_eq!((again.wall_s, again.steps), (made.wall_s, made.steps), "the runs' own times and steps");
+
+    let q = "least_interbody_distance_over_dx";
+    let of_run =
+        |run: &str| made.results.iter().find(|r| r.quantity == format!("{run}: {q}")).expect("a run's result").value;
+    std::fs::write(
+        &study,
+        format!("{runs}[[results]]\nquantity = \"closer\"\ndifference = [\"a\", \"b\"]\nof = \"{q}\"\n"),
+    )
+    .unwrap();
+    let added = reanalyse_file(&study, &opts).expect("the study is analysed again").report;
+    let closer = added.results.iter().find(|r| r.quantity == "closer").expect("the added result").value;
+    let (a, b) = (of_run("a"), of_run("b"));
+    assert!(a > 0.0 && b > 0.0, "{a}, {b}");
+    assert_eq!(closer, (b - a) / a.abs());
+
+    let missing = dir.join("out").join("b").join("report.json");
+    std::fs::remove_file(&missing).unwrap();
+    let err = reanalyse_file(&study, &opts).err().expect("a run's report is missing").to_string();
+    assert!(err.contains(&missing.display().to_string()), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// A wrong `[neighbours]` table is an error at its line: an unknown search, a skin beyond the
 /// cut-off, an adaptive search without its field or on a field the model lacks.
 #[test]
