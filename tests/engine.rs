@@ -345,6 +345,49 @@ fn failed_material_pulled_apart_does_no_work_and_keeps_its_density() {
     assert!(least >= 1.0, "a failed particle thinned to {least} ρ0");
 }
 
+/// The stress a damaged particle carries (damage/failed_stress.sph), evaluated by the compiled
+/// model on one particle at x = (1 mm, 0, 0) with s = diag(s_xx, 0, 0): with `damage_coupling = 1`
+/// damage weakens the deviatoric stress and the tension by (1 − D), never the compression (as
+/// FTLR19's damaged kernel, Eq 4.10, weakens the pair); with 0 the particle is intact until it
+/// fails; a failed particle carries only its pressure in compression.
+#[test]
+fn damage_weakens_deviatoric_stress_and_tension_but_never_compression() {
+    let m = model(
+        "use kernels\nuse damage::failed_stress\ngroup metal\nkernel = wendland_c2\n\
+         param s_xx: scalar [Pa]\nparam p0: scalar [Pa]\nparam D0: scalar [-]\n\
+         particle stress -> sig: symtensor [Pa] { sig = failing_stress(s_xx * sym(outer(x, x)) / dot(x, x), p0, D0, damage_coupling) }\n\
+         integrate { x' = v }\n",
+    );
+    let sigma = |s_xx: f64, p: f64, d: f64, coupling: f64| -> Vec<f64> {
+        let inp = input(3, vec![[1e-3, 0.0, 0.0]], 1e-3);
+        let values = [("rho0", 7850.0), ("s_xx", s_xx), ("p0", p), ("D0", d), ("damage_coupling", coupling)];
+        let mat = material(&m, &values.map(|(name, v)| (name, vec![v])));
+        let b = backend::<f64>(&m, &scene(&m, 3, &["sig"], IntegratorKind::Euler), &inp, &[mat], vec![]);
+        field_by_id(&b, "sig").1
+    };
+    // A symtensor is stored as xx, xy, xz, yy, yz, zz: the off-diagonal stays 0 and zz = yy.
+    let xx_yy = |v: Vec<f64>| {
+        assert!(v[1] == 0.0 && v[2] == 0.0 && v[4] == 0.0 && v[3] == v[5], "{v:?}");
+        (v[0], v[3])
+    };
+    let (s_xx, tension, compression, d) = (300e6, -100e6, 100e6, 0.4);
+    // Intact (D = 0): s − p I whatever the coupling.
+    assert_eq!(xx_yy(sigma(s_xx, tension, 0.0, 1.0)), (s_xx - tension, -tension));
+    // Damaged, coupled: (1 − D) of the deviatoric stress and of the tension ...
+    let (xx, yy) = xx_yy(sigma(s_xx, tension, d, 1.0));
+    assert!((xx - 0.6 * (s_xx - tension)).abs() < 1e-6 && (yy + 0.6 * tension).abs() < 1e-6, "{xx}, {yy}");
+    // ... and all of the compression.
+    let (xx, yy) = xx_yy(sigma(s_xx, compression, d, 1.0));
+    assert!((xx - (0.6 * s_xx - compression)).abs() < 1e-6 && (yy + compression).abs() < 1e-6, "{xx}, {yy}");
+    // Damaged, uncoupled: unweakened.
+    assert_eq!(xx_yy(sigma(s_xx, tension, d, 0.0)), (s_xx - tension, -tension));
+    // Failed: its pressure in compression only, whatever the coupling.
+    for coupling in [0.0, 1.0] {
+        assert_eq!(xx_yy(sigma(s_xx, compression, 1.0, coupling)), (-compression, -compression));
+        assert_eq!(xx_yy(sigma(s_xx, tension, 1.0, coupling)), (0.0, 0.0));
+    }
+}
+
 /// Penalty contact pushes both particles of a pair with the same force, also where their masses
 /// differ (a coarse projectile on a finer plate): a block of 2 mm particles driven into a block of
 /// 1 mm particles, eight times lighter, through contact alone, keeps the total momentum to

@@ -87,10 +87,10 @@ fn borvik_8mm_plate_is_perforated_without_gaining_energy() {
     }
     // The ballistic limit from Recht and Ipson's plugging curve (p = 2, a = m_p / (m_p + m_plug)
     // = 0.909) through these three runs, on a plate of 40 mm radius with four particles through
-    // the thickness: +5.7 %; −2.5 / +5.7 / +7.9 % at 2.667 / 2 / 1.6 mm, Richardson +9.3 %. The
-    // free fit (a and p fitted too) has three unknowns for three runs and swings (−49 % here);
-    // the fine study's seven runs on the full plate (700 µs) are the figures to quote: −4.3 %
-    // (docs/results/borvik_8mm_fine/).
+    // the thickness: −3.7 %; −9.7 / −3.7 / −0.3 % at 2.667 / 2 / 1.6 mm, Richardson +11.6 %
+    // (docs/results/borvik_8mm_convergence/). The free fit (a and p fitted too) has three
+    // unknowns for three runs and swings (−46 % here); the full plate's runs are the figures to
+    // quote (docs/results/README.md, Børvik).
     within(&o, "ballistic_limit_plugging", 0.15);
     // The fit's rms, recomputed from the runs and the fitted limit on the plugging curve.
     let v_bl = value(&o, "ballistic_limit_plugging");

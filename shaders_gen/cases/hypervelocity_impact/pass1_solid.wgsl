@@ -484,19 +484,23 @@ fn st_dv(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 5u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 9u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 10u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 11u;
+    return params[b];
+}
+fn prm_damage_coupling(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 12u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -567,15 +571,19 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             div_v = div_v + ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * dot((v_i - ldj_v(j, sgn)), gradW_ij));
             // pairsum velocity_gradient (stdlib/solid/strain_rate.sph:6)
             grad_v = grad_v + outer((ldj_v(j, sgn) - v_i), ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * gradW_ij));
-            // pairsum failing_energy (stdlib/energy/solid_failing.sph:19)
+            // pairsum failing_energy (stdlib/energy/solid_failing.sph:20)
             let s_2 = s_i;
             let p = p_i;
             let D = D_i;
-            let sig_i = sel_m((s_2 - (p * eye())), ((-max(p, 0.0)) * eye()), (D >= 1.0));
+            let coupling = prm_damage_coupling(i);
+            let w = select((coupling * D), 1.0, (D >= 1.0));
+            let sig_i = (((1.0 - w) * (s_2 - (min(p, 0.0) * eye()))) - (max(p, 0.0) * eye()));
             let s_3 = ldj_s(j, sgn);
             let p_2 = ldj_p(j, sgn);
             let D_2 = ldj_D(j, sgn);
-            let sig_j = sel_m((s_3 - (p_2 * eye())), ((-max(p_2, 0.0)) * eye()), (D_2 >= 1.0));
+            let coupling_2 = prm_damage_coupling(j);
+            let w_2 = select((coupling_2 * D_2), 1.0, (D_2 >= 1.0));
+            let sig_j = (((1.0 - w_2) * (s_3 - (min(p_2, 0.0) * eye()))) - (max(p_2, 0.0) * eye()));
             let c_i_2 = c_i;
             let c_j = ldj_c(j, sgn);
             let vr = dot((v_i - ldj_v(j, sgn)), x_ij);
@@ -588,15 +596,19 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let p2 = ldj_rho(j, sgn);
             let A = ((div_m(sig_i, (rho_i * rho_i)) + div_m(sig_j, (p2 * p2))) - (pi_ij * eye()));
             de = de + (-((0.5 * ldj_m(j, sgn)) * dot((v_i - ldj_v(j, sgn)), (A * gradW_ij))));
-            // pairsum failing_momentum (stdlib/momentum/total_stress_failing.sph:16)
+            // pairsum failing_momentum (stdlib/momentum/total_stress_failing.sph:17)
             let s_4 = s_i;
             let p_3 = p_i;
             let D_3 = D_i;
-            let sig_i_2 = sel_m((s_4 - (p_3 * eye())), ((-max(p_3, 0.0)) * eye()), (D_3 >= 1.0));
+            let coupling_3 = prm_damage_coupling(i);
+            let w_3 = select((coupling_3 * D_3), 1.0, (D_3 >= 1.0));
+            let sig_i_2 = (((1.0 - w_3) * (s_4 - (min(p_3, 0.0) * eye()))) - (max(p_3, 0.0) * eye()));
             let s_5 = ldj_s(j, sgn);
             let p_4 = ldj_p(j, sgn);
             let D_4 = ldj_D(j, sgn);
-            let sig_j_2 = sel_m((s_5 - (p_4 * eye())), ((-max(p_4, 0.0)) * eye()), (D_4 >= 1.0));
+            let coupling_4 = prm_damage_coupling(j);
+            let w_4 = select((coupling_4 * D_4), 1.0, (D_4 >= 1.0));
+            let sig_j_2 = (((1.0 - w_4) * (s_5 - (min(p_4, 0.0) * eye()))) - (max(p_4, 0.0) * eye()));
             let c_i_3 = c_i;
             let c_j_2 = ldj_c(j, sgn);
             let vr_2 = dot((v_i - ldj_v(j, sgn)), x_ij);

@@ -496,23 +496,27 @@ fn st_dv(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_delta(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 6u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 7u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 11u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 12u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 13u;
+    return params[b];
+}
+fn prm_damage_coupling(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 14u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -586,16 +590,20 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             div_v = div_v + (vol_j * dot((v_i - ldj_v(j, sgn)), (L_inv * g)));
             let phi = ((((2.0 * (rho_i - ldj_rho(j, sgn))) * x_ij) / (r_ij * r_ij)) - (grad_rho_i + ldj_grad_rho(j, sgn)));
             diffusion = diffusion + ((((prm_delta(i) * h_i) * prm_c0(i)) * vol_j) * dot(phi, gradW_ij));
-            // pairsum failed_in_compression_momentum (stdlib/momentum/failed_in_compression.sph:23)
+            // pairsum failed_in_compression_momentum (stdlib/momentum/failed_in_compression.sph:24)
             if ((body_i == ldj_body(j, sgn))) {
                 let s_2 = s_i;
                 let p = p_i;
                 let D = D_i;
-                let sig_i = sel_m((s_2 - (p * eye())), ((-max(p, 0.0)) * eye()), (D >= 1.0));
+                let coupling = prm_damage_coupling(i);
+                let w = select((coupling * D), 1.0, (D >= 1.0));
+                let sig_i = (((1.0 - w) * (s_2 - (min(p, 0.0) * eye()))) - (max(p, 0.0) * eye()));
                 let s_3 = ldj_s(j, sgn);
                 let p_2 = ldj_p(j, sgn);
                 let D_2 = ldj_D(j, sgn);
-                let sig_j = sel_m((s_3 - (p_2 * eye())), ((-max(p_2, 0.0)) * eye()), (D_2 >= 1.0));
+                let coupling_2 = prm_damage_coupling(j);
+                let w_2 = select((coupling_2 * D_2), 1.0, (D_2 >= 1.0));
+                let sig_j = (((1.0 - w_2) * (s_3 - (min(p_2, 0.0) * eye()))) - (max(p_2, 0.0) * eye()));
                 let c_i_2 = c_i;
                 let c_j = ldj_c(j, sgn);
                 let vr = dot((v_i - ldj_v(j, sgn)), x_ij);
