@@ -751,3 +751,43 @@ fn a_named_resolution_at_another_spacing_keeps_its_settings() {
     assert_eq!((bare.dx, bare.time_scale), (0.002, 1.0));
     assert!(at.particles.x.len() < ci.particles.x.len());
 }
+
+/// With symmetry planes, a graded fill's lattice is anchored on the planes whatever the shape's
+/// size: the Børvik plate (radius 255 mm, 2 mm within 40 mm of the axis, 4 mm beyond, neither a
+/// divisor of 255) has its first rows half a spacing off both planes, so each particle meets its
+/// mirror image at one spacing, and the quarter holds a quarter of the plate. Before, the coarse
+/// cells were anchored at the plate's edge (−255 mm): the fine lattice put a row on each plane,
+/// which was dropped, and the quarter plate had a slot one row wide along both planes. A fill that
+/// still puts a row on a plane (node-centred) is error C0025.
+#[test]
+fn a_graded_fill_sits_half_a_spacing_off_the_symmetry_planes() {
+    let opts = pairsum::scene::Options { resolution: Some("fine".into()), ..Default::default() };
+    let scene = prepare(&case("borvik_perforation"), &opts).expect("the case loads").0;
+    let plate = scene.bodies.iter().find(|b| b.name == "plate").expect("a plate");
+    let p = &scene.particles;
+    for spacing in [0.002, 0.004] {
+        let rows: Vec<usize> = plate.particles.clone().filter(|k| (p.dx[*k] - spacing).abs() < 1e-12).collect();
+        assert!(!rows.is_empty(), "no particle at {spacing} m");
+        for axis in 0..2 {
+            let nearest = rows.iter().map(|k| p.x[*k][axis]).fold(f64::INFINITY, f64::min);
+            assert!(
+                (nearest - 0.5 * spacing).abs() < 1e-9,
+                "at {spacing} m the row nearest the plane {axis} = 0 lies at {nearest} m, not half a spacing"
+            );
+        }
+    }
+    let volume: f64 = plate.particles.clone().map(|k| p.vol[k]).sum();
+    let quarter = std::f64::consts::PI * 0.255_f64.powi(2) * 0.008 / 4.0;
+    assert!((volume / quarter - 1.0).abs() < 1e-9, "the quarter plate holds {volume} m³, not {quarter} m³");
+    // A node-centred fill puts a row on each plane: an error, where it used to be dropped silently.
+    let text = std::fs::read_to_string(case("cube_on_cube")).expect("case");
+    let shape = "shape = { box = { min = [\"-5 mm\", \"-5 mm\", \"-10 mm\"], max = [\"5 mm\", \"5 mm\", 0] } }";
+    assert!(text.contains(shape), "the cube_on_cube case's plate changed");
+    let dir = out_dir("on-plane");
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("cube_on_cube.toml");
+    std::fs::write(&path, text.replace(shape, &format!("{shape}\nfill = \"nodes\""))).unwrap();
+    let err = prepare(&path, &Default::default()).err().expect("a row on the plane is an error").to_string();
+    assert!(err.contains("C0025") && err.contains("use `fill = \"cells\"`"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -287,7 +287,7 @@ fn graded_box_with_a_fine_disc() {
     let shape = Primitive::Box { min: [0.0; 3], max: [2.0, 1.0, 0.0] };
     let region = Primitive::Sphere { center: [0.7, 0.5, 0.0], radius: 0.25 };
     let (f, c) = (0.025, 0.1);
-    let p = fill_graded(&shape, f, c, &region, 2).unwrap();
+    let p = fill_graded(&shape, f, c, &region, 2, None).unwrap();
     check_graded(&p, f, c, 2.0, 2);
     // Integer ratio and a box: the cells tile exactly, no rescaling needed.
     assert!((p.volume_scale - 1.0).abs() < 1e-12);
@@ -310,7 +310,7 @@ fn graded_sphere_with_a_fine_box_and_a_non_integer_ratio() {
     let shape = Primitive::Sphere { center: [0.0; 3], radius: 0.5 };
     let region = Primitive::Box { min: [0.0, -0.1, -0.1], max: [0.5, 0.1, 0.1] };
     for (f, c) in [(0.04, 0.08), (0.03, 0.08)] {
-        let p = fill_graded(&shape, f, c, &region, 3).unwrap();
+        let p = fill_graded(&shape, f, c, &region, 3, None).unwrap();
         check_graded(&p, f, c, 4.0 / 3.0 * PI * 0.125, 3);
         for (x, s) in p.positions.iter().zip(&p.spacing) {
             assert!(dist(*x, [0.0; 3]) <= 0.5 + 1e-9);
@@ -388,7 +388,7 @@ fn node_centred_graded_plate_keeps_two_layers_where_coarse() {
     let plate = Primitive::Box { min: [-0.1, -0.1, -0.01], max: [0.1, 0.1, 0.0] };
     let region = Primitive::Cylinder { base: [0.0, 0.0, -0.02], axis: [0.0, 0.0, 1.0], radius: 0.04, length: 0.04 };
     let (f, c) = (0.005, 0.01);
-    let cells = fill_graded(&plate, f, c, &region, 3).unwrap();
+    let cells = fill_graded(&plate, f, c, &region, 3, None).unwrap();
     let p = at_corners(&cells, 3);
     check_nodes(&p, 3);
     assert!(close(p.total_volume(), 0.2 * 0.2 * 0.01, 1e-12));
@@ -419,19 +419,22 @@ fn node_centred_graded_plate_keeps_two_layers_where_coarse() {
 fn graded_fill_in_1d_and_degenerate_cases() {
     let bar = Primitive::Box { min: [0.0; 3], max: [1.0, 0.0, 0.0] };
     let region = Primitive::Box { min: [0.4, 0.0, 0.0], max: [0.6, 0.0, 0.0] };
-    let p = fill_graded(&bar, 0.01, 0.05, &region, 1).unwrap();
+    let p = fill_graded(&bar, 0.01, 0.05, &region, 1, None).unwrap();
     check_graded(&p, 0.01, 0.05, 1.0, 1);
     assert_eq!(p.spacing.iter().filter(|&&s| s == 0.01).count(), 20);
     assert_eq!(p.spacing.iter().filter(|&&s| s == 0.05).count(), 16);
     // A fine region outside the shape: a plain coarse fill.
     let away = Primitive::Sphere { center: [5.0, 0.0, 0.0], radius: 0.1 };
-    let q = fill_graded(&bar, 0.01, 0.05, &away, 1).unwrap();
+    let q = fill_graded(&bar, 0.01, 0.05, &away, 1, None).unwrap();
     assert_eq!(q.len(), 20);
     // coarse < fine is an error.
-    assert!(matches!(fill_graded(&bar, 0.05, 0.01, &region, 1), Err(GeometryError::Parameter { name: "coarse", .. })));
+    assert!(matches!(
+        fill_graded(&bar, 0.05, 0.01, &region, 1, None),
+        Err(GeometryError::Parameter { name: "coarse", .. })
+    ));
     // Too fine a region.
     let cube = Primitive::Box { min: [0.0; 3], max: [1.0; 3] };
-    assert!(matches!(fill_graded(&cube, 1e-3, 0.1, &cube, 3), Err(GeometryError::TooManyParticles { .. })));
+    assert!(matches!(fill_graded(&cube, 1e-3, 0.1, &cube, 3, None), Err(GeometryError::TooManyParticles { .. })));
 }
 
 // ---------------------------------------------------------------- CSV
@@ -717,7 +720,7 @@ fn time_a_million_particle_fill() {
     println!("oblique cylinder: {} particles in {:?}", p.len(), t.elapsed());
     let cube = Primitive::Box { min: [0.0; 3], max: [1.0; 3] };
     let t = std::time::Instant::now();
-    let p = fill_graded(&cube, 0.005, 0.02, &Primitive::Sphere { center: [0.5; 3], radius: 0.3 }, 3).unwrap();
+    let p = fill_graded(&cube, 0.005, 0.02, &Primitive::Sphere { center: [0.5; 3], radius: 0.3 }, 3, None).unwrap();
     println!("graded cube: {} particles in {:?}", p.len(), t.elapsed());
     let t = std::time::Instant::now();
     let s = estimate_spacing(&p.positions, 3);

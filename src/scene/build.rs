@@ -858,8 +858,8 @@ fn component_index(shape: Shape, dim: usize, name: &str) -> Option<usize> {
 }
 
 /// Particles of one body: a primitive filled at its spacing (graded if asked), or a node list.
-/// With symmetry planes, a uniform fill's lattice is anchored half a spacing off each plane, and
-/// only the particles on the planes' positive side are kept.
+/// With symmetry planes, the lattice (uniform or graded) is anchored half a spacing off each plane,
+/// and only the particles on the planes' positive side are kept.
 fn place(
     body: &case::Body,
     spacing: f64,
@@ -879,20 +879,24 @@ fn place(
         cx.err(body.shape.span(), "C0025", format!("body `{name}` lies behind a symmetry plane"), "no particle kept");
         return None;
     }
-    if let Some(k) = keep
-        .iter()
-        .find(|k| mirrors.iter().any(|m| placed.positions[**k][m.axis] - m.offset < 0.25 * placed.spacing[**k]))
+    // A particle on a plane (or within a quarter spacing of it, on either side) would sit on its
+    // mirror image, or leave a gap along the plane where it is dropped.
+    if let Some(k) = (0..placed.len())
+        .find(|k| mirrors.iter().any(|m| (placed.positions[*k][m.axis] - m.offset).abs() < 0.25 * placed.spacing[*k]))
     {
         cx.err(
             body.shape.span(),
             "C0025",
             format!(
                 "body `{name}`: a particle at {:?} lies within a quarter spacing of a symmetry plane, too close to its mirror image",
-                placed.positions[*k]
+                placed.positions[k]
             ),
-            match body.fill_at() {
-                case::FillAt::Cells => "make the shape's extent across the plane a whole number of spacings",
-                case::FillAt::Nodes => "a node-centred fill puts particles on a plane through the body: use `fill = \"cells\"`",
+            match (body.shape.get_ref(), body.fill_at()) {
+                (case::Shape::Nodes { .. }, _) => "a node list's first row must lie half a spacing off the plane",
+                (_, case::FillAt::Nodes) => {
+                    "a node-centred fill puts particles on a plane through the body: use `fill = \"cells\"`"
+                }
+                (_, case::FillAt::Cells) => "a cell fill starts half a spacing off the plane; this one did not",
             },
         );
         return None;
@@ -964,28 +968,34 @@ fn place_whole(
         };
     }
     let shape = primitive(body.shape.get_ref(), cx)?;
-    let filled = match &body.refine {
-        Some(r) => {
-            let region = primitive(r.region.get_ref(), cx)?;
-            geometry::fill_graded(&shape, dx * r.factor, spacing, &region, cx.dim)
+    // With symmetry planes the lattice's cells are anchored on the planes, so that the first row of
+    // particles sits half a spacing off each plane, at the right distance from its mirror image.
+    let corner = if mirrors.is_empty() {
+        None
+    } else {
+        match shape.bbox(cx.dim) {
+            Ok((mut min, _)) => {
+                for m in mirrors {
+                    min[m.axis] = m.offset;
+                }
+                Some(min)
+            }
+            Err(e) => {
+                cx.err(span, "C0023", format!("body `{name}`: {e}"), "here");
+                return None;
+            }
         }
-        None if mirrors.is_empty() => geometry::fill(&shape, spacing, cx.dim),
-        None => {
-            let mut origin = match shape.bbox(cx.dim) {
-                Ok((min, _)) => {
-                    let mut o = [0.0; 3];
-                    for c in 0..cx.dim {
-                        o[c] = min[c] + 0.5 * spacing;
-                    }
-                    o
-                }
-                Err(e) => {
-                    cx.err(span, "C0023", format!("body `{name}`: {e}"), "here");
-                    return None;
-                }
-            };
-            for m in mirrors {
-                origin[m.axis] = m.offset + 0.5 * spacing;
+    };
+    let filled = match (&body.refine, corner) {
+        (Some(r), _) => {
+            let region = primitive(r.region.get_ref(), cx)?;
+            geometry::fill_graded(&shape, dx * r.factor, spacing, &region, cx.dim, corner)
+        }
+        (None, None) => geometry::fill(&shape, spacing, cx.dim),
+        (None, Some(corner)) => {
+            let mut origin = [0.0; 3];
+            for c in 0..cx.dim {
+                origin[c] = corner[c] + 0.5 * spacing;
             }
             geometry::fill_with(&shape, &geometry::Fill { spacing, origin: Some(origin) }, cx.dim)
         }

@@ -135,14 +135,20 @@ fn checked_count(shape: &Shape, lat: &Lattice, b: &IndexBox) -> Result<u64, Geom
 /// (`fine` for an integer ratio), and no cell whose centre lies in the shape is left empty. Each
 /// particle's `spacing` is `fine` or `coarse`, its volume `spacing^dim`, and the total is rescaled
 /// to the exact volume of `shape` (for every primitive, a box included).
+///
+/// `corner` is a corner of the coarse cells (their faces lie at `corner + k coarse` along each
+/// axis, and the fine cells' at `corner + k fine`); by default the shape's bounding box minimum. A
+/// symmetry plane must lie on a cell face, so that the first row of particles sits half a
+/// spacing off it.
 pub fn fill_graded(
     shape: &Primitive,
     fine: f64,
     coarse: f64,
     fine_region: &Primitive,
     dim: usize,
+    corner: Option<[f64; 3]>,
 ) -> Result<Particles, GeometryError> {
-    let grading = Grading::new(shape, fine, coarse, fine_region, dim)?;
+    let grading = Grading::new(shape, fine, coarse, fine_region, dim, corner)?;
     let refined = grading.refined_cells()?;
     let mut positions = Vec::new();
     grading.coarse_nodes(&refined, &mut positions)?;
@@ -156,7 +162,7 @@ pub fn fill_graded(
     Ok(Particles::from_parts(positions, spacing, dim, Some(grading.shape.volume())))
 }
 
-/// The two lattices of a graded fill, both anchored at the shape's bounding box minimum.
+/// The two lattices of a graded fill, both anchored at one corner of the coarse cells.
 struct Grading {
     shape: Shape,
     region: Shape,
@@ -174,6 +180,7 @@ impl Grading {
         coarse: f64,
         fine_region: &Primitive,
         dim: usize,
+        corner: Option<[f64; 3]>,
     ) -> Result<Grading, GeometryError> {
         let shape = Shape::resolve(shape, dim)?;
         let region = Shape::resolve(fine_region, dim)?;
@@ -182,8 +189,19 @@ impl Grading {
             let msg = format!("coarse spacing ({c}) must be ≥ fine spacing ({f})");
             return Err(GeometryError::Parameter { name: "coarse", message: msg });
         }
-        let fine = Lattice { origin: default_origin(&shape, f), dx: f, dim };
-        let coarse = Lattice { origin: default_origin(&shape, c), dx: c, dim };
+        let corner = match corner {
+            Some(p) => finite_point("corner", p)?,
+            None => shape.bbox().0,
+        };
+        let node = |dx: f64| {
+            let mut o = [0.0; 3];
+            for i in 0..dim {
+                o[i] = corner[i] + 0.5 * dx;
+            }
+            o
+        };
+        let fine = Lattice { origin: node(f), dx: f, dim };
+        let coarse = Lattice { origin: node(c), dx: c, dim };
         check_estimate(shape.volume() / c.powi(dim as i32) + region.volume().min(shape.volume()) / f.powi(dim as i32))?;
         Ok(Grading { shape, region, fine, coarse })
     }
