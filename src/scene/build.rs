@@ -993,11 +993,7 @@ fn place_whole(
         }
         (None, None) => geometry::fill(&shape, spacing, cx.dim),
         (None, Some(corner)) => {
-            let mut origin = [0.0; 3];
-            for c in 0..cx.dim {
-                origin[c] = corner[c] + 0.5 * spacing;
-            }
-            geometry::fill_with(&shape, &geometry::Fill { spacing, origin: Some(origin) }, cx.dim)
+            geometry::fill_with(&shape, &geometry::Fill::from_corner(spacing, corner, cx.dim), cx.dim)
         }
     };
     if let (Ok(cells), Primitive::Box { min, max }, None) = (&filled, &shape, &body.refine) {

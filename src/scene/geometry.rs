@@ -33,10 +33,12 @@
 //! # Graded fills
 //!
 //! [`fill_graded`] partitions the shape's bounding box into coarse cells (the coarse lattice's cells,
-//! anchored at the bounding box minimum, or at a given corner: a symmetry plane's). A coarse cell is *refined* when a fine lattice node inside
-//! both the shape and the fine region falls in it. Refined cells hold the fine lattice nodes inside
-//! the shape (all of them: the fine region is widened to whole coarse cells); the other cells hold
-//! their coarse node when it lies inside the shape. Both lattices are anchored at the same corner, so when `coarse = m × fine` (m integer) the fine nodes tile each refined cell exactly.
+//! anchored at the bounding box minimum, or at a corner given: on the symmetry planes). A coarse
+//! cell is *refined* when a fine lattice node inside both the shape and the fine region falls in
+//! it. Refined cells hold the fine lattice nodes inside the shape (all of them: the fine region is
+//! widened to whole coarse cells); the other cells hold their coarse node when it lies inside the
+//! shape. Both lattices are anchored at the same corner, so when `coarse = m × fine` (m integer)
+//! the fine nodes tile each refined cell exactly.
 //!
 //! Guarantees: fine–fine distances are ≥ `fine`, coarse–coarse ≥ `coarse`, and coarse–fine ≥
 //! `coarse/2` (≥ `coarse/2 + fine/2` when `coarse/fine` is an integer), so the minimum pair distance

@@ -21,6 +21,11 @@ impl Fill {
     pub fn new(spacing: f64) -> Fill {
         Fill { spacing, origin: None }
     }
+
+    /// A fill at `spacing` whose cells have a corner at `corner` (its nodes half a spacing off).
+    pub fn from_corner(spacing: f64, corner: [f64; 3], dim: usize) -> Fill {
+        Fill { spacing, origin: Some(node_off(corner, spacing, dim)) }
+    }
 }
 
 /// Particles placed in a shape: one entry per particle in each vector.
@@ -95,10 +100,14 @@ pub fn fill_with(shape: &Primitive, how: &Fill, dim: usize) -> Result<Particles,
 
 /// The default lattice anchor: the bounding box minimum + `dx/2` (unused coordinates 0).
 fn default_origin(shape: &Shape, dx: f64) -> [f64; 3] {
-    let (min, _) = shape.bbox();
+    node_off(shape.bbox().0, dx, shape.dim)
+}
+
+/// The lattice node of the cell with corner `corner`: `corner + dx/2` (unused coordinates 0).
+fn node_off(corner: [f64; 3], dx: f64, dim: usize) -> [f64; 3] {
     let mut o = [0.0; 3];
-    for i in 0..shape.dim {
-        o[i] = min[i] + 0.5 * dx;
+    for i in 0..dim {
+        o[i] = corner[i] + 0.5 * dx;
     }
     o
 }
@@ -193,15 +202,8 @@ impl Grading {
             Some(p) => finite_point("corner", p)?,
             None => shape.bbox().0,
         };
-        let node = |dx: f64| {
-            let mut o = [0.0; 3];
-            for i in 0..dim {
-                o[i] = corner[i] + 0.5 * dx;
-            }
-            o
-        };
-        let fine = Lattice { origin: node(f), dx: f, dim };
-        let coarse = Lattice { origin: node(c), dx: c, dim };
+        let fine = Lattice { origin: node_off(corner, f, dim), dx: f, dim };
+        let coarse = Lattice { origin: node_off(corner, c, dim), dx: c, dim };
         check_estimate(shape.volume() / c.powi(dim as i32) + region.volume().min(shape.volume()) / f.powi(dim as i32))?;
         Ok(Grading { shape, region, fine, coarse })
     }
