@@ -279,8 +279,8 @@ pub struct Held {
 pub const STOPPED_BELOW: f64 = 0.05;
 
 /// Least-squares fit over (impact, residual) pairs. Runs that did not perforate (residual below
-/// [`STOPPED_BELOW`] of the impact speed) bound the limit from below; `a` is linear and solved exactly for each (p, v_bl) of a search,
-/// unless `held` gives it (and `p`). With three runs and nothing held the fit has as many unknowns
+/// [`STOPPED_BELOW`] of the impact speed) bound the limit from below; `a` is linear and solved
+/// exactly for each (p, v_bl) of a search, unless `held` gives it (and `p`). With three runs and nothing held the fit has as many unknowns
 /// as points and its limit swings with small changes in them; holding `a` and `p` at Recht and
 /// Ipson's plugging values leaves the limit alone to fit.
 pub fn fit_recht_ipson(points: &[(f64, f64)], held: Held) -> Option<RechtIpson> {
