@@ -791,3 +791,40 @@ fn a_graded_fill_sits_half_a_spacing_off_the_symmetry_planes() {
     assert!(err.contains("C0025") && err.contains("use `fill = \"cells\"`"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A node list of a quarter body whose first rows lie a whole spacing off the symmetry planes
+/// leaves a slot two spacings wide along each plane: the case loads with warning C0038 for each
+/// plane, at the body; the same list half a spacing off gets none.
+#[test]
+fn a_node_list_a_spacing_off_a_symmetry_plane_is_warned_of() {
+    let text = std::fs::read_to_string(case("cube_on_cube")).expect("case");
+    let shape = "shape = { box = { min = [\"-5 mm\", \"-5 mm\", \"-10 mm\"], max = [\"5 mm\", \"5 mm\", 0] } }";
+    assert!(text.contains(shape), "the cube_on_cube case's plate changed");
+    let dir = out_dir("node-slot");
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("cube_on_cube.toml");
+    let case_text = text.replace(shape, "shape = { nodes = { file = \"steel.csv\", scale = 0.001 } }");
+    std::fs::write(&path, &case_text).unwrap();
+    let line = case_text.lines().position(|l| l.starts_with("shape = { nodes")).unwrap() + 1;
+    // The quarter steel cube at 0.5 mm: 10 × 10 × 20 nodes and their volumes, in mm.
+    for (first, warned) in [(0.25, false), (0.5, true)] {
+        let mut csv = String::from("x,y,z,volume\n");
+        for (i, j, k) in (0..10).flat_map(|i| (0..10).flat_map(move |j| (0..20).map(move |k| (i, j, k)))) {
+            let (x, y, z) = (first + 0.5 * i as f64, first + 0.5 * j as f64, -9.75 + 0.5 * k as f64);
+            csv.push_str(&format!("{x},{y},{z},0.125\n"));
+        }
+        std::fs::write(dir.join("steel.csv"), csv).unwrap();
+        let (scene, _) = prepare(&path, &Default::default()).expect("the case loads");
+        let w = scene.warnings.concat();
+        if warned {
+            for plane in ["plane x = 0 m", "plane y = 0 m"] {
+                assert!(w.contains(&format!("{plane} lie 1.00 spacings off it, 2.00 spacings")), "{w}");
+            }
+            assert_eq!(w.matches("C0038").count(), 2, "{w}");
+            assert!(w.contains(&format!("cube_on_cube.toml:{line}:")), "{w}");
+        } else {
+            assert!(!w.contains("C0038"), "{w}");
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

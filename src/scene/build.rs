@@ -901,6 +901,7 @@ fn place(
         );
         return None;
     }
+    warn_gap_at_planes(name, body.shape.span(), &placed, &keep, mirrors, cx);
     let pick = |v: &[f64]| keep.iter().map(|k| v[*k]).collect::<Vec<f64>>();
     Some(geometry::Particles {
         positions: keep.iter().map(|k| placed.positions[*k]).collect(),
@@ -1051,6 +1052,37 @@ fn initial_value(
             cx.diags.extend(d);
             None
         }
+    }
+}
+
+/// Warns (C0038) when a body's row nearest a symmetry plane lies between ¾ and 1½ of its spacing
+/// off the plane: its mirror image is then 1.5 to 3 spacings away, a slot along the plane (a node
+/// list whose first row is a whole spacing off). Filled shapes are anchored half a spacing off;
+/// a body farther off is taken to stand clear of the plane.
+fn warn_gap_at_planes(
+    name: &str,
+    span: std::ops::Range<usize>,
+    placed: &geometry::Particles,
+    keep: &[usize],
+    mirrors: &[Mirror],
+    cx: &mut Ctx,
+) {
+    for m in mirrors {
+        let off = |k: &usize| (placed.positions[*k][m.axis] - m.offset) / placed.spacing[*k];
+        let nearest = keep.iter().map(off).fold(f64::INFINITY, f64::min);
+        if !(0.75..=1.5).contains(&nearest) {
+            continue;
+        }
+        let msg = format!(
+            "body `{name}`: its particles nearest the symmetry plane {} = {} m lie {nearest:.2} spacings off it, {:.2} spacings from their mirror images: a slot along the plane",
+            ["x", "y", "z"][m.axis],
+            m.offset,
+            2.0 * nearest
+        );
+        let d = Diagnostic::warning("C0038", msg)
+            .at(cx.span(span.clone()), "this body")
+            .help("a body that touches the plane needs its first row half a spacing off it");
+        cx.diags.push(d);
     }
 }
 
