@@ -444,3 +444,83 @@ fn penalty_contact_conserves_momentum_between_particles_of_unequal_mass() {
     let pushed: f64 = (27..mass.len()).map(|k| mass[k] * v[3 * k]).sum();
     assert!(pushed > 0.05 * p0[0], "the fine block took {pushed} of {} kg m/s", p0[0]);
 }
+
+/// Heating by plastic work (thermal/plastic_work.sph, FTLR19 Eq 3.14), in a block of Weldox 460 E
+/// stretched along x and shortened along y (v = k (x, −y, 0), isochoric): every particle's heat
+/// C_p (T − T_room) is the plastic work per unit mass of its returns, Σ σ_eq Δε_p / ρ0, which the
+/// test sums step by step from the stress and the plastic strain; and the stress of a particle
+/// still flowing sits on the softened Johnson–Cook surface (A + B ε_p^n)(1 − T*^m), the test's
+/// own formula. The melting
+/// point is lowered to 400 K so that the heating visibly softens the block.
+#[test]
+fn plastic_work_heats_the_metal_and_softens_it() {
+    let m = model(
+        "use kernels\nuse continuity::plain\nuse solid::strain_rate\nuse solid::jaumann\nuse eos::mie_gruneisen\n\
+         use energy::solid\nuse momentum::total_stress\nuse plasticity::radial_return_jc\nuse thermal::plastic_work\n\
+         use timestep::acoustic\ngroup metal\nkernel = wendland_c2\n\
+         integrate { x' = v  v' = dv  rho' = drho  s' = ds  e' = de }\n",
+    );
+    let (n, dx, k) = (6, 1e-3, 1e5);
+    let mut inp = input(3, lattice(3, n, dx), dx);
+    let c = 0.5 * n as f64 * dx;
+    inp.v = inp.x.iter().map(|p| [k * (p[0] - c), -k * (p[1] - c), 0.0]).collect();
+    let (rho0, a, b, n_jc, m_jc, t_room, t_melt, c_p) = (7850.0, 490e6, 807e6, 0.73, 0.94, 293.0, 400.0, 452.0);
+    let values = [
+        ("rho0", rho0),
+        ("c0", 5047.6),
+        ("S_s", 1.5),
+        ("gamma0", 2.0),
+        ("G", 75.19e9),
+        ("jc_A", a),
+        ("jc_B", b),
+        ("jc_C", 0.0),
+        ("jc_n", n_jc),
+        ("jc_m", m_jc),
+        ("T_room", t_room),
+        ("T_melt", t_melt),
+        ("C_p", c_p),
+        ("h_ratio", 1.3),
+    ];
+    let mat = material(&m, &values.map(|(name, v)| (name, vec![v])));
+    let b0 = backend::<f64>(&m, &scene(&m, 3, &["s", "eps_p", "T"], IntegratorKind::Euler), &inp, &[mat], vec![]);
+    let mut e = engine(b0, 1.0);
+    let count = inp.x.len();
+    let von_mises = |s: &[f64]| {
+        // xx, xy, xz, yy, yz, zz
+        let dd = s[0] * s[0] + s[3] * s[3] + s[5] * s[5] + 2.0 * (s[1] * s[1] + s[2] * s[2] + s[4] * s[4]);
+        (1.5 * dd).sqrt()
+    };
+    let mut work = vec![0.0; count];
+    let mut eps_before = vec![0.0; count];
+    let mut flowing = vec![false; count];
+    for _ in 0..80 {
+        e.step().expect("step");
+        let (_, s) = field_by_id(&e.backend, "s");
+        let (_, eps) = field_by_id(&e.backend, "eps_p");
+        for i in 0..count {
+            work[i] += von_mises(&s[6 * i..6 * i + 6]) * (eps[i] - eps_before[i]) / rho0;
+            flowing[i] = eps[i] > eps_before[i];
+            eps_before[i] = eps[i];
+        }
+    }
+    let (_, s) = field_by_id(&e.backend, "s");
+    let (_, t) = field_by_id(&e.backend, "T");
+    let mut softest: f64 = 1.0;
+    for i in 0..count {
+        let heat = c_p * (t[i] - t_room);
+        assert!(
+            (heat - work[i]).abs() <= 0.02 * work[i] + 1e-9,
+            "particle {i}: heat {heat} J/kg, plastic work {} J/kg",
+            work[i]
+        );
+        if flowing[i] {
+            let t_star = ((t[i] - t_room) / (t_melt - t_room)).clamp(0.0, 1.0);
+            let softening = 1.0 - t_star.powf(m_jc);
+            let surface = (a + b * eps_before[i].powf(n_jc)) * softening;
+            let eq = von_mises(&s[6 * i..6 * i + 6]);
+            assert!((eq / surface - 1.0).abs() < 0.02, "particle {i}: σ_eq {eq} Pa, the softened surface {surface} Pa");
+            softest = softest.min(softening);
+        }
+    }
+    assert!(softest < 0.8, "the block hardly softened: the least factor 1 − T*^m is {softest}");
+}
