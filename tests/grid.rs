@@ -444,3 +444,45 @@ fn ranges_within_a_radius_hold_every_particle_within_it() {
         }
     }
 }
+
+/// `Grid::nearby_max` bounds each particle's neighbourhood: no particle within `reach` of i has a
+/// value above i's bound, in clouds graded from fine to four times coarser (with far debris, which
+/// coarsens the blocks); and the bound stays local: fine particles farther than 2 reach from every
+/// coarse one get the fine value, not the coarse one.
+#[test]
+fn nearby_max_bounds_every_neighbourhood_and_stays_local() {
+    let mut rng = XorShift(4242);
+    for dim in 1..=3 {
+        for debris in [false, true] {
+            let n = 1200;
+            let mut x = cloud(&mut rng, n, dim, 10.0);
+            if debris {
+                x[dim * 5] = 1e7;
+            }
+            // Coarse (h = 0.8) beyond x = 3, fine (h = 0.2) elsewhere.
+            let h: Vec<f64> = (0..n).map(|i| if x[i * dim] > 3.0 { 0.8 } else { 0.2 }).collect();
+            let reach = SUPPORT * h_max(&h);
+            let near = Grid::nearby_max(&x, dim, &h, reach);
+            let mut far_fine = 0;
+            for i in 0..n {
+                let (a, mut truth, mut nearest_coarse) = (point_of(&x, dim, i), h[i], f64::INFINITY);
+                for (j, hj) in h.iter().enumerate() {
+                    let b = point_of(&x, dim, j);
+                    let r = (0..dim).map(|k| (a[k] - b[k]).powi(2)).sum::<f64>().sqrt();
+                    if r < reach {
+                        truth = truth.max(*hj);
+                    }
+                    if *hj > 0.5 {
+                        nearest_coarse = nearest_coarse.min(r);
+                    }
+                }
+                assert!(near[i] >= truth, "dim {dim}, particle {i}: bound {} below {truth}", near[i]);
+                if !debris && nearest_coarse > 2.0 * reach {
+                    assert_eq!(near[i], 0.2, "dim {dim}, particle {i}, {nearest_coarse} from the coarse ones");
+                    far_fine += 1;
+                }
+            }
+            assert!(debris || far_fine > 0, "dim {dim}: no fine particle far from the coarse ones");
+        }
+    }
+}

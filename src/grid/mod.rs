@@ -12,6 +12,9 @@
 //! pair has `r_ij < cell_size`, hence `|x_i - x_j| < cell_size` along every axis, hence the cells of
 //! i and j differ by at most one along every axis: j is among the 3^dim cells around i's cell. This
 //! holds with variable h; the grid only returns *candidates*, and the caller filters by distance.
+//! With graded spacing the caller can search less: [`Grid::nearby_max`] bounds the largest h
+//! within the largest cut-off of each particle, so `support * (h_i + that) / 2` also holds every
+//! pair.
 //! The grid enlarges the requested cell size by a relative [`CELL_MARGIN`] so that a distance the
 //! caller rounds to just below the support still lands in adjacent cells.
 //!
@@ -34,6 +37,7 @@ pub use geometry::{point_of, CELL_MARGIN};
 pub use morton::{apply_permutation, morton_code, morton_codes, morton_permutation};
 
 use geometry::{check_layout, Geometry};
+use rayon::prelude::*;
 
 /// A coordinate type the grid accepts; cell coordinates are computed in f64.
 pub trait Coord: Copy + Send + Sync + 'static {
@@ -75,6 +79,29 @@ impl Grid {
     pub fn build<T: Coord>(x: &[T], dim: usize, cell_size: f64) -> Grid {
         let n = check_layout(x, dim);
         Grid::with_geometry(x, Geometry::fit(x, dim, cell_size, max_cells(n), usize::MAX))
+    }
+
+    /// For each particle, an upper bound on `values` over every particle within `reach` of it:
+    /// the largest value in the blocks (of a quarter of `reach`, or larger where the cell cap
+    /// says) that a cube of half-side `reach` around its block covers. With graded spacing it
+    /// lets a fine particle away from the coarse ones search only as far as its own
+    /// neighbourhood needs, not the coarsest particle's cut-off. Cost: one pass over the
+    /// particles and a running maximum along each axis over the blocks.
+    pub fn nearby_max<T: Coord>(x: &[T], dim: usize, values: &[T], reach: f64) -> Vec<f64> {
+        let n = check_layout(x, dim);
+        let g = Geometry::fit(x, dim, 0.25 * reach, max_cells(n), usize::MAX);
+        let blocks = g.linear_of_all(x);
+        let mut near = vec![f64::NEG_INFINITY; g.num_cells()];
+        for (b, v) in blocks.iter().zip(values) {
+            let m = &mut near[*b as usize];
+            *m = m.max(v.to_f64());
+        }
+        // Two points within `reach` lie in blocks at most `w` apart along every axis.
+        let w = if g.cell_size.is_finite() { (reach / g.cell_size).ceil().max(1.0) as usize } else { 0 };
+        for axis in 0..dim {
+            near = max_within_along(&g, &near, axis, w);
+        }
+        blocks.iter().map(|b| near[*b as usize]).collect()
     }
 
     pub(crate) fn with_geometry<T: Coord>(x: &[T], geom: Geometry) -> Grid {
@@ -244,6 +271,25 @@ fn push_range(out: &mut Vec<(u32, u32)>, a: u32, b: u32) {
 }
 
 /// Stable counting sort of particle indices by cell: returns `(cell_start, order)`.
+/// The largest value of each block and of the blocks up to `w` away from it along `axis`.
+fn max_within_along(g: &Geometry, v: &[f64], axis: usize, w: usize) -> Vec<f64> {
+    let stride = match axis {
+        0 => 1,
+        1 => g.counts[0],
+        _ => g.counts[0] * g.counts[1],
+    };
+    let count = g.counts[axis];
+    (0..v.len())
+        .into_par_iter()
+        .map(|k| {
+            let along = (k / stride) % count;
+            let first = k - along.min(w) * stride;
+            let last = k + (count - 1 - along).min(w) * stride;
+            (first..=last).step_by(stride).map(|j| v[j]).fold(f64::NEG_INFINITY, f64::max)
+        })
+        .collect()
+}
+
 fn counting_sort(cells: &[u32], num_cells: usize) -> (Vec<u32>, Vec<u32>) {
     let mut start = vec![0u32; num_cells + 1];
     for &c in cells {

@@ -195,7 +195,10 @@ pub struct Neighbours<'a, T> {
     pub h: &'a [T],
     pub dim: usize,
     pub support: T,
-    pub h_max: f64,
+    /// Per particle, an upper bound on the smoothing length of every particle within the largest
+    /// cut-off of it (`Grid::nearby_max`): its search reaches support · (h_i + h_near_i)/2. Empty
+    /// when the walk follows kept lists.
+    pub h_near: &'a [f64],
     pub mirrors: &'a [Mirror],
     pub walk: Walk<'a>,
 }
@@ -467,9 +470,12 @@ fn neighbours_of<T: Real, const D: usize>(
     let group = w.sh.group;
     let sources = w.v.sources;
     let order = grid.order();
+    // No neighbour of i, nor of its images (a reflection only moves i away from the particles on
+    // the planes' positive side), has a smoothing length above h_near.
+    let h_near = nb.h_near[i];
     for t in 0..1u32 << nb.mirrors.len() {
         // Transform t reflects particle j across the mirrors whose bit is set.
-        if beyond_reach(xi, t, nb.mirrors, nb.support.to_f64() * nb.h_max) {
+        if beyond_reach(xi, t, nb.mirrors, nb.support.to_f64() * h_near) {
             continue;
         }
         let (yi, flip) = transformed(xi, t, nb.mirrors);
@@ -477,8 +483,8 @@ fn neighbours_of<T: Real, const D: usize>(
         for c in 0..D {
             p[c] = yi[c].to_f64();
         }
-        // h_ij ≤ (h_i + h_max)/2: no neighbour lies beyond support · that.
-        let radius = nb.support.to_f64() * 0.5 * (hi.to_f64() + nb.h_max);
+        // h_ij ≤ (h_i + h_near)/2: no neighbour lies beyond support · that.
+        let radius = nb.support.to_f64() * 0.5 * (hi.to_f64() + h_near);
         grid.cell_ranges_within(p, radius, ranges);
         for &(s, e) in ranges.iter() {
             for &jj in &order[s as usize..e as usize] {

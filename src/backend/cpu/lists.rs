@@ -104,14 +104,15 @@ impl<T: Real> Lists<T> {
     fn rebuild_where(&mut self, inp: &BuildInput<T>, which: impl Fn(usize) -> bool + Sync) {
         let reach = inp.support * inp.h_max + self.skin_len;
         let grid = Grid::build(inp.x, inp.dim, 0.5 * reach);
-        let skin = self.skin_len;
+        let h_near = Grid::nearby_max(inp.x, inp.dim, inp.h, reach);
+        let near = Near { skin: self.skin_len, h_near: &h_near };
         self.of.par_iter_mut().enumerate().for_each_init(Vec::new, |ranges, (i, list)| {
             if which(i) {
                 list.clear();
                 match inp.dim {
-                    1 => collect::<T, 1>(&grid, inp, skin, i, ranges, list),
-                    2 => collect::<T, 2>(&grid, inp, skin, i, ranges, list),
-                    _ => collect::<T, 3>(&grid, inp, skin, i, ranges, list),
+                    1 => collect::<T, 1>(&grid, inp, &near, i, ranges, list),
+                    2 => collect::<T, 2>(&grid, inp, &near, i, ranges, list),
+                    _ => collect::<T, 3>(&grid, inp, &near, i, ranges, list),
                 }
             }
         });
@@ -165,23 +166,30 @@ pub fn beyond_reach<T: Real>(xi: [T; 3], t: u32, mirrors: &[Mirror], radius: f64
         .any(|(m, mirror)| t >> m & 1 == 1 && (xi[mirror.axis].to_f64() - mirror.offset).abs() >= radius)
 }
 
+/// The skin, and per particle the largest smoothing length within the build reach of it
+/// (`Grid::nearby_max`).
+struct Near<'a> {
+    skin: f64,
+    h_near: &'a [f64],
+}
+
 /// Every particle or image within the pair's build reach: its own cut-off `support · h_ij` plus
-/// the skin (the cells searched reach `support · (h_i + h_max)/2` plus the skin, which holds
+/// the skin (the cells searched reach `support · (h_i + h_near_i)/2` plus the skin, which holds
 /// every such pair). With particles of several sizes a fine particle's list then holds its
 /// neighbours, not every particle a coarse one's reach could bring in.
 fn collect<T: Real, const D: usize>(
     grid: &Grid,
     inp: &BuildInput<T>,
-    skin: f64,
+    near: &Near,
     i: usize,
     ranges: &mut Vec<(u32, u32)>,
     out: &mut Vec<u32>,
 ) {
     let mut xi = [T::zero(); 3];
     xi[..D].copy_from_slice(&inp.x[i * D..i * D + D]);
-    // h_ij ≤ (h_i + h_max)/2: no neighbour lies beyond support · that.
-    let hi = inp.h[i].to_f64();
-    let radius = inp.support * 0.5 * (hi + inp.h_max) + skin;
+    // h_ij ≤ (h_i + h_near_i)/2: no neighbour lies beyond support · that.
+    let (hi, skin) = (inp.h[i].to_f64(), near.skin);
+    let radius = inp.support * 0.5 * (hi + near.h_near[i]) + skin;
     let order = grid.order();
     for t in 0..1u32 << inp.mirrors.len() {
         if beyond_reach(xi, t, inp.mirrors, radius) {

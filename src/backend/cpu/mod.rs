@@ -606,8 +606,14 @@ impl<T: Real> Backend for CpuBackend<T> {
             time: T::from_f64(g.time),
             dt: T::from_f64(g.dt),
         };
-        let nb =
-            Neighbours { walk, x: &x, h: &h, dim, support: T::from_f64(self.support), h_max, mirrors: &self.mirrors };
+        // With graded spacing a fine particle far from the coarse ones need not search as far as
+        // the coarsest cut-off.
+        let h_near = match walk {
+            Walk::Cells(_) => Grid::nearby_max(&x, dim, &h, self.support * h_max),
+            Walk::Lists(_) => vec![],
+        };
+        let support = T::from_f64(self.support);
+        let nb = Neighbours { walk, x: &x, h: &h, dim, support, h_near: &h_near, mirrors: &self.mirrors };
         for pass in &self.passes {
             self.chunks.par_iter().for_each_init(Scratch::default, |scratch, chunk| {
                 if let Some(v) = pass.iter().find(|v| v.group == chunk.group) {
