@@ -270,7 +270,6 @@ fn push_range(out: &mut Vec<(u32, u32)>, a: u32, b: u32) {
     }
 }
 
-/// Stable counting sort of particle indices by cell: returns `(cell_start, order)`.
 /// The largest value of each block and of the blocks up to `w` away from it along `axis`.
 fn max_within_along(g: &Geometry, v: &[f64], axis: usize, w: usize) -> Vec<f64> {
     let stride = match axis {
@@ -290,6 +289,7 @@ fn max_within_along(g: &Geometry, v: &[f64], axis: usize, w: usize) -> Vec<f64> 
         .collect()
 }
 
+/// Stable counting sort of particle indices by cell: returns `(cell_start, order)`.
 fn counting_sort(cells: &[u32], num_cells: usize) -> (Vec<u32>, Vec<u32>) {
     let mut start = vec![0u32; num_cells + 1];
     for &c in cells {
