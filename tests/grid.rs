@@ -2,7 +2,7 @@
 //! on cell boundaries, far debris and NaNs, Morton reordering, and the range API.
 
 use pairsum::grid::{
-    apply_permutation, max_cells, morton_code, morton_codes, morton_permutation, point_of, Coord, Grid,
+    apply_permutation, max_cells, max_fine_cells, morton_code, morton_codes, morton_permutation, point_of, Coord, Grid,
 };
 
 /// Kernel support in units of h: a pair interacts when `r < SUPPORT * (h_i + h_j) / 2`.
@@ -484,5 +484,50 @@ fn nearby_max_bounds_every_neighbourhood_and_stays_local() {
             }
             assert!(debris || far_fine > 0, "dim {dim}: no fine particle far from the coarse ones");
         }
+    }
+}
+
+/// The CPU backend's graded search: cells of half the finest cut-off (`Grid::build_fine`), each
+/// particle walking `support · (h_i + h_near_i)/2`, finds exactly the brute-force pairs in graded
+/// clouds, and with the finer cap keeps cells finer than `Grid::build` would where the bounding
+/// box is mostly empty (a thin wide plate under a tall column of fine particles).
+#[test]
+fn fine_cells_over_a_graded_cloud_find_every_pair() {
+    let mut rng = XorShift(0x5eed_f1e5);
+    for dim in 1..=3 {
+        let n = 1500;
+        // A wide thin coarse slab (h = 0.8) and a narrow fine column (h = 0.2) standing on it.
+        let mut x = cloud(&mut rng, n, dim, 1.0);
+        let h: Vec<f64> = (0..n).map(|i| if i % 3 == 0 { 0.8 } else { 0.2 }).collect();
+        for i in 0..n {
+            let (wide, tall) = if h[i] > 0.5 { (30.0, 2.0) } else { (1.5, 10.0) };
+            for k in 0..dim {
+                x[i * dim + k] *= if k + 1 == dim && dim > 1 { tall } else { wide };
+            }
+        }
+        let (h_min, h_max) = (0.2, h_max(&h));
+        let grid = Grid::build_fine(&x, dim, 0.5 * SUPPORT * h_min);
+        check_invariants(&grid);
+        assert!(grid.num_cells() <= max_fine_cells(n), "dim {dim}: {} cells", grid.num_cells());
+        let capped = Grid::build(&x, dim, 0.5 * SUPPORT * h_min);
+        if dim == 3 {
+            assert!(grid.cell_size() < capped.cell_size(), "3D: the finer cap gave no finer cells");
+        }
+        let near = Grid::nearby_max(&x, dim, &h, SUPPORT * h_max);
+        let (mut pairs, mut ranges) = (vec![], vec![]);
+        for i in 0..n {
+            grid.cell_ranges_within(point_of(&x, dim, i), SUPPORT * 0.5 * (h[i] + near[i]), &mut ranges);
+            for &(a, b) in &ranges {
+                for &j in &grid.order()[a as usize..b as usize] {
+                    if j as usize != i && interacts(&x, dim, &h, i, j as usize) {
+                        pairs.push((i as u32, j));
+                    }
+                }
+            }
+        }
+        pairs.sort_unstable();
+        let truth = brute_force(&x, dim, &h);
+        assert!(truth.len() > n, "dim {dim}: only {} pairs, the check is too sparse", truth.len());
+        assert_eq!(pairs, truth, "dim {dim}");
     }
 }

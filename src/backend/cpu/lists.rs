@@ -4,7 +4,7 @@
 //! lists and keep the pairs within the current cut-off; when a list is rebuilt is the schedule's
 //! decision ([`Search::rebuild`]).
 
-use super::Mirror;
+use super::{search_cell_size, Mirror};
 use crate::grid::Grid;
 use crate::ir::FieldId;
 use crate::particles::Real;
@@ -103,7 +103,7 @@ impl<T: Real> Lists<T> {
     /// Rebuilds the lists of the particles `which` picks, from a fresh cell list.
     fn rebuild_where(&mut self, inp: &BuildInput<T>, which: impl Fn(usize) -> bool + Sync) {
         let reach = inp.support * inp.h_max + self.skin_len;
-        let grid = Grid::build(inp.x, inp.dim, 0.5 * reach);
+        let grid = Grid::build_fine(inp.x, inp.dim, search_cell_size(inp.h, inp.h_max, inp.support, self.skin_len));
         let h_near = Grid::nearby_max(inp.x, inp.dim, inp.h, reach);
         let near = Near { skin: self.skin_len, h_near: &h_near };
         self.of.par_iter_mut().enumerate().for_each_init(Vec::new, |ranges, (i, list)| {
