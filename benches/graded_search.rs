@@ -7,18 +7,18 @@
 //! - `whole-scene bound`: every particle searches `support · (h_i + h_max)/2` (before stop 30);
 //! - `nearby bound`: it searches `support · (h_i + h_near_i)/2`, `h_near` from
 //!   [`Grid::nearby_max`], its cost included (stop 30);
-//! - `fine cells`: the same on cells of half the finest cut-off ([`Grid::build_fine`],
-//!   [`search_cell_size`]), what the CPU backend does since stop 31.
+//! - `size levels`: a grid per particle size, each of cells of half its finest cut-off over its
+//!   own particles' box ([`SizeLevels`]), searched only where the nearby bound reaches it: what
+//!   the CPU backend does since stop 31.
 //!
 //! It prints the time per sweep, the ratios to the first, measured in this run, and the
-//! candidates visited per pair found. The backend's pair loop does more per candidate than this
-//! sweep (group filter, mirror images), so it gains more: see `docs/results/README.md`.
+//! candidates visited per pair found. The sweep only counts pairs; what the backend's whole step
+//! gains on the case itself is in `docs/ARCHITECTURE.md` ("The CPU cell list").
 //!
 //! `cargo bench --bench graded_search`
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use pairsum::backend::cpu::search_cell_size;
-use pairsum::grid::Grid;
+use pairsum::grid::{Grid, SizeLevels};
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 
@@ -54,25 +54,33 @@ fn borvik_12mm_1mm() -> (Vec<f64>, Vec<f64>) {
     (x, h)
 }
 
-/// One sweep over every particle; returns (pairs found, candidates visited).
+/// Of the candidates in `ranges` of `order`: (pairs with i, candidates).
+fn count_pairs(x: &[f64], h: &[f64], i: usize, p: [f64; 3], order: &[u32], ranges: &[(u32, u32)]) -> (usize, usize) {
+    let (mut pairs, mut candidates) = (0, 0);
+    for &(s, e) in ranges {
+        for &j in &order[s as usize..e as usize] {
+            let j = j as usize;
+            candidates += 1;
+            let d2 = (0..3).map(|c| (x[3 * j + c] - p[c]).powi(2)).sum::<f64>();
+            let cut = SUPPORT * 0.5 * (h[i] + h[j]);
+            if j != i && d2 < cut * cut {
+                pairs += 1;
+            }
+        }
+    }
+    (pairs, candidates)
+}
+
+/// One sweep over every particle of one grid; returns (pairs found, candidates visited).
 fn sweep(x: &[f64], h: &[f64], grid: &Grid, reach_h: &dyn Fn(usize) -> f64) -> (usize, usize) {
     let (mut pairs, mut candidates) = (0, 0);
     let mut ranges = Vec::new();
-    let order = grid.order();
     for i in 0..h.len() {
         let p = [x[3 * i], x[3 * i + 1], x[3 * i + 2]];
         grid.cell_ranges_within(p, SUPPORT * 0.5 * (h[i] + reach_h(i)), &mut ranges);
-        for &(s, e) in &ranges {
-            for &j in &order[s as usize..e as usize] {
-                let j = j as usize;
-                candidates += 1;
-                let d2 = (0..3).map(|c| (x[3 * j + c] - p[c]).powi(2)).sum::<f64>();
-                let cut = SUPPORT * 0.5 * (h[i] + h[j]);
-                if j != i && d2 < cut * cut {
-                    pairs += 1;
-                }
-            }
-        }
+        let (found, seen) = count_pairs(x, h, i, p, grid.order(), &ranges);
+        pairs += found;
+        candidates += seen;
     }
     (pairs, candidates)
 }
@@ -91,11 +99,24 @@ fn nearby_bound(x: &[f64], h: &[f64], h_max: f64) -> (usize, usize) {
     sweep(x, h, &grid, &|i| h_near[i])
 }
 
-/// The backend now: the nearby bound on cells of half the finest cut-off.
-fn fine_cells(x: &[f64], h: &[f64], h_max: f64) -> (usize, usize) {
-    let grid = Grid::build_fine(x, 3, search_cell_size(h, h_max, SUPPORT, 0.0));
+/// The backend now: a grid per particle size ([`SizeLevels`]), each searched as far as its
+/// largest h and the nearby bound need.
+fn size_levels(x: &[f64], h: &[f64], h_max: f64) -> (usize, usize) {
+    let levels = SizeLevels::build(x, 3, h, SUPPORT, 0.0);
     let h_near = Grid::nearby_max(x, 3, h, SUPPORT * h_max);
-    sweep(x, h, &grid, &|i| h_near[i])
+    let (mut pairs, mut candidates) = (0, 0);
+    let mut ranges = Vec::new();
+    for i in 0..h.len() {
+        let p = [x[3 * i], x[3 * i + 1], x[3 * i + 2]];
+        for level in levels.levels() {
+            let Some(radius) = level.reach(SUPPORT, h[i], h_near[i], 0.0) else { continue };
+            level.grid.cell_ranges_within(p, radius, &mut ranges);
+            let (found, seen) = count_pairs(x, h, i, p, level.grid.order(), &ranges);
+            pairs += found;
+            candidates += seen;
+        }
+    }
+    (pairs, candidates)
 }
 
 /// Mean seconds per call over `runs` calls.
@@ -113,7 +134,7 @@ fn bench(c: &mut Criterion) {
     let (x, h) = borvik_12mm_1mm();
     let h_max = h.iter().cloned().fold(0.0, f64::max);
     let searches: [(&str, Search); 3] =
-        [("whole_scene_bound", whole_scene_bound), ("nearby_bound", nearby_bound), ("fine_cells", fine_cells)];
+        [("whole_scene_bound", whole_scene_bound), ("nearby_bound", nearby_bound), ("size_levels", size_levels)];
 
     // Plain figures first, from this run, independent of criterion's report.
     let runs = 5;

@@ -2,7 +2,7 @@
 //! on cell boundaries, far debris and NaNs, Morton reordering, and the range API.
 
 use pairsum::grid::{
-    apply_permutation, max_cells, max_fine_cells, morton_code, morton_codes, morton_permutation, point_of, Coord, Grid,
+    apply_permutation, max_cells, morton_code, morton_codes, morton_permutation, point_of, Coord, Grid, SizeLevels,
 };
 
 /// Kernel support in units of h: a pair interacts when `r < SUPPORT * (h_i + h_j) / 2`.
@@ -487,47 +487,83 @@ fn nearby_max_bounds_every_neighbourhood_and_stays_local() {
     }
 }
 
-/// The CPU backend's graded search: cells of half the finest cut-off (`Grid::build_fine`), each
-/// particle walking `support · (h_i + h_near_i)/2`, finds exactly the brute-force pairs in graded
-/// clouds, and with the finer cap keeps cells finer than `Grid::build` would where the bounding
-/// box is mostly empty (a thin wide plate under a tall column of fine particles).
+/// The CPU backend's graded search (`SizeLevels`): a grid per factor of two in h, each walked
+/// as far as `support · (h_i + min(h_hi, h_near_i))/2`, finds exactly the brute-force pairs in
+/// graded clouds (with far debris too); each level holds the particles of its sizes once, and its
+/// cells are finer than one grid's under the same `4 n` cap where the whole bounding box is mostly
+/// empty (a thin wide plate under a tall column of fine particles). One size gives one level.
 #[test]
-fn fine_cells_over_a_graded_cloud_find_every_pair() {
+fn size_levels_over_a_graded_cloud_find_every_pair() {
     let mut rng = XorShift(0x5eed_f1e5);
     for dim in 1..=3 {
-        let n = 1500;
-        // A wide thin coarse slab (h = 0.8) and a narrow fine column (h = 0.2) standing on it.
-        let mut x = cloud(&mut rng, n, dim, 1.0);
-        let h: Vec<f64> = (0..n).map(|i| if i % 3 == 0 { 0.8 } else { 0.2 }).collect();
-        for i in 0..n {
-            let (wide, tall) = if h[i] > 0.5 { (30.0, 2.0) } else { (1.5, 10.0) };
-            for k in 0..dim {
-                x[i * dim + k] *= if k + 1 == dim && dim > 1 { tall } else { wide };
+        for debris in [false, true] {
+            let n = 1500;
+            // A wide thin coarse slab (h ≈ 0.8), a narrow fine column (h ≈ 0.2) standing on it,
+            // and between them particles of h ≈ 0.35 (a level of their own).
+            let mut x = cloud(&mut rng, n, dim, 1.0);
+            let h: Vec<f64> = (0..n).map(|i| [0.8, 0.2, 0.2, 0.35][i % 4] * rng.range(0.75, 1.0)).collect();
+            for i in 0..n {
+                let (wide, tall) = if h[i] > 0.45 { (30.0, 2.0) } else { (1.5, 10.0) };
+                for k in 0..dim {
+                    x[i * dim + k] *= if k + 1 == dim && dim > 1 { tall } else { wide };
+                }
             }
-        }
-        let (h_min, h_max) = (0.2, h_max(&h));
-        let grid = Grid::build_fine(&x, dim, 0.5 * SUPPORT * h_min);
-        check_invariants(&grid);
-        assert!(grid.num_cells() <= max_fine_cells(n), "dim {dim}: {} cells", grid.num_cells());
-        let capped = Grid::build(&x, dim, 0.5 * SUPPORT * h_min);
-        if dim == 3 {
-            assert!(grid.cell_size() < capped.cell_size(), "3D: the finer cap gave no finer cells");
-        }
-        let near = Grid::nearby_max(&x, dim, &h, SUPPORT * h_max);
-        let (mut pairs, mut ranges) = (vec![], vec![]);
-        for i in 0..n {
-            grid.cell_ranges_within(point_of(&x, dim, i), SUPPORT * 0.5 * (h[i] + near[i]), &mut ranges);
-            for &(a, b) in &ranges {
-                for &j in &grid.order()[a as usize..b as usize] {
-                    if j as usize != i && interacts(&x, dim, &h, i, j as usize) {
-                        pairs.push((i as u32, j));
+            if debris {
+                x[dim * 7] = 1e6;
+            }
+            let levels = SizeLevels::build(&x, dim, &h, SUPPORT, 0.0);
+            assert_eq!(levels.levels().len(), 3, "dim {dim}: levels of h 0.8, 0.35 and 0.2");
+            let mut members = vec![0; n];
+            for level in levels.levels() {
+                // Each member sits in the cell that holds its position, in increasing order.
+                let (g, start) = (&level.grid, level.grid.cell_start());
+                for c in 0..g.num_cells() {
+                    let cell = &g.order()[start[c] as usize..start[c + 1] as usize];
+                    assert!(cell.windows(2).all(|w| w[0] < w[1]), "cell {c} is not stable");
+                    for &j in cell {
+                        assert_eq!(g.linear_index(g.cell_coords(point_of(&x, dim, j as usize))), c);
+                    }
+                }
+                assert!(level.grid.num_cells() <= max_cells(level.grid.num_particles()));
+                for &j in level.grid.order() {
+                    members[j as usize] += 1;
+                    assert!((level.h_lo..=level.h_hi).contains(&h[j as usize]));
+                }
+                assert!(level.h_hi <= 2.0 * level.h_lo);
+            }
+            assert!(members.iter().all(|&m| m == 1), "dim {dim}: a particle in no level or in two");
+            if dim == 3 && !debris {
+                let one_grid = Grid::build(&x, dim, 0.5 * SUPPORT * 0.2);
+                let finest = levels.levels().last().unwrap();
+                assert!(finest.grid.cell_size() < 0.5 * one_grid.cell_size(), "3D: the fine level's cells");
+            }
+            let near = Grid::nearby_max(&x, dim, &h, SUPPORT * h_max(&h));
+            let (mut pairs, mut ranges) = (vec![], vec![]);
+            for i in 0..n {
+                for level in levels.levels() {
+                    let Some(radius) = level.reach(SUPPORT, h[i], near[i], 0.0) else { continue };
+                    level.grid.cell_ranges_within(point_of(&x, dim, i), radius, &mut ranges);
+                    for &(a, b) in &ranges {
+                        for &j in &level.grid.order()[a as usize..b as usize] {
+                            if j as usize != i && interacts(&x, dim, &h, i, j as usize) {
+                                pairs.push((i as u32, j));
+                            }
+                        }
                     }
                 }
             }
+            pairs.sort_unstable();
+            let truth = brute_force(&x, dim, &h);
+            assert!(truth.len() > n, "dim {dim}: only {} pairs, the check is too sparse", truth.len());
+            assert_eq!(pairs, truth, "dim {dim}, debris {debris}");
         }
-        pairs.sort_unstable();
-        let truth = brute_force(&x, dim, &h);
-        assert!(truth.len() > n, "dim {dim}: only {} pairs, the check is too sparse", truth.len());
-        assert_eq!(pairs, truth, "dim {dim}");
+        // One size, one level: the grid `Grid::build` gives.
+        let x = cloud(&mut rng, 400, dim, 1.0);
+        let h = vec![0.05; 400];
+        let levels = SizeLevels::build(&x, dim, &h, SUPPORT, 0.01);
+        assert_eq!(levels.levels().len(), 1);
+        let alone = Grid::build(&x, dim, 0.5 * (SUPPORT * 0.05 + 0.01));
+        assert_eq!(levels.levels()[0].grid.order(), alone.order());
+        assert_eq!(levels.levels()[0].grid.cell_size(), alone.cell_size());
     }
 }

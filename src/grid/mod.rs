@@ -1,4 +1,5 @@
-//! The CPU neighbour search: a uniform cell grid built by counting sort, and Morton reordering.
+//! The CPU neighbour search: a uniform cell grid built by counting sort, one per particle size in
+//! graded scenes ([`SizeLevels`]), and Morton reordering.
 //!
 //! This module owns the spatial index the CPU backend iterates to find interacting pairs. It knows
 //! nothing about fields or equations: it takes interleaved positions (`x.len() == n * dim`,
@@ -14,7 +15,7 @@
 //! holds with variable h; the grid only returns *candidates*, and the caller filters by distance.
 //! With graded spacing the caller can search less: [`Grid::nearby_max`] bounds the largest h
 //! within the largest cut-off of each particle, so `support * (h_i + that) / 2` also holds every
-//! pair, and [`Grid::build_fine`] lets the cells follow the finest particles, searched with
+//! pair; and [`SizeLevels`] gives each particle size its own grid, searched with
 //! [`Grid::cell_ranges_within`].
 //! The grid enlarges the requested cell size by a relative [`CELL_MARGIN`] so that a distance the
 //! caller rounds to just below the support still lands in adjacent cells.
@@ -25,16 +26,18 @@
 //!   and, within a cell, by particle index (the counting sort is stable);
 //! - `cell_start.len() == cells + 1`, `cell_start[0] == 0`, `cell_start[cells] == n`, and the
 //!   particles of cell `c` are `order[cell_start[c]..cell_start[c + 1]]`;
-//! - the number of cells is at most `max(4 n, 4096)` ([`max_cells`]; `max(32 n, 4096)` for
-//!   [`Grid::build_fine`]): when the bounding box would need more (a few particles flung far
-//!   away), the cell size is doubled until it fits. Larger cells are still complete, only slower;
+//! - the number of cells is at most `max(4 n, 4096)`: when the bounding box would need more (a
+//!   few particles flung far away), the cell size is doubled until it fits. Larger cells are still
+//!   complete, only slower;
 //! - a non-finite coordinate puts the particle in cell 0 of that axis, and a query point is clamped
 //!   to the grid, so building and querying never panic on NaN or infinite positions.
 
 mod geometry;
+mod levels;
 mod morton;
 
 pub use geometry::{point_of, CELL_MARGIN};
+pub use levels::{Level, SizeLevels, MAX_LEVELS};
 pub use morton::{apply_permutation, morton_code, morton_codes, morton_permutation};
 
 use geometry::{check_layout, Geometry};
@@ -64,13 +67,6 @@ pub fn max_cells(n: usize) -> usize {
     (4 * n).max(4096).min(u32::MAX as usize)
 }
 
-/// The cap on the number of cells of a grid finer than the largest cut-off
-/// ([`Grid::build_fine`]): `max(32 n, 4096)`, and at most `u32::MAX`. At 4 bytes a cell that is
-/// 128 bytes a particle, a fifth of a solid's state.
-pub fn max_fine_cells(n: usize) -> usize {
-    (32 * n).max(4096).min(u32::MAX as usize)
-}
-
 /// A uniform cell grid over a set of particles, with the particles counting-sorted by cell.
 #[derive(Clone, Debug)]
 pub struct Grid {
@@ -87,15 +83,6 @@ impl Grid {
     pub fn build<T: Coord>(x: &[T], dim: usize, cell_size: f64) -> Grid {
         let n = check_layout(x, dim);
         Grid::with_geometry(x, Geometry::fit(x, dim, cell_size, max_cells(n), usize::MAX))
-    }
-
-    /// Builds the grid of the `x.len() / dim` particles at (at least) `cell_size`, with up to
-    /// [`max_fine_cells`] cells: for a search by [`cell_ranges_within`](Self::cell_ranges_within)
-    /// with cells finer than the cut-off, where [`max_cells`] would coarsen a scene whose
-    /// bounding box is mostly empty (a graded plate far wider than the fine region).
-    pub fn build_fine<T: Coord>(x: &[T], dim: usize, cell_size: f64) -> Grid {
-        let n = check_layout(x, dim);
-        Grid::with_geometry(x, Geometry::fit(x, dim, cell_size, max_fine_cells(n), usize::MAX))
     }
 
     /// For each particle, an upper bound on `values` over every particle within `reach` of it:

@@ -5,7 +5,7 @@
 use super::lists::{beyond_reach, transformed, INDEX_MASK, TRANSFORM_SHIFT};
 use super::program::{ColView, Ctx, Program, LANES};
 use super::{Mirror, PairRegs, Variant};
-use crate::grid::Grid;
+use crate::grid::SizeLevels;
 use crate::ir::Reduce;
 use crate::particles::{Real, Store};
 
@@ -206,8 +206,8 @@ pub struct Neighbours<'a, T> {
 /// Where a pass finds the candidates of a particle.
 #[derive(Clone, Copy)]
 pub enum Walk<'a> {
-    /// The cells its cut-off reaches.
-    Cells(&'a Grid),
+    /// The cells its cut-off reaches, in the grid of each particle size near it.
+    Cells(&'a SizeLevels),
     /// Its kept list.
     Lists(&'a [Vec<u32>]),
 }
@@ -459,7 +459,7 @@ fn sh_groups<T>(sh: &Shared<T>) -> usize {
 fn neighbours_of<T: Real, const D: usize>(
     w: &mut Writer<T>,
     nb: &Neighbours<T>,
-    grid: &Grid,
+    levels: &SizeLevels,
     i: usize,
     ranges: &mut Vec<(u32, u32)>,
     filter: bool,
@@ -469,7 +469,6 @@ fn neighbours_of<T: Real, const D: usize>(
     let hi = nb.h[i];
     let group = w.sh.group;
     let sources = w.v.sources;
-    let order = grid.order();
     // No neighbour of i, nor of its images (a reflection only moves i away from the particles on
     // the planes' positive side), has a smoothing length above h_near.
     let h_near = nb.h_near[i];
@@ -483,16 +482,19 @@ fn neighbours_of<T: Real, const D: usize>(
         for c in 0..D {
             p[c] = yi[c].to_f64();
         }
-        // h_ij ≤ (h_i + h_near)/2: no neighbour lies beyond support · that.
-        let radius = nb.support.to_f64() * 0.5 * (hi.to_f64() + h_near);
-        grid.cell_ranges_within(p, radius, ranges);
-        for &(s, e) in ranges.iter() {
-            for &jj in &order[s as usize..e as usize] {
-                let jj = jj as usize;
-                if (t == 0 && jj == i) || (filter && (sources >> group[jj]) & 1 == 0) {
-                    continue;
+        for level in levels.levels() {
+            // h_ij ≤ (h_i + min(h_hi, h_near))/2: no neighbour lies beyond support · that.
+            let Some(radius) = level.reach(nb.support.to_f64(), hi.to_f64(), h_near, 0.0) else { continue };
+            level.grid.cell_ranges_within(p, radius, ranges);
+            let order = level.grid.order();
+            for &(s, e) in ranges.iter() {
+                for &jj in &order[s as usize..e as usize] {
+                    let jj = jj as usize;
+                    if (t == 0 && jj == i) || (filter && (sources >> group[jj]) & 1 == 0) {
+                        continue;
+                    }
+                    offer_candidate::<T, D>(w, nb, yi, flip, hi, jj);
                 }
-                offer_candidate::<T, D>(w, nb, yi, flip, hi, jj);
             }
         }
     }

@@ -4,8 +4,8 @@
 //! lists and keep the pairs within the current cut-off; when a list is rebuilt is the schedule's
 //! decision ([`Search::rebuild`]).
 
-use super::{search_cell_size, Mirror};
-use crate::grid::Grid;
+use super::Mirror;
+use crate::grid::{Grid, SizeLevels};
 use crate::ir::FieldId;
 use crate::particles::Real;
 use crate::schedule::{Drift, Rebuild, Search, SearchStats};
@@ -103,16 +103,16 @@ impl<T: Real> Lists<T> {
     /// Rebuilds the lists of the particles `which` picks, from a fresh cell list.
     fn rebuild_where(&mut self, inp: &BuildInput<T>, which: impl Fn(usize) -> bool + Sync) {
         let reach = inp.support * inp.h_max + self.skin_len;
-        let grid = Grid::build_fine(inp.x, inp.dim, search_cell_size(inp.h, inp.h_max, inp.support, self.skin_len));
+        let levels = SizeLevels::build(inp.x, inp.dim, inp.h, inp.support, self.skin_len);
         let h_near = Grid::nearby_max(inp.x, inp.dim, inp.h, reach);
         let near = Near { skin: self.skin_len, h_near: &h_near };
         self.of.par_iter_mut().enumerate().for_each_init(Vec::new, |ranges, (i, list)| {
             if which(i) {
                 list.clear();
                 match inp.dim {
-                    1 => collect::<T, 1>(&grid, inp, &near, i, ranges, list),
-                    2 => collect::<T, 2>(&grid, inp, &near, i, ranges, list),
-                    _ => collect::<T, 3>(&grid, inp, &near, i, ranges, list),
+                    1 => collect::<T, 1>(&levels, inp, &near, i, ranges, list),
+                    2 => collect::<T, 2>(&levels, inp, &near, i, ranges, list),
+                    _ => collect::<T, 3>(&levels, inp, &near, i, ranges, list),
                 }
             }
         });
@@ -178,7 +178,7 @@ struct Near<'a> {
 /// every such pair). With particles of several sizes a fine particle's list then holds its
 /// neighbours, not every particle a coarse one's reach could bring in.
 fn collect<T: Real, const D: usize>(
-    grid: &Grid,
+    levels: &SizeLevels,
     inp: &BuildInput<T>,
     near: &Near,
     i: usize,
@@ -190,7 +190,6 @@ fn collect<T: Real, const D: usize>(
     // h_ij ≤ (h_i + h_near_i)/2: no neighbour lies beyond support · that.
     let (hi, skin) = (inp.h[i].to_f64(), near.skin);
     let radius = inp.support * 0.5 * (hi + near.h_near[i]) + skin;
-    let order = grid.order();
     for t in 0..1u32 << inp.mirrors.len() {
         if beyond_reach(xi, t, inp.mirrors, radius) {
             continue;
@@ -200,17 +199,21 @@ fn collect<T: Real, const D: usize>(
         for c in 0..D {
             p[c] = yi[c].to_f64();
         }
-        grid.cell_ranges_within(p, radius, ranges);
-        for &(s, e) in ranges.iter() {
-            for &j in &order[s as usize..e as usize] {
-                if t == 0 && j as usize == i {
-                    continue;
-                }
-                let xj = &inp.x[j as usize * D..j as usize * D + D];
-                let r2: f64 = (0..D).map(|c| (yi[c] - xj[c]).to_f64().powi(2)).sum();
-                let reach = inp.support * 0.5 * (hi + inp.h[j as usize].to_f64()) + skin;
-                if r2 < reach * reach {
-                    out.push(j | t << TRANSFORM_SHIFT);
+        for level in levels.levels() {
+            let Some(radius) = level.reach(inp.support, hi, near.h_near[i], skin) else { continue };
+            level.grid.cell_ranges_within(p, radius, ranges);
+            let order = level.grid.order();
+            for &(s, e) in ranges.iter() {
+                for &j in &order[s as usize..e as usize] {
+                    if t == 0 && j as usize == i {
+                        continue;
+                    }
+                    let xj = &inp.x[j as usize * D..j as usize * D + D];
+                    let r2: f64 = (0..D).map(|c| (yi[c] - xj[c]).to_f64().powi(2)).sum();
+                    let reach = inp.support * 0.5 * (hi + inp.h[j as usize].to_f64()) + skin;
+                    if r2 < reach * reach {
+                        out.push(j | t << TRANSFORM_SHIFT);
+                    }
                 }
             }
         }

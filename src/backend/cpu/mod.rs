@@ -10,7 +10,7 @@ pub mod math;
 pub mod program;
 
 use super::{timestep, Backend, BackendError, Globals, Mirror, Snapshot};
-use crate::grid::{morton_permutation, Grid};
+use crate::grid::{morton_permutation, Grid, SizeLevels};
 use crate::ir::{FieldId, GroupId, Reduce, Storage};
 use crate::particles::{Real, Store};
 use crate::schedule::{Block, Plan};
@@ -576,10 +576,10 @@ impl<T: Real> Backend for CpuBackend<T> {
         }
         let x: Vec<T> = self.positions().to_vec();
         let h: Vec<T> = self.store.column(self.h).expect("h is stored").data.clone();
-        // Kept lists, brought up to date as the plan's search says; or cells of half the finest
-        // cut-off (`search_cell_size`): the search visits only the cells the cut-off sphere
-        // reaches (`Grid::cell_ranges_within`), fewer candidates than the 3^dim cells of a
-        // cut-off's size.
+        // Kept lists, brought up to date as the plan's search says; or a grid per particle size
+        // (`SizeLevels`), of cells of half its finest cut-off: the search visits only the cells
+        // the cut-off sphere reaches (`Grid::cell_ranges_within`), fewer candidates than the
+        // 3^dim cells of a cut-off's size.
         let keeps_lists = self.plan.search.keeps_lists();
         let grid = if keeps_lists {
             let inp = lists::BuildInput { x: &x, h: &h, dim, support: self.support, h_max, mirrors: &self.mirrors };
@@ -588,7 +588,7 @@ impl<T: Real> Backend for CpuBackend<T> {
             self.lists.prepare(&self.plan.search, &inp, field);
             None
         } else {
-            Some(Grid::build_fine(&x, dim, search_cell_size(&h, h_max, self.support, 0.0)))
+            Some(SizeLevels::build(&x, dim, &h, self.support, 0.0))
         };
         let walk = match &grid {
             Some(g) => Walk::Cells(g),
@@ -762,12 +762,3 @@ impl<T: Real> Backend for CpuBackend<T> {
 
 /// Lanes per batch, for reports.
 pub const BATCH_LANES: usize = LANES;
-
-/// The cell size of the CPU search grid ([`Grid::build_fine`]): half the finest particle's
-/// cut-off, plus half the kept lists' `skin`, so that a fine particle's search in a graded scene
-/// visits few cells' worth of candidates beyond its own neighbours. It is no finer than an
-/// eighth of the largest cut-off: a coarse particle walks at most 17 rows of cells along an axis.
-pub fn search_cell_size<T: Real>(h: &[T], h_max: f64, support: f64, skin: f64) -> f64 {
-    let h_min = h.iter().map(|v| v.to_f64()).fold(h_max, f64::min).max(0.25 * h_max);
-    0.5 * (support * h_min + skin)
-}
