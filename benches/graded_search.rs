@@ -7,7 +7,7 @@
 //! - `whole-scene bound`: every particle searches `support · (h_i + h_max)/2` (before stop 30);
 //! - `nearby bound`: it searches `support · (h_i + h_near_i)/2`, `h_near` from
 //!   [`Grid::nearby_max`], its cost included (stop 30);
-//! - `size levels`: a grid per particle size, each of cells of half its finest cut-off over its
+//! - `size levels`: a grid per particle size, each of cells of half its largest cut-off over its
 //!   own particles' box ([`SizeLevels`]), searched only where the nearby bound reaches it: what
 //!   the CPU backend does since stop 31.
 //!

@@ -491,7 +491,8 @@ fn nearby_max_bounds_every_neighbourhood_and_stays_local() {
 /// as far as `support · (h_i + min(h_hi, h_near_i))/2`, finds exactly the brute-force pairs in
 /// graded clouds (with far debris too); each level holds the particles of its sizes once, and its
 /// cells are finer than one grid's under the same `4 n` cap where the whole bounding box is mostly
-/// empty (a thin wide plate under a tall column of fine particles). One size gives one level.
+/// empty (a thin wide plate under a tall column of fine particles). Sizes within a factor of two
+/// give one level, the single grid of before.
 #[test]
 fn size_levels_over_a_graded_cloud_find_every_pair() {
     let mut rng = XorShift(0x5eed_f1e5);
@@ -557,12 +558,13 @@ fn size_levels_over_a_graded_cloud_find_every_pair() {
             assert!(truth.len() > n, "dim {dim}: only {} pairs, the check is too sparse", truth.len());
             assert_eq!(pairs, truth, "dim {dim}, debris {debris}");
         }
-        // One size, one level: the grid `Grid::build` gives.
+        // Sizes within a factor of two: one level, the grid of half the largest cut-off (plus
+        // the skin) that `Grid::build` gives, as the backend had before the levels.
         let x = cloud(&mut rng, 400, dim, 1.0);
-        let h = vec![0.05; 400];
+        let h: Vec<f64> = (0..400).map(|_| rng.range(0.03, 0.05)).collect();
         let levels = SizeLevels::build(&x, dim, &h, SUPPORT, 0.01);
         assert_eq!(levels.levels().len(), 1);
-        let alone = Grid::build(&x, dim, 0.5 * (SUPPORT * 0.05 + 0.01));
+        let alone = Grid::build(&x, dim, 0.5 * (SUPPORT * h_max(&h) + 0.01));
         assert_eq!(levels.levels()[0].grid.order(), alone.order());
         assert_eq!(levels.levels()[0].grid.cell_size(), alone.cell_size());
     }

@@ -1,5 +1,5 @@
 //! Cell grids by particle size, for graded scenes: one grid per factor of two in smoothing
-//! length, each with cells of half its own finest cut-off over its own particles' box.
+//! length, each with cells of half its own largest cut-off over its own particles' box.
 //!
 //! One grid for every size must either have cells of the coarse cut-off, which a fine particle
 //! walks through by the hundred, or cells of the fine one over the coarse plate's whole box.
@@ -43,7 +43,7 @@ pub struct SizeLevels {
 impl SizeLevels {
     /// Bins the `x.len() / dim` particles by `h` (level k holds `h_max / 2^(k+1) < h ≤ h_max / 2^k`;
     /// NaN and non-positive h join the finest level) and builds each level's grid with cells of
-    /// `(support · h_lo + skin) / 2`.
+    /// `(support · h_hi + skin) / 2`: with one level, the grid of one cut-off of the largest h.
     pub fn build<T: Coord>(x: &[T], dim: usize, h: &[T], support: f64, skin: f64) -> SizeLevels {
         let n = check_layout(x, dim);
         assert_eq!(h.len(), n, "levels: {} smoothing lengths for {n} particles", h.len());
@@ -69,7 +69,7 @@ impl SizeLevels {
                     let v = h[i as usize].to_f64();
                     (lo.min(v), hi.max(v))
                 });
-                let cell = 0.5 * (support * lo + skin);
+                let cell = 0.5 * (support * hi + skin);
                 let grid = if occupied == 1 {
                     Grid::build(x, dim, cell)
                 } else {

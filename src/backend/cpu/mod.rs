@@ -577,7 +577,7 @@ impl<T: Real> Backend for CpuBackend<T> {
         let x: Vec<T> = self.positions().to_vec();
         let h: Vec<T> = self.store.column(self.h).expect("h is stored").data.clone();
         // Kept lists, brought up to date as the plan's search says; or a grid per particle size
-        // (`SizeLevels`), of cells of half its finest cut-off: the search visits only the cells
+        // (`SizeLevels`), of cells of half its largest cut-off: the search visits only the cells
         // the cut-off sphere reaches (`Grid::cell_ranges_within`), fewer candidates than the
         // 3^dim cells of a cut-off's size.
         let keeps_lists = self.plan.search.keeps_lists();
