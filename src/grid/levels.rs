@@ -32,7 +32,7 @@ impl Level {
 
 /// The most levels: a particle smaller than the largest by more than 2^(MAX_LEVELS − 1) joins
 /// the finest level.
-pub const MAX_LEVELS: usize = 8;
+const MAX_LEVELS: usize = 8;
 
 /// The grids of a scene's particle sizes, coarsest first.
 #[derive(Clone, Debug)]

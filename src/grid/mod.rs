@@ -37,7 +37,7 @@ mod levels;
 mod morton;
 
 pub use geometry::{point_of, CELL_MARGIN};
-pub use levels::{Level, SizeLevels, MAX_LEVELS};
+pub use levels::{Level, SizeLevels};
 pub use morton::{apply_permutation, morton_code, morton_codes, morton_permutation};
 
 use geometry::{check_layout, Geometry};
