@@ -18,7 +18,7 @@
 //! `cargo bench --bench graded_search`
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use pairsum::grid::{Grid, SizeLevels};
+use pairsum::grid::{Grid, Level, SizeLevels};
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 
@@ -54,18 +54,20 @@ fn borvik_12mm_1mm() -> (Vec<f64>, Vec<f64>) {
     (x, h)
 }
 
+/// Whether candidate j is a neighbour of particle i, at `p`.
+fn is_pair(x: &[f64], h: &[f64], i: usize, p: [f64; 3], j: usize) -> bool {
+    let d2 = (0..3).map(|c| (x[3 * j + c] - p[c]).powi(2)).sum::<f64>();
+    let cut = SUPPORT * 0.5 * (h[i] + h[j]);
+    j != i && d2 < cut * cut
+}
+
 /// Of the candidates in `ranges` of `order`: (pairs with i, candidates).
 fn count_pairs(x: &[f64], h: &[f64], i: usize, p: [f64; 3], order: &[u32], ranges: &[(u32, u32)]) -> (usize, usize) {
     let (mut pairs, mut candidates) = (0, 0);
     for &(s, e) in ranges {
         for &j in &order[s as usize..e as usize] {
-            let j = j as usize;
             candidates += 1;
-            let d2 = (0..3).map(|c| (x[3 * j + c] - p[c]).powi(2)).sum::<f64>();
-            let cut = SUPPORT * 0.5 * (h[i] + h[j]);
-            if j != i && d2 < cut * cut {
-                pairs += 1;
-            }
+            pairs += is_pair(x, h, i, p, j as usize) as usize;
         }
     }
     (pairs, candidates)
@@ -108,13 +110,11 @@ fn size_levels(x: &[f64], h: &[f64], h_max: f64) -> (usize, usize) {
     let mut ranges = Vec::new();
     for i in 0..h.len() {
         let p = [x[3 * i], x[3 * i + 1], x[3 * i + 2]];
-        for level in levels.levels() {
-            let Some(radius) = level.reach(SUPPORT, h[i], h_near[i], 0.0) else { continue };
-            level.grid.cell_ranges_within(p, radius, &mut ranges);
-            let (found, seen) = count_pairs(x, h, i, p, level.grid.order(), &ranges);
-            pairs += found;
-            candidates += seen;
-        }
+        let reach = |level: &Level| level.reach(SUPPORT, h[i], h_near[i], 0.0);
+        levels.for_each_candidate(p, reach, &mut ranges, |j| {
+            candidates += 1;
+            pairs += is_pair(x, h, i, p, j as usize) as usize;
+        });
     }
     (pairs, candidates)
 }

@@ -2,7 +2,8 @@
 //! on cell boundaries, far debris and NaNs, Morton reordering, and the range API.
 
 use pairsum::grid::{
-    apply_permutation, max_cells, morton_code, morton_codes, morton_permutation, point_of, Coord, Grid, SizeLevels,
+    apply_permutation, max_cells, morton_code, morton_codes, morton_permutation, point_of, Coord, Grid, Level,
+    SizeLevels,
 };
 
 /// Kernel support in units of h: a pair interacts when `r < SUPPORT * (h_i + h_j) / 2`.
@@ -541,17 +542,12 @@ fn size_levels_over_a_graded_cloud_find_every_pair() {
             let near = Grid::nearby_max(&x, dim, &h, SUPPORT * h_max(&h));
             let (mut pairs, mut ranges) = (vec![], vec![]);
             for i in 0..n {
-                for level in levels.levels() {
-                    let Some(radius) = level.reach(SUPPORT, h[i], near[i], 0.0) else { continue };
-                    level.grid.cell_ranges_within(point_of(&x, dim, i), radius, &mut ranges);
-                    for &(a, b) in &ranges {
-                        for &j in &level.grid.order()[a as usize..b as usize] {
-                            if j as usize != i && interacts(&x, dim, &h, i, j as usize) {
-                                pairs.push((i as u32, j));
-                            }
-                        }
+                let reach = |level: &Level| level.reach(SUPPORT, h[i], near[i], 0.0);
+                levels.for_each_candidate(point_of(&x, dim, i), reach, &mut ranges, |j| {
+                    if j as usize != i && interacts(&x, dim, &h, i, j as usize) {
+                        pairs.push((i as u32, j));
                     }
-                }
+                });
             }
             pairs.sort_unstable();
             let truth = brute_force(&x, dim, &h);

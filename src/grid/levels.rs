@@ -90,4 +90,25 @@ impl SizeLevels {
     pub fn levels(&self) -> &[Level] {
         &self.levels
     }
+
+    /// Calls `visit` with every particle index in the cells that a search at `p` walks: in each
+    /// level as far as `reach` says (usually [`Level::reach`]), skipping levels it answers `None`
+    /// for. `ranges` is scratch space for the cell ranges.
+    #[inline(always)]
+    pub fn for_each_candidate(
+        &self,
+        p: [f64; 3],
+        reach: impl Fn(&Level) -> Option<f64>,
+        ranges: &mut Vec<(u32, u32)>,
+        mut visit: impl FnMut(u32),
+    ) {
+        for level in &self.levels {
+            let Some(radius) = reach(level) else { continue };
+            level.grid.cell_ranges_within(p, radius, ranges);
+            let order = level.grid.order();
+            for &(s, e) in ranges.iter() {
+                order[s as usize..e as usize].iter().for_each(|&j| visit(j));
+            }
+        }
+    }
 }

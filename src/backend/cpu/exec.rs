@@ -5,7 +5,7 @@
 use super::lists::{beyond_reach, transformed, INDEX_MASK, TRANSFORM_SHIFT};
 use super::program::{ColView, Ctx, Program, LANES};
 use super::{Mirror, PairRegs, Variant};
-use crate::grid::SizeLevels;
+use crate::grid::{Level, SizeLevels};
 use crate::ir::Reduce;
 use crate::particles::{Real, Store};
 
@@ -482,21 +482,14 @@ fn neighbours_of<T: Real, const D: usize>(
         for c in 0..D {
             p[c] = yi[c].to_f64();
         }
-        for level in levels.levels() {
-            // h_ij ≤ (h_i + min(h_hi, h_near))/2: no neighbour lies beyond support · that.
-            let Some(radius) = level.reach(nb.support.to_f64(), hi.to_f64(), h_near, 0.0) else { continue };
-            level.grid.cell_ranges_within(p, radius, ranges);
-            let order = level.grid.order();
-            for &(s, e) in ranges.iter() {
-                for &jj in &order[s as usize..e as usize] {
-                    let jj = jj as usize;
-                    if (t == 0 && jj == i) || (filter && (sources >> group[jj]) & 1 == 0) {
-                        continue;
-                    }
-                    offer_candidate::<T, D>(w, nb, yi, flip, hi, jj);
-                }
+        // h_ij ≤ (h_i + min(h_hi, h_near))/2: no neighbour lies beyond support · that.
+        let reach = |level: &Level| level.reach(nb.support.to_f64(), hi.to_f64(), h_near, 0.0);
+        levels.for_each_candidate(p, reach, ranges, |jj| {
+            let jj = jj as usize;
+            if (t != 0 || jj != i) && (!filter || (sources >> group[jj]) & 1 != 0) {
+                offer_candidate::<T, D>(w, nb, yi, flip, hi, jj);
             }
-        }
+        });
     }
 }
 

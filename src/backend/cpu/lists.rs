@@ -5,7 +5,7 @@
 //! decision ([`Search::rebuild`]).
 
 use super::Mirror;
-use crate::grid::{Grid, SizeLevels};
+use crate::grid::{Grid, Level, SizeLevels};
 use crate::ir::FieldId;
 use crate::particles::Real;
 use crate::schedule::{Drift, Rebuild, Search, SearchStats};
@@ -199,23 +199,17 @@ fn collect<T: Real, const D: usize>(
         for c in 0..D {
             p[c] = yi[c].to_f64();
         }
-        for level in levels.levels() {
-            let Some(radius) = level.reach(inp.support, hi, near.h_near[i], skin) else { continue };
-            level.grid.cell_ranges_within(p, radius, ranges);
-            let order = level.grid.order();
-            for &(s, e) in ranges.iter() {
-                for &j in &order[s as usize..e as usize] {
-                    if t == 0 && j as usize == i {
-                        continue;
-                    }
-                    let xj = &inp.x[j as usize * D..j as usize * D + D];
-                    let r2: f64 = (0..D).map(|c| (yi[c] - xj[c]).to_f64().powi(2)).sum();
-                    let reach = inp.support * 0.5 * (hi + inp.h[j as usize].to_f64()) + skin;
-                    if r2 < reach * reach {
-                        out.push(j | t << TRANSFORM_SHIFT);
-                    }
-                }
+        let reach = |level: &Level| level.reach(inp.support, hi, near.h_near[i], skin);
+        levels.for_each_candidate(p, reach, ranges, |j| {
+            if t == 0 && j as usize == i {
+                return;
             }
-        }
+            let xj = &inp.x[j as usize * D..j as usize * D + D];
+            let r2: f64 = (0..D).map(|c| (yi[c] - xj[c]).to_f64().powi(2)).sum();
+            let reach = inp.support * 0.5 * (hi + inp.h[j as usize].to_f64()) + skin;
+            if r2 < reach * reach {
+                out.push(j | t << TRANSFORM_SHIFT);
+            }
+        });
     }
 }
