@@ -43,9 +43,9 @@ pub fn views<T: Real>(store: &mut Store<T>) -> Vec<Option<ColView<T>>> {
         .map(|c| {
             c.as_mut().map(|c| {
                 let present: Vec<isize> = c.base.iter().copied().filter(|b| *b != crate::particles::ABSENT).collect();
-                let uniform =
-                    present.first().copied().filter(|b| present.iter().all(|x| x == b) && present.len() == ranges);
-                ColView { ptr: c.data.as_mut_ptr(), comps: c.comps, base: c.base.clone(), uniform }
+                let shared = present.first().copied().filter(|b| present.iter().all(|x| x == b));
+                let uniform = shared.filter(|_| present.len() == ranges);
+                ColView { ptr: c.data.as_mut_ptr(), comps: c.comps, base: c.base.clone(), uniform, shared }
             })
         })
         .collect()
@@ -227,7 +227,8 @@ pub fn run_pass_chunk<T: Real>(
     for (k, (f, comps)) in v.temps.iter().enumerate() {
         let buf = &mut scratch.temps[k];
         buf.resize(LANES * comps, T::zero());
-        temp_views[f.index()] = Some(ColView { ptr: buf.as_mut_ptr(), comps: *comps, base: vec![], uniform: None });
+        temp_views[f.index()] =
+            Some(ColView { ptr: buf.as_mut_ptr(), comps: *comps, base: vec![], uniform: None, shared: None });
     }
     let Scratch { a, b, c, j, sign, slots, comp, ranges, .. } = scratch;
     let init_regs: &mut [T] = match &v.init {
@@ -439,13 +440,14 @@ impl<T: Real> Writer<'_, '_, T> {
     }
 }
 
-/// Row 0 of each gathered column, when every one is stored with one base on all groups.
-fn gathered_columns<T>(fields: &[crate::ir::FieldId], cols: &[Option<ColView<T>>]) -> Option<Vec<*const T>> {
+/// Row 0 of each gathered column, when every one is stored with one base on all the groups that
+/// store it (the native code reads zeros for a neighbour of another group).
+pub fn gathered_columns<T>(fields: &[crate::ir::FieldId], cols: &[Option<ColView<T>>]) -> Option<Vec<*const T>> {
     fields
         .iter()
         .map(|f| {
             let c = cols[f.index()].as_ref()?;
-            Some(c.ptr.wrapping_offset(c.uniform? * c.comps as isize) as *const T)
+            Some(c.ptr.wrapping_offset(c.shared? * c.comps as isize) as *const T)
         })
         .collect()
 }

@@ -12,13 +12,15 @@
 //!
 //! A program with an operation the JIT does not emit (`ln`, `pow` with a varying exponent) keeps
 //! its closures; so does a pass whose gathered columns are not stored with one base on every
-//! group. `PAIRSUM_NO_JIT=1` turns the JIT off.
+//! group that stores them. A neighbour whose group does not store a gathered field (the
+//! projectile's, for the plate's damage) reads zeros there, as with the closures.
+//! `PAIRSUM_NO_JIT=1` turns the JIT off.
 
 use super::lower::{Bin, Graph, Id, Node, Un};
 use super::math::ExpConsts;
 use super::program::LANES;
 use super::program::{lane_max, lane_min, sign_axes};
-use crate::ir::{FieldId, Global, Model, Reduce, Side};
+use crate::ir::{FieldId, Global, GroupSet, Model, Reduce, Side};
 use crate::particles::Real;
 use cranelift_codegen::ir::condcodes::FloatCC;
 use cranelift_codegen::ir::condcodes::IntCC;
@@ -167,7 +169,14 @@ pub struct PairSpec<'a> {
     /// The parameter table's layout: a parameter component is at `material × stride + offset`.
     pub param_stride: usize,
     pub param_offset: &'a [usize],
+    /// Fields gathered at j that some source group does not store, with the set of groups that
+    /// do: a neighbour of another group reads 0 there, as the closures give.
+    pub partial: &'a [(FieldId, GroupSet)],
 }
+
+/// Zeros that a neighbour reads for a field its group does not store: the rows of the widest
+/// field (a 3 × 3 tensor) at most.
+static ZERO_ROW: [u64; 9] = [0; 9];
 
 /// Whether the JIT is on (it is unless `PAIRSUM_NO_JIT` is set or the host has no backend).
 pub fn enabled() -> bool {
@@ -176,6 +185,11 @@ pub fn enabled() -> bool {
 
 /// Compiles the pair program, or says why not.
 pub fn compile_pair<T: Real>(spec: &PairSpec) -> Result<JitPair<T>, String> {
+    for (f, _) in spec.partial {
+        if crate::ir::components(spec.model.field(*f).ty.shape, spec.dim) > ZERO_ROW.len() {
+            return Err(format!("`{}` is wider than the zero row", spec.model.field(*f).name));
+        }
+    }
     for id in spec.nodes {
         supported(&spec.graph.nodes[*id as usize])?;
     }
@@ -486,11 +500,16 @@ impl<'a, 'b, T: Real> Emitter<'a, 'b, T> {
                         Some(r) => r.clone(),
                         None => {
                             let stride = (comps * T::BYTES) as i64;
+                            let stored_on = spec.partial.iter().find(|(f, _)| *f == field).map(|(_, set)| *set);
                             let r: Vec<Value> = js
                                 .iter()
                                 .map(|j| {
                                     let off = self.b.ins().imul_imm_s(*j, stride);
-                                    self.b.ins().iadd(col_ptrs[slot], off)
+                                    let row = self.b.ins().iadd(col_ptrs[slot], off);
+                                    match stored_on {
+                                        Some(set) => self.row_if_stored(set, group, *j, row),
+                                        None => row,
+                                    }
                                 })
                                 .collect();
                             rows.insert(field, r.clone());
@@ -625,6 +644,17 @@ impl<'a, 'b, T: Real> Emitter<'a, 'b, T> {
                 }
             }
         }
+    }
+
+    /// `row` when j's group is in `set`, else the address of [`ZERO_ROW`] (never j's row: a
+    /// column not stored on j's group has no row for it).
+    fn row_if_stored(&mut self, set: GroupSet, group: Value, j: Value, row: Value) -> Value {
+        let g = self.lane_u32(group, j);
+        let bits = self.b.ins().iconst(types::I64, set.0 as i64);
+        let bit = self.b.ins().ushr(bits, g);
+        let bit = self.b.ins().band_imm_s(bit, 1);
+        let zeros = self.b.ins().iconst(self.ptr, ZERO_ROW.as_ptr() as i64);
+        self.b.ins().select(bit, row, zeros)
     }
 
     /// `array[j]` of a `u32` array, widened to 64 bits.

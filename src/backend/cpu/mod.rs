@@ -11,11 +11,11 @@ pub mod program;
 
 use super::{timestep, Backend, BackendError, Globals, Mirror, Snapshot};
 use crate::grid::{morton_permutation, Grid, SizeLevels};
-use crate::ir::{FieldId, GroupId, Reduce, Storage};
+use crate::ir::{FieldId, GroupId, GroupSet, Reduce, Side, Storage};
 use crate::particles::{Real, Store};
 use crate::schedule::{Block, Plan};
 use exec::{chunks, views, Chunk, Neighbours, Scratch, Shared, Walk};
-use lower::{Effect, Id, Known, Lowerer, Mode, Node};
+use lower::{Effect, Graph, Id, Known, Lowerer, Mode, Node};
 use program::{compile, live_nodes, Pinned, Program, LANES};
 use rayon::prelude::*;
 
@@ -198,6 +198,22 @@ fn varying(node: &Node, flags: &[bool]) -> bool {
     }
 }
 
+/// The fields the pair program gathers at j that not every source group stores, with the groups
+/// that do.
+fn partly_stored(plan: &Plan, graph: &Graph, nodes: &[Id], sources: GroupSet) -> Vec<(FieldId, GroupSet)> {
+    let groups = (1u64 << plan.model.groups.len()) - 1;
+    let mut out: Vec<(FieldId, GroupSet)> = vec![];
+    for id in nodes {
+        if let Node::Load { field, side: Side::J, .. } = graph.nodes[*id as usize] {
+            let stored_on = plan.layout.iter().find(|l| l.field == field).map_or(GroupSet(0), |l| l.groups);
+            if sources.0 & groups & !stored_on.0 != 0 && !out.iter().any(|(f, _)| *f == field) {
+                out.push((field, stored_on));
+            }
+        }
+    }
+    out
+}
+
 fn compile_variant<T: Real>(
     plan: &Plan,
     known: &Known,
@@ -350,6 +366,7 @@ fn compile_variant<T: Real>(
                 }
             }
             let broadcast: Vec<(Id, usize)> = exports.iter().map(|u| (*u, dest.reg_of[u])).collect();
+            let partial = partly_stored(plan, graph, &pair_nodes, v.sources);
             let spec = jit::PairSpec {
                 model,
                 dim,
@@ -362,6 +379,7 @@ fn compile_variant<T: Real>(
                 signs,
                 param_stride: params.stride,
                 param_offset: &params.offset,
+                partial: &partial,
             };
             jit::compile_pair::<T>(&spec)
                 .map_err(|why| {
@@ -407,7 +425,7 @@ impl<T: Real> CpuBackend<T> {
 
     /// Compiles every block of the plan for every group present. The store must hold the
     /// particles (sorted group-major) with the scene's fields and the material parameters set.
-    pub fn new(plan: Plan, store: Store<T>, mirrors: Vec<Mirror>) -> Result<CpuBackend<T>, BackendError> {
+    pub fn new(plan: Plan, mut store: Store<T>, mirrors: Vec<Mirror>) -> Result<CpuBackend<T>, BackendError> {
         let x = plan.model.field_id("x").ok_or_else(|| BackendError("the model has no position field `x`".into()))?;
         let h = plan.model.field_id("h").ok_or_else(|| BackendError("the model has no smoothing length `h`".into()))?;
         let n_groups = plan.model.groups.len();
@@ -416,7 +434,7 @@ impl<T: Real> CpuBackend<T> {
             (0..n_groups).map(|g| if present.contains(&g) { f(g) } else { None }).collect()
         };
         let known = known(&plan, &store);
-        let passes: Vec<Vec<Variant<T>>> = plan
+        let mut passes: Vec<Vec<Variant<T>>> = plan
             .passes
             .iter()
             .map(|p| {
@@ -426,6 +444,17 @@ impl<T: Real> CpuBackend<T> {
                     .collect()
             })
             .collect();
+        // Native code gathers a column from one base (the store's layout is fixed from here on).
+        let cols = views(&mut store);
+        for v in passes.iter_mut().flatten() {
+            if v.jit.as_ref().is_some_and(|jit| exec::gathered_columns(&jit.gathers, &cols).is_none()) {
+                if crate::config::env().debug >= 1 {
+                    eprintln!("pass on group {}: closures, a gathered column has no single base", v.group);
+                }
+                v.jit = None;
+            }
+        }
+        drop(cols);
         let mut stages = vec![];
         for st in &plan.stages {
             let mut blocks = st.updates.clone();

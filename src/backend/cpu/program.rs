@@ -20,6 +20,8 @@ pub struct ColView<T> {
     /// The base when every group that stores the column has the same one (rows are particle
     /// indices, the usual case): neighbour gathers then skip the per-particle group lookup.
     pub uniform: Option<isize>,
+    /// The base shared by every group that stores the column, if they share one.
+    pub shared: Option<isize>,
 }
 
 // SAFETY: a ColView is only dereferenced at rows the scheduler's invariants make race-free:
