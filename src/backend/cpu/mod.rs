@@ -201,7 +201,7 @@ fn varying(node: &Node, flags: &[bool]) -> bool {
 /// The fields the pair program gathers at j that not every source group stores, with the groups
 /// that do.
 fn partly_stored(plan: &Plan, graph: &Graph, nodes: &[Id], sources: GroupSet) -> Vec<(FieldId, GroupSet)> {
-    let groups = (1u64 << plan.model.groups.len()) - 1;
+    let groups = 1u64.checked_shl(plan.model.groups.len() as u32).map_or(u64::MAX, |bit| bit - 1);
     let mut out: Vec<(FieldId, GroupSet)> = vec![];
     for id in nodes {
         if let Node::Load { field, side: Side::J, .. } = graph.nodes[*id as usize] {
