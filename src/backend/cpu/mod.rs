@@ -198,15 +198,14 @@ fn varying(node: &Node, flags: &[bool]) -> bool {
     }
 }
 
-/// The fields the pair program gathers at j that not every source group stores, with the groups
-/// that do.
+/// The fields the pair program gathers at j that not every source group with particles stores,
+/// with the groups that do.
 fn partly_stored(plan: &Plan, graph: &Graph, nodes: &[Id], sources: GroupSet) -> Vec<(FieldId, GroupSet)> {
-    let groups = 1u64.checked_shl(plan.model.groups.len() as u32).map_or(u64::MAX, |bit| bit - 1);
     let mut out: Vec<(FieldId, GroupSet)> = vec![];
     for id in nodes {
         if let Node::Load { field, side: Side::J, .. } = graph.nodes[*id as usize] {
-            let stored_on = plan.layout.iter().find(|l| l.field == field).map_or(GroupSet(0), |l| l.groups);
-            if sources.0 & groups & !stored_on.0 != 0 && !out.iter().any(|(f, _)| *f == field) {
+            let stored_on = plan.field_layout(field).map_or(GroupSet(0), |l| l.groups);
+            if sources.0 & plan.groups.0 & !stored_on.0 != 0 && !out.iter().any(|(f, _)| *f == field) {
                 out.push((field, stored_on));
             }
         }
