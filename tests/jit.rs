@@ -135,3 +135,85 @@ fn native_pair_programs_equal_the_closures_on_jittered_clouds_with_variable_h() 
         }
     }
 }
+
+/// A field that only some of a pass's source groups store: FTLR19's plate gathers its damage `D`
+/// at j, which the elastic projectile does not store. On a jittered cloud with the two groups
+/// mixed at random (about half the pairs cross the groups) and `D` set anywhere from 0 to failed,
+/// every pass must run natively and one evaluation must agree bit for bit with the closures, so
+/// the plate's rows are gathered from their own base. A neighbour of the other group reads a zero
+/// row (`jit::PairSpec::partial`) that the bundled sums never use (they take `D` from their own
+/// group only: with that row set to NaN this test still passes), so the row guards the read
+/// rather than the value.
+#[test]
+fn native_pair_programs_gather_a_field_that_one_of_two_mixed_groups_stores() {
+    use pairsum::backend::Globals;
+    let opts = pairsum::scene::Options { resolution: Some("ci".into()), ..Default::default() };
+    let (scene, plan) = prepare(&case("borvik_perforation"), &opts).expect("borvik_perforation");
+    let d = plan.model.field_id("D").expect("D");
+    assert_eq!(plan.model.all_groups().0.count_ones(), 2, "projectile and target");
+    // Each group's material as the case binds it.
+    let material_of = |g: u32| {
+        let k = scene.particles.group.iter().position(|&q| q == g).expect("a particle of the group");
+        scene.particles.material[k]
+    };
+    let dx = 0.002;
+    let mut seed = 7;
+    let mut x = lattice(3, 9, dx);
+    for p in &mut x {
+        for c in p.iter_mut() {
+            *c += 0.3 * dx * (rnd(&mut seed) - 0.5);
+        }
+    }
+    let mut inp = input(3, x, dx);
+    for k in 0..inp.len() {
+        let g = u32::from(rnd(&mut seed) < 0.5);
+        inp.group[k] = g;
+        inp.material[k] = material_of(g);
+        inp.body[k] = g;
+        for c in 0..3 {
+            inp.v[k][c] = 50.0 * (rnd(&mut seed) - 0.5);
+        }
+    }
+    let store = build_store::<f64>(&plan, &inp, &scene.materials).expect("store");
+    let mut a = CpuBackend::new(plan.clone(), store.clone(), vec![]).expect("cpu");
+    assert_eq!(a.native_passes().0, a.native_passes().1, "every pass native");
+    let mut b = CpuBackend::new(plan.clone(), store, vec![]).expect("cpu").without_jit();
+    a.initialise().expect("init");
+    b.initialise().expect("init");
+    // Damage from none to failed (a fifth of the particles), so that a row read from the wrong
+    // base shows.
+    let mut snap = a.snapshot().expect("snapshot");
+    let damage = snap.columns[d.index()].as_mut().expect("D is stored on the target");
+    for v in damage.iter_mut() {
+        let r = rnd(&mut seed);
+        *v = if r < 0.2 { 1.0 } else { r };
+    }
+    a.restore(&snap).expect("restore");
+    b.restore(&snap).expect("restore");
+    let g = Globals { time: 0.0, dt: 1e-8 };
+    a.evaluate(g).expect("native");
+    b.evaluate(g).expect("closures");
+    let mut checked = 0;
+    for f in plan.watched_fields() {
+        let field = &plan.model.field(f).name;
+        let (_, x) = field_by_id(&a, field);
+        let (_, y) = field_by_id(&b, field);
+        assert!(
+            x.iter().zip(&y).all(|(p, q)| p.to_bits() == q.to_bits() || (p.is_nan() && q.is_nan())),
+            "`{field}` differs between native code and closures"
+        );
+        checked += 1;
+    }
+    assert!(checked > 0);
+    // The damage reached the sums: the accelerations differ from a cloud without it.
+    let mut c =
+        CpuBackend::new(plan.clone(), build_store::<f64>(&plan, &inp, &scene.materials).expect("store"), vec![])
+            .expect("cpu");
+    c.initialise().expect("init");
+    c.evaluate(g).expect("undamaged");
+    let changed = plan.watched_fields().into_iter().any(|f| {
+        let field = &plan.model.field(f).name;
+        field_by_id(&a, field).1 != field_by_id(&c, field).1
+    });
+    assert!(changed, "the damage changes none of the sums");
+}
