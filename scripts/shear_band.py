@@ -46,11 +46,11 @@ def band(d, dx_mm):
     strain = high = failed = 0.0
     volume = dx_mm**3
     for k, body in enumerate(d["body"]):
-        x, y, _ = d["Points"][k]
-        r = 1000.0 * math.hypot(x, y)
         if body != 1:
             continue
         failed += d["D"][k] >= 1.0
+        x, y, _ = d["Points"][k]
+        r = 1000.0 * math.hypot(x, y)
         if r > 20.0:
             continue
         e = d["eps_p"][k]
