@@ -390,14 +390,24 @@ impl<T: Real> Writer<'_, '_, T> {
                     time: sh.time,
                     dt: sh.dt,
                 };
+                // The last vector may read up to OVERRUN lanes past the batch, where an earlier
+                // pass may have left a particle of a group that does not store a gathered
+                // column (or the 0 they start with): its row would lie outside the column. The
+                // batch's last neighbour is a row of every column the pass gathers.
+                let last = self.j[n - 1];
+                self.j[n..n + OVERRUN].fill(last);
+                debug_assert!(
+                    self.j[..n + OVERRUN].iter().all(|&j| v.sources >> sh.group[j as usize] & 1 == 1),
+                    "a lane the native code reads holds a particle the pass does not sum over"
+                );
                 for (q, &(k, start)) in segs.iter().enumerate() {
                     let end = seg_end(q);
                     if end > start {
                         let slots = &mut self.slots[k * ns..(k + 1) * ns];
                         let dest = self.dest[k..].as_ptr();
                         // SAFETY: the frame is the pair program's (padded for whole vectors); j
-                        // holds LANES + padding rows of every gathered column (stale lanes are
-                        // earlier, valid neighbours); the sign lanes exist whenever the case has
+                        // holds LANES + padding rows of every gathered column (the lanes past the
+                        // batch repeat its last neighbour); the sign lanes exist whenever the case has
                         // mirrors, which is when the program reads them; `dest` is lane k of the
                         // dest frame, which holds every broadcast register; `slots` are k's.
                         unsafe { jit.run(self.pair, self.j, cols, start..end, sign.as_ptr(), &world, dest, slots) }
