@@ -343,6 +343,8 @@ pub enum Builtin {
     Ln,
     Sin,
     Cos,
+    /// The arc cosine, in radians, of a value in [−1, 1].
+    Acos,
     Abs,
     Min,
     Max,
@@ -371,6 +373,7 @@ impl Builtin {
             Builtin::Ln => "ln",
             Builtin::Sin => "sin",
             Builtin::Cos => "cos",
+            Builtin::Acos => "acos",
             Builtin::Abs => "abs",
             Builtin::Min => "min",
             Builtin::Max => "max",

@@ -36,6 +36,7 @@ pub trait Real:
     fn ln(self) -> Self;
     fn sin(self) -> Self;
     fn cos(self) -> Self;
+    fn acos(self) -> Self;
     fn powf(self, e: Self) -> Self;
     fn abs(self) -> Self;
     fn min(self, o: Self) -> Self;
@@ -86,6 +87,10 @@ macro_rules! real {
             #[inline(always)]
             fn cos(self) -> Self {
                 <$t>::cos(self)
+            }
+            #[inline(always)]
+            fn acos(self) -> Self {
+                <$t>::acos(self)
             }
             #[inline(always)]
             fn powf(self, e: Self) -> Self {

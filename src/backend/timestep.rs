@@ -67,6 +67,7 @@ fn eval(e: &Expr, values: &[f64], next: &mut usize, time: f64, dt: f64) -> f64 {
                 Builtin::Ln => a[0].ln(),
                 Builtin::Sin => a[0].sin(),
                 Builtin::Cos => a[0].cos(),
+                Builtin::Acos => a[0].acos(),
                 _ => f64::NAN,
             }
         }

@@ -338,7 +338,7 @@ pub fn builtin(f: Builtin, mut args: Vec<Expr>, span: crate::diag::Span) -> Resu
             let u = units[0].powr(Ratio { num: 1, den: 2 }).ok_or_else(unit_overflow)?;
             Ok(call(args, Type::scalar(u)))
         }
-        Builtin::Exp | Builtin::Ln | Builtin::Sin | Builtin::Cos => {
+        Builtin::Exp | Builtin::Ln | Builtin::Sin | Builtin::Cos | Builtin::Acos => {
             if shapes[0] != Shape::Scalar {
                 return Err(bad("a scalar", None));
             }
@@ -413,6 +413,7 @@ pub fn builtin_by_name(name: &str) -> Option<(Builtin, Option<usize>)> {
         "ln" => (Ln, Some(1)),
         "sin" => (Sin, Some(1)),
         "cos" => (Cos, Some(1)),
+        "acos" => (Acos, Some(1)),
         "abs" => (Abs, Some(1)),
         "min" => (Min, None),
         "max" => (Max, None),
@@ -423,7 +424,7 @@ pub fn builtin_by_name(name: &str) -> Option<(Builtin, Option<usize>)> {
 }
 
 /// Every callable name the language knows besides user helpers (for suggestions).
-pub const CALLABLE: [&str; 25] = [
+pub const CALLABLE: [&str; 28] = [
     "diag",
     "dot",
     "outer",
@@ -439,6 +440,9 @@ pub const CALLABLE: [&str; 25] = [
     "sqrt",
     "exp",
     "ln",
+    "sin",
+    "cos",
+    "acos",
     "abs",
     "min",
     "max",

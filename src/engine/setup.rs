@@ -200,6 +200,7 @@ fn eval(
                 Builtin::Ln => vec![a[0][0].ln()],
                 Builtin::Sin => vec![a[0][0].sin()],
                 Builtin::Cos => vec![a[0][0].cos()],
+                Builtin::Acos => vec![a[0][0].acos()],
                 Builtin::Abs => a[0].iter().map(|x| x.abs()).collect(),
                 Builtin::Min => a[0].iter().zip(&a[1]).map(|(x, y)| x.min(*y)).collect(),
                 Builtin::Max => a[0].iter().zip(&a[1]).map(|(x, y)| x.max(*y)).collect(),

@@ -92,19 +92,23 @@ fn st_R_art(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 0u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 5u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 6u;
     return params[b];
 }
 fn prm_art_eps(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 9u;
+    return params[b];
+}
+fn prm_art_axes(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 11u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -126,8 +130,24 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // artificial_stress
     var R_art_i: mat3x3<f32> = ld_R_art(i);
     let sigma = (ld_s(i) - (p_i * eye()));
+    let sigma_2 = sigma;
+    let q = (trace(sigma_2) / 3.0);
+    let b = (sigma_2 - (q * eye()));
+    let spread = sqrt((ddot(b, b) / select(2.0, 6.0, (3.0 == 3.0))));
+    let b_2 = b;
+    let spread_2 = spread;
+    let unit = select(1.0, spread_2, (spread_2 > 0.0));
+    let angle = (acos(min(max((determinant(div_m(b_2, unit)) / 2.0), -1.0), 1.0)) / 3.0);
+    let s1 = select((q + spread), (q + ((2.0 * spread) * cos(angle))), (3.0 == 3.0));
+    let s3 = select((q - spread), (q + ((2.0 * spread) * cos((angle + ((2.0 * 3.1415927) / 3.0))))), (3.0 == 3.0));
+    let s2 = select((q - spread), (((3.0 * q) - s1) - s3), (3.0 == 3.0));
+    let d12 = select(select(0.0, (s1 / max((s1 - s2), s1)), (s1 > 0.0)), 1.0, (s2 > 0.0));
+    let d23 = select(select(0.0, (s2 / max((s2 - s3), s2)), (s2 > 0.0)), 1.0, (s3 > 0.0));
+    let d123 = select(0.0, ((d12 - d23) / select(1.0, (s1 - s3), (s1 > s3))), (s1 > s3));
+    let r1 = (sigma_2 - (s1 * eye()));
+    let pulled = sel_m(max_m(sigma, mat3x3<f32>()), (((max(s1, 0.0) * eye()) + (d12 * r1)) + (d123 * sym((r1 * (sigma_2 - (s2 * eye())))))), (prm_art_axes(i) > 0.0));
     let p3 = ld_rho(i);
-    R_art_i = div_m(((-prm_art_eps(i)) * max_m(sigma, mat3x3<f32>())), (p3 * p3));
+    R_art_i = div_m(((-prm_art_eps(i)) * pulled), (p3 * p3));
     st_p(i, p_i);
     st_c(i, c_i);
     st_R_art(i, R_art_i);

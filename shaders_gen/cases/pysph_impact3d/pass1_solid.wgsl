@@ -513,27 +513,27 @@ fn st_v_xsph(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 8u;
     return params[b];
 }
 fn prm_art_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 10u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 12u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 13u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 14u;
     return params[b];
 }
 fn prm_xsph_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 15u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -608,7 +608,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             div_v = div_v + ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * dot((v_i - ldj_v(j, sgn)), gradW_ij));
             // pairsum velocity_gradient (stdlib/solid/strain_rate.sph:6)
             grad_v = grad_v + outer((ldj_v(j, sgn) - v_i), ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * gradW_ij));
-            // pairsum momentum (stdlib/momentum/artificial_stress.sph:22)
+            // pairsum momentum (stdlib/momentum/artificial_stress.sph:29)
             let sig_i = (s_i - (p_i * eye()));
             let sig_j = (ldj_s(j, sgn) - (ldj_p(j, sgn) * eye()));
             let c_i_2 = c_i;

@@ -20,6 +20,7 @@ pub enum Un {
     Ln,
     Sin,
     Cos,
+    Acos,
     Abs,
 }
 
@@ -143,6 +144,7 @@ impl Graph {
                 Un::Ln => x.ln(),
                 Un::Sin => x.sin(),
                 Un::Cos => x.cos(),
+                Un::Acos => x.acos(),
                 Un::Abs => x.abs(),
             };
             return self.c(r);
@@ -748,13 +750,14 @@ impl<'a> Lowerer<'a> {
                 let det = self.det(&args[0]);
                 scalar(det)
             }
-            Builtin::Sqrt | Builtin::Exp | Builtin::Ln | Builtin::Sin | Builtin::Cos | Builtin::Abs => {
+            Builtin::Sqrt | Builtin::Exp | Builtin::Ln | Builtin::Sin | Builtin::Cos | Builtin::Acos | Builtin::Abs => {
                 let op = match f {
                     Builtin::Sqrt => Un::Sqrt,
                     Builtin::Exp => Un::Exp,
                     Builtin::Ln => Un::Ln,
                     Builtin::Sin => Un::Sin,
                     Builtin::Cos => Un::Cos,
+                    Builtin::Acos => Un::Acos,
                     _ => Un::Abs,
                 };
                 let c = args[0].c.iter().map(|x| self.g.un(op, *x)).collect();

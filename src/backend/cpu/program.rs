@@ -235,6 +235,7 @@ fn un_instr<T: Real>(op: Un, o: usize, a: usize) -> Instr<T> {
         Un::Ln => lanes1!(o, a, |x| x.ln()),
         Un::Sin => lanes1!(o, a, |x| x.sin()),
         Un::Cos => lanes1!(o, a, |x| x.cos()),
+        Un::Acos => lanes1!(o, a, |x| x.acos()),
         Un::Abs => lanes1!(o, a, |x| x.abs()),
     }
 }

@@ -453,6 +453,7 @@ impl<'a> Writer<'a> {
             Builtin::Ln => format!("log({})", a[0]),
             Builtin::Sin => format!("sin({})", a[0]),
             Builtin::Cos => format!("cos({})", a[0]),
+            Builtin::Acos => format!("acos({})", a[0]),
             Builtin::Abs if is_mat(shape, d) => format!("abs_m({})", a[0]),
             Builtin::Abs => format!("abs({})", a[0]),
             Builtin::Min if is_mat(shape, d) => format!("min_m({}, {})", a[0], a[1]),
