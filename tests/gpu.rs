@@ -148,10 +148,7 @@ fn gpu_neighbour_counts_equal_the_cpu_ones_exactly() {
 /// CPU's by more than a sum's rounding; the exact test is tests/principal.rs, in f64.
 #[test]
 fn tensile_part_on_the_gpu_matches_the_cpu() {
-    let m = model(
-        "use kernels\nuse solid::principal\ngroup all\nkernel = cubic_spline\nstate s: symtensor [Pa]\n\
-         particle tension -> pulled: symtensor [Pa] { pulled = tensile_part(s) }\nintegrate { }\n",
-    );
+    let m = model(TENSILE_PART_MODEL);
     for dim in [2, 3] {
         let inp = cloud(dim, if dim == 2 { 14 } else { 7 }, 0.01, false, 5);
         let mat = material(&m, &[("rho0", vec![1000.0])]);

@@ -12,9 +12,6 @@ use pairsum::engine::setup::build_store;
 use pairsum::ir::{component_indices, components, Shape};
 use pairsum::schedule::{IntegratorKind, Plan};
 
-const MODEL: &str = "use kernels\nuse solid::principal\ngroup all\nkernel = cubic_spline\nstate s: symtensor [Pa]\n\
-                     particle tension -> pulled: symtensor [Pa] { pulled = tensile_part(s) }\nintegrate { }\n";
-
 /// A random rotation (Gram–Schmidt of a random matrix).
 fn rotation(dim: usize, seed: &mut u64) -> DMatrix<f64> {
     let m = DMatrix::from_fn(dim, dim, |_, _| rnd(seed) - 0.5);
@@ -71,7 +68,7 @@ fn stresses(dim: usize) -> Vec<DMatrix<f64>> {
 
 #[test]
 fn tensile_part_is_the_positive_part_of_the_eigen_decomposition() {
-    let m = model(MODEL);
+    let m = model(TENSILE_PART_MODEL);
     for dim in 1..=3 {
         let stresses = stresses(dim);
         let n = stresses.len();

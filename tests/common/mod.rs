@@ -103,6 +103,10 @@ pub fn field_by_id<B: Backend>(b: &B, name: &str) -> (usize, Vec<f64>) {
     (comps, out)
 }
 
+/// A model whose one equation is `tensile_part` (stdlib/solid/principal.sph) of the state `s`.
+pub const TENSILE_PART_MODEL: &str = "use kernels\nuse solid::principal\ngroup all\nkernel = cubic_spline\n\
+     state s: symtensor [Pa]\nparticle tension -> pulled: symtensor [Pa] { pulled = tensile_part(s) }\nintegrate { }\n";
+
 /// A xorshift pseudo-random number in [0, 1), advancing `seed`.
 pub fn rnd(seed: &mut u64) -> f64 {
     *seed ^= *seed << 13;

@@ -282,7 +282,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let s2 = select((q - spread), (((3.0 * q) - s1) - s3), (3.0 == 3.0));
     let d12 = select(select(0.0, (s1 / max((s1 - s2), s1)), (s1 > 0.0)), 1.0, (s2 > 0.0));
     let d23 = select(select(0.0, (s2 / max((s2 - s3), s2)), (s2 > 0.0)), 1.0, (s3 > 0.0));
-    let d123 = select(0.0, ((d12 - d23) / select(1.0, (s1 - s3), (s1 > s3))), (s1 > s3));
+    let d123 = ((d12 - d23) / select(1.0, (s1 - s3), (s1 > s3)));
     let r1 = (sigma_2 - (s1 * eye()));
     let pulled = sel_m(max_m(sigma, mat3x3<f32>()), (((max(s1, 0.0) * eye()) + (d12 * r1)) + (d123 * sym((r1 * (sigma_2 - (s2 * eye())))))), (prm_art_axes(i) > 0.0));
     R_art_i = div_m(((-prm_art_eps(i)) * pulled), (rho_i * rho_i));
