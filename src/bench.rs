@@ -276,19 +276,18 @@ fn skew(a: &M3) -> M3 {
     o
 }
 
-/// Largest relative difference between the closure backend's fields and the native ones.
-pub fn compare(b: &CpuBackend<f64>, native: &NativeOut) -> f64 {
+/// Largest relative difference between the closure backend's fields and the native ones (each
+/// over the larger magnitude of the two); an error naming the field where a value is not finite
+/// or the lengths differ.
+pub fn compare(b: &CpuBackend<f64>, native: &NativeOut) -> Result<f64, String> {
     let mut worst: f64 = 0.0;
     for (name, ours) in
         [("drho", &native.drho), ("edot", &native.edot), ("spin", &native.spin), ("dv", &native.dv), ("ds", &native.ds)]
     {
-        let theirs = col(b, name);
-        let scale = ours.iter().map(|x| x.abs()).fold(0.0, f64::max).max(1e-300);
-        for (a, c) in ours.iter().zip(theirs) {
-            worst = worst.max((a - c).abs() / scale);
-        }
+        let d = crate::compare::max_rel_diff(ours, &col(b, name)).map_err(|e| format!("`{name}`: {e}"))?;
+        worst = worst.max(d);
     }
-    worst
+    Ok(worst)
 }
 
 fn time<R>(f: impl FnMut() -> R, reps: usize) -> f64 {
@@ -317,7 +316,7 @@ pub fn run(sizes: &[usize], reps: usize) -> Result<String, String> {
     for &n in sizes {
         let mut b = elastic_block(n)?;
         let mut closures = elastic_block(n)?.without_jit();
-        let h_max = col(&b, "h").iter().copied().fold(0.0, f64::max);
+        let h_max = crate::compare::max_abs(col(&b, "h")).map_err(|e| format!("h: {e}"))?;
         let cell = b.support * h_max;
         // Interleaved, best of `reps` each: the machine's load drifts between measurements.
         let (mut t_grid, mut t_native, mut t_closure) = (f64::INFINITY, f64::INFINITY, f64::INFINITY);
@@ -332,7 +331,8 @@ pub fn run(sizes: &[usize], reps: usize) -> Result<String, String> {
         let grid = Grid::build(col(&b, "x"), 3, cell);
         let native = native_step(&b, &grid);
         b.evaluate(Globals::default()).map_err(|e| e.0)?;
-        let diff = compare(&b, &native);
+        let diff =
+            compare(&b, &native).map_err(|e| format!("{n} particles, generated code against hand-written: {e}"))?;
         let gpu = match elastic_block_gpu(n) {
             Ok(mut g) => {
                 let mut best = f64::INFINITY;

@@ -7,6 +7,7 @@ pub mod backend;
 pub mod bench;
 pub mod check;
 pub mod cli;
+pub mod compare;
 pub mod config;
 pub mod diag;
 pub mod engine;

@@ -115,14 +115,10 @@ fn a_symmetry_plane_gives_the_same_motion_as_the_mirrored_full_model() {
     let (c, xf) = field_by_id(&ef.backend, "x");
     let (_, xh) = field_by_id(&eh.backend, "x");
     // Particle k of the half model is particle 2k of the full one (the right-hand block).
-    let mut worst: f64 = 0.0;
-    let mut moved: f64 = 0.0;
-    for k in 0..xh.len() / c {
-        for a in 0..c {
-            worst = worst.max((xh[k * c + a] - xf[2 * k * c + a]).abs());
-            moved = moved.max((xh[k * c + a] - half_in.x[k][a]).abs());
-        }
-    }
+    let right: Vec<f64> = (0..xh.len()).map(|i| xf[2 * (i / c) * c + i % c]).collect();
+    let start: Vec<f64> = (0..xh.len()).map(|i| half_in.x[i / c][i % c]).collect();
+    let worst = max_abs_diff("half against full model", &xh, &right);
+    let moved = max_abs_diff("half model against its start", &xh, &start);
     assert!(moved > 0.05 * dx, "the blocks hardly moved ({moved})");
     assert!(worst < 1e-9 * dx, "half and full models differ by {worst:e} m");
 }
@@ -186,9 +182,9 @@ fn a_sum_from_own_sees_only_the_particles_own_group() {
     let apart = sums(&text(""), 10.0 * dx);
     let own_touching = sums(&text("from own"), 0.0);
     let all_touching = sums(&text(""), 0.0);
-    let worst = apart.iter().zip(&own_touching).map(|(a, b)| (a - b).abs() / a).fold(0.0, f64::max);
+    let worst = max_pointwise_rel_diff("from own: apart against touching", &apart, &own_touching);
     assert!(worst < 1e-12, "from own, touching vs apart: relative difference {worst:e}");
-    let cross = apart.iter().zip(&all_touching).map(|(a, b)| (a - b).abs() / a).fold(0.0, f64::max);
+    let cross = max_pointwise_rel_diff("without from own: apart against touching", &apart, &all_touching);
     assert!(cross > 0.1, "without `from own` the touching blocks should see each other ({cross:e})");
 }
 
@@ -329,7 +325,7 @@ fn failed_block_pulled_apart(model_text: &str) -> (f64, f64) {
     let (_, d) = field_by_id(&e.backend, "D");
     assert!(d.iter().all(|&d| d >= 1.0), "every particle has failed");
     let (_, rho) = field_by_id(&e.backend, "rho");
-    let least = rho.iter().cloned().fold(f64::INFINITY, f64::min) / 2710.0;
+    let least = least("rho", &rho) / 2710.0;
     ((total(&e.backend) - e0) / e0, least)
 }
 

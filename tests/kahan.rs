@@ -20,7 +20,7 @@ integrate { }
 ";
 
 fn worst_error(values: &[f64], exact: &[f64]) -> f64 {
-    values.iter().zip(exact).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max)
+    max_abs_diff("f32 sum against the f64 one", values, exact)
 }
 
 #[test]

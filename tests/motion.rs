@@ -101,8 +101,9 @@ fn a_paddle_turns_rigidly_about_its_centre_and_pushes_the_water_aside() {
     }
     // The paddle pushes the water rather than passing through it: no water particle comes within
     // half a spacing of it, though its left half has swept through the water.
-    let gap = water.iter().flat_map(|w| paddle.iter().map(move |p| dist(*w, *p))).fold(f64::INFINITY, f64::min);
-    let deepest = paddle.iter().map(|p| p[1]).fold(f64::INFINITY, f64::min);
+    let distances: Vec<f64> = water.iter().flat_map(|w| paddle.iter().map(move |p| dist(*w, *p))).collect();
+    let gap = least("water–paddle distance", &distances);
+    let deepest = least("paddle's y", &paddle.iter().map(|p| p[1]).collect::<Vec<_>>());
     assert!(deepest < 0.05, "the paddle reaches down to y = {deepest} only");
     assert!(gap > 0.5 * 0.005, "a water particle is {gap} m from the paddle");
 }

@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::rnd;
+use common::{max_abs, max_abs_diff, rnd};
 use pairsum::backend::cpu::lists::{transformed, BuildInput, Lists, INDEX_MASK, TRANSFORM_SHIFT};
 use pairsum::backend::cpu::CpuBackend;
 use pairsum::backend::{Backend, Mirror};
@@ -62,7 +62,7 @@ fn verlet_lists_never_miss_a_pair_under_the_conservative_bound() {
         let no_field = |_: FieldId| -> Vec<f64> { unreachable!("Verlet lists read no field") };
         let steps = 60u64;
         for step in 0..steps {
-            let h_max = h.iter().copied().fold(0.0, f64::max);
+            let h_max = max_abs("h", &h);
             let inp = BuildInput { x: &x, h: &h, dim, support: SUPPORT, h_max, mirrors: &mirrors };
             lists.prepare(&search, &inp, no_field);
             assert_eq!(missed(&lists, &x, &h, dim, &mirrors), 0, "{dim}D, step {step}: a pair is missing");
@@ -140,8 +140,8 @@ fn verlet_lists_give_the_cell_search_result_on_the_bullet_case() {
     for name in ["x", "v", "rho", "s", "eps_p"] {
         let f = model.field_id(name).expect("field").index();
         let (p, q) = (a.columns[f].as_ref().expect("stored"), b.columns[f].as_ref().expect("stored"));
-        let scale = p.iter().map(|v| v.abs()).fold(0.0, f64::max);
-        let diff = p.iter().zip(q).map(|(u, w)| (u - w).abs()).fold(0.0, f64::max);
+        let scale = max_abs(&format!("{name} with the cell search"), p);
+        let diff = max_abs_diff(&format!("{name}, cell search against Verlet lists"), p, q);
         assert!(diff <= 1e-9 * scale, "{name}: differs by {diff:e} (scale {scale:e})");
     }
     let stats = verlet.backend.search_stats();

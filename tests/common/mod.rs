@@ -103,9 +103,110 @@ pub fn field_by_id<B: Backend>(b: &B, name: &str) -> (usize, Vec<f64>) {
     (comps, out)
 }
 
+/// A field of the particles whose group stores it, in the scene's original order (`field_by_id`
+/// gives NaN for the others, which a comparison must not read as a value).
+pub fn stored_field<B: Backend>(b: &B, name: &str) -> (usize, Vec<f64>) {
+    let plan = b.plan();
+    let f = plan.model.field_id(name).expect("field");
+    let groups = plan.layout.iter().find(|l| l.field == f).unwrap_or_else(|| panic!("`{name}` is not stored")).groups;
+    let (comps, data) = b.read(f).expect("read").expect("stored");
+    let mut rows: Vec<(u32, usize)> = b
+        .ids()
+        .expect("ids")
+        .into_iter()
+        .zip(b.groups())
+        .enumerate()
+        .filter(|(_, (_, g))| groups.contains(pairsum::ir::GroupId(*g)))
+        .map(|(row, (id, _))| (id, row))
+        .collect();
+    rows.sort();
+    let values = rows.iter().flat_map(|(_, row)| data[row * comps..(row + 1) * comps].iter().copied()).collect();
+    (comps, values)
+}
+
+/// One figure a bundled case computes at its CI resolution today (`tests/data/ci_values.toml`,
+/// written by `scripts/pin_ci_values.py`).
+#[derive(serde::Deserialize)]
+pub struct Pin {
+    pub case: String,
+    pub set: std::collections::BTreeMap<String, String>,
+    pub quantity: String,
+    pub f64: f64,
+    pub f32: f64,
+    pub band: f64,
+}
+
+pub fn pins() -> Vec<Pin> {
+    #[derive(serde::Deserialize)]
+    struct File {
+        pin: Vec<Pin>,
+    }
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/ci_values.toml");
+    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    toml::from_str::<File>(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display())).pin
+}
+
+/// Every result of a CI run of `case` (with `set`, in f32 or f64) lies within its pinned band of what the case
+/// computed when it was pinned, and every pinned result was reported: a regression test, whose
+/// band is the spread rounding makes (f32 against f64), not the case's error against its reference.
+pub fn assert_pinned(case: &str, set: &[(&str, &str)], f32: bool, results: &[(String, f64)]) {
+    let set: std::collections::BTreeMap<String, String> =
+        set.iter().map(|(k, v)| (k.to_string(), v.to_string())).collect();
+    let pinned: Vec<Pin> = pins().into_iter().filter(|p| p.case == case && p.set == set).collect();
+    assert!(
+        !pinned.is_empty(),
+        "{case} {set:?}: nothing pinned in tests/data/ci_values.toml (scripts/pin_ci_values.py)"
+    );
+    for (quantity, value) in results {
+        let pin = pinned.iter().find(|p| &p.quantity == quantity).unwrap_or_else(|| {
+            panic!("{case} {set:?}: `{quantity}` is not pinned (scripts/pin_ci_values.py writes every result)")
+        });
+        let (pinned_value, other) = if f32 { (pin.f32, pin.f64) } else { (pin.f64, pin.f32) };
+        assert!(
+            (value - pinned_value).abs() <= pin.band,
+            "{case} {set:?}: `{quantity}` = {value}, pinned at {pinned_value} ± {} (the other precision gave {other})",
+            pin.band
+        );
+    }
+    for pin in &pinned {
+        assert!(results.iter().any(|(q, _)| *q == pin.quantity), "{case}: pinned `{}` was not reported", pin.quantity);
+    }
+}
+
 /// A model whose one equation is `tensile_part` (stdlib/solid/principal.sph) of the state `s`.
 pub const TENSILE_PART_MODEL: &str = "use kernels\nuse solid::principal\ngroup all\nkernel = cubic_spline\n\
      state s: symtensor [Pa]\nparticle tension -> pulled: symtensor [Pa] { pulled = tensile_part(s) }\nintegrate { }\n";
+
+/// The largest magnitude of `values`; fails the test, naming `what`, at a NaN or an infinity.
+pub fn max_abs(what: &str, values: &[f64]) -> f64 {
+    pairsum::compare::max_abs(values).unwrap_or_else(|e| panic!("{what}: {e}"))
+}
+
+/// The least of `values`; fails the test, naming `what`, at a NaN or an infinity.
+pub fn least(what: &str, values: &[f64]) -> f64 {
+    pairsum::compare::extremes(values).unwrap_or_else(|e| panic!("{what}: {e}")).0
+}
+
+/// The largest of `values`; fails the test, naming `what`, at a NaN or an infinity.
+pub fn largest(what: &str, values: &[f64]) -> f64 {
+    pairsum::compare::extremes(values).unwrap_or_else(|e| panic!("{what}: {e}")).1
+}
+
+/// The largest `|a[k] − b[k]|`; fails the test, naming `what`, at a NaN, an infinity or a
+/// difference in length.
+pub fn max_abs_diff(what: &str, a: &[f64], b: &[f64]) -> f64 {
+    pairsum::compare::max_abs_diff(a, b).unwrap_or_else(|e| panic!("{what}: {e}"))
+}
+
+/// The largest `|a[k] − b[k]|` over the largest magnitude of either side; fails as `max_abs_diff`.
+pub fn max_rel_diff(what: &str, a: &[f64], b: &[f64]) -> f64 {
+    pairsum::compare::max_rel_diff(a, b).unwrap_or_else(|e| panic!("{what}: {e}"))
+}
+
+/// The largest `|a[k] − b[k]| / |a[k]|`; fails as `max_abs_diff`, and where an `a[k]` is 0.
+pub fn max_pointwise_rel_diff(what: &str, a: &[f64], b: &[f64]) -> f64 {
+    pairsum::compare::max_pointwise_rel_diff(a, b).unwrap_or_else(|e| panic!("{what}: {e}"))
+}
 
 /// A xorshift pseudo-random number in [0, 1), advancing `seed`.
 pub fn rnd(seed: &mut u64) -> f64 {
