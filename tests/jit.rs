@@ -40,42 +40,58 @@ fn native_equals_closures<T: Real>(name: &str, steps: usize) -> (usize, usize) {
     counts
 }
 
-/// Every watched field of `a` equals `b`'s bit for bit (a NaN equals a NaN).
+/// Every watched field of `a` equals `b`'s bit for bit, over the particles that store it, and is
+/// finite there (a run that blew up alike on both sides proves nothing).
 fn assert_same_bits<B: Backend>(a: &B, b: &B, what: &str) {
     for f in a.plan().watched_fields() {
         let field = &a.plan().model.field(f).name;
-        let (_, x) = field_by_id(a, field);
-        let (_, y) = field_by_id(b, field);
-        let differ =
-            x.iter().zip(&y).filter(|(p, q)| p.to_bits() != q.to_bits() && !(p.is_nan() && q.is_nan())).count();
+        let (_, x) = stored_field(a, field);
+        let (_, y) = stored_field(b, field);
+        if let Err(e) = pairsum::compare::max_abs_diff(&x, &y) {
+            panic!("{what}: `{field}`: {e}");
+        }
+        let differ = x.iter().zip(&y).filter(|(p, q)| p.to_bits() != q.to_bits()).count();
         assert_eq!(differ, 0, "{what}: `{field}` differs in {differ} of {} values", x.len());
     }
 }
 
-const CASES: [&str; 10] = [
-    "cantilever",
-    "elastic_wave",
-    "standing_wave",
-    "rings_2d",
-    "hypervelocity_impact",
-    "cube_on_cube",
-    "borvik_perforation",
-    "tensile_test",
-    "sphere_plate_graded",
-    "pysph_impact3d",
+/// Every bundled case: each `cases/*.toml` that is not a study (a study runs one of these).
+fn bundled_cases() -> Vec<String> {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("cases");
+    let mut names: Vec<String> = std::fs::read_dir(&dir)
+        .expect("cases/")
+        .map(|e| e.expect("entry").path())
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .filter(|p| !pairsum::scene::study::is_study(&std::fs::read_to_string(p).expect("case file")))
+        .map(|p| p.file_stem().expect("name").to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    names
+}
+
+/// The bundled cases whose pair programs the JIT does not emit yet, and why: their passes run as
+/// closures (`PAIRSUM_DEBUG=1` prints the reason). Each is still compared bit for bit below,
+/// closures against closures, which checks only that the run is deterministic.
+const CLOSURE_CASES: [(&str, &str); 3] = [
+    ("body_in_water_2d", "pow with a varying exponent (the Tait equation of state)"),
+    ("dam_break_2d", "pow with a varying exponent (the Tait equation of state)"),
+    ("hydrostatic_tank", "pow with a varying exponent (the Tait equation of state)"),
 ];
 
 #[test]
-fn native_pair_programs_equal_the_closures_bit_for_bit_on_every_bundled_case() {
-    let mut native = 0;
-    let mut all = 0;
-    for name in CASES {
-        let (n, a) = native_equals_closures::<f64>(name, 4);
-        native += n;
-        all += a;
+fn native_pair_programs_equal_the_closures_bit_for_bit_on_every_bundled_case_and_run_natively_but_three() {
+    let cases = bundled_cases();
+    assert!(cases.len() >= 17, "{cases:?}");
+    for name in &cases {
+        let (native, all) = native_equals_closures::<f64>(name, 4);
+        match CLOSURE_CASES.iter().find(|c| c.0 == name) {
+            // When the JIT learns their programs, this fails: take them off the list.
+            Some((_, why)) => {
+                assert_eq!(native, 0, "{name} now runs natively ({native} of {all}), not by closures ({why})")
+            }
+            None => assert_eq!(native, all, "{name}: {native} of {all} pass variants ran as native code"),
+        }
     }
-    // Every pair program of the bundled models is within what the JIT emits.
-    assert_eq!(native, all, "{native} of {all} pass variants ran as native code");
 }
 
 #[test]
@@ -128,15 +144,7 @@ fn native_pair_programs_equal_the_closures_on_jittered_clouds_with_variable_h() 
             let g = Globals { time: 0.0, dt: 1e-7 };
             a.evaluate(g).expect("native");
             b.evaluate(g).expect("closures");
-            for f in plan.watched_fields() {
-                let field = &plan.model.field(f).name;
-                let (_, x) = field_by_id(&a, field);
-                let (_, y) = field_by_id(&b, field);
-                assert!(
-                    x.iter().zip(&y).all(|(p, q)| p.to_bits() == q.to_bits()),
-                    "{name} {dim}D: `{field}` differs between native code and closures"
-                );
-            }
+            assert_same_bits(&a, &b, &format!("{name} {dim}D, native code against closures"));
         }
     }
 }
@@ -208,7 +216,10 @@ fn native_pair_programs_gather_a_field_that_one_of_two_mixed_groups_stores() {
     c.evaluate(g).expect("undamaged");
     let changed = plan.watched_fields().into_iter().any(|f| {
         let field = &plan.model.field(f).name;
-        field_by_id(&a, field).1 != field_by_id(&c, field).1
+        // Compared as bits over the particles that store the field: a NaN (`field_by_id`'s value
+        // for a particle that does not) would make any two vectors unequal.
+        let bits = |b: &CpuBackend<f64>| stored_field(b, field).1.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        bits(&a) != bits(&c)
     });
     assert!(changed, "the damage changes none of the sums");
 }

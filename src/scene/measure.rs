@@ -445,6 +445,17 @@ fn interbody(x: &[[f64; 3]], body: &[u32], dim: usize, dx: f64) -> (f64, usize) 
 }
 
 impl History {
+    /// A history resumed from a checkpoint: its points so far and the value a relative probe
+    /// measures from.
+    pub fn resumed(points: Vec<(f64, f64)>, initial: Option<f64>) -> History {
+        History { points, initial }
+    }
+
+    /// The value a relative probe measures from (its first value), once recorded.
+    pub fn initial(&self) -> Option<f64> {
+        self.initial
+    }
+
     pub fn record(&mut self, p: &ProbeSpec, t: f64, value: f64) {
         let relative = matches!(p.kind, ProbeKind::Field { relative: true, .. });
         let base = *self.initial.get_or_insert(value);
@@ -452,13 +463,23 @@ impl History {
     }
 }
 
+/// NaN when a value of `points` is NaN, otherwise `f(points)`.
+fn nan_or(points: &[(f64, f64)], f: impl Fn(&[(f64, f64)]) -> f64) -> f64 {
+    if points.iter().any(|p| p.1.is_nan()) {
+        f64::NAN
+    } else {
+        f(points)
+    }
+}
+
 /// A result from its probe's history.
 pub fn result_value(r: &ResultSpec, h: &History) -> f64 {
     let pts = &h.points;
     let v = match r.at.as_str() {
-        "min" => pts.iter().map(|p| p.1).fold(f64::INFINITY, f64::min),
-        "max" => pts.iter().map(|p| p.1).fold(f64::NEG_INFINITY, f64::max),
-        "abs_max" => pts.iter().map(|p| p.1.abs()).fold(0.0, f64::max),
+        // A NaN recorded anywhere makes these NaN: `f64::min` and `f64::max` would drop it.
+        "min" => nan_or(pts, |p| p.iter().map(|p| p.1).fold(f64::INFINITY, f64::min)),
+        "max" => nan_or(pts, |p| p.iter().map(|p| p.1).fold(f64::NEG_INFINITY, f64::max)),
+        "abs_max" => nan_or(pts, |p| p.iter().map(|p| p.1.abs()).fold(0.0, f64::max)),
         "mean_after" => {
             let from = r.from.unwrap_or(0.0);
             let sel: Vec<f64> = pts.iter().filter(|p| p.0 >= from).map(|p| p.1).collect();
