@@ -437,7 +437,6 @@ fn run_run(case: &str, a: RunArgs) -> i32 {
         }
         Err(RunFailure::Run(msg)) => {
             eprintln!("error: {msg}");
-            eprintln!("report: {}", opts.out.join("report.md").display());
             1
         }
     }

@@ -177,7 +177,56 @@ struct Recorder<'a> {
     started: Instant,
 }
 
+/// What a run has recorded so far, kept in its checkpoints so that a restarted run reports the
+/// same histories and results as one that was never stopped. Every f64 is kept as its bits: JSON
+/// has no NaN, and the restart must be exact.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct RecordSoFar {
+    next_output: u64,
+    vtk: Vec<(u64, String)>,
+    /// Per probe: its points (t, value) and the value a relative probe measures from.
+    histories: Vec<(Vec<(u64, u64)>, Option<u64>)>,
+}
+
 impl Recorder<'_> {
+    fn record_so_far(&self) -> Vec<u8> {
+        let record = RecordSoFar {
+            next_output: self.next_output.to_bits(),
+            vtk: self.series.iter().flat_map(|s| s.entries()).map(|(t, f)| (t.to_bits(), f.clone())).collect(),
+            histories: self
+                .histories
+                .iter()
+                .map(|h| {
+                    let points = h.points.iter().map(|(t, v)| (t.to_bits(), v.to_bits())).collect();
+                    (points, h.initial().map(f64::to_bits))
+                })
+                .collect(),
+        };
+        serde_json::to_vec(&record).expect("plain data serialises")
+    }
+
+    /// Takes up what an earlier run had recorded up to its checkpoint.
+    fn resume(&mut self, bytes: &[u8]) -> Result<(), String> {
+        let record: RecordSoFar =
+            serde_json::from_slice(bytes).map_err(|e| format!("the checkpoint's record of the run: {e}"))?;
+        if record.histories.len() != self.histories.len() {
+            return Err(format!(
+                "the checkpoint records {} probes where the case has {}",
+                record.histories.len(),
+                self.histories.len()
+            ));
+        }
+        let f = f64::from_bits;
+        self.next_output = f(record.next_output);
+        if let Some(series) = &mut self.series {
+            series.continue_after(record.vtk.into_iter().map(|(t, name)| (f(t), name)).collect());
+        }
+        for (h, (points, initial)) in self.histories.iter_mut().zip(record.histories) {
+            *h = measure::History::resumed(points.into_iter().map(|(t, v)| (f(t), f(v))).collect(), initial.map(f));
+        }
+        Ok(())
+    }
+
     fn observe<B: Backend>(&mut self, e: &Engine<B>) -> Result<(), String> {
         for (p, h) in self.scene.probes.iter().zip(&mut self.histories) {
             if e.step.is_multiple_of(p.every) {
@@ -192,8 +241,8 @@ impl Recorder<'_> {
             }
         }
         if self.opts.checkpoint_every.is_some_and(|n| n > 0 && e.step.is_multiple_of(n)) {
-            checkpoint::write(e, &self.opts.out.join("checkpoint.bin"))
-                .map_err(|err| format!("writing a checkpoint: {err}"))?;
+            checkpoint::write(e, &self.record_so_far(), &self.opts.out.join("checkpoint.bin"))
+                .map_err(|err| format!("writing a checkpoint: {err} (the last one written, if any, is kept)"))?;
         }
         if let Some(pb) = &self.progress {
             let end = e.config.end_time;
@@ -234,10 +283,14 @@ fn drive<B: Backend>(scene: Scene, backend: B, opts: &RunOptions, precision: &st
     config.max_steps = opts.max_steps;
     let mut engine = Engine::new(backend, config);
     engine.initialise().map_err(|e| RunFailure::Run(e.to_string()))?;
-    if let Some(r) = &opts.restart {
-        checkpoint::read(&mut engine, r)
-            .map_err(|e| RunFailure::Run(format!("cannot restart from `{}`: {e}", r.display())))?;
-    }
+    let cannot_restart = |e: &dyn std::fmt::Display| {
+        let file = opts.restart.as_deref().unwrap_or(Path::new("")).display();
+        RunFailure::Run(format!("cannot restart from `{file}`: {e}"))
+    };
+    let record = match &opts.restart {
+        Some(r) => Some(checkpoint::read(&mut engine, r).map_err(|e| cannot_restart(&e))?),
+        None => None,
+    };
     let series = if opts.vtk {
         Some(
             report::Series::new(opts.out.join("vtk"), scene.name.clone())
@@ -263,8 +316,12 @@ fn drive<B: Backend>(scene: Scene, backend: B, opts: &RunOptions, precision: &st
         progress,
         started: Instant::now(),
     };
-    rec.observe(&engine).map_err(RunFailure::Run)?;
-    let start_step = engine.step;
+    match record.filter(|r| !r.is_empty()) {
+        // The checkpoint was written after its step was observed.
+        Some(r) => rec.resume(&r).map_err(|e| cannot_restart(&e))?,
+        None => rec.observe(&engine).map_err(RunFailure::Run)?,
+    }
+    let (start_step, start_time) = (engine.step, engine.time);
     let started = Instant::now();
     let result = engine.run(&mut |e| rec.observe(e));
     let wall = started.elapsed().as_secs_f64();
@@ -299,10 +356,22 @@ fn drive<B: Backend>(scene: Scene, backend: B, opts: &RunOptions, precision: &st
         Err(e) => failure = Some(e.to_string()),
     }
     let steps = engine.step - start_step;
-    let report = make_report(&scene, &engine, &rec.histories, wall, steps, precision, failure.as_deref());
-    report::write(&opts.out, &report).map_err(|e| RunFailure::Run(format!("writing the report: {e}")))?;
-    if let Some(f) = failure {
-        return Err(RunFailure::Run(f));
+    let mut report = make_report(&scene, &engine, &rec.histories, wall, steps, precision, failure.as_deref());
+    if opts.restart.is_some() {
+        report.notes.push(format!(
+            "restarted from the checkpoint at step {start_step} (t = {:e} s); steps and wall time count from there",
+            start_time
+        ));
+    }
+    let written = report::write(&opts.out, &report);
+    match (failure, written) {
+        (Some(f), Ok(())) => {
+            let report = opts.out.join("report.md");
+            return Err(RunFailure::Run(format!("{f}\nreport of the run up to there: {}", report.display())));
+        }
+        (Some(f), Err(e)) => return Err(RunFailure::Run(format!("{f}; then writing the report failed too: {e}"))),
+        (None, Err(e)) => return Err(RunFailure::Run(format!("writing the report: {e}"))),
+        (None, Ok(())) => {}
     }
     let histories = scene.probes.iter().zip(&rec.histories).map(|(p, h)| (p.name.clone(), h.points.clone())).collect();
     Ok(RunOutcome { report, out: opts.out.clone(), histories })

@@ -146,7 +146,7 @@ pub fn from_json(text: &str) -> serde_json::Result<RunReport> {
 pub fn write_json(path: &Path, report: &RunReport) -> io::Result<()> {
     let mut text = to_json(report);
     text.push('\n');
-    super::write_atomic(path, text.as_bytes())
+    crate::output_dir::write_atomic(path, text.as_bytes())
 }
 
 #[cfg(test)]

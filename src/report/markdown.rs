@@ -28,7 +28,7 @@ pub fn write_markdown(dir: &Path, report: &RunReport) -> io::Result<()> {
     for h in &report.histories {
         plot_errors.push(plot_history(&dir.join(plot_file_name(h)), h).err());
     }
-    super::write_atomic(&dir.join("report.md"), render_with(report, &plot_errors).as_bytes())
+    crate::output_dir::write_atomic(&dir.join("report.md"), render_with(report, &plot_errors).as_bytes())
 }
 
 /// The Markdown text of the report, assuming every plot was written.

@@ -19,8 +19,8 @@ pub mod markdown;
 pub mod plot;
 pub mod vtk;
 
-use std::io::{self, Write};
-use std::path::{Path, PathBuf};
+use std::io;
+use std::path::Path;
 
 pub use json::{Curve, GroupBytes, History, ResultRow, RunReport};
 pub use vtk::{read_vtu, write_vtu, PointField, Series, VtuData};
@@ -33,37 +33,7 @@ pub fn write(dir: &Path, report: &RunReport) -> io::Result<()> {
     std::fs::create_dir_all(dir)?;
     json::write_json(&dir.join("report.json"), report)?;
     if let Some(text) = csv::histories_csv(report) {
-        write_atomic(&dir.join("histories.csv"), text.as_bytes())?;
+        crate::output_dir::write_atomic(&dir.join("histories.csv"), text.as_bytes())?;
     }
     markdown::write_markdown(dir, report)
-}
-
-/// Writes `contents` to `path` through a temporary file in the same directory and a rename, so a
-/// reader (or a run killed mid-write) never sees a half-written file.
-pub(crate) fn write_atomic(path: &Path, contents: &[u8]) -> io::Result<()> {
-    write_atomic_with(path, |w| w.write_all(contents))
-}
-
-/// Like [`write_atomic`], with the contents streamed by `fill` into a buffered writer. On error the
-/// temporary file is removed and `path` is left as it was.
-pub(crate) fn write_atomic_with(path: &Path, fill: impl FnOnce(&mut dyn Write) -> io::Result<()>) -> io::Result<()> {
-    let tmp = tmp_path(path);
-    let written = (|| {
-        let mut w = io::BufWriter::new(std::fs::File::create(&tmp)?);
-        fill(&mut w)?;
-        w.flush()
-    })();
-    match written.and_then(|()| std::fs::rename(&tmp, path)) {
-        Ok(()) => Ok(()),
-        Err(e) => {
-            let _ = std::fs::remove_file(&tmp);
-            Err(e)
-        }
-    }
-}
-
-/// `.name.tmp` next to `path`.
-fn tmp_path(path: &Path) -> PathBuf {
-    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    path.with_file_name(format!(".{name}.tmp"))
 }

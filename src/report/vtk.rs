@@ -33,7 +33,7 @@
 use std::io::{self, Write};
 use std::path::{Path, PathBuf};
 
-use super::{write_atomic, write_atomic_with};
+use crate::output_dir::{write_atomic, write_atomic_with};
 
 /// One per-particle (point) data array: `data` holds `n * comps` values, interleaved per particle
 /// (`[p0c0, p0c1, .., p1c0, ..]`).
@@ -408,6 +408,12 @@ impl Series {
 
     pub fn dir(&self) -> &Path {
         &self.dir
+    }
+
+    /// Continues a series a restarted run had written `entries` of: the next snapshot is numbered
+    /// after them, and the `.pvd` lists them all.
+    pub fn continue_after(&mut self, entries: Vec<(f64, String)>) {
+        self.entries = entries;
     }
 
     pub fn basename(&self) -> &str {
