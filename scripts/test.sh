@@ -17,4 +17,24 @@ if ! ls /usr/share/vulkan/icd.d/lvp_icd*.json >/dev/null 2>&1 || ! ldconfig -p |
         || { as_root apt-get update && as_root apt-get install -y --no-install-recommends mesa-vulkan-drivers libvulkan1; }
 fi
 
+# The full-disk test (tests/faults.rs) mounts a tmpfs in a private namespace with util-linux's
+# `unshare`; tests/scripts.rs runs scripts/shear_band.py with python3.
+for tool in unshare:util-linux python3:python3; do
+    if ! command -v "${tool%%:*}" >/dev/null; then
+        echo "scripts/test.sh: installing ${tool#*:} for the tests"
+        export DEBIAN_FRONTEND=noninteractive
+        as_root apt-get install -y --no-install-recommends "${tool#*:}" \
+            || { as_root apt-get update && as_root apt-get install -y --no-install-recommends "${tool#*:}"; }
+    fi
+done
+
 cargo test --workspace "$@"
+
+# With a filter or other arguments, only the tests asked for. Otherwise also what the suite above
+# neither builds nor runs:
+if [ $# -eq 0 ]; then
+    # the portable lane loops (no AVX2), against the native pair code bit for bit;
+    PAIRSUM_NO_WIDE_SIMD=1 cargo test --test jit --test native
+    # the criterion benchmarks, each run once in test mode (timings belong to `cargo bench`).
+    cargo test --benches
+fi
