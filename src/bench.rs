@@ -284,7 +284,7 @@ pub fn compare(b: &CpuBackend<f64>, native: &NativeOut) -> Result<f64, String> {
     for (name, ours) in
         [("drho", &native.drho), ("edot", &native.edot), ("spin", &native.spin), ("dv", &native.dv), ("ds", &native.ds)]
     {
-        let d = crate::compare::max_rel_diff(ours, &col(b, name)).map_err(|e| format!("`{name}`: {e}"))?;
+        let d = crate::compare::max_rel_diff(ours, col(b, name)).map_err(|e| format!("`{name}`: {e}"))?;
         worst = worst.max(d);
     }
     Ok(worst)

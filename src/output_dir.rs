@@ -109,6 +109,47 @@ fn refusal(dir: &Path, foreign: &[PathBuf], what: &str) -> Refused {
     ))
 }
 
+/// Writes `contents` to `path` through a temporary file in the same directory and a rename, so a
+/// reader (or a run killed mid-write) never sees a half-written file.
+pub fn write_atomic(path: &Path, contents: &[u8]) -> io::Result<()> {
+    write_atomic_with(path, |w| w.write_all(contents))
+}
+
+/// Like [`write_atomic`], with the contents streamed by `fill` into a buffered writer. The file is
+/// synced to the disk before the rename and the folder after it, so that what was renamed survives
+/// a crash of the machine too. On error (a full disk, a folder that cannot be written) the
+/// temporary file is removed, `path` is left as it was, and the error names `path`.
+pub fn write_atomic_with(path: &Path, fill: impl FnOnce(&mut dyn Write) -> io::Result<()>) -> io::Result<()> {
+    let tmp = tmp_path(path);
+    let written = (|| {
+        let mut w = io::BufWriter::new(std::fs::File::create(&tmp)?);
+        fill(&mut w)?;
+        w.into_inner().map_err(|e| e.into_error())?.sync_all()
+    })();
+    let done = match written.and_then(|()| std::fs::rename(&tmp, path)) {
+        Ok(()) => sync_dir(path),
+        Err(e) => {
+            let _ = std::fs::remove_file(&tmp);
+            Err(e)
+        }
+    };
+    done.map_err(|e| io::Error::new(e.kind(), format!("{}: {e}", path.display())))
+}
+
+/// Syncs the folder holding `path`, which makes a rename into it durable.
+fn sync_dir(path: &Path) -> io::Result<()> {
+    match path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        Some(dir) => std::fs::File::open(dir)?.sync_all(),
+        None => Ok(()),
+    }
+}
+
+/// `.name.tmp` next to `path`.
+fn tmp_path(path: &Path) -> PathBuf {
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    path.with_file_name(format!(".{name}.tmp"))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -150,45 +191,4 @@ mod tests {
         assert_eq!(std::fs::read_to_string(d.join("hand.wgsl")).unwrap(), "// my own shader\n");
         std::fs::remove_dir_all(&d).unwrap();
     }
-}
-
-/// Writes `contents` to `path` through a temporary file in the same directory and a rename, so a
-/// reader (or a run killed mid-write) never sees a half-written file.
-pub fn write_atomic(path: &Path, contents: &[u8]) -> io::Result<()> {
-    write_atomic_with(path, |w| w.write_all(contents))
-}
-
-/// Like [`write_atomic`], with the contents streamed by `fill` into a buffered writer. The file is
-/// synced to the disk before the rename and the folder after it, so that what was renamed survives
-/// a crash of the machine too. On error (a full disk, a folder that cannot be written) the
-/// temporary file is removed, `path` is left as it was, and the error names `path`.
-pub fn write_atomic_with(path: &Path, fill: impl FnOnce(&mut dyn Write) -> io::Result<()>) -> io::Result<()> {
-    let tmp = tmp_path(path);
-    let written = (|| {
-        let mut w = io::BufWriter::new(std::fs::File::create(&tmp)?);
-        fill(&mut w)?;
-        w.into_inner().map_err(|e| e.into_error())?.sync_all()
-    })();
-    let done = match written.and_then(|()| std::fs::rename(&tmp, path)) {
-        Ok(()) => sync_dir(path),
-        Err(e) => {
-            let _ = std::fs::remove_file(&tmp);
-            Err(e)
-        }
-    };
-    done.map_err(|e| io::Error::new(e.kind(), format!("{}: {e}", path.display())))
-}
-
-/// Syncs the folder holding `path`, which makes a rename into it durable.
-fn sync_dir(path: &Path) -> io::Result<()> {
-    match path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        Some(dir) => std::fs::File::open(dir)?.sync_all(),
-        None => Ok(()),
-    }
-}
-
-/// `.name.tmp` next to `path`.
-fn tmp_path(path: &Path) -> PathBuf {
-    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    path.with_file_name(format!(".{name}.tmp"))
 }

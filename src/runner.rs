@@ -184,9 +184,11 @@ struct Recorder<'a> {
 struct RecordSoFar {
     next_output: u64,
     vtk: Vec<(u64, String)>,
-    /// Per probe: its points (t, value) and the value a relative probe measures from.
-    histories: Vec<(Vec<(u64, u64)>, Option<u64>)>,
+    histories: Vec<HistoryBits>,
 }
+
+/// A probe's points (t, value) and the value a relative probe measures from, as bits.
+type HistoryBits = (Vec<(u64, u64)>, Option<u64>);
 
 impl Recorder<'_> {
     fn record_so_far(&self) -> Vec<u8> {
