@@ -77,6 +77,47 @@ fn fit_free(e: &mut Expr, src: &ast::Expr, to: &Type) {
     }
 }
 
+/// The deepest an expression may nest in the checker and in the IR it builds (the parser's limit
+/// on the text is [`crate::syntax::MAX_DEPTH`]): every later stage recurses over it.
+pub const MAX_DEPTH: usize = 256;
+
+/// The most expressions the checker checks in one model, inlined helpers counted each time:
+/// helpers that call another twice double at each level. The stdlib's largest model takes
+/// about 2,000.
+pub const MAX_WORK: usize = 250_000;
+
+/// How deep an expression nests (a leaf is 1), without recursion.
+pub fn ir_depth(e: &Expr) -> usize {
+    let mut deepest = 0;
+    let mut stack = vec![(e, 1usize)];
+    while let Some((e, d)) = stack.pop() {
+        deepest = deepest.max(d);
+        match &e.kind {
+            ExprKind::Unary(_, a)
+            | ExprKind::ToTensor(a)
+            | ExprKind::Component(a, _, _)
+            | ExprKind::Reduction(_, a) => stack.push((a, d + 1)),
+            ExprKind::Binary(_, a, b) | ExprKind::Let(_, a, b) => {
+                stack.push((a, d + 1));
+                stack.push((b, d + 1));
+            }
+            ExprKind::Select(a, b, c) => {
+                stack.extend([(&**a, d + 1), (&**b, d + 1), (&**c, d + 1)]);
+            }
+            ExprKind::Call(_, args) => stack.extend(args.iter().map(|a| (a, d + 1))),
+            ExprKind::Const(_)
+            | ExprKind::Field(..)
+            | ExprKind::Param(..)
+            | ExprKind::Local(_)
+            | ExprKind::Pair(_)
+            | ExprKind::Global(_)
+            | ExprKind::Identity
+            | ExprKind::InGroup(..) => {}
+        }
+    }
+    deepest
+}
+
 fn mk(kind: ExprKind, ty: Type, span: Span) -> Expr {
     Expr { kind, ty, span }
 }
@@ -134,7 +175,62 @@ impl Checker {
         Some(x)
     }
 
+    /// Checks an expression. The checker recurses through the expression, the helpers it inlines
+    /// and the constants it reads, so it counts its own depth (E0217 beyond [`MAX_DEPTH`]), the
+    /// depth of what it builds (inlined helpers wrap their bodies in `let`s; E0217 beyond
+    /// [`MAX_DEPTH`] at the outermost call) and its work on the whole model (E0217 beyond
+    /// [`MAX_WORK`]: helpers that call others twice double at each level when inlined).
     pub(crate) fn expr(&mut self, e: &ast::Expr, cx: &Cx) -> Option<Expr> {
+        if self.depth >= MAX_DEPTH || self.work >= MAX_WORK {
+            self.too_deep(e.span);
+            return None;
+        }
+        self.depth += 1;
+        self.work += 1;
+        let out = self.expr_inner(e, cx);
+        self.depth -= 1;
+        if self.depth == 0 {
+            let out = out?;
+            let deepest = ir_depth(&out);
+            if deepest > MAX_DEPTH {
+                let d = Diagnostic::error(
+                    "E0217",
+                    format!(
+                        "with its helpers inlined, this expression nests {deepest} levels deep, more than {MAX_DEPTH}"
+                    ),
+                )
+                .at(e.span, "too deep")
+                .help("split it with `let` values in the equation, or use fewer nested helpers");
+                self.error(d);
+                return None;
+            }
+            return Some(out);
+        }
+        out
+    }
+
+    /// E0217, once per model, where the checker's recursion or work went past its bound.
+    fn too_deep(&mut self, span: Span) {
+        if self.too_deep_reported {
+            return;
+        }
+        self.too_deep_reported = true;
+        let msg = if self.work >= MAX_WORK {
+            format!(
+                "the model is too large to check: with its helpers inlined, its expressions exceed {MAX_WORK} nodes"
+            )
+        } else {
+            format!(
+                "nested too deeply: with the helpers and constants it uses, this expression nests more than {MAX_DEPTH} levels"
+            )
+        };
+        let d = Diagnostic::error("E0217", msg)
+            .at(span, "here")
+            .help("split it with `let` values in the equation, or use fewer nested helpers and constants");
+        self.error(d);
+    }
+
+    fn expr_inner(&mut self, e: &ast::Expr, cx: &Cx) -> Option<Expr> {
         let span = e.span;
         match &e.kind {
             A::Number(v, unit) => {

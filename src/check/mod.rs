@@ -167,6 +167,11 @@ pub(crate) struct Checker {
     temps: Vec<(String, FieldId)>,
     /// Helpers being inlined (to catch recursion and to say "called from").
     fn_stack: Vec<(String, Span)>,
+    /// How deep `expr` has recursed, and how many expressions it has checked (`expr::MAX_DEPTH`,
+    /// `expr::MAX_WORK`); whether E0217 has been reported.
+    depth: usize,
+    work: usize,
+    too_deep_reported: bool,
     /// The groups the module being checked may run on and see as neighbours (`use m on G from S`),
     /// and whether its pair sums see only the destination's own group (`from own`).
     module_scope: Scope,
@@ -186,6 +191,9 @@ impl Checker {
             scope: vec![],
             temps: vec![],
             fn_stack: vec![],
+            depth: 0,
+            work: 0,
+            too_deep_reported: false,
             module_scope: (GroupSet::ALL, GroupSet::ALL, false),
         }
     }

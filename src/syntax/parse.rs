@@ -5,24 +5,38 @@ use crate::diag::{Diagnostic, Span};
 use pest::iterators::{Pair, Pairs};
 use pest::pratt_parser::{Assoc, Op, PrattParser};
 use pest::Parser;
+use std::cell::Cell;
 use std::sync::OnceLock;
 
 #[derive(pest_derive::Parser)]
 #[grammar = "../grammar/pairsum.pest"]
 struct Grammar;
 
+/// The deepest nesting a source may have: brackets (`(`, `[`, `{`) and `else if` chains in its
+/// text, and levels of its syntax tree (an operator is a level: `a + b + c` is three deep). The
+/// parser, the checker and every later stage recurse over the tree, so a deeper input (a fuzzer's
+/// `((((…))))` or a sum of thousands of terms) is refused with E0004 rather than overflowing the
+/// stack. The stdlib's deepest is 22 levels.
+pub const MAX_DEPTH: usize = 128;
+
 /// Parses one source file (`file` is its id in `Sources`).
 pub fn parse_file(file: u32, text: &str) -> Result<File, Box<Diagnostic>> {
+    if let Some(at) = too_deep_text(text) {
+        return Err(Box::new(too_deep(Span::new(file, at, at + 1))));
+    }
     let mut pairs = Grammar::parse(Rule::file, text).map_err(|e| Box::new(syntax_error(file, text, e)))?;
-    let b = Builder { file, offset: 0 };
+    let b = Builder::new(file, 0);
     let root = pairs.next().expect("the file rule always yields one pair");
     let items = root.into_inner().filter(|p| p.as_rule() != Rule::EOI).map(|p| b.item(p)).collect();
-    Ok(File { items })
+    b.finish(File { items })
 }
 
 /// Parses one expression that stands at byte `offset` of source file `file` (a case file's
 /// initial value): spans point into that file.
 pub fn parse_expr(file: u32, offset: usize, text: &str) -> Result<Expr, Box<Diagnostic>> {
+    if let Some(at) = too_deep_text(text) {
+        return Err(Box::new(too_deep(Span::new(file, offset + at, offset + at + 1))));
+    }
     let mut pairs = Grammar::parse(Rule::expr_only, text).map_err(|e| {
         let mut d = syntax_error(file, text, e);
         if let Some((span, _)) = &mut d.primary {
@@ -30,10 +44,78 @@ pub fn parse_expr(file: u32, offset: usize, text: &str) -> Result<Expr, Box<Diag
         }
         Box::new(d)
     })?;
-    let b = Builder { file, offset };
+    let b = Builder::new(file, offset);
     let root = pairs.next().expect("the expr_only rule always yields one pair");
     let e = root.into_inner().find(|p| p.as_rule() == Rule::expr).expect("expr_only holds an expr");
-    Ok(b.expr(e))
+    let e = b.expr(e);
+    b.finish(e)
+}
+
+fn too_deep(span: Span) -> Diagnostic {
+    Diagnostic::error("E0004", format!("nested too deeply: more than {MAX_DEPTH} levels"))
+        .at(span, format!("level {} starts here", MAX_DEPTH + 1))
+        .help("split the expression with `let` values or helper functions")
+}
+
+/// Where the text's nesting first goes deeper than [`MAX_DEPTH`]: brackets, and `else if` chains
+/// (each `else if` is a level until its enclosing bracket closes), outside comments and strings.
+/// The grammar recurses at each of these, so this bounds the parser's own recursion before it
+/// starts; the tree's depth is bounded as it is built.
+fn too_deep_text(text: &str) -> Option<usize> {
+    let b = text.as_bytes();
+    // Per open bracket (and the top level): the `else if` levels opened inside it.
+    let mut chains: Vec<usize> = vec![0];
+    let mut depth = 0usize;
+    let mut k = 0;
+    let mut last_word_else = false;
+    while k < b.len() {
+        let c = b[k];
+        if c == b'/' && b.get(k + 1) == Some(&b'/') {
+            k = text[k..].find('\n').map_or(b.len(), |n| k + n);
+            continue;
+        }
+        if c == b'/' && b.get(k + 1) == Some(&b'*') {
+            k = text[k + 2..].find("*/").map_or(b.len(), |n| k + 2 + n + 2);
+            continue;
+        }
+        if c == b'"' {
+            k = text[k + 1..].find(['"', '\n']).map_or(b.len(), |n| k + 1 + n + 1);
+            last_word_else = false;
+            continue;
+        }
+        if c.is_ascii_alphanumeric() || c == b'_' {
+            let end = b[k..].iter().position(|c| !(c.is_ascii_alphanumeric() || *c == b'_')).map_or(b.len(), |n| k + n);
+            let word = &text[k..end];
+            if word == "if" && last_word_else {
+                *chains.last_mut().expect("the top level") += 1;
+                depth += 1;
+                if depth > MAX_DEPTH {
+                    return Some(k);
+                }
+            }
+            last_word_else = word == "else";
+            k = end;
+            continue;
+        }
+        match c {
+            b'(' | b'[' | b'{' => {
+                chains.push(0);
+                depth += 1;
+                if depth > MAX_DEPTH {
+                    return Some(k);
+                }
+            }
+            b')' | b']' | b'}' if chains.len() > 1 => {
+                depth -= 1 + chains.pop().expect("an open bracket");
+            }
+            _ => {}
+        }
+        if !c.is_ascii_whitespace() && c != b';' {
+            last_word_else = false;
+        }
+        k += 1;
+    }
+    None
 }
 
 fn syntax_error(file: u32, text: &str, e: pest::error::Error<Rule>) -> Diagnostic {
@@ -163,6 +245,12 @@ fn pratt() -> &'static PrattParser<Rule> {
     })
 }
 
+/// The operators among the children of an `expr` pair (everything but its operands).
+fn is_operator(r: Rule) -> bool {
+    use Rule::*;
+    matches!(r, or | and | eq | ne | le | ge | lt | gt | add | sub | mul | div | pow | neg | not | index | member)
+}
+
 fn is_keyword(r: Rule) -> bool {
     use Rule::*;
     matches!(
@@ -202,9 +290,43 @@ struct Builder {
     file: u32,
     /// Where the parsed text starts in the file (an expression inside a case file).
     offset: usize,
+    /// The levels of the tree above the node being built.
+    depth: Cell<usize>,
+    /// Where the tree first went deeper than [`MAX_DEPTH`].
+    too_deep: Cell<Option<Span>>,
 }
 
 impl Builder {
+    fn new(file: u32, offset: usize) -> Builder {
+        Builder { file, offset, depth: Cell::new(0), too_deep: Cell::new(None) }
+    }
+
+    /// The tree built, or E0004 where it went too deep.
+    fn finish<T>(&self, built: T) -> Result<T, Box<Diagnostic>> {
+        match self.too_deep.get() {
+            Some(span) => Err(Box::new(too_deep(span))),
+            None => Ok(built),
+        }
+    }
+
+    /// Enters `levels` levels of the tree at `span`: false (and E0004 noted) when that is too deep;
+    /// otherwise the caller builds, then calls [`Builder::leave`] with the same count.
+    fn enter(&self, levels: usize, span: Span) -> bool {
+        let d = self.depth.get() + levels;
+        if d > MAX_DEPTH {
+            if self.too_deep.get().is_none() {
+                self.too_deep.set(Some(span));
+            }
+            return false;
+        }
+        self.depth.set(d);
+        true
+    }
+
+    fn leave(&self, levels: usize) {
+        self.depth.set(self.depth.get() - levels);
+    }
+
     /// A pair's span without the whitespace and comments pest lets a rule absorb at its end.
     fn span(&self, p: &Pair<Rule>) -> Span {
         let s = p.as_span();
@@ -456,6 +578,17 @@ impl Builder {
     }
 
     fn unit_expr(&self, p: Pair<Rule>) -> UnitExpr {
+        // `m * s / kg` nests to the left: one level per operator.
+        let levels = 1 + p.clone().into_inner().filter(|c| c.as_rule() == Rule::unit_op).count();
+        if !self.enter(levels, self.span(&p)) {
+            return UnitExpr::One;
+        }
+        let out = self.unit_chain(p);
+        self.leave(levels);
+        out
+    }
+
+    fn unit_chain(&self, p: Pair<Rule>) -> UnitExpr {
         let mut it = kids(p);
         let mut acc = self.unit_factor(it.next().expect("unit factor"));
         while let Some(op) = it.next() {
@@ -491,7 +624,12 @@ impl Builder {
     }
 
     fn block(&self, p: Pair<Rule>) -> Vec<Stmt> {
-        kids(p).map(|s| self.stmt(s)).collect()
+        if !self.enter(1, self.span(&p)) {
+            return vec![];
+        }
+        let out = kids(p).map(|s| self.stmt(s)).collect();
+        self.leave(1);
+        out
     }
 
     fn lvalue(&self, p: Pair<Rule>) -> LValue {
@@ -544,7 +682,15 @@ impl Builder {
                 let then = self.block(it.next().expect("then block"));
                 let otherwise = match it.next() {
                     None => vec![],
-                    Some(e) if e.as_rule() == Rule::if_stmt => vec![self.stmt(e)],
+                    // `else if`: the next `if` is a level below this one.
+                    Some(e) if e.as_rule() == Rule::if_stmt => {
+                        if !self.enter(1, self.span(&e)) {
+                            return Stmt::If { cond, then, otherwise: vec![], span };
+                        }
+                        let s = vec![self.stmt(e)];
+                        self.leave(1);
+                        s
+                    }
                     Some(e) => self.block(e),
                 };
                 Stmt::If { cond, then, otherwise, span }
@@ -554,6 +700,18 @@ impl Builder {
     }
 
     fn expr(&self, p: Pair<Rule>) -> Expr {
+        // The Pratt parser recurses once per operator, and each operator is a level of the tree.
+        let span = self.span(&p);
+        let levels = 1 + p.clone().into_inner().filter(|c| is_operator(c.as_rule())).count();
+        if !self.enter(levels, span) {
+            return Expr { kind: ExprKind::Bool(false), span };
+        }
+        let out = self.pratt_expr(p);
+        self.leave(levels);
+        out
+    }
+
+    fn pratt_expr(&self, p: Pair<Rule>) -> Expr {
         let inner: Pairs<Rule> = p.into_inner();
         pratt()
             .map_primary(|prim| self.primary(prim))
