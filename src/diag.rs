@@ -48,7 +48,11 @@ impl Sources {
     /// 1-based line and column of a span's start.
     pub fn line_col(&self, span: Span) -> (usize, usize) {
         let text = self.text(span.file);
-        let upto = &text[..(span.start as usize).min(text.len())];
+        let mut start = (span.start as usize).min(text.len());
+        while !text.is_char_boundary(start) {
+            start -= 1;
+        }
+        let upto = &text[..start];
         let line = upto.matches('\n').count() + 1;
         let col = upto.rsplit('\n').next().map(|l| l.chars().count()).unwrap_or(0) + 1;
         (line, col)

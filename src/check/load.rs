@@ -37,7 +37,11 @@ impl Stdlib {
     fn read(&self, rel: &str) -> Option<(String, String)> {
         match self {
             Stdlib::Dir(d) => {
+                // Only a regular file: a name such as `use "/dev/zero"` must not read forever.
                 let p = d.join(rel);
+                if !p.is_file() {
+                    return None;
+                }
                 let text = std::fs::read_to_string(&p).ok()?;
                 Some((key_of(&p), text))
             }
