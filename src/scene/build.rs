@@ -21,6 +21,47 @@ struct Ctx<'a> {
     file: u32,
     dim: usize,
     diags: &'a mut Vec<Diagnostic>,
+    /// Where the options stand, for errors in them.
+    cli: &'a CommandLine,
+    /// The case text (placeholders expanded): what spans in `file` index.
+    text: &'a str,
+}
+
+/// The options a case was loaded with, written out as a source of their own (`<command line>`)
+/// so that an error in one points at it like an error in the case file.
+#[derive(Default)]
+struct CommandLine {
+    file: u32,
+    resolution: Option<std::ops::Range<usize>>,
+    set: Vec<std::ops::Range<usize>>,
+    verlet: Option<std::ops::Range<usize>>,
+    end_time: Option<std::ops::Range<usize>>,
+}
+
+impl CommandLine {
+    fn new(opts: &Options, sources: &mut Sources) -> CommandLine {
+        let mut text = String::new();
+        let mut arg = |flag: &str, value: String| -> std::ops::Range<usize> {
+            if !text.is_empty() {
+                text.push(' ');
+            }
+            text.push_str(flag);
+            text.push(' ');
+            let start = text.len();
+            text.push_str(&value);
+            start..text.len()
+        };
+        let resolution = opts.resolution.as_ref().map(|r| arg("--resolution", r.clone()));
+        let set = opts.set.iter().map(|(k, v)| arg("--set", format!("{k}={v}"))).collect();
+        let verlet = opts.verlet.map(|v| arg("--verlet", v.to_string()));
+        let end_time = opts.end_time.map(|t| arg("--end-time", t.to_string()));
+        let file = if text.is_empty() { u32::MAX } else { sources.add("<command line>", text) };
+        CommandLine { file, resolution, set, verlet, end_time }
+    }
+
+    fn span(&self, r: &Option<std::ops::Range<usize>>) -> Option<Span> {
+        r.as_ref().map(|r| Span::new(self.file, r.start, r.end))
+    }
 }
 
 impl Ctx<'_> {
@@ -71,6 +112,15 @@ impl Ctx<'_> {
             return None;
         }
         Some(q.value)
+    }
+
+    /// `x` when it is positive and finite; C0002 at `span` otherwise.
+    fn positive(&mut self, span: std::ops::Range<usize>, x: f64, what: &str) -> Option<f64> {
+        if x.is_finite() && x > 0.0 {
+            return Some(x);
+        }
+        self.err(span, "C0002", format!("{what} must be positive and finite, found {x}"), "here");
+        None
     }
 
     /// A vector of `dim` quantities (a list), each checked against `unit`.
@@ -160,17 +210,77 @@ fn resolution_set(text: &str, opts: &Options) -> Vec<(String, String)> {
     set.map(|s| s.iter().map(|(k, v)| (k.clone(), super::study::text_of(v))).collect()).unwrap_or_default()
 }
 
+/// The most particles a scene may hold unless its case file says otherwise (`max_particles`).
+pub const DEFAULT_MAX_PARTICLES: u64 = geometry::MAX_PARTICLES;
+
+/// Bounds on what loading a case may build, whatever its file says (a fuzzer's or a service's).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Limits {
+    /// At most this many particles in the scene, even if the case's `max_particles` allows more.
+    pub max_particles: Option<u64>,
+}
+
+/// Where the case text gives the resolution whose `set` is applied.
+fn resolution_span(text: &str, opts: &Options) -> Option<std::ops::Range<usize>> {
+    #[derive(serde::Deserialize)]
+    struct Located {
+        #[serde(default)]
+        default_resolution: Option<String>,
+        #[serde(default)]
+        resolutions: std::collections::BTreeMap<String, toml::Spanned<toml::Value>>,
+    }
+    let l: Located = toml::from_str(&super::template::skeleton_text(text)).ok()?;
+    let wanted = opts.resolution.clone().or(l.default_resolution).unwrap_or_else(|| "ci".into());
+    let (name, _) = super::spec::split_resolution(&wanted);
+    l.resolutions.get(name).map(|r| r.span())
+}
+
 /// Reads and builds a case. Diagnostics (DSL and case file) are returned on failure.
 pub fn load(path: &Path, sources: &mut Sources, opts: &Options) -> Result<Scene, Vec<Diagnostic>> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| vec![Diagnostic::error("C0001", format!("cannot read `{}`: {e}", path.display()))])?;
-    let mut set = resolution_set(&text, opts);
+    let text = read_text(path).map_err(|d| vec![*d])?;
+    load_text(&text, path, sources, opts, Limits::default())
+}
+
+/// The text of a case or study file: a regular file only (a device or a pipe, `/dev/zero`, would
+/// be read forever).
+pub fn read_text(path: &Path) -> Result<String, Box<Diagnostic>> {
+    let read = match std::fs::metadata(path) {
+        Ok(m) if !m.is_file() => Err(std::io::Error::other("not a regular file")),
+        _ => std::fs::read_to_string(path),
+    };
+    read.map_err(|e| Box::new(Diagnostic::error("C0001", format!("cannot read `{}`: {e}", path.display()))))
+}
+
+/// Builds a case from its text, as if read from `path` (which names it in diagnostics and
+/// places what it refers to: a model file, node files).
+pub fn load_text(
+    text: &str,
+    path: &Path,
+    sources: &mut Sources,
+    opts: &Options,
+    limits: Limits,
+) -> Result<Scene, Vec<Diagnostic>> {
+    let mut set = resolution_set(text, opts);
+    let from_case = set.len();
     set.extend(opts.set.iter().cloned());
-    let text = match super::template::expand(&text, &set) {
+    let text = match super::template::expand(text, &set) {
         Ok(t) => t,
         Err(e) => {
-            let file = sources.add(check::load::display_path(path), text.clone());
-            return Err(vec![e.diagnostic(file)]);
+            let file = sources.add(check::load::display_path(path), text.to_string());
+            let d = match e.set_entry {
+                // A name the chosen resolution's `set` gives, or a `--set`.
+                Some(k) if k < from_case => {
+                    let r = resolution_span(text, opts).unwrap_or(0..0);
+                    Diagnostic::error("C0026", e.message).at(Span::new(file, r.start, r.end), "this resolution sets it")
+                }
+                Some(k) => {
+                    let cli = CommandLine::new(opts, sources);
+                    let r = cli.set.get(k - from_case).cloned().unwrap_or(0..0);
+                    Diagnostic::error("C0026", e.message).at(Span::new(cli.file, r.start, r.end), "no such parameter")
+                }
+                None => e.diagnostic(file),
+            };
+            return Err(vec![d]);
         }
     };
     let file = sources.add(check::load::display_path(path), text.clone());
@@ -188,8 +298,9 @@ pub fn load(path: &Path, sources: &mut Sources, opts: &Options) -> Result<Scene,
         );
         return Err(diags);
     }
-    let mut cx = Ctx { file, dim, diags: &mut diags };
-    let scene = build(&case, path, &dir, model, opts, &mut cx);
+    let cli = CommandLine::new(opts, sources);
+    let mut cx = Ctx { file, dim, diags: &mut diags, cli: &cli, text: &text };
+    let scene = build(&case, path, &dir, model, opts, limits, &mut cx);
     match scene {
         Some(mut s) if !diags.iter().any(|d| d.is_error()) => {
             s.warnings = diags.iter().map(|d| crate::diag::render(sources, std::slice::from_ref(d))).collect();
@@ -257,19 +368,28 @@ fn load_model(
     (!has_errors).then_some(checked.model)
 }
 
-fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options, cx: &mut Ctx) -> Option<Scene> {
+fn build(
+    case: &CaseFile,
+    path: &Path,
+    dir: &Path,
+    model: Model,
+    opts: &Options,
+    limits: Limits,
+    cx: &mut Ctx,
+) -> Option<Scene> {
     let dim = cx.dim;
     let m = Unit::M;
     let s = Unit::S;
     // Resolution.
     let mut resolutions = vec![];
-    for (name, r) in &case.resolutions {
+    for (name, r) in case.resolutions.get_ref() {
         let (dx_value, _) = match r.get_ref() {
             case::Resolution::Spacing(v) => (v.clone(), None::<f64>),
             case::Resolution::Table(t) => (t.dx.clone(), t.tolerance),
         };
         let v = toml::Spanned::new(r.span(), dx_value);
-        if let Some(dx) = cx.scalar(&v, m, &format!("resolution `{name}`")) {
+        let what = format!("the spacing of resolution `{name}`");
+        if let Some(dx) = cx.scalar(&v, m, &what).and_then(|dx| cx.positive(r.span(), dx, &what)) {
             resolutions.push((name.clone(), dx));
         }
     }
@@ -280,43 +400,68 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
         .unwrap_or_else(|| "ci".to_string());
     let (settings, at) = super::spec::split_resolution(&wanted);
     let named = resolutions.iter().find(|(n, _)| n == settings).map(|(_, dx)| *dx);
+    // An unknown resolution the case file asked for is shown where it asks for it.
+    let located = |d: Diagnostic| -> Diagnostic {
+        if let Some(span) = cx.cli.span(&cx.cli.resolution) {
+            return d.at(span, "not a resolution of the case");
+        }
+        match &case.default_resolution {
+            Some(r) => d.at(cx.span(r.span()), "the default resolution"),
+            None => d
+                .at(cx.span(case.resolutions.span()), "no resolution `ci` here")
+                .help("name one with `default_resolution`, or add a resolution `ci`"),
+        }
+    };
     let dx = match (named, at) {
         (Some(dx), None) => dx,
         (None, Some(_)) => {
             let names: Vec<String> = resolutions.iter().map(|(n, _)| n.clone()).collect();
-            cx.diags.push(Diagnostic::error(
+            let d = located(Diagnostic::error(
                 "C0006",
                 format!("unknown resolution `{settings}` in `{wanted}`: the case has {}", names.join(", ")),
             ));
+            cx.diags.push(d);
             return None;
         }
         // `name@spacing` with a known name, or a bare spacing.
         (_, at) => {
             match quantity::parse(at.unwrap_or(settings)).ok().filter(|q| q.unit == m || q.unit == Unit::ONE) {
-                Some(q) if q.value > 0.0 => q.value,
+                Some(q) if q.value > 0.0 && q.value.is_finite() => q.value,
                 _ => {
                     let names: Vec<String> = resolutions.iter().map(|(n, _)| n.clone()).collect();
-                    cx.diags.push(Diagnostic::error(
+                    let d = located(Diagnostic::error(
                     "C0006",
                     format!("unknown resolution `{wanted}`: the case has {} (or give a spacing such as 0.005 or \"5 mm\")", names.join(", ")),
                 ));
+                    cx.diags.push(d);
                     return None;
                 }
             }
         }
     };
-    let res_table = case.resolutions.get(settings).and_then(|r| match r.get_ref() {
+    let res_table = case.resolutions.get_ref().get(settings).and_then(|r| match r.get_ref() {
         case::Resolution::Table(t) => Some(t),
         _ => None,
     });
     // A resolution may run the case faster in time (loads, ramps, outputs and result windows
     // scale with it), e.g. a quicker but still quasi-static load for CI.
+    let res_span = case.resolutions.get_ref().get(settings).map_or(case.resolutions.span(), |r| r.span());
     let time_scale = res_table.and_then(|t| t.time_scale).unwrap_or(1.0);
-    let mut end_time = time_scale * cx.scalar(&case.end_time, s, "end_time")?;
+    let time_scale = cx.positive(res_span.clone(), time_scale, "`time_scale`")?;
+    let mut end_time = cx.scalar(&case.end_time, s, "end_time")?;
+    end_time = time_scale * cx.positive(case.end_time.span(), end_time, "end_time")?;
     if let Some(t) = res_table.and_then(|t| t.end_time.clone()) {
-        end_time = cx.scalar(&toml::Spanned::new(case.end_time.span(), t), s, "end_time")?;
+        end_time = cx.scalar(&toml::Spanned::new(res_span.clone(), t), s, "end_time")?;
+        end_time = cx.positive(res_span.clone(), end_time, "the resolution's end_time")?;
     }
     if let Some(t) = opts.end_time {
+        if !(t.is_finite() && t > 0.0) {
+            let span = cx.cli.span(&cx.cli.end_time).unwrap_or_default();
+            let d = Diagnostic::error("C0002", format!("--end-time must be a positive, finite time, found {t}"))
+                .at(span, "here");
+            cx.diags.push(d);
+            return None;
+        }
         end_time = t;
     }
     // Materials.
@@ -394,10 +539,15 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
         };
         mirrors.push(Mirror { axis, offset: at });
     }
-    // Bodies.
+    // Bodies, within the scene's particle budget.
+    let max_particles = match &case.max_particles {
+        Some(n) => *n.get_ref(),
+        None => DEFAULT_MAX_PARTICLES,
+    }
+    .min(limits.max_particles.unwrap_or(u64::MAX));
     let mut particles = ParticleInput::default();
     let mut bodies: Vec<BodyInfo> = vec![];
-    for (b, body) in case.bodies.iter().enumerate() {
+    for (b, body) in case.bodies.get_ref().iter().enumerate() {
         let name = body.name.get_ref().clone();
         let Some(group) = model.group_id(body.group.get_ref()) else {
             let names: Vec<&str> = model.groups.iter().map(|g| g.name.as_str()).collect();
@@ -421,7 +571,8 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
             continue;
         };
         let spacing = dx * body.spacing_factor.unwrap_or(1.0);
-        let Some(placed) = place(body, spacing, dx, dir, &mirrors, cx) else { continue };
+        let budget = Budget { left: max_particles.saturating_sub(particles.len() as u64), limit: max_particles };
+        let Some(placed) = place(body, spacing, dx, dir, &mirrors, budget, cx) else { continue };
         let velocity = match &body.velocity {
             Some(v) => cx.vector(v, unit("m/s"), &format!("velocity of body `{name}`"))?,
             None => [0.0; 3],
@@ -447,11 +598,14 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
         bodies.push(BodyInfo { name, group, material, particles: start..particles.len(), mass });
     }
     if particles.is_empty() {
-        cx.diags.push(Diagnostic::error("C0011", "the case places no particles"));
+        if !cx.diags.iter().any(|d| d.is_error()) {
+            let span = cx.span(case.bodies.span());
+            cx.diags.push(Diagnostic::error("C0011", "the case places no particles").at(span, "no body here"));
+        }
         return None;
     }
     let body_index = |cx: &mut Ctx, n: &toml::Spanned<String>| -> Option<usize> {
-        let found = case.bodies.iter().position(|b| b.name.get_ref() == n.get_ref());
+        let found = case.bodies.get_ref().iter().position(|b| b.name.get_ref() == n.get_ref());
         if found.is_none() {
             cx.err(n.span(), "C0012", format!("no body `{}` in the case", n.get_ref()), "unknown body");
         }
@@ -467,7 +621,7 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
                       region: &Option<toml::Spanned<case::Shape>>|
      -> Option<(Target, f64, crate::ir::GroupId)> {
         let b = body_index(cx, body)?;
-        let info = bodies.iter().find(|x| x.name == *case.bodies[b].name.get_ref())?;
+        let info = bodies.iter().find(|x| x.name == *case.bodies.get_ref()[b].name.get_ref())?;
         let Some(region) = region else { return Some((Target::Body(b), info.mass, info.group)) };
         let shape = primitive(region.get_ref(), cx)?;
         let range = info.particles.clone();
@@ -559,7 +713,10 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
             }
         }
         if let Some(i) = &o.interval {
-            output_interval = cx.scalar(i, s, "output interval").map(|x| x * time_scale);
+            output_interval = cx
+                .scalar(i, s, "output interval")
+                .and_then(|x| cx.positive(i.span(), x, "the output interval"))
+                .map(|x| x * time_scale);
         }
     }
     let mut probes = vec![];
@@ -760,8 +917,26 @@ fn build(case: &CaseFile, path: &Path, dir: &Path, model: Model, opts: &Options,
     outputs.dedup();
     let groups = particles.groups();
     let kernel = case.kernel.as_ref().map(|k| k.get_ref().clone());
+    if let Some(k) = case.kernel.as_ref().filter(|k| model.kernel_id(k.get_ref()).is_none()) {
+        let names: Vec<&str> = model.kernels.iter().map(|k| k.name.as_str()).collect();
+        let mut d = Diagnostic::error("C0040", format!("the model has no kernel `{}`", k.get_ref()))
+            .at(cx.span(k.span()), "unknown kernel")
+            .note(format!("the model's kernels: {}", names.join(", ")));
+        if let Some(b) = closest(k.get_ref(), names.iter().copied()) {
+            d = d.help(format!("did you mean `{b}`?"));
+        }
+        cx.diags.push(d);
+        return None;
+    }
     let dt_max = match &case.dt_max {
-        Some(v) => cx.scalar(v, s, "dt_max")?,
+        // Infinite is fine (no bound); zero, negative or NaN would stop the clock.
+        Some(v) => match cx.scalar(v, s, "dt_max")? {
+            x if x > 0.0 => x,
+            x => {
+                cx.err(v.span(), "C0002", format!("dt_max must be a positive time, found {x}"), "here");
+                return None;
+            }
+        },
         None => f64::INFINITY,
     };
     let symmetry = mirrors.iter().map(|m| (m.axis, m.offset)).collect();
@@ -857,6 +1032,33 @@ fn component_index(shape: Shape, dim: usize, name: &str) -> Option<usize> {
     }
 }
 
+/// How many particles a body may still place: what the scene's limit leaves.
+#[derive(Clone, Copy)]
+struct Budget {
+    left: u64,
+    limit: u64,
+}
+
+impl Budget {
+    /// C0039 at the body's shape when it would place `count` particles (about, when `estimated`).
+    fn exceeded(self, cx: &mut Ctx, body: &case::Body, count: u64, estimated: bool) {
+        let name = body.name.get_ref();
+        let about = if estimated { "about " } else { "" };
+        let msg = if self.left == self.limit {
+            format!("body `{name}` would place {about}{count} particles, more than the limit of {}", self.limit)
+        } else {
+            format!(
+                "body `{name}` would place {about}{count} particles, more than the {} the scene's limit of {} leaves",
+                self.left, self.limit
+            )
+        };
+        let d = Diagnostic::error("C0039", msg).at(cx.span(body.shape.span()), "too many particles").help(format!(
+            "use a coarser spacing, or raise the case's `max_particles` (default {DEFAULT_MAX_PARTICLES})"
+        ));
+        cx.diags.push(d);
+    }
+}
+
 /// Particles of one body: a primitive filled at its spacing (graded if asked), or a node list.
 /// With symmetry planes, the lattice (uniform or graded) is anchored half a spacing off each plane,
 /// and only the particles on the planes' positive side are kept.
@@ -866,9 +1068,10 @@ fn place(
     dx: f64,
     dir: &Path,
     mirrors: &[Mirror],
+    budget: Budget,
     cx: &mut Ctx,
 ) -> Option<geometry::Particles> {
-    let placed = place_whole(body, spacing, dx, dir, mirrors, cx)?;
+    let placed = place_whole(body, spacing, dx, dir, mirrors, budget, cx)?;
     if mirrors.is_empty() {
         return Some(placed);
     }
@@ -917,6 +1120,7 @@ fn place_whole(
     dx: f64,
     dir: &Path,
     mirrors: &[Mirror],
+    budget: Budget,
     cx: &mut Ctx,
 ) -> Option<geometry::Particles> {
     let name = body.name.get_ref();
@@ -929,7 +1133,12 @@ fn place_whole(
             return None;
         }
         let p = dir.join(file.get_ref());
-        let text = match std::fs::read_to_string(&p) {
+        // Only a regular file: a device or a pipe (`/dev/zero`) would be read forever.
+        let read = match std::fs::metadata(&p) {
+            Ok(m) if !m.is_file() => Err(std::io::Error::other("not a regular file")),
+            _ => std::fs::read_to_string(&p),
+        };
+        let text = match read {
             Ok(t) => t,
             Err(e) => {
                 cx.err(file.span(), "C0021", format!("body `{name}`: cannot read `{}`: {e}", p.display()), "here");
@@ -949,6 +1158,10 @@ fn place_whole(
                 return None;
             }
         };
+        if nodes.positions.len() as u64 > budget.left {
+            budget.exceeded(cx, body, nodes.positions.len() as u64, false);
+            return None;
+        }
         let k = scale.unwrap_or(1.0);
         for q in &mut nodes.positions {
             for c in q.iter_mut() {
@@ -990,12 +1203,15 @@ fn place_whole(
     let filled = match (&body.refine, corner) {
         (Some(r), _) => {
             let region = primitive(r.region.get_ref(), cx)?;
-            geometry::fill_graded(&shape, dx * r.factor, spacing, &region, cx.dim, corner)
+            geometry::fill_graded_with_limit(&shape, dx * r.factor, spacing, &region, cx.dim, corner, budget.left)
         }
-        (None, None) => geometry::fill(&shape, spacing, cx.dim),
-        (None, Some(corner)) => {
-            geometry::fill_with(&shape, &geometry::Fill::from_corner(spacing, corner, cx.dim), cx.dim)
-        }
+        (None, None) => geometry::fill_with_limit(&shape, &geometry::Fill::new(spacing), cx.dim, budget.left),
+        (None, Some(corner)) => geometry::fill_with_limit(
+            &shape,
+            &geometry::Fill::from_corner(spacing, corner, cx.dim),
+            cx.dim,
+            budget.left,
+        ),
     };
     if let (Ok(cells), Primitive::Box { min, max }, None) = (&filled, &shape, &body.refine) {
         warn_box_overhang(name, span.clone(), (min, max), spacing, cells.total_volume(), cx);
@@ -1005,6 +1221,11 @@ fn place_whole(
         case::FillAt::Nodes => filled.map(|cells| geometry::at_corners(&cells, cx.dim)),
     };
     match filled {
+        Ok(p) if p.len() as u64 > budget.left => {
+            // A node-centred fill has more particles than cells.
+            budget.exceeded(cx, body, p.len() as u64, false);
+            None
+        }
         Ok(p) if !p.is_empty() => Some(p),
         Ok(_) => {
             cx.err(
@@ -1013,6 +1234,17 @@ fn place_whole(
                 format!("body `{name}` holds no particle at spacing {spacing} m"),
                 "empty at this spacing",
             );
+            None
+        }
+        Err(geometry::GeometryError::TooManyParticles { count, estimated, .. }) => {
+            budget.exceeded(cx, body, count, estimated);
+            None
+        }
+        Err(e @ geometry::GeometryError::TooManyRows { .. }) => {
+            let d = Diagnostic::error("C0039", format!("body `{name}`: {e}"))
+                .at(cx.span(span), "too many rows")
+                .help("use a coarser spacing");
+            cx.diags.push(d);
             None
         }
         Err(e) => {
@@ -1045,14 +1277,90 @@ fn initial_value(
         cx.diags.push(d);
         return None;
     };
-    // The expression's first byte in the case file: after the opening quote of a one-line string.
-    match check::initial_value(model, cx.file, text.span().start + 1, text.get_ref(), f) {
+    // The expression as the file writes it, escapes and all, so that its diagnostics point into
+    // the file; the TOML value itself when the string cannot be read back (it always can).
+    let span = text.span();
+    let (offset, expr) = cx
+        .text
+        .get(span.clone())
+        .and_then(string_layout)
+        .map_or((span.start + 1, text.get_ref().clone()), |(k, e)| (span.start + k, e));
+    match check::initial_value(model, cx.file, offset, &expr, f) {
         Ok(e) => Some((f, e)),
         Err(d) => {
             cx.diags.extend(d);
             None
         }
     }
+}
+
+/// A TOML string as written (`"…"`, `'…'`, or either tripled) → where its content starts, and its
+/// value laid out byte for byte as the file has it: each escape sequence (`\t`, `\u00e9`, a
+/// line-ending backslash) becomes its character followed by spaces to the escape's length. So a
+/// position in the value is the same position in the file, and an expression's diagnostics point
+/// at what the file shows. `None` when `raw` is not a string the reader knows.
+fn string_layout(raw: &str) -> Option<(usize, String)> {
+    let (open, literal) = if raw.starts_with("\"\"\"") {
+        (3, false)
+    } else if raw.starts_with("'''") {
+        (3, true)
+    } else if raw.starts_with('"') {
+        (1, false)
+    } else if raw.starts_with('\'') {
+        (1, true)
+    } else {
+        return None;
+    };
+    let body = raw.get(open..raw.len().checked_sub(open)?)?;
+    if literal {
+        return Some((open, body.to_string()));
+    }
+    let mut out = String::with_capacity(body.len());
+    let mut chars = body.char_indices().peekable();
+    while let Some((k, c)) = chars.next() {
+        if c != '\\' {
+            out.push(c);
+            continue;
+        }
+        let &(_, e) = chars.peek()?;
+        let (decoded, len) = match e {
+            'b' => (Some('\u{8}'), 2),
+            't' => (Some('\t'), 2),
+            'n' => (Some('\n'), 2),
+            'f' => (Some('\u{c}'), 2),
+            'r' => (Some('\r'), 2),
+            '"' => (Some('"'), 2),
+            '\\' => (Some('\\'), 2),
+            'e' => (Some('\u{1b}'), 2),
+            'u' | 'U' | 'x' => {
+                let n = match e {
+                    'u' => 4,
+                    'U' => 8,
+                    _ => 2,
+                };
+                let hex = body.get(k + 2..k + 2 + n)?;
+                (Some(u32::from_str_radix(hex, 16).ok().and_then(char::from_u32)?), 2 + n)
+            }
+            // A line-ending backslash: the line break and the whitespace after it are dropped.
+            w if w.is_whitespace() => {
+                let end = body[k + 1..].find(|c: char| !c.is_whitespace()).map_or(body.len(), |n| k + 1 + n);
+                (None, end - k)
+            }
+            _ => return None,
+        };
+        let start = out.len();
+        if let Some(d) = decoded {
+            out.push(d);
+        }
+        while out.len() < start + len {
+            out.push(' ');
+        }
+        // The rest of the escape.
+        while chars.peek().is_some_and(|(j, _)| *j < k + len) {
+            chars.next();
+        }
+    }
+    Some((open, out))
 }
 
 /// Warns (C0038) when a body's row nearest a symmetry plane lies between ¾ and 1½ of its spacing
@@ -1172,7 +1480,8 @@ fn primitive(s: &case::Shape, cx: &mut Ctx) -> Option<Primitive> {
 fn neighbour_search(cx: &mut Ctx, model: &Model, n: Option<&case::Neighbours>, verlet: Option<f64>) -> Option<Search> {
     if let Some(skin) = verlet {
         if let Some(msg) = Search::skin_problem(skin) {
-            cx.diags.push(Diagnostic::error("C0034", format!("--verlet: {msg}")));
+            let span = cx.cli.span(&cx.cli.verlet).unwrap_or_default();
+            cx.diags.push(Diagnostic::error("C0034", format!("--verlet: {msg}")).at(span, "out of range"));
             return None;
         }
         return Some(Search::Verlet { skin });
@@ -1224,5 +1533,29 @@ fn neighbour_search(cx: &mut Ctx, model: &Model, n: Option<&case::Neighbours>, v
             cx.err(n.search.span(), "C0034", msg, "here");
             None
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::string_layout;
+
+    #[test]
+    fn a_string_is_laid_out_as_the_file_writes_it() {
+        for (raw, open, value) in [
+            (r#""x + 1""#, 1, "x + 1"),
+            (r#""\té""#, 1, "\t é"),
+            (r#""\u00e9 x""#, 1, "é     x"),
+            (r#""a\"b""#, 1, "a\" b"),
+            ("'\\t'", 1, "\\t"),
+            ("\"\"\"x \\\n   y\"\"\"", 3, "x      y"),
+            ("'''x'''", 3, "x"),
+        ] {
+            let (k, v) = string_layout(raw).expect("a string");
+            assert_eq!((k, v.as_str()), (open, value), "{raw}");
+            assert_eq!(v.len(), raw.len() - 2 * open, "{raw}");
+        }
+        assert!(string_layout("12").is_none());
+        assert!(string_layout(r#""\q""#).is_none());
     }
 }

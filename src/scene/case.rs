@@ -30,7 +30,7 @@ pub struct CaseFile {
     #[serde(default)]
     pub min_dt_ratio: Option<Spanned<f64>>,
     /// Named resolutions; each a spacing or a table with `dx` and overrides.
-    pub resolutions: BTreeMap<String, Spanned<Resolution>>,
+    pub resolutions: Spanned<BTreeMap<String, Spanned<Resolution>>>,
     /// The resolution used when none is asked for.
     #[serde(default)]
     pub default_resolution: Option<Spanned<String>>,
@@ -42,7 +42,7 @@ pub struct CaseFile {
     /// Materials by name: `[materials.steel]` with parameter values.
     #[serde(default)]
     pub materials: BTreeMap<String, BTreeMap<String, Value>>,
-    pub bodies: Vec<Body>,
+    pub bodies: Spanned<Vec<Body>>,
     #[serde(default)]
     pub loads: Vec<Load>,
     #[serde(default)]
@@ -61,6 +61,10 @@ pub struct CaseFile {
     /// Defaults of the case's `${name}` placeholders (already substituted when this is parsed).
     #[serde(default)]
     pub parameters: Option<toml::Table>,
+    /// The most particles the scene may hold (default [`super::build::DEFAULT_MAX_PARTICLES`]): a
+    /// spacing too fine for the domain is refused before anything is allocated.
+    #[serde(default)]
+    pub max_particles: Option<Spanned<u64>>,
 }
 
 #[derive(Deserialize, Debug)]

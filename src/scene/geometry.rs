@@ -51,7 +51,7 @@ mod nodes;
 mod primitive;
 mod spacing;
 
-pub use fill::{at_corners, fill, fill_graded, fill_with, Fill, Particles};
+pub use fill::{at_corners, fill, fill_graded, fill_graded_with_limit, fill_with, fill_with_limit, Fill, Particles};
 pub use nodes::{read_csv_nodes, read_lsdyna_nodes, NodeError, NodeList};
 pub use primitive::Primitive;
 pub use spacing::estimate_spacing;

@@ -15,7 +15,7 @@ pub struct StudyFile {
     #[serde(default)]
     pub title: Option<String>,
     /// The case, relative to the study file.
-    pub case: String,
+    pub case: toml::Spanned<String>,
     pub runs: Vec<RunSpec>,
     #[serde(default)]
     pub results: Vec<StudyResult>,
@@ -90,6 +90,38 @@ pub struct Study {
     pub case_path: PathBuf,
     /// The study file's id in the source map.
     pub source: u32,
+    /// Where the study file says what its diagnostics are about.
+    pub spans: Spans,
+}
+
+/// Byte ranges of the study file: its `name`, and each entry of `plots` and `ci_runs`.
+#[derive(Debug, Default)]
+pub struct Spans {
+    pub name: std::ops::Range<usize>,
+    pub plots: Vec<std::ops::Range<usize>>,
+    pub ci_runs: Vec<std::ops::Range<usize>>,
+}
+
+impl Spans {
+    /// The study file read again for the positions of what `StudyFile` keeps as plain strings.
+    fn of(text: &str) -> Spans {
+        #[derive(Deserialize)]
+        struct Located {
+            name: toml::Spanned<String>,
+            #[serde(default)]
+            plots: Vec<toml::Spanned<String>>,
+            #[serde(default)]
+            ci_runs: Vec<toml::Spanned<String>>,
+        }
+        match toml::from_str::<Located>(text) {
+            Ok(l) => Spans {
+                name: l.name.span(),
+                plots: l.plots.iter().map(|p| p.span()).collect(),
+                ci_runs: l.ci_runs.iter().map(|p| p.span()).collect(),
+            },
+            Err(_) => Spans::default(),
+        }
+    }
 }
 
 /// What a study result computes across its runs.
@@ -194,35 +226,49 @@ pub fn validate(study: &Study, case_results: &[String], case_probes: &[String]) 
             err("its reference is not a quantity".into(), "a number, or a string such as \"152.5 m/s\"".into());
         }
     }
-    for p in study.file.plots.iter().filter(|p| !case_probes.contains(p)) {
+    let at = |spans: &[std::ops::Range<usize>], k: usize| {
+        let r = spans.get(k).unwrap_or(&study.spans.name);
+        Span::new(study.source, r.start, r.end)
+    };
+    for (k, p) in study.file.plots.iter().enumerate().filter(|(_, p)| !case_probes.contains(p)) {
         out.push(
             Diagnostic::error(
                 "C0031",
                 format!("study `{}` plots `{p}`, which is no probe of its case", study.file.name),
             )
+            .at(at(&study.spans.plots, k), "no such probe")
             .help(format!("the case's probes: {}", case_probes.join(", "))),
         );
     }
-    for c in study.file.ci_runs.iter().flatten().filter(|c| !runs.contains(&c.as_str())) {
-        out.push(Diagnostic::error(
-            "C0031",
-            format!("study `{}`: `ci_runs` names `{c}`, which is no run", study.file.name),
-        ));
+    for (k, c) in study.file.ci_runs.iter().flatten().enumerate().filter(|(_, c)| !runs.contains(&c.as_str())) {
+        out.push(
+            Diagnostic::error("C0031", format!("study `{}`: `ci_runs` names `{c}`, which is no run", study.file.name))
+                .at(at(&study.spans.ci_runs, k), "no such run"),
+        );
     }
     out
 }
 
 pub fn load(path: &Path, sources: &mut crate::diag::Sources) -> Result<Study, Vec<Diagnostic>> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| vec![Diagnostic::error("C0001", format!("cannot read `{}`: {e}", path.display()))])?;
-    let id = sources.add(crate::check::load::display_path(path), text.clone());
-    let file: StudyFile = toml::from_str(&text).map_err(|e| {
+    let text = super::build::read_text(path).map_err(|d| vec![*d])?;
+    load_text(&text, path, sources)
+}
+
+/// A study from its text, as if read from `path` (its case is relative to `path`'s folder).
+pub fn load_text(text: &str, path: &Path, sources: &mut crate::diag::Sources) -> Result<Study, Vec<Diagnostic>> {
+    let id = sources.add(crate::check::load::display_path(path), text.to_string());
+    let file: StudyFile = toml::from_str(text).map_err(|e| {
         let span = e.span().unwrap_or(0..0);
         vec![Diagnostic::error("C0030", format!("study file: {}", e.message().trim()))
             .at(Span::new(id, span.start, span.end), "here")]
     })?;
-    let case_path = path.parent().map(Path::to_path_buf).unwrap_or_default().join(&file.case);
-    Ok(Study { file, case_path, source: id })
+    let case_path = path.parent().map(Path::to_path_buf).unwrap_or_default().join(file.case.get_ref());
+    // The case is read before the first run: say now, and where, when it cannot be.
+    if let Err(d) = super::build::read_text(&case_path) {
+        let r = file.case.span();
+        return Err(vec![(*d).at(Span::new(id, r.start, r.end), "the study's case")]);
+    }
+    Ok(Study { file, case_path, source: id, spans: Spans::of(text) })
 }
 
 /// A value as text for `--set`.

@@ -8,6 +8,9 @@ pub struct TemplateError {
     pub start: usize,
     pub end: usize,
     pub message: String,
+    /// The entry of `set` the error is about (a name the case has no parameter for): it was given
+    /// outside the text, so `start..end` says nothing.
+    pub set_entry: Option<usize>,
 }
 
 impl TemplateError {
@@ -27,6 +30,11 @@ fn as_text(v: &toml::Value) -> String {
 /// the resolutions can be read before the values are known (a placeholder may stand for a number).
 /// The 0 is padded with spaces to the placeholder's length, so that an error's span is the text's.
 pub fn skeleton(text: &str) -> Result<toml::Table, toml::de::Error> {
+    toml::from_str::<toml::Table>(&skeleton_text(text))
+}
+
+/// The case text with every `${name}` replaced by a 0 padded to its length (see [`skeleton`]).
+pub fn skeleton_text(text: &str) -> String {
     let mut out = String::with_capacity(text.len());
     let mut rest = text;
     while let Some(k) = rest.find("${") {
@@ -44,7 +52,7 @@ pub fn skeleton(text: &str) -> Result<toml::Table, toml::de::Error> {
         }
     }
     out.push_str(rest);
-    toml::from_str::<toml::Table>(&out)
+    out
 }
 
 /// The case text with every `${name}` replaced by its value: `set` first, then `[parameters]`.
@@ -55,16 +63,17 @@ pub fn expand(text: &str, set: &[(String, String)]) -> Result<String, TemplateEr
     // A text that is not TOML is reported as such here: its parameters cannot be read.
     let table = skeleton(text).map_err(|e| {
         let span = e.span().unwrap_or(0..0);
-        TemplateError { start: span.start, end: span.end, message: e.message().to_string() }
+        TemplateError { start: span.start, end: span.end, message: e.message().to_string(), set_entry: None }
     })?;
     let defaults = table.get("parameters").and_then(|p| p.as_table()).cloned().unwrap_or_default();
-    for (name, _) in set {
+    for (k, (name, _)) in set.iter().enumerate() {
         if !defaults.contains_key(name) {
             let names: Vec<&String> = defaults.keys().collect();
             return Err(TemplateError {
                 start: 0,
                 end: 0,
                 message: format!("the case has no parameter `{name}` to set (its parameters: {names:?})"),
+                set_entry: Some(k),
             });
         }
     }
@@ -75,7 +84,12 @@ pub fn expand(text: &str, set: &[(String, String)]) -> Result<String, TemplateEr
         out.push_str(&rest[..k]);
         let after = &rest[k + 2..];
         let Some(close) = after.find('}') else {
-            return Err(TemplateError { start: at + k, end: at + k + 2, message: "`${` without a closing `}`".into() });
+            return Err(TemplateError {
+                start: at + k,
+                end: at + k + 2,
+                message: "`${` without a closing `}`".into(),
+                set_entry: None,
+            });
         };
         let name = &after[..close];
         let value = match set.iter().rev().find(|(n, _)| n == name) {
@@ -87,6 +101,7 @@ pub fn expand(text: &str, set: &[(String, String)]) -> Result<String, TemplateEr
                         start: at + k,
                         end: at + k + 3 + close,
                         message: format!("`${{{name}}}` names no entry of `[parameters]`"),
+                        set_entry: None,
                     })
                 }
             },

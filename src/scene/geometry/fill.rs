@@ -78,6 +78,12 @@ pub fn fill(shape: &Primitive, spacing: f64, dim: usize) -> Result<Particles, Ge
 ///
 /// Fails on bad parameters, when no node lies inside, or beyond [`MAX_PARTICLES`] particles.
 pub fn fill_with(shape: &Primitive, how: &Fill, dim: usize) -> Result<Particles, GeometryError> {
+    fill_with_limit(shape, how, dim, MAX_PARTICLES)
+}
+
+/// [`fill_with`], failing beyond `limit` particles instead of [`MAX_PARTICLES`]: before anything is
+/// allocated when the shape's volume says so, else once they are counted.
+pub fn fill_with_limit(shape: &Primitive, how: &Fill, dim: usize, limit: u64) -> Result<Particles, GeometryError> {
     let shape = Shape::resolve(shape, dim)?;
     let dx = positive("spacing", how.spacing)?;
     let origin = match how.origin {
@@ -87,13 +93,13 @@ pub fn fill_with(shape: &Primitive, how: &Fill, dim: usize) -> Result<Particles,
     let lat = Lattice { origin, dx, dim };
     let (min, max) = shape.bbox();
     let b = lat.index_box(min, max);
-    check_estimate(shape.volume() / dx.powi(dim as i32))?;
-    let n = checked_count(&shape, &lat, &b)?;
+    check_estimate(shape.volume() / dx.powi(dim as i32), limit)?;
+    let n = checked_count(&shape, &lat, &b, limit)?;
     if n == 0 {
         return Err(GeometryError::Empty { spacing: dx });
     }
     let mut positions = Vec::with_capacity(n as usize);
-    collect(&shape, &lat, &b, &mut positions)?;
+    collect(&shape, &lat, &b, limit, &mut positions)?;
     let exact = shape.rescaled().then(|| shape.volume());
     Ok(Particles::from_parts(positions, vec![dx; n as usize], dim, exact))
 }
@@ -112,24 +118,24 @@ fn node_off(corner: [f64; 3], dx: f64, dim: usize) -> [f64; 3] {
     o
 }
 
-fn too_many(count: u64, estimated: bool) -> GeometryError {
-    GeometryError::TooManyParticles { count, estimated, limit: MAX_PARTICLES }
+fn too_many(count: u64, estimated: bool, limit: u64) -> GeometryError {
+    GeometryError::TooManyParticles { count, estimated, limit }
 }
 
-/// Rejects early a shape whose volume alone says it holds far more than the limit.
-fn check_estimate(estimate: f64) -> Result<(), GeometryError> {
-    if estimate > 1.5 * MAX_PARTICLES as f64 || estimate.is_nan() {
+/// Rejects early a shape whose volume alone says it holds far more than the limit `max`.
+fn check_estimate(estimate: f64, max: u64) -> Result<(), GeometryError> {
+    if estimate > 1.5 * max as f64 + 100.0 || estimate.is_nan() {
         let n = if estimate.is_finite() { estimate.round() as u64 } else { u64::MAX };
-        return Err(too_many(n, true));
+        return Err(too_many(n, true, max));
     }
     Ok(())
 }
 
-/// The exact node count of `shape` in `b`, failing beyond the limit.
-fn checked_count(shape: &Shape, lat: &Lattice, b: &IndexBox) -> Result<u64, GeometryError> {
-    let n = count(shape, lat, b)?;
-    if n > MAX_PARTICLES {
-        return Err(too_many(n, false));
+/// The exact node count of `shape` in `b`, failing beyond the limit `max`.
+fn checked_count(shape: &Shape, lat: &Lattice, b: &IndexBox, max: u64) -> Result<u64, GeometryError> {
+    let n = count(shape, lat, b, max)?;
+    if n > max {
+        return Err(too_many(n, false, max));
     }
     Ok(n)
 }
@@ -157,7 +163,20 @@ pub fn fill_graded(
     dim: usize,
     corner: Option<[f64; 3]>,
 ) -> Result<Particles, GeometryError> {
-    let grading = Grading::new(shape, fine, coarse, fine_region, dim, corner)?;
+    fill_graded_with_limit(shape, fine, coarse, fine_region, dim, corner, MAX_PARTICLES)
+}
+
+/// [`fill_graded`], failing beyond `max` particles instead of [`MAX_PARTICLES`].
+pub fn fill_graded_with_limit(
+    shape: &Primitive,
+    fine: f64,
+    coarse: f64,
+    fine_region: &Primitive,
+    dim: usize,
+    corner: Option<[f64; 3]>,
+    max: u64,
+) -> Result<Particles, GeometryError> {
+    let grading = Grading::new(shape, fine, coarse, fine_region, dim, corner, max)?;
     let refined = grading.refined_cells()?;
     let mut positions = Vec::new();
     grading.coarse_nodes(&refined, &mut positions)?;
@@ -177,6 +196,8 @@ struct Grading {
     region: Shape,
     fine: Lattice,
     coarse: Lattice,
+    /// The most particles the fill may place.
+    max: u64,
 }
 
 /// A coarse cell, by the index of its coarse node.
@@ -190,6 +211,7 @@ impl Grading {
         fine_region: &Primitive,
         dim: usize,
         corner: Option<[f64; 3]>,
+        max: u64,
     ) -> Result<Grading, GeometryError> {
         let shape = Shape::resolve(shape, dim)?;
         let region = Shape::resolve(fine_region, dim)?;
@@ -204,8 +226,11 @@ impl Grading {
         };
         let fine = Lattice { origin: node_off(corner, f, dim), dx: f, dim };
         let coarse = Lattice { origin: node_off(corner, c, dim), dx: c, dim };
-        check_estimate(shape.volume() / c.powi(dim as i32) + region.volume().min(shape.volume()) / f.powi(dim as i32))?;
-        Ok(Grading { shape, region, fine, coarse })
+        check_estimate(
+            shape.volume() / c.powi(dim as i32) + region.volume().min(shape.volume()) / f.powi(dim as i32),
+            max,
+        )?;
+        Ok(Grading { shape, region, fine, coarse, max })
     }
 
     /// The coarse cell holding fine node index `i` along an axis.
@@ -232,10 +257,10 @@ impl Grading {
         let (smin, smax) = self.shape.bbox();
         let (rmin, rmax) = self.region.bbox();
         let b = self.fine.index_box(smin, smax).intersect(&self.fine.index_box(rmin, rmax));
-        checked_count(&self.shape, &self.fine, &b)?;
+        checked_count(&self.shape, &self.fine, &b, self.max)?;
         let tol = REL_TOL * self.fine.dx;
         let mut cells = HashSet::new();
-        scan(&self.shape, &self.fine, &b, |mut row, k, lo, hi| {
+        scan(&self.shape, &self.fine, &b, self.max, |mut row, k, lo, hi| {
             for i in lo..=hi {
                 row[k] = i;
                 if self.region.contains(self.fine.position(row), tol) {
@@ -258,8 +283,8 @@ impl Grading {
     fn coarse_nodes(&self, refined: &HashSet<Cell>, out: &mut Vec<[f64; 3]>) -> Result<(), GeometryError> {
         let (min, max) = self.shape.bbox();
         let b = self.coarse.index_box(min, max);
-        checked_count(&self.shape, &self.coarse, &b)?;
-        scan(&self.shape, &self.coarse, &b, |mut row, k, lo, hi| {
+        checked_count(&self.shape, &self.coarse, &b, self.max)?;
+        scan(&self.shape, &self.coarse, &b, self.max, |mut row, k, lo, hi| {
             for i in lo..=hi {
                 row[k] = i;
                 if !refined.contains(&row) {
@@ -278,13 +303,13 @@ impl Grading {
     ) -> Result<(), GeometryError> {
         let per_cell = (self.coarse.dx / self.fine.dx).ceil().powi(self.fine.dim as i32);
         let estimate = n_coarse as f64 + refined.len() as f64 * per_cell;
-        if estimate > MAX_PARTICLES as f64 {
-            return Err(too_many(estimate as u64, true));
+        if estimate > self.max as f64 {
+            return Err(too_many(estimate as u64, true, self.max));
         }
         let mut cells: Vec<Cell> = refined.iter().copied().collect();
         cells.sort_unstable();
         for cell in cells {
-            collect(&self.shape, &self.fine, &self.cell_box(cell), out)?;
+            collect(&self.shape, &self.fine, &self.cell_box(cell), self.max, out)?;
         }
         Ok(())
     }

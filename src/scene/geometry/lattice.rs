@@ -2,10 +2,12 @@
 //! enumerates the lattice nodes of a shape run by run.
 
 use super::primitive::Shape;
-use super::{GeometryError, MAX_PARTICLES};
+use super::GeometryError;
 
-/// The most lattice rows a scan may visit (a bounding box much larger than its shape's volume).
-const MAX_ROWS: f64 = 4.0 * MAX_PARTICLES as f64;
+/// The most lattice rows a scan may visit: this many per particle the fill may place, and
+/// [`MIN_ROWS`] more (a bounding box much larger than its shape's volume).
+const ROWS_PER_PARTICLE: f64 = 4.0;
+const MIN_ROWS: f64 = 1e6;
 
 /// Relative tolerance (of the spacing) by which shape boundaries are widened, so that a node on a
 /// boundary up to rounding counts as inside.
@@ -94,11 +96,13 @@ fn rows(b: &IndexBox, k: usize) -> f64 {
 }
 
 /// Calls `f(row, k, lo, hi)` for each run of consecutive nodes of `shape` in `b`: the nodes `row`
-/// with `row[k]` in `lo..=hi`. Fails when the scan would visit too many rows.
+/// with `row[k]` in `lo..=hi`. Fails when the scan would visit more rows than a fill of at most
+/// `max` particles may.
 pub(crate) fn scan(
     shape: &Shape,
     lat: &Lattice,
     b: &IndexBox,
+    max: u64,
     mut f: impl FnMut([i64; 3], usize, i64, i64),
 ) -> Result<(), GeometryError> {
     if b.is_empty() {
@@ -106,7 +110,7 @@ pub(crate) fn scan(
     }
     let k = row_axis(b, lat.dim);
     let n_rows = rows(b, k);
-    if n_rows > MAX_ROWS {
+    if n_rows > ROWS_PER_PARTICLE * max as f64 + MIN_ROWS {
         return Err(GeometryError::TooManyRows { rows: n_rows as u64 });
     }
     let others: Vec<usize> = (0..3).filter(|&i| i != k).collect();
@@ -130,10 +134,10 @@ pub(crate) fn scan(
     Ok(())
 }
 
-/// The number of nodes of `shape` in `b`.
-pub(crate) fn count(shape: &Shape, lat: &Lattice, b: &IndexBox) -> Result<u64, GeometryError> {
+/// The number of nodes of `shape` in `b` (the scan bounded as for `max` particles).
+pub(crate) fn count(shape: &Shape, lat: &Lattice, b: &IndexBox, max: u64) -> Result<u64, GeometryError> {
     let mut n = 0u64;
-    scan(shape, lat, b, |_, _, lo, hi| n += (hi - lo + 1) as u64)?;
+    scan(shape, lat, b, max, |_, _, lo, hi| n += (hi - lo + 1) as u64)?;
     Ok(n)
 }
 
@@ -142,9 +146,10 @@ pub(crate) fn collect(
     shape: &Shape,
     lat: &Lattice,
     b: &IndexBox,
+    max: u64,
     out: &mut Vec<[f64; 3]>,
 ) -> Result<(), GeometryError> {
-    scan(shape, lat, b, |mut row, k, lo, hi| {
+    scan(shape, lat, b, max, |mut row, k, lo, hi| {
         for i in lo..=hi {
             row[k] = i;
             out.push(lat.position(row));
