@@ -437,6 +437,9 @@ fn make_report<B: Backend>(
     if let Some(f) = failure {
         notes.push(format!("the run did not complete: {f}"));
     }
+    // A run that was stopped reports no figures: a result of its histories so far (a maximum, a
+    // value at the end) would read as the case's. Its histories and plots show what happened.
+    let results = if failure.is_some() { vec![] } else { results };
     let _: Option<FieldId> = None;
     RunReport {
         case: scene.name.clone(),
