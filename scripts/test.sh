@@ -35,6 +35,10 @@ cargo test --workspace "$@"
 if [ $# -eq 0 ]; then
     # the portable lane loops (no AVX2), against the native pair code bit for bit;
     PAIRSUM_NO_WIDE_SIMD=1 cargo test --test jit --test native
-    # the criterion benchmarks, each run once in test mode (timings belong to `cargo bench`).
+    # the criterion benchmarks, each run once in test mode (timings belong to `cargo bench`);
     cargo test --benches
+    # the coverage-guided fuzz targets (their own workspace, fuzz/), type-checked against today's
+    # API: about 2.5 min on 2 cores, where a build, whose dependencies' features differ from the
+    # test suite's, takes 7 (running them needs cargo-fuzz and a nightly toolchain: fuzz/README.md).
+    cargo check --locked --manifest-path fuzz/Cargo.toml --target-dir target/fuzz-check
 fi
