@@ -391,8 +391,10 @@ fn make_report<B: Backend>(
     let n = engine.backend.particles();
     let plan = engine.backend.plan();
     let real = if precision == "f32" { 4 } else { 8 };
-    let results = scene
-        .results
+    // A run that was stopped reports no figures: a result of its histories so far (a maximum, a
+    // value at the end) would read as the case's. Its histories and plots show what happened.
+    let completed = if failure.is_none() { scene.results.as_slice() } else { &[] };
+    let results = completed
         .iter()
         .map(|r| {
             let v = measure::result_value(r, &histories[r.probe]);
@@ -437,9 +439,6 @@ fn make_report<B: Backend>(
     if let Some(f) = failure {
         notes.push(format!("the run did not complete: {f}"));
     }
-    // A run that was stopped reports no figures: a result of its histories so far (a maximum, a
-    // value at the end) would read as the case's. Its histories and plots show what happened.
-    let results = if failure.is_some() { vec![] } else { results };
     let _: Option<FieldId> = None;
     RunReport {
         case: scene.name.clone(),
