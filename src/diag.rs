@@ -45,17 +45,20 @@ impl Sources {
     pub fn snippet(&self, span: Span) -> &str {
         self.text(span.file).get(span.start as usize..span.end as usize).unwrap_or("")
     }
-    /// 1-based line and column of a span's start.
+    /// 1-based line and column of a span's start (the line found by binary search over the
+    /// file's line starts, so that locating every equation of a long file stays linear).
     pub fn line_col(&self, span: Span) -> (usize, usize) {
+        use codespan_reporting::files::Files;
         let text = self.text(span.file);
         let mut start = (span.start as usize).min(text.len());
         while !text.is_char_boundary(start) {
             start -= 1;
         }
-        let upto = &text[..start];
-        let line = upto.matches('\n').count() + 1;
-        let col = upto.rsplit('\n').next().map(|l| l.chars().count()).unwrap_or(0) + 1;
-        (line, col)
+        let id = span.file as usize;
+        let Ok(line) = self.files.line_index(id, start) else { return (1, 1) };
+        let Ok(range) = self.files.line_range(id, line) else { return (line + 1, 1) };
+        let col = text.get(range.start.min(start)..start).map_or(0, |l| l.chars().count());
+        (line + 1, col + 1)
     }
 }
 

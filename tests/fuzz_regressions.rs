@@ -126,6 +126,25 @@ fn deep_nesting_is_a_diagnostic_not_a_stack_overflow() {
     assert!(t.elapsed() < Duration::from_secs(10), "{:?}", t.elapsed());
 }
 
+/// Equations that all write one field were reported pair by pair: n equations made n²/2 errors
+/// (20,000 of them 200 million, which never finished). Now one error per equation, against the
+/// first that writes the field; and locating the equations no longer scans the file for each.
+#[test]
+fn many_writers_of_one_field_are_reported_once_each() {
+    let n = 20_000;
+    let mut text = String::from("group g\nfield q: scalar\n");
+    for k in 0..n {
+        text.push_str(&format!("particle e{k} -> q {{ q = 1 }}\n"));
+    }
+    let t = Instant::now();
+    let mut sources = Sources::new();
+    let checked = check_text(&mut sources, "many.sph", &text, stdlib());
+    assert_eq!(first_error(&checked.diags, &sources).code, "E0305");
+    assert_eq!(checked.diags.iter().filter(|d| d.code == "E0305").count(), n - 1);
+    assert!(checked.diags[0].message.contains("`e0` and `e1`"), "{}", checked.diags[0].message);
+    assert!(t.elapsed() < Duration::from_secs(30), "{:?}", t.elapsed());
+}
+
 /// `use "/dev/zero"` read the device forever (into a string that grew to the memory's size).
 #[test]
 fn a_module_that_is_a_device_is_not_read() {
