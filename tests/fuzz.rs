@@ -88,7 +88,7 @@ fn checkpoints_never_panic() {
 /// (1,000,000 by default) shared as below, `PAIRSUM_FUZZ_JOBS` children at a time (the cores).
 /// Writes `target/fuzz-summary.json`; fails if any input failed.
 #[test]
-#[ignore = "about an hour on 2 cores: cargo test --test fuzz -- --ignored --nocapture million_inputs"]
+#[ignore = "about 10 minutes on 2 cores: cargo test --test fuzz -- --ignored --nocapture million_inputs"]
 fn million_inputs() {
     let total: u64 = std::env::var("PAIRSUM_FUZZ_TOTAL").ok().and_then(|s| s.parse().ok()).unwrap_or(1_000_000);
     let jobs: usize = std::env::var("PAIRSUM_FUZZ_JOBS")
