@@ -417,3 +417,17 @@ fn an_unstable_run_on_the_cpu_stops_naming_step_particle_and_field_keeps_the_las
 fn an_unstable_run_on_the_gpu_stops_naming_step_particle_and_field_keeps_the_last_good_state_and_reports_no_figures() {
     an_unstable_run_stops_naming_step_particle_and_field_and_keeps_the_last_good_state("gpu");
 }
+
+#[test]
+fn a_restart_from_a_device_or_a_missing_file_is_a_clear_error() {
+    let work = fresh_dir("restart-from");
+    for (file, says) in [("/dev/zero", "not a regular file"), ("/nonexistent/checkpoint.bin", "No such file")] {
+        let mut args = small_wave_args(&work.join("out"));
+        args.extend(["--restart".into(), file.into()]);
+        let o = pairsum().args(&args).output().expect("pairsum runs");
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{file}: {stderr}");
+        assert!(stderr.contains(&format!("cannot restart from `{file}`: ")) && stderr.contains(says), "{stderr}");
+    }
+    let _ = std::fs::remove_dir_all(&work);
+}

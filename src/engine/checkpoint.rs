@@ -73,6 +73,10 @@ fn bad(msg: impl Into<String>) -> std::io::Error {
 
 /// Restores a checkpoint into an engine built from the same case; returns the caller's record.
 pub fn read<B: Backend>(engine: &mut Engine<B>, path: &Path) -> std::io::Result<Vec<u8>> {
+    // Not a device or a pipe, which could be read without end.
+    if !std::fs::metadata(path)?.is_file() {
+        return Err(bad("not a regular file"));
+    }
     let data = std::fs::read(path)?;
     decode(engine, &data)
 }
