@@ -278,6 +278,17 @@ fn resolution_errors_of_the_case_file_are_located() {
     assert_eq!(first_error(&diags, &sources).code, "C0011", "{}", render(&sources, &diags));
 }
 
+/// Found by the case-file fuzzer's counts: a text that is not TOML was C0001 without placeholders
+/// and C0026 (a parameter's error) with them. Both are C0001 now, where the TOML breaks.
+#[test]
+fn a_case_that_is_not_toml_is_c0001_with_or_without_placeholders() {
+    for top in ["x = [1,", "[parameters]\nv = 1\nx = \"${v}\"\ny = [1,"] {
+        let (diags, sources) = load(&case(top, ""), &Options::default());
+        let d = first_error(&diags, &sources);
+        assert_eq!(d.code, "C0001", "{}", render(&sources, &diags));
+    }
+}
+
 /// A study's `plots` and `ci_runs` that name nothing were errors without a location.
 #[test]
 fn study_errors_are_located() {

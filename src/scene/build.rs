@@ -278,6 +278,10 @@ pub fn load_text(
                     let r = cli.set.get(k - from_case).cloned().unwrap_or(0..0);
                     Diagnostic::error("C0026", e.message).at(Span::new(cli.file, r.start, r.end), "no such parameter")
                 }
+                None if e.not_toml => {
+                    let msg = e.message.trim().to_string();
+                    Diagnostic::error("C0001", format!("case file: {msg}")).at(Span::new(file, e.start, e.end), msg)
+                }
                 None => e.diagnostic(file),
             };
             return Err(vec![d]);

@@ -11,6 +11,9 @@ pub struct TemplateError {
     /// The entry of `set` the error is about (a name the case has no parameter for): it was given
     /// outside the text, so `start..end` says nothing.
     pub set_entry: Option<usize>,
+    /// The text is not TOML (with its placeholders read as values): a case-file error, not one of
+    /// its parameters.
+    pub not_toml: bool,
 }
 
 impl TemplateError {
@@ -63,7 +66,13 @@ pub fn expand(text: &str, set: &[(String, String)]) -> Result<String, TemplateEr
     // A text that is not TOML is reported as such here: its parameters cannot be read.
     let table = skeleton(text).map_err(|e| {
         let span = e.span().unwrap_or(0..0);
-        TemplateError { start: span.start, end: span.end, message: e.message().to_string(), set_entry: None }
+        TemplateError {
+            start: span.start,
+            end: span.end,
+            message: e.message().to_string(),
+            set_entry: None,
+            not_toml: true,
+        }
     })?;
     let defaults = table.get("parameters").and_then(|p| p.as_table()).cloned().unwrap_or_default();
     for (k, (name, _)) in set.iter().enumerate() {
@@ -74,6 +83,7 @@ pub fn expand(text: &str, set: &[(String, String)]) -> Result<String, TemplateEr
                 end: 0,
                 message: format!("the case has no parameter `{name}` to set (its parameters: {names:?})"),
                 set_entry: Some(k),
+                not_toml: false,
             });
         }
     }
@@ -89,6 +99,7 @@ pub fn expand(text: &str, set: &[(String, String)]) -> Result<String, TemplateEr
                 end: at + k + 2,
                 message: "`${` without a closing `}`".into(),
                 set_entry: None,
+                not_toml: false,
             });
         };
         let name = &after[..close];
@@ -102,6 +113,7 @@ pub fn expand(text: &str, set: &[(String, String)]) -> Result<String, TemplateEr
                         end: at + k + 3 + close,
                         message: format!("`${{{name}}}` names no entry of `[parameters]`"),
                         set_entry: None,
+                        not_toml: false,
                     })
                 }
             },
