@@ -28,17 +28,23 @@ for tool in unshare:util-linux python3:python3; do
     fi
 done
 
-cargo test --workspace "$@"
+# Everything is also logged, to close with one line that counts every test run.
+log=$(mktemp)
+trap 'rm -f "$log"' EXIT
+logged() { "$@" 2>&1 | tee -a "$log"; return "${PIPESTATUS[0]}"; }
+
+logged cargo test --workspace "$@"
 
 # With a filter or other arguments, only the tests asked for. Otherwise also what the suite above
 # neither builds nor runs:
 if [ $# -eq 0 ]; then
     # the portable lane loops (no AVX2), against the native pair code bit for bit;
-    PAIRSUM_NO_WIDE_SIMD=1 cargo test --test jit --test native
+    PAIRSUM_NO_WIDE_SIMD=1 logged cargo test --test jit --test native
     # the criterion benchmarks, each run once in test mode (timings belong to `cargo bench`);
-    cargo test --benches
+    logged cargo test --benches
     # the coverage-guided fuzz targets (their own workspace, fuzz/), type-checked against today's
     # API: about 2.5 min on 2 cores, where a build, whose dependencies' features differ from the
     # test suite's, takes 7 (running them needs cargo-fuzz and a nightly toolchain: fuzz/README.md).
-    cargo check --locked --manifest-path fuzz/Cargo.toml --target-dir target/fuzz-check
+    logged cargo check --locked --manifest-path fuzz/Cargo.toml --target-dir target/fuzz-check
 fi
+awk '/^test result:/ { passed += $4; failed += $6 } END { printf "%d passed, %d failed\n", passed, failed }' "$log"
