@@ -51,7 +51,7 @@ fn brute_force<T: Coord>(x: &[T], dim: usize, h: &[f64]) -> Vec<(u32, u32)> {
 }
 
 fn h_max(h: &[f64]) -> f64 {
-    h.iter().copied().fold(0.0, f64::max)
+    pairsum::compare::max_abs(h).expect("finite smoothing lengths")
 }
 
 /// Pairs found through `for_each_candidate`, sorted; panics if a candidate comes twice.

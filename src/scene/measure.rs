@@ -174,10 +174,13 @@ fn reduce_values(reduce: &str, v: &[f64]) -> f64 {
     if v.is_empty() {
         return f64::NAN;
     }
+    // A NaN anywhere makes min, max and abs_max NaN, as it makes the sum and the mean:
+    // `f64::min` and `f64::max` would drop it.
+    let extreme = |f: fn(&[f64]) -> f64| if v.iter().any(|x| x.is_nan()) { f64::NAN } else { f(v) };
     match reduce {
-        "min" => v.iter().copied().fold(f64::INFINITY, f64::min),
-        "max" => v.iter().copied().fold(f64::NEG_INFINITY, f64::max),
-        "abs_max" => v.iter().map(|x| x.abs()).fold(0.0, f64::max),
+        "min" => extreme(|v| v.iter().copied().fold(f64::INFINITY, f64::min)),
+        "max" => extreme(|v| v.iter().copied().fold(f64::NEG_INFINITY, f64::max)),
+        "abs_max" => extreme(|v| v.iter().map(|x| x.abs()).fold(0.0, f64::max)),
         "sum" => v.iter().sum(),
         _ => v.iter().sum::<f64>() / v.len() as f64,
     }
