@@ -352,6 +352,13 @@ pub enum Builtin {
     Diag,
     /// W at a given distance and smoothing length: `W_at(r, h)`
     KernelAt,
+    /// ∇W at a given separation vector and smoothing length: `gradW_at(r, h)` (0 at r = 0 and
+    /// beyond the support), the kernel gradient of a pair in another configuration than the
+    /// current one (the reference configuration of a total Lagrangian solid).
+    KernelGradAt,
+    /// A vec from scalars: `vec(a, b)` or `vec(a, b, c)`; components past the model's dimension
+    /// are dropped, missing ones are 0.
+    Vector,
 }
 
 impl Builtin {
@@ -379,6 +386,8 @@ impl Builtin {
             Builtin::Max => "max",
             Builtin::Diag => "diag",
             Builtin::KernelAt => "W_at",
+            Builtin::KernelGradAt => "gradW_at",
+            Builtin::Vector => "vec",
         }
     }
 }

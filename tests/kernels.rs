@@ -145,3 +145,46 @@ fn normalisation_constants_integrate_to_one() {
         }
     }
 }
+
+/// `gradW_at(r, h)` is the kernel gradient at any separation: at the pair's own separation and
+/// smoothing length it is `gradW_ij` (the same sum over every particle's neighbours, to rounding),
+/// and it is 0 at r = 0 and past the support. `vec(a, b, c)` keeps the model's first d
+/// components.
+#[test]
+fn gradw_at_the_pair_separation_is_gradw_ij_and_zero_at_the_origin_and_past_the_support() {
+    for (kernel, h_ratio) in KERNELS {
+        let support = if kernel == "gaussian" { 3.0 } else { 2.0 };
+        let m = model(&format!(
+            "use kernels\ngroup all\nkernel = {kernel}\n\
+             pairsum both -> by_pair: vec [1/m], by_at: vec [1/m], outside: scalar [1/m^4], built: vec [m] {{\n\
+                 by_pair += vol[j] * gradW_ij\n\
+                 by_at += vol[j] * gradW_at(x_ij, h_ij)\n\
+                 finally {{\n\
+                     outside = norm(gradW_at(vec(0 [m], 0 [m], 0 [m]), h)) + norm(gradW_at(vec({past} * h, 0 [m], 0 [m]), h))\n\
+                     built = vec(1 [m], 2 [m], 3 [m])\n\
+                 }}\n\
+             }}\n\
+             integrate {{ }}\n",
+            past = support * 1.0001
+        ));
+        for dim in 1..=3 {
+            let n = [0, 15, 9, 7][dim];
+            let dx = 0.1;
+            let inp = input(dim, lattice(dim, n, dx), dx);
+            let mat = material(&m, &[("rho0", vec![1000.0]), ("h_ratio", vec![h_ratio])]);
+            let outputs = ["by_pair", "by_at", "outside", "built"];
+            let mut b = backend::<f64>(&m, &scene(&m, dim, &outputs, IntegratorKind::Euler), &inp, &[mat], vec![]);
+            b.evaluate(Default::default()).expect("evaluate");
+            let (_, by_pair) = field_by_id(&b, "by_pair");
+            let (_, by_at) = field_by_id(&b, "by_at");
+            let scale = max_abs("Σ V ∇W_ij", &by_pair);
+            assert!(scale > 1.0, "{kernel} in {dim}D: the lattice's edges give Σ V ∇W_ij = {scale}");
+            let diff = max_abs_diff("Σ V gradW_at against Σ V gradW_ij", &by_at, &by_pair);
+            assert!(diff <= 1e-12 * scale, "{kernel} in {dim}D: differ by {diff} (of {scale})");
+            let (_, outside) = field_by_id(&b, "outside");
+            assert_eq!(max_abs("gradW_at at 0 and past the support", &outside), 0.0, "{kernel} in {dim}D");
+            let (comps, built) = field_by_id(&b, "built");
+            assert_eq!(&built[..comps], &[1.0, 2.0, 3.0][..dim], "vec(1, 2, 3) in {dim}D");
+        }
+    }
+}

@@ -640,7 +640,7 @@ impl Checker {
         if !ok {
             return None;
         }
-        if matches!(b, Builtin::Min | Builtin::Max) {
+        if matches!(b, Builtin::Min | Builtin::Max | Builtin::Vector) {
             // Free zeros and infinities take the unit of the other arguments.
             if let Some(anchor) = typed.iter().zip(args).find(|(_, a)| !is_free(a)).map(|(t, _)| t.ty) {
                 for (t, a) in typed.iter_mut().zip(args) {
@@ -648,8 +648,9 @@ impl Checker {
                 }
             }
         }
-        if b == Builtin::KernelAt && cx.at == Where::Kernel {
-            self.error(Diagnostic::error("E0214", "a kernel cannot be defined in terms of `W_at`").at(span, "here"));
+        if matches!(b, Builtin::KernelAt | Builtin::KernelGradAt) && cx.at == Where::Kernel {
+            let msg = format!("a kernel cannot be defined in terms of `{}`", b.name());
+            self.error(Diagnostic::error("E0214", msg).at(span, "here"));
             return None;
         }
         let shown: Vec<Expr> = typed.clone();

@@ -390,6 +390,40 @@ pub fn builtin(f: Builtin, mut args: Vec<Expr>, span: crate::diag::Span) -> Resu
             let u = Unit::ONE.div(&m.powr(Ratio::int(3)).ok_or_else(unit_overflow)?).ok_or_else(unit_overflow)?;
             Ok(call(args, Type::scalar(u)))
         }
+        Builtin::KernelGradAt => {
+            let m = Unit::M;
+            if shapes != [Shape::Vec, Shape::Scalar] || units[0] != m || units[1] != m {
+                return Err(unit_err(
+                    format!(
+                        "`gradW_at(r, h)` takes a separation vec and a smoothing length in m, found ({} [{}], {} [{}])",
+                        shapes[0].name(),
+                        units[0],
+                        shapes[1].name(),
+                        units[1]
+                    ),
+                    "here",
+                    None,
+                ));
+            }
+            let u = Unit::ONE.div(&m.powr(Ratio::int(4)).ok_or_else(unit_overflow)?).ok_or_else(unit_overflow)?;
+            Ok(call(args, Type::new(Shape::Vec, u)))
+        }
+        Builtin::Vector => {
+            if args.len() > 3 || shapes.iter().any(|s| *s != Shape::Scalar) {
+                return Err(bad("two or three scalars", None));
+            }
+            for u in &units[1..] {
+                if *u != units[0] {
+                    return Err(unit_err(
+                        format!("the components of a `vec` have one unit, found [{}] and [{}]", units[0], u),
+                        "here",
+                        None,
+                    ));
+                }
+            }
+            let u = units[0];
+            Ok(call(args, Type::new(Shape::Vec, u)))
+        }
     }
 }
 
@@ -418,13 +452,15 @@ pub fn builtin_by_name(name: &str) -> Option<(Builtin, Option<usize>)> {
         "min" => (Min, None),
         "max" => (Max, None),
         "W_at" => (KernelAt, Some(2)),
+        "gradW_at" => (KernelGradAt, Some(2)),
+        "vec" => (Vector, None),
         "diag" => (Diag, Some(1)),
         _ => return None,
     })
 }
 
 /// Every callable name the language knows besides user helpers (for suggestions).
-pub const CALLABLE: [&str; 28] = [
+pub const CALLABLE: [&str; 30] = [
     "diag",
     "dot",
     "outer",
@@ -447,6 +483,8 @@ pub const CALLABLE: [&str; 28] = [
     "min",
     "max",
     "W_at",
+    "gradW_at",
+    "vec",
     "pow",
     "select",
     "avg",

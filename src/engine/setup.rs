@@ -206,6 +206,7 @@ fn eval(
                 Builtin::Max => a[0].iter().zip(&a[1]).map(|(x, y)| x.max(*y)).collect(),
                 Builtin::Norm => vec![a[0].iter().map(|x| x * x).sum::<f64>().sqrt()],
                 Builtin::Dot => vec![a[0].iter().zip(&a[1]).map(|(x, y)| x * y).sum()],
+                Builtin::Vector => (0..dim).map(|k| a.get(k).map_or(0.0, |c| c[0])).collect(),
                 _ => return None,
             }
         }

@@ -777,7 +777,39 @@ impl<'a> Lowerer<'a> {
                 let w = self.kernel_w(args[0].c[0], args[1].c[0], true);
                 scalar(w)
             }
+            Builtin::KernelGradAt => self.kernel_grad_at(&args[0], args[1].c[0]),
+            Builtin::Vector => {
+                let c = (0..d).map(|k| args.get(k).map_or_else(|| self.g.c(0.0), |a| a.c[0])).collect();
+                Val { shape: Shape::Vec, c }
+            }
         }
+    }
+
+    /// ∇W at the separation `x` with smoothing length `h`: norm_d / h^(d+1) · dw(R) · x / r,
+    /// 0 at r = 0 and from the support on.
+    fn kernel_grad_at(&mut self, x: &Val, h: Id) -> Val {
+        let squares: Vec<Id> = x.c.iter().map(|c| self.g.mul(*c, *c)).collect();
+        let r2 = self.g.sum(&squares);
+        let r = self.g.un(Un::Sqrt, r2);
+        let big_r = self.g.div(r, h);
+        let dw = self.kernel_fn(big_r, false);
+        let norm = self.g.c(self.kernel.norm[self.dim - 1]);
+        let hd = self.g.powi(h, self.dim as i32 + 1);
+        let a = self.g.div(norm, hd);
+        let f = self.g.mul(a, dw);
+        let f_over_r = self.g.div(f, r);
+        let (zero, support) = (self.g.c(0.0), self.g.c(self.kernel.support));
+        let inside = self.g.bin(Bin::Lt, big_r, support);
+        let apart = self.g.bin(Bin::Gt, r, zero);
+        let counts = self.g.bin(Bin::And, inside, apart);
+        let c =
+            x.c.iter()
+                .map(|xk| {
+                    let g = self.g.mul(f_over_r, *xk);
+                    self.g.select(counts, g, zero)
+                })
+                .collect();
+        Val { shape: Shape::Vec, c }
     }
 
     fn trace(&mut self, a: &Val) -> Id {

@@ -464,6 +464,15 @@ impl<'a> Writer<'a> {
                 self.kernel_fns = true;
                 format!("kernel_w_at({}, {})", a[0], a[1])
             }
+            Builtin::KernelGradAt => {
+                self.kernel_fns = true;
+                format!("kernel_grad_at({}, {})", a[0], a[1])
+            }
+            Builtin::Vector if one_d => a[0].clone(),
+            Builtin::Vector => {
+                let c: Vec<String> = (0..d).map(|k| a.get(k).cloned().unwrap_or_else(|| "0.0".into())).collect();
+                format!("vec{d}<f32>({})", c.join(", "))
+            }
         }
     }
 
@@ -768,8 +777,9 @@ fn opaque_fns(d: usize) -> String {
     s
 }
 
-/// `kernel_w(r, h)`, `kernel_w_at(r, h)` and `kernel_grad(r, h)` (the factor of x_ij).
-fn kernel_functions(plan: &Plan, lay: &Layout) -> String {
+/// `kernel_w(r, h)`, `kernel_w_at(r, h)` and `kernel_grad(r, h)` (the factor of x_ij), and
+/// `kernel_grad_at(x, h)` where `body` calls it.
+fn kernel_functions(plan: &Plan, lay: &Layout, body: &str) -> String {
     let k = &plan.model.kernels[plan.kernel.index()];
     let d = plan.dim;
     let mut w = Writer::new(plan, lay, Mode::None);
@@ -792,9 +802,24 @@ fn kernel_slope(R: f32) -> f32 {{
 fn kernel_w(r: f32, h: f32) -> f32 {{ return {norm} / ({hd}) * kernel_shape(r / h); }}
 fn kernel_w_at(r: f32, h: f32) -> f32 {{ return select(0.0, kernel_w(r, h), r / h < {support}); }}
 fn kernel_grad(r: f32, h: f32) -> f32 {{ return {norm} / ({hd} * h) * kernel_slope(r / h) / r; }}
-",
+{grad_at}",
         name = k.name,
-        support = lit(k.support)
+        support = lit(k.support),
+        grad_at = if body.contains("kernel_grad_at(") { kernel_grad_at_fn(plan, k.support) } else { String::new() }
+    )
+}
+
+/// `kernel_grad_at(x, h)`: ∇W at the separation x, 0 at x = 0 and from the support on.
+fn kernel_grad_at_fn(plan: &Plan, support: f64) -> String {
+    let vt = ty(Shape::Vec, plan.dim);
+    let len = if plan.dim == 1 { "abs(x)" } else { "length(x)" };
+    let support = lit(support);
+    format!(
+        "fn kernel_grad_at(x: {vt}, h: f32) -> {vt} {{
+    let r = {len};
+    return select({vt}(0.0), kernel_grad(r, h) * x, r > 0.0 && r / h < {support});
+}}
+"
     )
 }
 
@@ -961,7 +986,7 @@ fn pass_kernel(plan: &Plan, lay: &Layout, pass: usize, v: &PassVariant, cell_hel
     if !lists {
         wgsl.push_str(cell_helpers);
     }
-    wgsl.push_str(&kernel_functions(plan, lay));
+    wgsl.push_str(&kernel_functions(plan, lay, &w.out));
     wgsl.push_str(&position_fn(plan, lay));
     wgsl.push_str(&h_fn(plan, lay));
     wgsl.push_str(&w.accessors());
@@ -1075,8 +1100,8 @@ fn particle_kernel(
     let body = std::mem::take(&mut w.out);
     let bindings = vec![Binding::Data, Binding::Ints, Binding::Params, Binding::Meta, Binding::Globals];
     let mut wgsl = header(plan, title, Some(g), &bindings);
-    if body.contains("kernel_w") {
-        wgsl.push_str(&kernel_functions(plan, lay));
+    if body.contains("kernel_w") || body.contains("kernel_grad_at(") {
+        wgsl.push_str(&kernel_functions(plan, lay, &body));
     }
     wgsl.push_str(&w.accessors());
     let _ = writeln!(

@@ -56,6 +56,7 @@ pub const HELPERS: &[&str] = &[
     "kernel_slope",
     "kernel_shape",
     "kernel_grad",
+    "kernel_grad_at",
     "grid_origin",
     "grid_dims",
     "grid_cell_size",
