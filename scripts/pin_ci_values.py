@@ -20,6 +20,7 @@ import math
 import subprocess
 import sys
 import tempfile
+import tomllib
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -30,6 +31,8 @@ RUNS = [
     ("standing_wave", {}),
     ("cantilever", {}),
     ("cantilever_lsm", {}),
+    ("cantilever_2d", {}),
+    ("beam_vibration_2d", {}),
     ("dam_break_2d", {"boundary": "dbc"}),
     ("dam_break_2d", {"boundary": "adami"}),
     ("hydrostatic_tank", {"boundary": "dbc"}),
@@ -77,11 +80,46 @@ def toml_string(s):
     return json.dumps(s, ensure_ascii=False)
 
 
+def pin_lines(case, sets, both, bands):
+    """The [[pin]] tables of one run: each result's f64 and f32 values and its band (given, for
+    kept pins, or computed)."""
+    lines = []
+    for quantity, v64 in both["f64"].items():
+        if is_timing(quantity):
+            continue
+        v32 = both["f32"].get(quantity)
+        if v64 is None or v32 is None or not (math.isfinite(v64) and math.isfinite(v32)):
+            sys.exit(f"{tag(case, sets)}: `{quantity}` is {v64} in f64 and {v32} in f32: nothing to pin")
+        band = bands.get(quantity, max(3.0 * abs(v32 - v64), 1e-3 * abs(v64)))
+        sets_toml = ", ".join(f"{k} = {toml_string(v)}" for k, v in sorted(sets.items()))
+        lines += [
+            "[[pin]]",
+            f"case = {toml_string(case)}",
+            f"set = {{ {sets_toml} }}" if sets else "set = {}",
+            f"quantity = {toml_string(quantity)}",
+            f"f64 = {v64!r}",
+            f"f32 = {v32!r}",
+            f"band = {band!r}",
+            "",
+        ]
+    return lines
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--bin", default=str(ROOT / "target/release/pairsum"))
     p.add_argument("--from", dest="source", help="reuse the runs in this folder")
+    p.add_argument(
+        "--only",
+        nargs="+",
+        metavar="CASE",
+        help="run only these cases; keep every other case's pins as tests/data/ci_values.toml has them",
+    )
     a = p.parse_args()
+    kept = {}
+    if a.only:
+        for pin in tomllib.loads((ROOT / "tests/data/ci_values.toml").read_text())["pin"]:
+            kept.setdefault(tag(pin["case"], pin["set"]), []).append(pin)
     work = Path(a.source) if a.source else Path(tempfile.mkdtemp(prefix="pairsum-pins-"))
     lines = [
         "# What each bundled case computes today at its CI resolution, on the CPU backend: written by",
@@ -92,6 +130,11 @@ def main():
         "",
     ]
     for case, sets in RUNS:
+        if a.only and case not in a.only:
+            pins = kept.get(tag(case, sets), [])  # none: the run reports no results (rings_2d)
+            both = {"f64": {p["quantity"]: p["f64"] for p in pins}, "f32": {p["quantity"]: p["f32"] for p in pins}}
+            lines += pin_lines(case, sets, both, {p["quantity"]: p["band"] for p in pins})
+            continue
         both = {}
         for precision in ["f64", "f32"]:
             out = work / f"{tag(case, sets)}-{precision}"
@@ -99,24 +142,7 @@ def main():
                 print(f"{tag(case, sets)} {precision}", file=sys.stderr)
                 run(a.bin, case, sets, precision, out)
             both[precision] = results(out)
-        for quantity, v64 in both["f64"].items():
-            if is_timing(quantity):
-                continue
-            v32 = both["f32"].get(quantity)
-            if v64 is None or v32 is None or not (math.isfinite(v64) and math.isfinite(v32)):
-                sys.exit(f"{tag(case, sets)}: `{quantity}` is {v64} in f64 and {v32} in f32: nothing to pin")
-            band = max(3.0 * abs(v32 - v64), 1e-3 * abs(v64))
-            sets_toml = ", ".join(f"{k} = {toml_string(v)}" for k, v in sorted(sets.items()))
-            lines += [
-                "[[pin]]",
-                f"case = {toml_string(case)}",
-                f"set = {{ {sets_toml} }}" if sets else "set = {}",
-                f"quantity = {toml_string(quantity)}",
-                f"f64 = {v64!r}",
-                f"f32 = {v32!r}",
-                f"band = {band!r}",
-                "",
-            ]
+        lines += pin_lines(case, sets, both, {})
     target = ROOT / "tests/data/ci_values.toml"
     target.write_text("\n".join(lines))
     print(f"wrote {target} (runs in {work})", file=sys.stderr)

@@ -846,3 +846,54 @@ fn a_node_list_a_spacing_off_a_symmetry_plane_is_warned_of() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+// The total Lagrangian solid in bending (docs/results/cantilever_2d_convergence/ and
+// beam_vibration_2d_convergence/): at 8 particles across the depth its error is within the case's
+// tolerance (run_and_check), and halving the spacing from 4 across cuts the error at least in two
+// (the stdlib's updated-Lagrangian solids did neither: issue 37).
+
+/// The relative error of a case's only referenced result at a resolution.
+fn error_at(name: &str, resolution: &str) -> f64 {
+    let mut opts = RunOptions {
+        backend: BackendChoice::Cpu,
+        precision: Precision::F64,
+        out: out_dir(&format!("{name}-{resolution}")),
+        vtk: false,
+        ..RunOptions::default()
+    };
+    opts.scene.resolution = Some(resolution.to_string());
+    let outcome = run_case(&case(name), &opts).unwrap_or_else(|e| panic!("{name} at {resolution}: {e}"));
+    let _ = std::fs::remove_dir_all(&opts.out);
+    let row = &outcome.report.results[0];
+    row.rel_error.unwrap_or_else(|| panic!("{name}: {} has no error", row.quantity))
+}
+
+fn assert_error_halves(name: &str, coarse: &str, fine: &str) {
+    let (e_coarse, e_fine) = (error_at(name, coarse), error_at(name, fine));
+    assert!(
+        e_fine.abs() <= 0.5 * e_coarse.abs(),
+        "{name}: error {:+.2} % at {coarse}, {:+.2} % at {fine}: not halved",
+        100.0 * e_coarse,
+        100.0 * e_fine
+    );
+}
+
+#[test]
+fn total_lagrangian_cantilever_2d_deflection_is_within_its_tolerance_at_8_particles_across() {
+    run_and_check("cantilever_2d", Precision::F64);
+}
+
+#[test]
+fn total_lagrangian_cantilever_2d_deflection_error_halves_from_4_to_8_particles_across() {
+    assert_error_halves("cantilever_2d", "ci@25mm", "ci");
+}
+
+#[test]
+fn total_lagrangian_beam_vibration_2d_period_is_within_its_tolerance_at_8_particles_across() {
+    run_and_check("beam_vibration_2d", Precision::F64);
+}
+
+#[test]
+fn total_lagrangian_beam_vibration_2d_period_error_halves_from_4_to_8_particles_across() {
+    assert_error_halves("beam_vibration_2d", "ci@5mm", "ci");
+}
