@@ -88,23 +88,19 @@ fn st_v_0(i: u32, v: vec2<f32>) {
     data[b + 1u] = v[1];
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 0u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 6u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 7u;
     return params[b];
 }
 fn prm__load0(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 12u;
-    return vec2<f32>(params[b], params[b + 1u]);
-}
-fn prm__constraint0(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 14u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 @compute @workgroup_size(64)
@@ -122,7 +118,6 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let rate_of_x = v_i;
     let rate_of_v = (ld_dv(i) + select(vec2<f32>(0.0), (min((t / 0.5), 1.0) * prm__load0(i)), (ld_part(i) == 0.0)));
     v_i = (ld_v_0(i) + (0.5 * (dt * rate_of_v)));
-    v_i = select(v_i, (1.0 * prm__constraint0(i)), (ld_part(i) == 1.0));
     x_i = (ld_x_0(i) + (0.5 * (dt * rate_of_x)));
     // p_wave_speed
     var c_i: f32 = ld_c(i);

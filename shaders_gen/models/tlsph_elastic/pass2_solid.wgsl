@@ -330,6 +330,16 @@ fn pos3(p: u32) -> vec3<f32> {
     return vec3<f32>(data[b + 0u], data[b + 1u], data[b + 2u]);
 }
 fn h_of(p: u32) -> f32 { return data[u32(info[8u + ints[p]] + i32(p))]; }
+fn ld_x(i: u32) -> vec3<f32> {
+    let b = u32(info[3 + G] + i32(i) * 3);
+    return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
+}
+fn st_x(i: u32, v: vec3<f32>) {
+    let b = u32(info[3 + G] + i32(i) * 3);
+    data[b] = v[0];
+    data[b + 1u] = v[1];
+    data[b + 2u] = v[2];
+}
 fn ld_v(i: u32) -> vec3<f32> {
     let b = u32(info[4 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
@@ -459,20 +469,32 @@ fn st_dv(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 0u;
     return params[b];
 }
 fn prm_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 5u;
+    return params[b];
+}
+fn prm_G(j: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + j] * 16u + 7u;
+    return params[b];
+}
+fn prm_bulk(j: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + j] * 16u + 8u;
     return params[b];
 }
 fn prm_hourglass_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 9u;
     return params[b];
 }
 fn prm_damping(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 11u;
     return params[b];
+}
+fn prm_clamp_normal(i: u32) -> vec3<f32> {
+    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 12u;
+    return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 @compute @workgroup_size(64)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) li: u32) {
@@ -486,6 +508,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // pairsum tl_momentum: accumulators
     var dv: vec3<f32> = vec3<f32>(0.0);
     var a: vec3<f32> = vec3<f32>(0.0);
+    let x_i = ld_x(i);
     let body_i = ld_body(i);
     let X_i = ld_X(i);
     let L0_inv_i = ld_L0_inv(i);
@@ -529,16 +552,29 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let r_ij = sqrt(r2);
             let W_ij = kernel_w(r_ij, h_ij);
             let gradW_ij = kernel_grad(r_ij, h_ij) * x_ij;
-            // pairsum tl_momentum (stdlib/solid/total_lagrangian.sph:58)
+            // pairsum tl_momentum (stdlib/solid/total_lagrangian.sph:80)
             if ((body_i == ldj_body(j, sgn))) {
                 let X_ij = (X_i - ldj_X(j, sgn));
                 let g0 = kernel_grad_at(X_ij, h_ij);
+                let clamped = (dot(ldj_X(j, sgn), prm_clamp_normal(i)) < 0.0);
+                let x_ij_2 = x_ij;
+                let u_image = ((x_i - x_ij) - ldj_X(j, sgn));
+                let n_2 = prm_clamp_normal(i);
+                let clamped_2 = clamped;
+                let d = select(x_ij_2, (x_ij_2 + (2.0 * (u_image - (dot(u_image, n_2) * n_2)))), clamped_2);
+                let R_2 = (eye() - (2.0 * outer(prm_clamp_normal(i), prm_clamp_normal(i))));
+                let F_j = sel_m(ldj_F(j, sgn), (eye() + (R_2 * (eye() - ldj_F(j, sgn)))), clamped);
+                let F = F_j;
+                let G_2 = prm_G(j);
+                let bulk = prm_bulk(j);
+                let strain = (0.5 * (sym((transpose(F) * F)) - eye()));
+                let P_j = sel_m(ldj_P(j, sgn), (F * ((((bulk - ((2.0 * G_2) / 3.0)) * trace(strain)) * eye()) + ((2.0 * G_2) * strain))), clamped);
                 let p1 = prm_rho0(i);
                 let p2 = prm_rho0(j);
-                a = a + (ldj_m(j, sgn) * (((P_i * (L0_inv_i * g0)) / (p1 * p1)) + ((ldj_P(j, sgn) * (ldj_L0_inv(j, sgn) * g0)) / (p2 * p2))));
+                a = a + (ldj_m(j, sgn) * (((P_i * (L0_inv_i * g0)) / (p1 * p1)) + ((P_j * (ldj_L0_inv(j, sgn) * g0)) / (p2 * p2))));
                 let r0 = length(X_ij);
-                let e = (x_ij / r_ij);
-                let miss = dot((((0.5 * (F_i + ldj_F(j, sgn))) * X_ij) - x_ij), e);
+                let e = (d / length(d));
+                let miss = dot((((0.5 * (F_i + F_j)) * X_ij) - d), e);
                 a = a + ((((((prm_hourglass_alpha(i) * ldj_vol(j, sgn)) * kernel_w_at(r0, h_ij)) * prm_E(i)) / (prm_rho0(i) * (r0 * r0))) * miss) * e);
             }
         }
