@@ -17,7 +17,10 @@ Two experiments, each at 4, 8 and 16 particles across a 0.1 m depth (E = 10 MPa,
                 elements (scripts/beam_references.py: 4.33721 mm);
   pure bending  a free 0.5 m beam under end couples: the curvature in its middle against
                 M / (E' I) (no clamp, no shear).
-Needs numpy and scipy. Takes about a minute.
+The odd clamp rows show what clamping by odd images would give; in the dynamic model such a clamp
+(a symmetry plane whose images move as −u and carry the stress of that field) grew unstable in the
+vibrating beam, so models::tlsph_elastic keeps the fixed particles.
+Needs numpy and scipy. Takes a few seconds.
 """
 import numpy as np
 import scipy.sparse as sp

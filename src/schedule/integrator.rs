@@ -5,7 +5,8 @@
 //! - Predictor–corrector (FTLR19 Fig 5, Monaghan's midpoint form): S½ = S⁰ + Δt/2 Ṡ(S⁰);
 //!   S¹ = S⁰ + Δt Ṡ(S½) (equal to FTLR19's S¹ = 2 S½′ − S⁰ with S½′ = S⁰ + Δt/2 Ṡ(S½)).
 //! - Symplectic (DualSPHysics, Monaghan 2005): the same predictor, then v¹ = v⁰ + Δt v̇(S½),
-//!   x¹ = x⁰ + Δt (v⁰ + v¹)/2, ρ¹ = ρ⁰ (2 − ε)/(2 + ε) with ε = −(ρ̇/ρ)½ Δt, others midpoint.
+//!   x¹ = x⁰ + Δt (v⁰ + v¹)/2 (and so every state whose rate is v), ρ¹ = ρ⁰ (2 − ε)/(2 + ε) with
+//!   ε = −(ρ̇/ρ)½ Δt, others midpoint.
 //!
 //! State that corrections change without a rate (plastic strain, damage) restarts every stage from
 //! its value at the start of the step, so a two-stage step counts its increment once.
@@ -408,8 +409,10 @@ fn stage_blocks(
             let value = match (kind, stage) {
                 (super::IntegratorKind::Euler, _) => base.plus(rate.scaled_by(dt())),
                 (_, 0) => base.plus(half(rate.scaled_by(dt()))),
-                (super::IntegratorKind::Symplectic, _) if Some(f) == x && is_field(&rate_expr(rates, f), v) => {
-                    // x¹ = x⁰ + Δt (v⁰ + v¹)/2
+                (super::IntegratorKind::Symplectic, _) if is_field(&rate_expr(rates, f), v) => {
+                    // x¹ = x⁰ + Δt (v⁰ + v¹)/2, for x and any other state whose rate is v (a total
+                    // Lagrangian solid's displacement): advanced another way, its forces would
+                    // see an explicit-Euler oscillator, which grows every step.
                     let v = v.expect("x' = v names v");
                     let vty = model.field(v).ty;
                     let v0 = saved(v).map(|s| Expr::field(s, vty)).unwrap_or_else(|| Expr::field(v, vty));

@@ -44,21 +44,39 @@ fn st_v(i: u32, v: vec2<f32>) {
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
+fn ld_u(i: u32) -> vec2<f32> {
+    let b = u32(info[11 + G] + i32(i) * 2);
+    return vec2<f32>(data[b], data[b + 1u]);
+}
+fn st_u(i: u32, v: vec2<f32>) {
+    let b = u32(info[11 + G] + i32(i) * 2);
+    data[b] = v[0];
+    data[b + 1u] = v[1];
+}
 fn ld_x_0(i: u32) -> vec2<f32> {
-    let b = u32(info[16 + G] + i32(i) * 2);
+    let b = u32(info[18 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_x_0(i: u32, v: vec2<f32>) {
-    let b = u32(info[16 + G] + i32(i) * 2);
+    let b = u32(info[18 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_v_0(i: u32) -> vec2<f32> {
-    let b = u32(info[17 + G] + i32(i) * 2);
+    let b = u32(info[19 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_v_0(i: u32, v: vec2<f32>) {
-    let b = u32(info[17 + G] + i32(i) * 2);
+    let b = u32(info[19 + G] + i32(i) * 2);
+    data[b] = v[0];
+    data[b + 1u] = v[1];
+}
+fn ld_u_0(i: u32) -> vec2<f32> {
+    let b = u32(info[20 + G] + i32(i) * 2);
+    return vec2<f32>(data[b], data[b + 1u]);
+}
+fn st_u_0(i: u32, v: vec2<f32>) {
+    let b = u32(info[20 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
@@ -74,8 +92,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // save the state at the start of the step
     var x_0_i: vec2<f32> = ld_x_0(i);
     var v_0_i: vec2<f32> = ld_v_0(i);
+    var u_0_i: vec2<f32> = ld_u_0(i);
     x_0_i = ld_x(i);
     v_0_i = ld_v(i);
+    u_0_i = ld_u(i);
     st_x_0(i, x_0_i);
     st_v_0(i, v_0_i);
+    st_u_0(i, u_0_i);
 }

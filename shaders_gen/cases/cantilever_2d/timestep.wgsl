@@ -26,8 +26,11 @@ fn main() {
     let t = globals[0u];
     let dt = globals[1u];
     var best = globals[4u];
+    // timestep hourglass
+    let limit_hourglass = globals[16u];
+    if (limit_hourglass > 0.0 && limit_hourglass < pinf()) { best = min(best, limit_hourglass); }
     // timestep cfl
-    let limit_cfl = (globals[16u] / globals[17u]);
+    let limit_cfl = (globals[17u] / globals[18u]);
     if (limit_cfl > 0.0 && limit_cfl < pinf()) { best = min(best, limit_cfl); }
     let remaining = globals[3u] - t;
     if (remaining > 0.0 && remaining < best * 1.000001) { best = remaining; }

@@ -330,16 +330,6 @@ fn pos3(p: u32) -> vec3<f32> {
     return vec3<f32>(data[b + 0u], data[b + 1u], data[b + 2u]);
 }
 fn h_of(p: u32) -> f32 { return data[u32(info[8u + ints[p]] + i32(p))]; }
-fn ld_x(i: u32) -> vec3<f32> {
-    let b = u32(info[3 + G] + i32(i) * 3);
-    return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
-}
-fn st_x(i: u32, v: vec3<f32>) {
-    let b = u32(info[3 + G] + i32(i) * 3);
-    data[b] = v[0];
-    data[b + 1u] = v[1];
-    data[b + 2u] = v[2];
-}
 fn ldj_vol(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[5 + ints[j]];
     if (base == -2147483648) { return 0.0; }
@@ -376,12 +366,28 @@ fn ldj_X(j: u32, sgn: vec3<f32>) -> vec3<f32> {
     let b = u32(base + i32(j) * 3);
     return (vec3<f32>(data[b], data[b + 1u], data[b + 2u]) * sgn);
 }
+fn ld_u(i: u32) -> vec3<f32> {
+    let b = u32(info[10 + G] + i32(i) * 3);
+    return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
+}
+fn st_u(i: u32, v: vec3<f32>) {
+    let b = u32(info[10 + G] + i32(i) * 3);
+    data[b] = v[0];
+    data[b + 1u] = v[1];
+    data[b + 2u] = v[2];
+}
+fn ldj_u(j: u32, sgn: vec3<f32>) -> vec3<f32> {
+    let base = info[10 + ints[j]];
+    if (base == -2147483648) { return vec3<f32>(0.0); }
+    let b = u32(base + i32(j) * 3);
+    return (vec3<f32>(data[b], data[b + 1u], data[b + 2u]) * sgn);
+}
 fn ld_L0_inv(i: u32) -> mat3x3<f32> {
-    let b = u32(info[11 + G] + i32(i) * 9);
+    let b = u32(info[12 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_L0_inv(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[11 + G] + i32(i) * 9);
+    let b = u32(info[12 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -392,12 +398,12 @@ fn st_L0_inv(i: u32, v: mat3x3<f32>) {
     data[b + 7u] = v[1][2];
     data[b + 8u] = v[2][2];
 }
-fn ld_F(i: u32) -> mat3x3<f32> {
-    let b = u32(info[12 + G] + i32(i) * 9);
+fn ld_H(i: u32) -> mat3x3<f32> {
+    let b = u32(info[13 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
-fn st_F(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[12 + G] + i32(i) * 9);
+fn st_H(i: u32, v: mat3x3<f32>) {
+    let b = u32(info[13 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -409,11 +415,11 @@ fn st_F(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ld_P(i: u32) -> mat3x3<f32> {
-    let b = u32(info[13 + G] + i32(i) * 9);
+    let b = u32(info[14 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_P(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[13 + G] + i32(i) * 9);
+    let b = u32(info[14 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -425,20 +431,16 @@ fn st_P(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 7u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 8u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 10u;
     return params[b];
-}
-fn prm_clamp_normal(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 12u;
-    return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 @compute @workgroup_size(64)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) li: u32) {
@@ -451,12 +453,12 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let dt = globals[1u];
     // pairsum deformation_gradient: accumulators
     var L0_inv: mat3x3<f32> = mat3x3<f32>();
-    var F: mat3x3<f32> = mat3x3<f32>();
+    var H: mat3x3<f32> = mat3x3<f32>();
     var L0: mat3x3<f32> = mat3x3<f32>();
-    var F0: mat3x3<f32> = mat3x3<f32>();
-    let x_i = ld_x(i);
+    var H0: mat3x3<f32> = mat3x3<f32>();
     let body_i = ld_body(i);
     let X_i = ld_X(i);
+    let u_i = ld_u(i);
     let xi = pos3(i);
     let hi = h_of(i);
     let mirrors = u32(globals[8u]);
@@ -499,28 +501,23 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             if ((body_i == ldj_body(j, sgn))) {
                 let X_ij = (X_i - ldj_X(j, sgn));
                 let g0 = (ldj_vol(j, sgn) * kernel_grad_at(X_ij, h_ij));
-                let clamped = (dot(ldj_X(j, sgn), prm_clamp_normal(i)) < 0.0);
                 L0 = L0 + neg_m(outer(g0, X_ij));
-                let x_ij_2 = x_ij;
-                let u_image = ((x_i - x_ij) - ldj_X(j, sgn));
-                let n_2 = prm_clamp_normal(i);
-                let clamped_2 = clamped;
-                F0 = F0 + neg_m(outer(select(x_ij_2, (x_ij_2 + (2.0 * (u_image - (dot(u_image, n_2) * n_2)))), clamped_2), g0));
+                H0 = H0 + outer((ldj_u(j, sgn) - u_i), g0);
             }
         }
         }}}
     }
     // then deformation_gradient
     L0_inv = sel_m(eye(), inv(L0), (abs(determinant(L0)) > prm_det_min(i)));
-    F = (F0 * transpose(L0_inv));
+    H = (H0 * transpose(L0_inv));
     // then piola_kirchhoff
     var P_i: mat3x3<f32> = ld_P(i);
-    let F_2 = F;
+    let H_2 = H;
     let G_2 = prm_G(i);
     let bulk = prm_bulk(i);
-    let strain = (0.5 * (sym((transpose(F_2) * F_2)) - eye()));
-    P_i = (F_2 * ((((bulk - ((2.0 * G_2) / 3.0)) * trace(strain)) * eye()) + ((2.0 * G_2) * strain)));
+    let strain = (sym(H_2) + (0.5 * sym((transpose(H_2) * H_2))));
+    P_i = ((eye() + H_2) * ((((bulk - ((2.0 * G_2) / 3.0)) * trace(strain)) * eye()) + ((2.0 * G_2) * strain)));
     st_L0_inv(i, L0_inv);
-    st_F(i, F);
+    st_H(i, H);
     st_P(i, P_i);
 }
