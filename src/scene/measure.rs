@@ -170,17 +170,20 @@ fn locate_extreme(reduce: &str, values: &[(usize, f64)], axis: usize, b: &dyn Ba
     Ok(positions(b)?.map(|x| x[k][axis]).unwrap_or(f64::NAN))
 }
 
+/// The largest of `start` and `values`, NaN if any of them is NaN (`f64::max` would drop it).
+fn max_keeping_nan(start: f64, values: impl IntoIterator<Item = f64>) -> f64 {
+    values.into_iter().fold(start, |m, x| if m.is_nan() || x.is_nan() { f64::NAN } else { m.max(x) })
+}
+
 fn reduce_values(reduce: &str, v: &[f64]) -> f64 {
     if v.is_empty() {
         return f64::NAN;
     }
-    // A NaN anywhere makes min, max and abs_max NaN, as it makes the sum and the mean:
-    // `f64::min` and `f64::max` would drop it.
-    let extreme = |f: fn(&[f64]) -> f64| if v.iter().any(|x| x.is_nan()) { f64::NAN } else { f(v) };
+    // A NaN anywhere makes min, max and abs_max NaN, as it makes the sum and the mean.
     match reduce {
-        "min" => extreme(|v| v.iter().copied().fold(f64::INFINITY, f64::min)),
-        "max" => extreme(|v| v.iter().copied().fold(f64::NEG_INFINITY, f64::max)),
-        "abs_max" => extreme(|v| v.iter().map(|x| x.abs()).fold(0.0, f64::max)),
+        "min" => -max_keeping_nan(f64::NEG_INFINITY, v.iter().map(|x| -x)),
+        "max" => max_keeping_nan(f64::NEG_INFINITY, v.iter().copied()),
+        "abs_max" => max_keeping_nan(0.0, v.iter().map(|x| x.abs())),
         "sum" => v.iter().sum(),
         _ => v.iter().sum::<f64>() / v.len() as f64,
     }
@@ -200,7 +203,7 @@ fn measure(m: Measure, scene: &Scene, b: &dyn Backend) -> Result<f64, BackendErr
         Measure::MinPairDistance => spacing_extremes(&x, b)?.0,
         Measure::MaxNeighbourGap => spacing_extremes(&x, b)?.1,
         Measure::KineticEnergy => kinetic_energy(b)?,
-        Measure::MaxSpeed => speeds(b)?.into_iter().fold(0.0, f64::max),
+        Measure::MaxSpeed => max_keeping_nan(0.0, speeds(b)?),
         Measure::CraterDiameter => crater_diameter(&x, &which, scene, None),
         Measure::IntactCraterDiameter => crater_diameter(&x, &which, scene, damage(b)?.as_deref()),
         Measure::DebrisLength => debris(&x, scene).0,
@@ -538,6 +541,18 @@ pub fn result_value(r: &ResultSpec, h: &History) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_nan_among_the_values_makes_every_extreme_nan() {
+        let v = [1.0, f64::NAN, -3.0];
+        for reduce in ["min", "max", "abs_max", "sum", "mean"] {
+            assert!(reduce_values(reduce, &v).is_nan(), "{reduce}");
+        }
+        assert!(max_keeping_nan(0.0, [2.0, f64::NAN, 5.0]).is_nan(), "a NaN speed among finite ones");
+        assert_eq!(reduce_values("min", &[1.0, -3.0]), -3.0);
+        assert_eq!(reduce_values("abs_max", &[1.0, -3.0]), 3.0);
+        assert_eq!(max_keeping_nan(0.0, [2.0, 5.0]), 5.0);
+    }
 
     fn result(at: &str, time: Option<f64>) -> ResultSpec {
         ResultSpec {
