@@ -553,8 +553,6 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             if (r2 >= rc * rc || r2 == 0.0) { continue; }
             let x_ij = (dxv * sgn);
             let r_ij = sqrt(r2);
-            let W_ij = kernel_w(r_ij, h_ij);
-            let gradW_ij = kernel_grad(r_ij, h_ij) * x_ij;
             // pairsum tl_momentum (stdlib/solid/total_lagrangian.sph:77)
             if ((body_i == ldj_body(j, sgn))) {
                 let X_ij = (X_i - ldj_X(j, sgn));

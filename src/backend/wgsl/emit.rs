@@ -187,7 +187,9 @@ struct Writer<'a> {
     stores: BTreeSet<FieldId>,
     /// Kahan compensation variables of compensated sums.
     compensation: BTreeMap<FieldId, String>,
-    kernel_fns: bool,
+    /// Whether the pair loop reads `W_ij` or `gradW_ij`, which it then computes once per pair
+    /// (`W_at` and `gradW_at` call the kernel functions themselves).
+    reads_pair_kernel: bool,
     reductions: usize,
     tmp: usize,
 }
@@ -211,7 +213,7 @@ impl<'a> Writer<'a> {
             params: BTreeSet::new(),
             stores: BTreeSet::new(),
             compensation: BTreeMap::new(),
-            kernel_fns: false,
+            reads_pair_kernel: false,
             reductions: 0,
             tmp: 0,
         }
@@ -281,7 +283,7 @@ impl<'a> Writer<'a> {
             ExprKind::Local(id) => self.local(*id),
             ExprKind::Pair(p) => {
                 if matches!(p, PairValue::W | PairValue::GradW) {
-                    self.kernel_fns = true;
+                    self.reads_pair_kernel = true;
                 }
                 match p {
                     PairValue::Xij => "x_ij",
@@ -460,14 +462,8 @@ impl<'a> Writer<'a> {
             Builtin::Max if is_mat(shape, d) => format!("max_m({}, {})", a[0], a[1]),
             Builtin::Min => format!("min({}, {})", a[0], a[1]),
             Builtin::Max => format!("max({}, {})", a[0], a[1]),
-            Builtin::KernelAt => {
-                self.kernel_fns = true;
-                format!("kernel_w_at({}, {})", a[0], a[1])
-            }
-            Builtin::KernelGradAt => {
-                self.kernel_fns = true;
-                format!("kernel_grad_at({}, {})", a[0], a[1])
-            }
+            Builtin::KernelAt => format!("kernel_w_at({}, {})", a[0], a[1]),
+            Builtin::KernelGradAt => format!("kernel_grad_at({}, {})", a[0], a[1]),
             Builtin::Vector if one_d => a[0].clone(),
             Builtin::Vector => {
                 let c: Vec<String> = (0..d).map(|k| a.get(k).cloned().unwrap_or_else(|| "0.0".into())).collect();
@@ -948,7 +944,7 @@ fn pass_kernel(plan: &Plan, lay: &Layout, pass: usize, v: &PassVariant, cell_hel
             w.line("}");
         }
     }
-    if w.kernel_fns {
+    if w.reads_pair_kernel {
         // W and its gradient, computed only when a sum reads them.
         let pre = format!(
             "{ind}let W_ij = kernel_w(r_ij, h_ij);\n{ind}let gradW_ij = kernel_grad(r_ij, h_ij) * x_ij;\n",
