@@ -6,6 +6,7 @@
 
 pub mod checkpoint;
 pub mod setup;
+pub mod watchdog;
 
 use crate::backend::{timestep, Backend, BackendError, Globals, Snapshot};
 use crate::ir::FieldId;
@@ -23,6 +24,12 @@ pub struct RunConfig {
     pub max_steps: Option<u64>,
     /// The run is unstable when the time step falls below this fraction of the initial one.
     pub min_dt_ratio: f64,
+    /// A particle faster than this many times the case's speed scale stops the run
+    /// ([`watchdog`]).
+    pub speed_factor: f64,
+    /// The run stops when its energy has grown by more than this many times the energy in play
+    /// at the start ([`watchdog`]).
+    pub energy_factor: f64,
 }
 
 impl Default for RunConfig {
@@ -34,6 +41,8 @@ impl Default for RunConfig {
             watch_every: 10,
             max_steps: None,
             min_dt_ratio: 1e-4,
+            speed_factor: 3.0,
+            energy_factor: 1.0,
         }
     }
 }
@@ -62,6 +71,12 @@ pub enum Cause {
     /// The time step fell to `dt`, below `RunConfig::min_dt_ratio` of the initial `dt0`; the
     /// particle is the fastest one, at `speed`.
     TimestepCollapse { dt: f64, dt0: f64, speed: f64 },
+    /// The particle moves at `speed`, faster than `bound`, `speed_factor` times the case's speed
+    /// scale `scale`.
+    TooFast { speed: f64, bound: f64, scale: f64 },
+    /// The energy grew by `growth` since t = 0, more than `bound`; the particle is the fastest,
+    /// at `speed`.
+    EnergyGrowth { growth: f64, bound: f64, speed: f64 },
 }
 
 #[derive(Debug)]
@@ -88,6 +103,23 @@ impl std::fmt::Display for RunError {
                         f,
                         "the time step fell to {dt:.3e} s from {dt0:.3e} s at the start; the fastest particle, {} \
                          (group {}), has `{}` = {speed:.3e} m/s",
+                        u.particle, u.group, u.field
+                    )?,
+                    Cause::TooFast { speed, bound, scale } => write!(
+                        f,
+                        "particle {} (group {}) moves at `{}` = {speed:.3e} m/s, faster than the watchdog's bound \
+                         {bound:.3e} m/s ({:.3} × the case's speed scale, {scale:.3e} m/s: the fastest of the \
+                         initial speeds, a fall through the scene and min h / Δt₀)",
+                        u.particle,
+                        u.group,
+                        u.field,
+                        bound / scale
+                    )?,
+                    Cause::EnergyGrowth { growth, bound, speed } => write!(
+                        f,
+                        "the energy (kinetic, internal and gravity's potential) grew by {growth:.3e} J since t = 0, \
+                         more than the watchdog's bound {bound:.3e} J in a case without loads or moving \
+                         constraints; the fastest particle, {} (group {}), has `{}` = {speed:.3e} m/s",
                         u.particle, u.group, u.field
                     )?,
                 }
@@ -121,13 +153,15 @@ pub struct Engine<B: Backend> {
     good: Option<(Snapshot, f64, u64, f64)>,
     /// The first time step, against which a collapse is measured.
     dt0: f64,
+    /// The watchdog's bounds on speed and energy (none for a model without `x`, `v` and `m`).
+    pub bounds: Option<watchdog::Bounds>,
 }
 
 impl<B: Backend> Engine<B> {
     pub fn new(backend: B, config: RunConfig) -> Engine<B> {
         let plan = backend.plan();
         let watched = plan.watched_fields();
-        Engine { backend, config, time: 0.0, step: 0, dt: 0.0, watched, good: None, dt0: 0.0 }
+        Engine { backend, config, time: 0.0, step: 0, dt: 0.0, watched, good: None, dt0: 0.0, bounds: None }
     }
 
     /// Initial values, state-only equations, and a first time step for equations that read `dt`.
@@ -138,8 +172,20 @@ impl<B: Backend> Engine<B> {
             return Err(RunError::BadTimestep { step: 0, dt: self.dt });
         }
         self.dt0 = self.dt;
+        self.bounds = self.measure_bounds()?;
         self.keep_good()?;
         Ok(())
+    }
+
+    fn measure_bounds(&self) -> Result<Option<watchdog::Bounds>, RunError> {
+        let plan = self.backend.plan();
+        let Some(motion) = watchdog::Motion::read(&self.backend)? else { return Ok(None) };
+        let h = match plan.model.field_id("h") {
+            Some(h) => self.backend.read(h)?.map(|(_, h)| h).unwrap_or_default(),
+            None => vec![],
+        };
+        let factors = (self.config.speed_factor, self.config.energy_factor);
+        Ok(Some(watchdog::Bounds::new(plan, &motion, &h, self.dt0, self.config.end_time, factors)))
     }
 
     fn next_dt(&mut self, g: Globals) -> Result<f64, RunError> {
@@ -225,6 +271,9 @@ impl<B: Backend> Engine<B> {
                 if self.bad()?.is_some() {
                     return Err(RunError::Unstable(Box::new(self.locate_instability()?)));
                 }
+                if let Some(u) = self.out_of_bounds()? {
+                    return Err(RunError::Unstable(Box::new(u)));
+                }
                 self.keep_good()?;
             }
             after_step(self).map_err(|e| RunError::Backend(BackendError(e)))?;
@@ -235,31 +284,41 @@ impl<B: Backend> Engine<B> {
     /// The instability of a collapsed time step, named after the fastest particle (a particle
     /// running away is what usually drives the step down).
     fn timestep_collapse(&self) -> Result<Instability, RunError> {
+        let (i, speed) = watchdog::Motion::read(&self.backend)?.map_or((0, f64::NAN), |m| m.fastest());
+        self.instability_at(i, "v", Cause::TimestepCollapse { dt: self.dt, dt0: self.dt0, speed })
+    }
+
+    /// The instability of a particle too fast or of energy grown without a source, if any.
+    fn out_of_bounds(&self) -> Result<Option<Instability>, RunError> {
+        let Some(bounds) = &self.bounds else { return Ok(None) };
+        let Some(now) = watchdog::Motion::read(&self.backend)? else { return Ok(None) };
+        let (i, cause) = match bounds.check(&now) {
+            None => return Ok(None),
+            Some(watchdog::Breach::Speed { particle, speed }) => {
+                (particle, Cause::TooFast { speed, bound: bounds.max_speed, scale: bounds.speed_scale })
+            }
+            Some(watchdog::Breach::Energy { growth, particle, speed }) => {
+                let bound = bounds.max_growth.clone().unwrap_or(f64::INFINITY);
+                (particle, Cause::EnergyGrowth { growth, bound, speed })
+            }
+        };
+        Ok(Some(self.instability_at(i, "v", cause)?))
+    }
+
+    /// An instability at particle `i` (in the backend's current order) now, with the last good
+    /// state kept by the watchdog.
+    fn instability_at(&self, i: usize, field: &str, cause: Cause) -> Result<Instability, RunError> {
         let (last_good, last_good_time) =
             self.good.as_ref().map(|g| (g.0.clone(), g.1)).expect("kept at initialisation");
         let plan = self.backend.plan();
-        let velocities = match plan.model.field_id("v") {
-            Some(v) => self.backend.read(v)?,
-            None => None,
-        };
-        let speeds = velocities.map(|(c, v)| {
-            v.chunks(c.max(1)).map(|u| u.iter().map(|x| x * x).sum::<f64>().sqrt()).collect::<Vec<f64>>()
-        });
-        let (i, speed) = speeds.unwrap_or_default().into_iter().enumerate().fold((0, f64::NAN), |best, (i, s)| {
-            if s > best.1 || best.1.is_nan() {
-                (i, s)
-            } else {
-                best
-            }
-        });
         let group = self.backend.groups().get(i).map(|g| plan.model.groups[*g as usize].name.clone());
         Ok(Instability {
             step: self.step,
             time: self.time,
             particle: self.backend.ids()?.get(i).copied().unwrap_or(0),
             group: group.unwrap_or_default(),
-            field: "v".into(),
-            cause: Cause::TimestepCollapse { dt: self.dt, dt0: self.dt0, speed },
+            field: field.into(),
+            cause,
             last_good,
             last_good_time,
         })

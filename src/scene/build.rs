@@ -955,6 +955,19 @@ fn build(
         }
         config.min_dt_ratio = *r.get_ref();
     }
+    let watchdog = case.watchdog.as_ref();
+    for (factor, name, into) in [
+        (watchdog.and_then(|w| w.speed_factor.as_ref()), "speed_factor", &mut config.speed_factor),
+        (watchdog.and_then(|w| w.energy_factor.as_ref()), "energy_factor", &mut config.energy_factor),
+    ] {
+        let Some(f) = factor else { continue };
+        if f.get_ref().is_nan() || *f.get_ref() <= 0.0 {
+            let msg = format!("`watchdog.{name}` must be positive (inf turns the bound off), found {}", f.get_ref());
+            cx.err(f.span(), "C0041", msg, "not a positive factor");
+            return None;
+        }
+        *into = *f.get_ref();
+    }
     let _ = GroupSet::default();
     Some(Scene {
         warnings: vec![],

@@ -29,6 +29,9 @@ pub struct CaseFile {
     /// The run stops as unstable when its time step falls below this fraction of the first.
     #[serde(default)]
     pub min_dt_ratio: Option<Spanned<f64>>,
+    /// The watchdog's bounds on speed and energy (`[watchdog]`).
+    #[serde(default)]
+    pub watchdog: Option<Watchdog>,
     /// Named resolutions; each a spacing or a table with `dx` and overrides.
     pub resolutions: Spanned<BTreeMap<String, Spanned<Resolution>>>,
     /// The resolution used when none is asked for.
@@ -236,6 +239,20 @@ pub struct Load {
     pub force: Value,
     #[serde(default)]
     pub ramp: Option<Value>,
+}
+
+/// `[watchdog]`: how far past the case's own scales a run may go before it is stopped as
+/// unstable (`inf` turns a bound off).
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct Watchdog {
+    /// A particle faster than this many times the case's speed scale stops the run.
+    #[serde(default)]
+    pub speed_factor: Option<Spanned<f64>>,
+    /// The run stops when its energy grows by more than this many times the energy in play at
+    /// the start.
+    #[serde(default)]
+    pub energy_factor: Option<Spanned<f64>>,
 }
 
 #[derive(Deserialize, Debug)]

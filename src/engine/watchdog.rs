@@ -1,0 +1,162 @@
+//! The watchdog's bounds on motion: a particle faster than the case can explain, and energy that
+//! grows without a source. Both are measured against the state at t = 0, from what the plan knows
+//! of the scene (gravity, loads, prescribed motions), on any backend (it reads fields).
+//!
+//! - **Speed.** The case's speed scale is the largest of: the fastest particle at t = 0, the speed
+//!   of a fall through the scene's height (or for the whole run, if that is longer), and the
+//!   signal speed `min h / Δt₀` (about the fastest wave speed over the CFL number). A particle
+//!   faster than `speed_factor` times that scale stops the run.
+//! - **Energy.** `E = Σ ½ m |v|² + Σ m e − Σ m g·x` (kinetic, internal when the model has a state
+//!   `e`, and gravity's potential) cannot grow in a case without loads or moving constraints: the
+//!   energy stored in strain or compression is not counted, and that only ever takes energy out
+//!   of `E`. The run stops when `E − E₀` passes `energy_factor` times the energy in play at the
+//!   start, `Σ ½ m |v₀|² + Σ m |e₀| + Σ m |g| H` (H the scene's height along gravity), or, for a
+//!   scene at rest without gravity, `½ M (10⁻⁴ × speed scale)²`.
+
+use crate::backend::{Backend, BackendError};
+use crate::ir::FieldId;
+use crate::schedule::{Plan, SceneRole};
+
+/// The state the bounds read.
+pub struct Motion {
+    /// The masses, when the plan stores them (a model that never reads `m` does not).
+    pub m: Option<Vec<f64>>,
+    pub speed: Vec<f64>,
+    /// Positions, `dim` per particle.
+    pub x: Vec<f64>,
+    /// The specific internal energy, when the model has a state `e`.
+    pub e: Option<Vec<f64>>,
+    pub dim: usize,
+}
+
+fn column<B: Backend>(b: &B, f: Option<FieldId>) -> Result<Option<(usize, Vec<f64>)>, BackendError> {
+    match f {
+        Some(f) => b.read(f),
+        None => Ok(None),
+    }
+}
+
+impl Motion {
+    /// Reads speeds, positions, masses and internal energies; `None` when the plan stores no `v` or
+    /// `x`.
+    pub fn read<B: Backend>(b: &B) -> Result<Option<Motion>, BackendError> {
+        let model = &b.plan().model;
+        let id = |name: &str| model.field_id(name);
+        let (Some((cv, v)), Some((cx, x))) = (column(b, id("v"))?, column(b, id("x"))?) else {
+            return Ok(None);
+        };
+        let m = column(b, id("m"))?.map(|(_, m)| m);
+        let speed = v.chunks(cv.max(1)).map(|u| u.iter().map(|a| a * a).sum::<f64>().sqrt()).collect();
+        let e = column(b, id("e").filter(|f| model.field(*f).ty.shape == crate::ir::Shape::Scalar))?.map(|(_, e)| e);
+        Ok(Some(Motion { m, speed, x, e, dim: cx.max(1) }))
+    }
+
+    /// The fastest particle (a NaN speed counts as the fastest) and its speed.
+    pub fn fastest(&self) -> (usize, f64) {
+        let mut best: Option<(usize, f64)> = None;
+        for (i, s) in self.speed.iter().copied().enumerate() {
+            match best {
+                Some((_, b)) if b.is_nan() || !(s.is_nan() || s > b) => {}
+                _ => best = Some((i, s)),
+            }
+        }
+        best.unwrap_or((0, 0.0))
+    }
+
+    /// `Σ m f` over the particles, with `f` of each particle's index.
+    fn mass_weighted(m: &[f64], f: impl Fn(usize) -> f64) -> f64 {
+        m.iter().enumerate().map(|(i, m)| m * f(i)).sum()
+    }
+
+    fn kinetic(&self, m: &[f64]) -> f64 {
+        Self::mass_weighted(m, |i| 0.5 * self.speed[i] * self.speed[i])
+    }
+
+    /// `Σ m e`, or with `abs`, `Σ m |e|`.
+    fn internal(&self, m: &[f64], abs: bool) -> f64 {
+        let e = |i: usize| self.e.as_ref().map_or(0.0, |e| if abs { e[i].abs() } else { e[i] });
+        Self::mass_weighted(m, e)
+    }
+
+    /// Kinetic + internal + gravity's potential energy (`−Σ m g·x`).
+    fn energy(&self, m: &[f64], g: &[f64]) -> f64 {
+        let dot = |i: usize| self.x[i * self.dim..(i + 1) * self.dim].iter().zip(g).map(|(a, b)| a * b).sum::<f64>();
+        self.kinetic(m) + self.internal(m, false) - Self::mass_weighted(m, dot)
+    }
+}
+
+/// The watchdog's bounds for one run.
+#[derive(Clone, Debug)]
+pub struct Bounds {
+    pub speed_scale: f64,
+    pub max_speed: f64,
+    gravity: Vec<f64>,
+    energy0: f64,
+    /// The energy growth that stops the run, or why energy is not watched.
+    pub max_growth: Result<f64, String>,
+}
+
+/// What stopped a run in [`Bounds::check`].
+pub enum Breach {
+    Speed { particle: usize, speed: f64 },
+    Energy { growth: f64, particle: usize, speed: f64 },
+}
+
+impl Bounds {
+    /// The bounds from the state at t = 0 and the first time step.
+    pub fn new(plan: &Plan, at_start: &Motion, h: &[f64], dt0: f64, end_time: f64, factors: (f64, f64)) -> Bounds {
+        let (speed_factor, energy_factor) = factors;
+        let gravity = plan
+            .scene_params
+            .iter()
+            .find(|p| p.role == SceneRole::Gravity)
+            .map_or(vec![0.0; at_start.dim], |p| p.value.clone());
+        let g = gravity.iter().map(|a| a * a).sum::<f64>().sqrt();
+        // The scene's height along gravity.
+        let heights = at_start.x.chunks(at_start.dim).map(|x| x.iter().zip(&gravity).map(|(a, b)| a * b).sum::<f64>());
+        let (low, high) = heights.fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), s| (l.min(s), h.max(s)));
+        let height = if g > 0.0 && high >= low { (high - low) / g } else { 0.0 };
+        let fall = (2.0 * g * height).sqrt().max(g * end_time.min(1e30));
+        let signal = h.iter().copied().fold(f64::INFINITY, f64::min) / dt0;
+        let fastest = at_start.fastest().1;
+        let speed_scale = [fastest, fall, signal].into_iter().filter(|s| s.is_finite()).fold(0.0, f64::max);
+        let sources = energy_sources(plan);
+        let (max_growth, energy0) = match &at_start.m {
+            None => (Err("the model stores no mass `m`".to_string()), 0.0),
+            Some(_) if !sources.is_empty() => (Err(sources.join(", ")), 0.0),
+            Some(m) => {
+                let mass: f64 = m.iter().sum();
+                let in_play = at_start.kinetic(m) + at_start.internal(m, true) + mass * g * height;
+                let in_play = if in_play > 0.0 { in_play } else { 0.5 * mass * (1e-4 * speed_scale).powi(2) };
+                (Ok(energy_factor * in_play), at_start.energy(m, &gravity))
+            }
+        };
+        Bounds { speed_scale, max_speed: speed_factor * speed_scale, energy0, gravity, max_growth }
+    }
+
+    /// The first bound the state passes, if any.
+    pub fn check(&self, now: &Motion) -> Option<Breach> {
+        let (particle, speed) = now.fastest();
+        if speed > self.max_speed {
+            return Some(Breach::Speed { particle, speed });
+        }
+        let (Ok(max), Some(m)) = (&self.max_growth, &now.m) else { return None };
+        let growth = now.energy(m, &self.gravity) - self.energy0;
+        (growth > *max).then_some(Breach::Energy { growth, particle, speed })
+    }
+}
+
+/// What feeds energy into the scene that the watchdog cannot account for: loads and prescribed
+/// motions.
+fn energy_sources(plan: &Plan) -> Vec<String> {
+    let nonzero = |v: &[f64]| v.iter().any(|a| *a != 0.0);
+    plan.scene_params
+        .iter()
+        .filter_map(|p| match p.role {
+            SceneRole::Load(k) if nonzero(&p.value) => Some(format!("load {}", k + 1)),
+            SceneRole::Constraint(k) if nonzero(&p.value) => Some(format!("moving constraint {}", k + 1)),
+            SceneRole::AngularSpeed(k) if nonzero(&p.value) => Some(format!("rotating constraint {}", k + 1)),
+            _ => None,
+        })
+        .collect()
+}
