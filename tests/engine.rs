@@ -188,6 +188,47 @@ fn a_sum_from_own_sees_only_the_particles_own_group() {
     assert!(cross > 0.1, "without `from own` the touching blocks should see each other ({cross:e})");
 }
 
+/// `from own body`: a sum over neighbours of the particle's own body only, on a pair sum and
+/// through a `use`. Two touching blocks of one group, one per body, give exactly the sums each
+/// block has alone; without it they differ.
+#[test]
+fn a_sum_from_own_body_sees_only_the_particles_own_body() {
+    let shepard = |from: &str| format!("pairsum shepard {from} -> w_sum: scalar [1/m^3] {{ w_sum += W_ij }}\n");
+    let text = |sum: &str| format!("use kernels\ngroup solid\nkernel = wendland_c2\n{sum}integrate {{ }}\n");
+    let (n, dx) = (6, 0.01);
+    let blocks = |gap: f64| {
+        let mut x = lattice(2, n, dx);
+        let mut shifted: Vec<[f64; 3]> = x.iter().map(|p| [p[0] + n as f64 * dx + gap, p[1], 0.0]).collect();
+        let half = x.len();
+        x.append(&mut shifted);
+        let mut input = input(2, x, dx);
+        input.body[half..].iter_mut().for_each(|b| *b = 1);
+        input
+    };
+    let dir = std::env::temp_dir().join(format!("pairsum-own-body-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("shepard.sph"), shepard("")).unwrap();
+    let used = format!("use \"{}\" from own body\n", dir.join("shepard.sph").display());
+    let sums = |text: &str, gap: f64| {
+        let m = model(text);
+        let mat = material(&m, &[("rho0", vec![1000.0]), ("h_ratio", vec![1.3])]);
+        let mut b = backend::<f64>(&m, &scene(&m, 2, &["w_sum"], IntegratorKind::Euler), &blocks(gap), &[mat], vec![]);
+        b.evaluate(Default::default()).expect("evaluate");
+        field_by_id(&b, "w_sum").1
+    };
+    let apart = sums(&text(&shepard("")), 10.0 * dx);
+    for (how, own_touching) in
+        [("on the pair sum", sums(&text(&shepard("from own body")), 0.0)), ("through a use", sums(&text(&used), 0.0))]
+    {
+        let worst = max_pointwise_rel_diff("from own body: apart against touching", &apart, &own_touching);
+        assert!(worst < 1e-12, "from own body {how}, touching vs apart: relative difference {worst:e}");
+    }
+    let all_touching = sums(&text(&shepard("")), 0.0);
+    let cross = max_pointwise_rel_diff("without from own body: apart against touching", &apart, &all_touching);
+    assert!(cross > 0.1, "without `from own body` the touching blocks should see each other ({cross:e})");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// Particles that accelerate as k |v| v run away in finite time: the time step they set collapses
 /// while every value stays finite. The engine stops, naming the fastest particle; a run whose last
 /// step is merely cut short to land on the end time is not flagged.

@@ -170,9 +170,20 @@ impl Checker {
             .collect();
         self.temps.clear();
         let own = p.own || self.module_scope.2;
+        let body = if p.own_body || self.module_scope.3 { self.within_own_body(body) } else { body };
         let kind =
             EquationKind::PairSum { sources, own, accumulators, init, body, finally, compensated: p.compensated };
         self.push_equation(&p.name.name, kind, dest, stored, p.span);
+    }
+
+    /// A pair loop's statements run only for neighbours of particle i's own body (`from own body`):
+    /// `if body[i] == body[j] { … }`.
+    fn within_own_body(&self, stmts: Vec<ir::Stmt>) -> Vec<ir::Stmt> {
+        let Some(f) = self.model.field_id("body") else { return stmts };
+        let ty = self.model.field(f).ty;
+        let side = |s| ir::Expr::new(ir::ExprKind::Field(f, s), ty);
+        let same = ir::Expr::binary(ir::Op::Eq, side(ir::Side::I), side(ir::Side::J), ir::Type::BOOL);
+        vec![ir::Stmt::If(same, stmts, vec![])]
     }
 
     pub(crate) fn particle(&mut self, p: &ast::ParticleDef) {

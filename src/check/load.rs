@@ -119,6 +119,7 @@ pub struct UseEdge {
     pub on: Option<Vec<Ident>>,
     pub from: Option<Vec<Ident>>,
     pub own: bool,
+    pub own_body: bool,
 }
 
 pub struct Loader<'s> {
@@ -215,7 +216,13 @@ impl<'s> Loader<'s> {
                 self.seen.insert(found.key, Some(index));
                 for u in uses {
                     if let Some(target) = self.resolve_use(&u.path, u.span, found.dir.as_deref()) {
-                        self.modules[index].uses.push(UseEdge { target, on: u.on, from: u.from, own: u.own });
+                        self.modules[index].uses.push(UseEdge {
+                            target,
+                            on: u.on,
+                            from: u.from,
+                            own: u.own,
+                            own_body: u.own_body,
+                        });
                     }
                 }
                 Some(index)

@@ -139,7 +139,9 @@ pub const RESERVED: [&str; 15] =
 
 /// A module's scope: the groups its equations run on, the groups its pair sums see, and whether
 /// they see only the destination's own group.
-pub(crate) type Scope = (GroupSet, GroupSet, bool);
+/// A module's scope: the groups its equations run on, the groups its pair sums see, and whether
+/// they see only particle i's own group (`from own`) and only its own body (`from own body`).
+pub(crate) type Scope = (GroupSet, GroupSet, bool, bool);
 
 /// The binding of a `let` whose value had an error: later uses stay quiet instead of reporting an
 /// unknown name.
@@ -194,7 +196,7 @@ impl Checker {
             depth: 0,
             work: 0,
             too_deep_reported: false,
-            module_scope: (GroupSet::ALL, GroupSet::ALL, false),
+            module_scope: (GroupSet::ALL, GroupSet::ALL, false, false),
         }
     }
 
@@ -267,7 +269,7 @@ impl Checker {
                 _ => {}
             }
         }
-        self.module_scope = (GroupSet::ALL, GroupSet::ALL, false);
+        self.module_scope = (GroupSet::ALL, GroupSet::ALL, false, false);
         self.check_unchecked_helpers();
         self.check_writers();
         if is_model && !self.diags.iter().any(|d| d.is_error()) {
@@ -278,28 +280,37 @@ impl Checker {
     /// The groups each module's equations may run on and see, from the `use … on G from S` along
     /// every path from a module the user named: the union over paths of the intersection along
     /// each. Restrictions reach the modules a restricted module uses, unless another path frees them.
-    /// `from own` holds for a module when it holds on every path (some `use` on each says it).
+    /// `from own` (and `from own body`) holds for a module when it holds on every path (some `use` on
+    /// each says it).
     fn module_scopes(&mut self, modules: &[load::Module]) -> Vec<Scope> {
         let all = self.model.all_groups();
-        let none: Scope = (GroupSet::default(), GroupSet::default(), true);
-        let mut scopes: Vec<Scope> =
-            modules.iter().enumerate().map(|(k, m)| if m.root || k == 0 { (all, all, false) } else { none }).collect();
+        let none: Scope = (GroupSet::default(), GroupSet::default(), true, true);
+        let mut scopes: Vec<Scope> = modules
+            .iter()
+            .enumerate()
+            .map(|(k, m)| if m.root || k == 0 { (all, all, false, false) } else { none })
+            .collect();
         let mut edges = vec![];
         for (k, m) in modules.iter().enumerate() {
             for e in &m.uses {
                 let on = self.groups(e.on.as_ref());
                 let from = self.groups(e.from.as_ref());
-                edges.push((k, e.target, on, from, e.own));
+                edges.push((k, e.target, on, from, e.own, e.own_body));
             }
         }
         loop {
             let mut changed = false;
-            for &(a, b, on, from, own) in &edges {
+            for &(a, b, on, from, own, own_body) in &edges {
                 let (sa, sb) = (scopes[a], scopes[b]);
                 if sa.0.intersect(on).is_empty() {
                     continue;
                 }
-                let reach = (sb.0.union(sa.0.intersect(on)), sb.1.union(sa.1.intersect(from)), sb.2 && (sa.2 || own));
+                let reach = (
+                    sb.0.union(sa.0.intersect(on)),
+                    sb.1.union(sa.1.intersect(from)),
+                    sb.2 && (sa.2 || own),
+                    sb.3 && (sa.3 || own_body),
+                );
                 if reach != sb {
                     scopes[b] = reach;
                     changed = true;

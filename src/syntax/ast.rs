@@ -46,6 +46,8 @@ pub struct Use {
     pub from: Option<Vec<Ident>>,
     /// `from own`: m's pair sums see only neighbours of particle i's own group.
     pub own: bool,
+    /// `from own body`: m's pair sums see only neighbours of particle i's own body.
+    pub own_body: bool,
     pub span: Span,
 }
 
@@ -174,6 +176,8 @@ pub struct PairSumDef {
     pub from: Option<Vec<Ident>>,
     /// `from own`: only neighbours of particle i's own group.
     pub own: bool,
+    /// `from own body`: only neighbours of particle i's own body.
+    pub own_body: bool,
     pub outputs: Vec<Output>,
     /// `acc name: type`: accumulators local to this pair sum (summed, read in `finally`, not stored).
     pub temps: Vec<Output>,

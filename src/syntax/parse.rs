@@ -197,6 +197,8 @@ fn rule_text(r: Rule) -> &'static str {
         on_clause => "`on`",
         from_clause => "`from`",
         K_own => "`own`",
+        own_body => "`own body`",
+        K_body => "`body`",
         fn_param => "a parameter",
         K_use => "`use`",
         K_group => "`group`",
@@ -348,16 +350,17 @@ impl Builder {
                     Rule::string => UsePath::File(target.as_str().trim_matches('"').to_string()),
                     _ => UsePath::Module(kids(target).map(|i| self.ident(i)).collect()),
                 };
-                let (mut on, mut from, mut own) = (None, None, false);
+                let (mut on, mut from, mut own, mut own_body) = (None, None, false, false);
                 for c in it {
                     match c.as_rule() {
                         Rule::on_clause => on = Some(self.groups(c)),
+                        Rule::from_clause if self.is_own_body(&c) => own_body = true,
                         Rule::from_clause if self.is_own(&c) => own = true,
                         Rule::from_clause => from = Some(self.groups(c)),
                         _ => {}
                     }
                 }
-                Item::Use(Use { path, on, from, own, span })
+                Item::Use(Use { path, on, from, own, own_body, span })
             }
             Rule::group_decl => Item::Groups(kids(p).map(|i| self.ident(i)).collect()),
             Rule::field_decl => {
@@ -494,6 +497,7 @@ impl Builder {
             on: None,
             from: None,
             own: false,
+            own_body: false,
             outputs: vec![],
             temps: vec![],
             compensated: false,
@@ -506,6 +510,7 @@ impl Builder {
             match c.as_rule() {
                 Rule::ident => def.name = self.ident(c),
                 Rule::on_clause => def.on = Some(self.groups(c)),
+                Rule::from_clause if self.is_own_body(&c) => def.own_body = true,
                 Rule::from_clause if self.is_own(&c) => def.own = true,
                 Rule::from_clause => def.from = Some(self.groups(c)),
                 Rule::outputs => def.outputs = self.outputs(c),
@@ -532,6 +537,11 @@ impl Builder {
     }
 
     /// `from own` rather than `from a | b`.
+    /// `from own body`.
+    fn is_own_body(&self, clause: &Pair<Rule>) -> bool {
+        clause.clone().into_inner().any(|k| k.as_rule() == Rule::own_body)
+    }
+
     fn is_own(&self, clause: &Pair<Rule>) -> bool {
         clause.clone().into_inner().any(|k| k.as_rule() == Rule::K_own)
     }

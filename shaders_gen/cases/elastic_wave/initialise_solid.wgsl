@@ -13,35 +13,35 @@ fn in_groups(mask: u32, g: u32) -> bool { return ((mask >> g) & 1u) == 1u; }
 // In 1D every vec and tensor is a single f32.
 fn frob(a: f32) -> f32 { return abs(a); }
 fn ld_rho(i: u32) -> f32 {
-    let b = u32(info[7 + G] + i32(i) * 1);
+    let b = u32(info[8 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho(i: u32, v: f32) {
-    let b = u32(info[7 + G] + i32(i) * 1);
+    let b = u32(info[8 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_p(i: u32) -> f32 {
-    let b = u32(info[13 + G] + i32(i) * 1);
+    let b = u32(info[14 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p(i: u32, v: f32) {
-    let b = u32(info[13 + G] + i32(i) * 1);
+    let b = u32(info[14 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_c(i: u32) -> f32 {
-    let b = u32(info[14 + G] + i32(i) * 1);
+    let b = u32(info[15 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_c(i: u32, v: f32) {
-    let b = u32(info[14 + G] + i32(i) * 1);
+    let b = u32(info[15 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 0u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 6u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -304,7 +304,7 @@ fn pos3(p: u32) -> vec3<f32> {
     let b = u32(info[3u + ints[p]] + i32(p) * 1);
     return vec3<f32>(data[b + 0u], 0.0, 0.0);
 }
-fn h_of(p: u32) -> f32 { return data[u32(info[8u + ints[p]] + i32(p))]; }
+fn h_of(p: u32) -> f32 { return data[u32(info[9u + ints[p]] + i32(p))]; }
 fn ld_v(i: u32) -> f32 {
     let b = u32(info[4 + G] + i32(i) * 1);
     return data[b];
@@ -320,107 +320,107 @@ fn ldj_v(j: u32, sgn: vec3<f32>) -> f32 {
     return (data[b] * sgn.x);
 }
 fn ld_body(i: u32) -> f32 {
-    let b = u32(info[5 + G] + i32(i) * 1);
+    let b = u32(info[6 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_body(i: u32, v: f32) {
-    let b = u32(info[5 + G] + i32(i) * 1);
+    let b = u32(info[6 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_body(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[5 + ints[j]];
-    if (base == -2147483648) { return 0.0; }
-    let b = u32(base + i32(j) * 1);
-    return data[b];
-}
-fn ldj_m(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[6 + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
-fn ld_rho(i: u32) -> f32 {
-    let b = u32(info[7 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_rho(i: u32, v: f32) {
-    let b = u32(info[7 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ldj_rho(j: u32, sgn: vec3<f32>) -> f32 {
+fn ldj_m(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[7 + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
+fn ld_rho(i: u32) -> f32 {
+    let b = u32(info[8 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_rho(i: u32, v: f32) {
+    let b = u32(info[8 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ldj_rho(j: u32, sgn: vec3<f32>) -> f32 {
+    let base = info[8 + ints[j]];
+    if (base == -2147483648) { return 0.0; }
+    let b = u32(base + i32(j) * 1);
+    return data[b];
+}
 fn ld_L_inv(i: u32) -> f32 {
-    let b = u32(info[9 + G] + i32(i) * 1);
+    let b = u32(info[10 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_L_inv(i: u32, v: f32) {
-    let b = u32(info[9 + G] + i32(i) * 1);
+    let b = u32(info[10 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s(i: u32) -> f32 {
-    let b = u32(info[10 + G] + i32(i) * 1);
+    let b = u32(info[11 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_s(i: u32, v: f32) {
-    let b = u32(info[10 + G] + i32(i) * 1);
+    let b = u32(info[11 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_s(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[10 + ints[j]];
+    let base = info[11 + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
 fn ld_p(i: u32) -> f32 {
-    let b = u32(info[13 + G] + i32(i) * 1);
+    let b = u32(info[14 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p(i: u32, v: f32) {
-    let b = u32(info[13 + G] + i32(i) * 1);
+    let b = u32(info[14 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_p(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[13 + ints[j]];
-    if (base == -2147483648) { return 0.0; }
-    let b = u32(base + i32(j) * 1);
-    return data[b];
-}
-fn ld_c(i: u32) -> f32 {
-    let b = u32(info[14 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_c(i: u32, v: f32) {
-    let b = u32(info[14 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ldj_c(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[14 + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
+fn ld_c(i: u32) -> f32 {
+    let b = u32(info[15 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_c(i: u32, v: f32) {
+    let b = u32(info[15 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ldj_c(j: u32, sgn: vec3<f32>) -> f32 {
+    let base = info[15 + ints[j]];
+    if (base == -2147483648) { return 0.0; }
+    let b = u32(base + i32(j) * 1);
+    return data[b];
+}
 fn ld_dv(i: u32) -> f32 {
-    let b = u32(info[17 + G] + i32(i) * 1);
+    let b = u32(info[18 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_dv(i: u32, v: f32) {
-    let b = u32(info[17 + G] + i32(i) * 1);
+    let b = u32(info[18 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 8u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 9u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 10u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -325,7 +325,7 @@ fn pos3(p: u32) -> vec3<f32> {
     let b = u32(info[3u + ints[p]] + i32(p) * 3);
     return vec3<f32>(data[b + 0u], data[b + 1u], data[b + 2u]);
 }
-fn h_of(p: u32) -> f32 { return data[u32(info[8u + ints[p]] + i32(p))]; }
+fn h_of(p: u32) -> f32 { return data[u32(info[9u + ints[p]] + i32(p))]; }
 fn ld_v(i: u32) -> vec3<f32> {
     let b = u32(info[4 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
@@ -343,45 +343,45 @@ fn ldj_v(j: u32, sgn: vec3<f32>) -> vec3<f32> {
     return (vec3<f32>(data[b], data[b + 1u], data[b + 2u]) * sgn);
 }
 fn ld_body(i: u32) -> f32 {
-    let b = u32(info[5 + G] + i32(i) * 1);
+    let b = u32(info[6 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_body(i: u32, v: f32) {
-    let b = u32(info[5 + G] + i32(i) * 1);
+    let b = u32(info[6 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_body(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[5 + ints[j]];
-    if (base == -2147483648) { return 0.0; }
-    let b = u32(base + i32(j) * 1);
-    return data[b];
-}
-fn ldj_m(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[6 + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
-fn ld_rho(i: u32) -> f32 {
-    let b = u32(info[7 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_rho(i: u32, v: f32) {
-    let b = u32(info[7 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ldj_rho(j: u32, sgn: vec3<f32>) -> f32 {
+fn ldj_m(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[7 + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
+fn ld_rho(i: u32) -> f32 {
+    let b = u32(info[8 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_rho(i: u32, v: f32) {
+    let b = u32(info[8 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ldj_rho(j: u32, sgn: vec3<f32>) -> f32 {
+    let base = info[8 + ints[j]];
+    if (base == -2147483648) { return 0.0; }
+    let b = u32(base + i32(j) * 1);
+    return data[b];
+}
 fn ld_L_inv(i: u32) -> mat3x3<f32> {
-    let b = u32(info[9 + G] + i32(i) * 9);
+    let b = u32(info[10 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_L_inv(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[9 + G] + i32(i) * 9);
+    let b = u32(info[10 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -393,11 +393,11 @@ fn st_L_inv(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ld_s(i: u32) -> mat3x3<f32> {
-    let b = u32(info[10 + G] + i32(i) * 6);
+    let b = u32(info[11 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[10 + G] + i32(i) * 6);
+    let b = u32(info[11 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -406,59 +406,59 @@ fn st_s(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ldj_s(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
-    let base = info[10 + ints[j]];
+    let base = info[11 + ints[j]];
     if (base == -2147483648) { return mat3x3<f32>(); }
     let b = u32(base + i32(j) * 6);
     return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u])), sgn);
 }
 fn ld_p(i: u32) -> f32 {
-    let b = u32(info[13 + G] + i32(i) * 1);
+    let b = u32(info[14 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p(i: u32, v: f32) {
-    let b = u32(info[13 + G] + i32(i) * 1);
+    let b = u32(info[14 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_p(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[13 + ints[j]];
-    if (base == -2147483648) { return 0.0; }
-    let b = u32(base + i32(j) * 1);
-    return data[b];
-}
-fn ld_c(i: u32) -> f32 {
-    let b = u32(info[14 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_c(i: u32, v: f32) {
-    let b = u32(info[14 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ldj_c(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[14 + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
+fn ld_c(i: u32) -> f32 {
+    let b = u32(info[15 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_c(i: u32, v: f32) {
+    let b = u32(info[15 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ldj_c(j: u32, sgn: vec3<f32>) -> f32 {
+    let base = info[15 + ints[j]];
+    if (base == -2147483648) { return 0.0; }
+    let b = u32(base + i32(j) * 1);
+    return data[b];
+}
 fn ld_dv(i: u32) -> vec3<f32> {
-    let b = u32(info[17 + G] + i32(i) * 3);
+    let b = u32(info[18 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_dv(i: u32, v: vec3<f32>) {
-    let b = u32(info[17 + G] + i32(i) * 3);
+    let b = u32(info[18 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 10u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 11u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 12u;
     return params[b];
 }
 @compute @workgroup_size(64)
