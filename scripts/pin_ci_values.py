@@ -28,6 +28,7 @@ ROOT = Path(__file__).resolve().parent.parent
 # (case or study, its --set values): exactly the runs of tests/cases.rs and tests/paper_cases.rs.
 RUNS = [
     ("elastic_wave", {}),
+    ("colliding_bars_1d", {}),
     ("standing_wave", {}),
     ("cantilever", {}),
     ("cantilever_lsm", {}),

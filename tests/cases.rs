@@ -113,6 +113,13 @@ fn check_histories_csv(path: &Path, histories: &[(String, Vec<(f64, f64)>)]) {
     }
 }
 
+/// Two bars of the corrected elastic solid meet through penalty contact only: the half contact
+/// time (L/c), the pressure of the contact stress ρ c v0 at mid-bar and the rebound velocity.
+#[test]
+fn colliding_bars_meet_within_1_5_percent_of_l_over_c_and_4_percent_of_rho_c_v0() {
+    run_and_check("colliding_bars_1d", Precision::F64);
+}
+
 #[test]
 fn elastic_wave_speed_is_within_3_percent_of_the_bar_speed() {
     run_and_check("elastic_wave", Precision::F64);

@@ -393,6 +393,13 @@ fn total_lagrangian_beam_vibrating_on_the_gpu_matches_the_cpu() {
     case_matches_cpu("beam_vibration_2d", &[], 400, &["H", "P"], 2e-3);
 }
 
+// Two bars meeting through penalty contact (`from own body` sums, `contact::penalty`): 200 steps
+// (about 0.42 ms), through the impact and the rebound.
+#[test]
+fn colliding_bars_through_penalty_contact_on_the_gpu_match_the_cpu() {
+    case_matches_cpu("colliding_bars_1d", &[], 200, &["v", "p"], 2e-3);
+}
+
 // The tank at rest with each kind of wall: 300 steps (the pressure settling under gravity).
 #[test]
 fn hydrostatic_tank_with_dynamic_boundary_particles_on_the_gpu_matches_the_cpu() {
