@@ -97,9 +97,21 @@ fn linear_momentum_is_conserved_to_round_off_in_a_closed_elastic_collision() {
     }
 }
 
+/// An elastic solid whose sums take every body (`models::elastic_solid` before issue 38): a
+/// symmetry plane's images belong to the body they mirror, so the half model of two bodies meeting
+/// at the plane matches the full model only where the bodies meet through their sums.
+fn elastic_across_bodies() -> pairsum::ir::Model {
+    model(
+        "use kernels\nuse continuity::plain\nuse solid::strain_rate\nuse solid::jaumann\nuse eos::linear\n\
+         use momentum::total_stress\nuse timestep::acoustic\ngroup solid\nkernel = wendland_c2\n\
+         param E: scalar [Pa]\nparam nu: scalar [-]\nparam G: scalar [Pa] = E / (2 * (1 + nu))\n\
+         param bulk: scalar [Pa] = E / (3 * (1 - 2 * nu))\nintegrate { x' = v  v' = dv  rho' = drho  s' = ds }\n",
+    )
+}
+
 #[test]
 fn a_symmetry_plane_gives_the_same_motion_as_the_mirrored_full_model() {
-    let m = elastic();
+    let m = elastic_across_bodies();
     let (n, dx) = (5, 0.01);
     let full_in = two_blocks(3, n, dx, 20.0, false);
     let half_in = two_blocks(3, n, dx, 20.0, true);

@@ -362,15 +362,15 @@ fn st_L_inv(i: u32, v: f32) {
     data[b] = v;
 }
 fn ld_s(i: u32) -> f32 {
-    let b = u32(info[11 + G] + i32(i) * 1);
+    let b = u32(info[12 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_s(i: u32, v: f32) {
-    let b = u32(info[11 + G] + i32(i) * 1);
+    let b = u32(info[12 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_s(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[11 + ints[j]];
+    let base = info[12 + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];

@@ -45,11 +45,11 @@ fn st_rho(i: u32, v: f32) {
     data[b] = v;
 }
 fn ld_s(i: u32) -> f32 {
-    let b = u32(info[12 + G] + i32(i) * 1);
+    let b = u32(info[13 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_s(i: u32, v: f32) {
-    let b = u32(info[12 + G] + i32(i) * 1);
+    let b = u32(info[13 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_p(i: u32) -> f32 {
