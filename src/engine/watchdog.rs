@@ -10,8 +10,8 @@
 //!   `e`, and gravity's potential) cannot grow in a case without loads or moving constraints: the
 //!   energy stored in strain or compression is not counted, and that only ever takes energy out
 //!   of `E`. The run stops when `E − E₀` passes `energy_factor` times the energy in play at the
-//!   start, `Σ ½ m |v₀|² + Σ m |e₀| + Σ m |g| H` (H the scene's height along gravity), or, for a
-//!   scene at rest without gravity, `½ M (10⁻⁴ × speed scale)²`.
+//!   start, `Σ ½ m |v₀|² + Σ m |e₀| + Σ m |g| (z − z_lowest)` (each particle's fall to the scene's
+//!   lowest point), or, for a scene at rest without gravity, `½ M (10⁻⁴ × speed scale)²`.
 
 use crate::backend::{Backend, BackendError};
 use crate::ir::FieldId;
@@ -112,9 +112,10 @@ impl Bounds {
             .find(|p| p.role == SceneRole::Gravity)
             .map_or(vec![0.0; at_start.dim], |p| p.value.clone());
         let g = gravity.iter().map(|a| a * a).sum::<f64>().sqrt();
-        // The scene's height along gravity.
-        let heights = at_start.x.chunks(at_start.dim).map(|x| x.iter().zip(&gravity).map(|(a, b)| a * b).sum::<f64>());
-        let (low, high) = heights.fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), s| (l.min(s), h.max(s)));
+        // g·x of each particle (largest at the lowest), and the scene's height along gravity.
+        let along: Vec<f64> =
+            at_start.x.chunks(at_start.dim).map(|x| x.iter().zip(&gravity).map(|(a, b)| a * b).sum()).collect();
+        let (low, high) = along.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), s| (l.min(*s), h.max(*s)));
         let height = if g > 0.0 && high >= low { (high - low) / g } else { 0.0 };
         let fall = (2.0 * g * height).sqrt().max(g * end_time.min(1e30));
         let signal = h.iter().copied().fold(f64::INFINITY, f64::min) / dt0;
@@ -126,7 +127,9 @@ impl Bounds {
             Some(_) if !sources.is_empty() => (Err(sources.join(", ")), 0.0),
             Some(m) => {
                 let mass: f64 = m.iter().sum();
-                let in_play = at_start.kinetic(m) + at_start.internal(m, true) + mass * g * height;
+                // Gravity's share: each particle's fall to the scene's lowest point.
+                let fall_energy: f64 = m.iter().zip(&along).map(|(m, s)| m * (high - s)).sum();
+                let in_play = at_start.kinetic(m) + at_start.internal(m, true) + fall_energy;
                 let in_play = if in_play > 0.0 { in_play } else { 0.5 * mass * (1e-4 * speed_scale).powi(2) };
                 (Ok(energy_factor * in_play), at_start.energy(m, &gravity))
             }
