@@ -324,7 +324,7 @@ fn the_plan_of_the_corrected_solid_model_fuses_l_velocity_gradient_and_contact_a
     // Continuity (from the corrected strain rate) and the Jaumann rate run in the tail of pass 1;
     // the equation of state in the update.
     assert!(
-        text.contains("then per particle: finally gradient_correction, finally velocity_gradient, continuity, jaumann"),
+        text.contains("then per particle: finally gradient_correction, finally velocity_gradient, continuity_from_strain_rate, jaumann"),
         "{text}"
     );
     assert!(text.contains("then: eos"), "{text}");

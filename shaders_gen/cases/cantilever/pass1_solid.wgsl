@@ -597,7 +597,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let g = (grad_v * transpose(L_inv));
     edot = sym(g);
     spin = skew(g);
-    // then continuity
+    // then continuity_from_strain_rate
     var drho_i: f32 = ld_drho(i);
     drho_i = ((-rho_i) * trace(edot));
     // then jaumann

@@ -546,7 +546,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let g = (grad_v * L_inv);
     edot = g;
     spin = 0.0;
-    // then continuity
+    // then continuity_from_strain_rate
     var drho_i: f32 = ld_drho(i);
     drho_i = ((-rho_i) * edot);
     // then jaumann

@@ -35,11 +35,11 @@ fn st_rho(i: u32, v: f32) {
     data[b] = v;
 }
 fn ld_s(i: u32) -> mat2x2<f32> {
-    let b = u32(info[19 + G] + i32(i) * 3);
+    let b = u32(info[21 + G] + i32(i) * 3);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 1u]), vec2<f32>(data[b + 1u], data[b + 2u]));
 }
 fn st_s(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[19 + G] + i32(i) * 3);
+    let b = u32(info[21 + G] + i32(i) * 3);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[1][1];

@@ -430,6 +430,14 @@ fn st_edot_visc(i: u32, v: mat2x2<f32>) {
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[1][1];
 }
+fn ld_p_interface(i: u32) -> f32 {
+    let b = u32(info[47 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_p_interface(i: u32, v: f32) {
+    let b = u32(info[47 + G] + i32(i) * 1);
+    data[b] = v;
+}
 fn prm_rho0(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 29u + 0u;
     return params[b];
@@ -537,6 +545,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // then fluid_stress
     var sigma_i: mat2x2<f32> = ld_sigma(i);
     sigma_i = (tau_i - (p_i * eye()));
+    // then fluid_interface_pressure
+    var p_interface_i: f32 = ld_p_interface(i);
+    p_interface_i = p_i;
     st_p(i, p_i);
     st_c(i, c_i);
     st_tau(i, tau_i);
@@ -544,4 +555,5 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     st_drho(i, drho);
     st_kernel_sum(i, kernel_sum);
     st_edot_visc(i, edot_visc);
+    st_p_interface(i, p_interface_i);
 }

@@ -53,11 +53,11 @@ fn st_rho(i: u32, v: f32) {
     data[b] = v;
 }
 fn ld_s(i: u32) -> mat2x2<f32> {
-    let b = u32(info[19 + G] + i32(i) * 3);
+    let b = u32(info[21 + G] + i32(i) * 3);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 1u]), vec2<f32>(data[b + 1u], data[b + 2u]));
 }
 fn st_s(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[19 + G] + i32(i) * 3);
+    let b = u32(info[21 + G] + i32(i) * 3);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[1][1];
@@ -79,55 +79,55 @@ fn st_eps_p(i: u32, v: f32) {
     data[b] = v;
 }
 fn ld_x_0(i: u32) -> vec2<f32> {
-    let b = u32(info[51 + G] + i32(i) * 2);
+    let b = u32(info[53 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_x_0(i: u32, v: vec2<f32>) {
-    let b = u32(info[51 + G] + i32(i) * 2);
+    let b = u32(info[53 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_v_0(i: u32) -> vec2<f32> {
-    let b = u32(info[53 + G] + i32(i) * 2);
+    let b = u32(info[55 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_v_0(i: u32, v: vec2<f32>) {
-    let b = u32(info[53 + G] + i32(i) * 2);
+    let b = u32(info[55 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_rho_0(i: u32) -> f32 {
-    let b = u32(info[55 + G] + i32(i) * 1);
+    let b = u32(info[57 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho_0(i: u32, v: f32) {
-    let b = u32(info[55 + G] + i32(i) * 1);
+    let b = u32(info[57 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s_0(i: u32) -> mat2x2<f32> {
-    let b = u32(info[57 + G] + i32(i) * 3);
+    let b = u32(info[59 + G] + i32(i) * 3);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 1u]), vec2<f32>(data[b + 1u], data[b + 2u]));
 }
 fn st_s_0(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[57 + G] + i32(i) * 3);
+    let b = u32(info[59 + G] + i32(i) * 3);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[1][1];
 }
 fn ld_e_0(i: u32) -> f32 {
-    let b = u32(info[59 + G] + i32(i) * 1);
+    let b = u32(info[61 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_e_0(i: u32, v: f32) {
-    let b = u32(info[59 + G] + i32(i) * 1);
+    let b = u32(info[61 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_eps_p_0(i: u32) -> f32 {
-    let b = u32(info[61 + G] + i32(i) * 1);
+    let b = u32(info[63 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_eps_p_0(i: u32, v: f32) {
-    let b = u32(info[61 + G] + i32(i) * 1);
+    let b = u32(info[63 + G] + i32(i) * 1);
     data[b] = v;
 }
 @compute @workgroup_size(64)

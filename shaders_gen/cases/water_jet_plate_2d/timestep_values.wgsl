@@ -62,7 +62,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     if (i >= n) { return; }
     let t = globals[0u];
     let dt = globals[1u];
-    let scratch = u32(info[63]);
+    let scratch = u32(info[65]);
     data[scratch + 0u * n + i] = (prm_cfl_alpha(i) * ld_h(i));
     data[scratch + 1u * n + i] = ((prm_S_s(i) * length(ld_v(i))) + prm_c0(i));
 }

@@ -69,38 +69,38 @@ fn st_drho(i: u32, v: f32) {
     data[b] = v;
 }
 fn ld_dv(i: u32) -> vec2<f32> {
-    let b = u32(info[47 + G] + i32(i) * 2);
+    let b = u32(info[49 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_dv(i: u32, v: vec2<f32>) {
-    let b = u32(info[47 + G] + i32(i) * 2);
+    let b = u32(info[49 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_x_0(i: u32) -> vec2<f32> {
-    let b = u32(info[51 + G] + i32(i) * 2);
+    let b = u32(info[53 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_x_0(i: u32, v: vec2<f32>) {
-    let b = u32(info[51 + G] + i32(i) * 2);
+    let b = u32(info[53 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_v_0(i: u32) -> vec2<f32> {
-    let b = u32(info[53 + G] + i32(i) * 2);
+    let b = u32(info[55 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_v_0(i: u32, v: vec2<f32>) {
-    let b = u32(info[53 + G] + i32(i) * 2);
+    let b = u32(info[55 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_rho_0(i: u32) -> f32 {
-    let b = u32(info[55 + G] + i32(i) * 1);
+    let b = u32(info[57 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho_0(i: u32, v: f32) {
-    let b = u32(info[55 + G] + i32(i) * 1);
+    let b = u32(info[57 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm__constraint0(i: u32) -> vec2<f32> {

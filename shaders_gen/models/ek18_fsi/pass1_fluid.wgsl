@@ -447,6 +447,14 @@ fn st_edot_visc(i: u32, v: mat3x3<f32>) {
     data[b + 4u] = v[2][1];
     data[b + 5u] = v[2][2];
 }
+fn ld_p_interface(i: u32) -> f32 {
+    let b = u32(info[43 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_p_interface(i: u32, v: f32) {
+    let b = u32(info[43 + G] + i32(i) * 1);
+    data[b] = v;
+}
 fn prm_rho0(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 26u + 0u;
     return params[b];
@@ -554,6 +562,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // then fluid_stress
     var sigma_i: mat3x3<f32> = ld_sigma(i);
     sigma_i = (tau_i - (p_i * eye()));
+    // then fluid_interface_pressure
+    var p_interface_i: f32 = ld_p_interface(i);
+    p_interface_i = p_i;
     st_p(i, p_i);
     st_c(i, c_i);
     st_tau(i, tau_i);
@@ -561,4 +572,5 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     st_drho(i, drho);
     st_kernel_sum(i, kernel_sum);
     st_edot_visc(i, edot_visc);
+    st_p_interface(i, p_interface_i);
 }
