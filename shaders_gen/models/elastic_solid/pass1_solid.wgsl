@@ -634,7 +634,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 let p2 = ldj_rho(j, sgn);
                 dv = dv + (ldj_m(j, sgn) * (((div_m(sig_i, (rho_i * rho_i)) + div_m(sig_j, (p2 * p2))) - (pi_ij * eye())) * gradW_ij));
             }
-            // pairsum contact (stdlib/contact/penalty.sph:22)
+            // pairsum contact (stdlib/contact/penalty.sph:26)
             let pen = (((dx_i + ldj_dx(j, sgn)) / 2.0) - r_ij);
             if ((((body_i != ldj_body(j, sgn)) && (pen > 0.0)) && (r_ij > 0.0))) {
                 let n_2 = (x_ij / r_ij);
