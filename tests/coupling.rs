@@ -47,7 +47,13 @@ fn accelerations(m: &pairsum::ir::Model) -> (Vec<[f64; 3]>, Vec<u32>, Vec<f64>) 
     inp.group = group.clone();
     let water = material(
         m,
-        &[("rho0", vec![1000.0]), ("bulk", vec![BULK]), ("c0", vec![1483.24]), ("S_s", vec![1.0]), ("h_ratio", vec![1.3])],
+        &[
+            ("rho0", vec![1000.0]),
+            ("bulk", vec![BULK]),
+            ("c0", vec![1483.24]),
+            ("S_s", vec![1.0]),
+            ("h_ratio", vec![1.3]),
+        ],
     );
     let al = material(
         m,
@@ -67,7 +73,8 @@ fn accelerations(m: &pairsum::ir::Model) -> (Vec<[f64; 3]>, Vec<u32>, Vec<f64>) 
             ("h_ratio", vec![1.3]),
         ],
     );
-    let mut b = backend::<f64>(m, &scene(m, 2, &["dv"], IntegratorKind::PredictorCorrector), &inp, &[water, al], vec![]);
+    let mut b =
+        backend::<f64>(m, &scene(m, 2, &["dv"], IntegratorKind::PredictorCorrector), &inp, &[water, al], vec![]);
     // The water at a uniform pressure P0, the plate bending.
     let mut state = b.snapshot().unwrap();
     let ids = b.ids().unwrap();
@@ -119,5 +126,9 @@ fn water_at_rest_on_a_bending_plate_is_not_pushed_along_it_where_eq_31_pushes_it
     // (20 MPa / 0.6 m) / 1000 kg/m³ = 3.3e4 m/s².
     let scale = 2.0 * S0 / 0.6 / 1000.0;
     assert!(theirs > 0.05 * scale, "Eq 31 pushes the water along the plate by {theirs} m/s² (scale {scale})");
-    assert!(ours < 1e-9 * scale, "the water is pushed along the plate by {ours} m/s²: {:.3e} of Eq 31's", ours / theirs);
+    assert!(
+        ours < 1e-9 * scale,
+        "the water is pushed along the plate by {ours} m/s²: {:.3e} of Eq 31's",
+        ours / theirs
+    );
 }
