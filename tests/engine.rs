@@ -162,6 +162,26 @@ fn the_watchdog_names_step_particle_group_and_field_and_keeps_the_last_good_stat
     assert!(col.iter().all(|v| v.is_finite()));
 }
 
+/// Two 6 × 6 blocks at 10 mm side by side along x, `gap` apart, the second one body 1 (and, with
+/// `second_group`, group 1); the Shepard sum Σ_j W_ij of every particle under the model `text`.
+fn shepard_sums_of_two_blocks(text: &str, gap: f64, second_group: bool) -> Vec<f64> {
+    let (n, dx) = (6, 0.01);
+    let mut x = lattice(2, n, dx);
+    let mut shifted: Vec<[f64; 3]> = x.iter().map(|p| [p[0] + n as f64 * dx + gap, p[1], 0.0]).collect();
+    let half = x.len();
+    x.append(&mut shifted);
+    let mut blocks = input(2, x, dx);
+    blocks.body[half..].iter_mut().for_each(|b| *b = 1);
+    if second_group {
+        blocks.group[half..].iter_mut().for_each(|g| *g = 1);
+    }
+    let m = model(text);
+    let mat = material(&m, &[("rho0", vec![1000.0]), ("h_ratio", vec![1.3])]);
+    let mut b = backend::<f64>(&m, &scene(&m, 2, &["w_sum"], IntegratorKind::Euler), &blocks, &[mat], vec![]);
+    b.evaluate(Default::default()).expect("evaluate");
+    field_by_id(&b, "w_sum").1
+}
+
 /// `from own`: a sum over neighbours of the particle's own group only. Two touching blocks, one
 /// per group, give with `from own` exactly the sums each block has alone; without it they differ.
 #[test]
@@ -173,24 +193,8 @@ fn a_sum_from_own_sees_only_the_particles_own_group() {
              integrate {{ }}\n"
         )
     };
-    let (n, dx) = (6, 0.01);
-    let blocks = |gap: f64| {
-        let mut x = lattice(2, n, dx);
-        let mut shifted: Vec<[f64; 3]> = x.iter().map(|p| [p[0] + n as f64 * dx + gap, p[1], 0.0]).collect();
-        let half = x.len();
-        x.append(&mut shifted);
-        let mut input = input(2, x, dx);
-        input.body[half..].iter_mut().for_each(|b| *b = 1);
-        input.group[half..].iter_mut().for_each(|g| *g = 1);
-        input
-    };
-    let sums = |text: &str, gap: f64| {
-        let m = model(text);
-        let mat = material(&m, &[("rho0", vec![1000.0]), ("h_ratio", vec![1.3])]);
-        let mut b = backend::<f64>(&m, &scene(&m, 2, &["w_sum"], IntegratorKind::Euler), &blocks(gap), &[mat], vec![]);
-        b.evaluate(Default::default()).expect("evaluate");
-        field_by_id(&b, "w_sum").1
-    };
+    let sums = |text: &str, gap: f64| shepard_sums_of_two_blocks(text, gap, true);
+    let dx = 0.01;
     let apart = sums(&text(""), 10.0 * dx);
     let own_touching = sums(&text("from own"), 0.0);
     let all_touching = sums(&text(""), 0.0);
@@ -207,27 +211,12 @@ fn a_sum_from_own_sees_only_the_particles_own_group() {
 fn a_sum_from_own_body_sees_only_the_particles_own_body() {
     let shepard = |from: &str| format!("pairsum shepard {from} -> w_sum: scalar [1/m^3] {{ w_sum += W_ij }}\n");
     let text = |sum: &str| format!("use kernels\ngroup solid\nkernel = wendland_c2\n{sum}integrate {{ }}\n");
-    let (n, dx) = (6, 0.01);
-    let blocks = |gap: f64| {
-        let mut x = lattice(2, n, dx);
-        let mut shifted: Vec<[f64; 3]> = x.iter().map(|p| [p[0] + n as f64 * dx + gap, p[1], 0.0]).collect();
-        let half = x.len();
-        x.append(&mut shifted);
-        let mut input = input(2, x, dx);
-        input.body[half..].iter_mut().for_each(|b| *b = 1);
-        input
-    };
+    let dx = 0.01;
     let dir = std::env::temp_dir().join(format!("pairsum-own-body-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     std::fs::write(dir.join("shepard.sph"), shepard("")).unwrap();
     let used = format!("use \"{}\" from own body\n", dir.join("shepard.sph").display());
-    let sums = |text: &str, gap: f64| {
-        let m = model(text);
-        let mat = material(&m, &[("rho0", vec![1000.0]), ("h_ratio", vec![1.3])]);
-        let mut b = backend::<f64>(&m, &scene(&m, 2, &["w_sum"], IntegratorKind::Euler), &blocks(gap), &[mat], vec![]);
-        b.evaluate(Default::default()).expect("evaluate");
-        field_by_id(&b, "w_sum").1
-    };
+    let sums = |text: &str, gap: f64| shepard_sums_of_two_blocks(text, gap, false);
     let apart = sums(&text(&shepard("")), 10.0 * dx);
     for (how, own_touching) in
         [("on the pair sum", sums(&text(&shepard("from own body")), 0.0)), ("through a use", sums(&text(&used), 0.0))]

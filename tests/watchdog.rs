@@ -126,13 +126,14 @@ const KICKED_MODEL: &str = "use kernels\ngroup metal\nkernel = wendland_c2\n\
     particle kick -> dv: vec [m/s^2] { dv = select(t > 0.0105 [s] && x.x > 0.025 [m], vec(1e5 [m/s^2], 0 [m/s^2]), 0) }\n\
     integrate { x' = v  v' = dv }\n";
 
-/// A block of 6 × 6 particles at 10 mm; a load (of a micronewton) makes the energy bound step
-/// aside, so the speed bound must catch the kick.
-const KICKED_CASE: &str = r#"name = "kicked"
-model = "kicked.sph"
+/// A case of one block of 6 × 6 particles at 10 mm, its largest speed probed, with the model
+/// `model`, the top-level keys `top` and the result `result` on the probe `speed`.
+fn block_case(model: &str, top: &str, result: &str) -> String {
+    format!(
+        r#"name = "block"
+model = "{model}"
 dim = 2
-integrator = "euler"
-end_time = "50 ms"
+{top}
 dt_max = "1 ms"
 
 [materials.metal]
@@ -142,11 +143,7 @@ rho0 = "1000 kg/m^3"
 name = "block"
 group = "metal"
 material = "metal"
-shape = { box = { min = [0, 0], max = ["60 mm", "60 mm"] } }
-
-[[loads]]
-body = "block"
-force = [0, "1e-6 N"]
+shape = {{ box = {{ min = [0, 0], max = ["60 mm", "60 mm"] }} }}
 
 [resolutions]
 ci = "10 mm"
@@ -160,15 +157,24 @@ reduce = "max"
 unit = "m/s"
 
 [[results]]
-quantity = "largest_speed"
 probe = "speed"
 at = "end"
-"#;
+{result}
+"#
+    )
+}
+
+/// The kicked block, with a load (of a micronewton) that makes the energy bound step aside, so
+/// that the speed bound must catch the kick.
+fn kicked_case() -> String {
+    let case = block_case("kicked.sph", "integrator = \"euler\"\nend_time = \"50 ms\"", "quantity = \"largest_speed\"");
+    format!("{case}\n[[loads]]\nbody = \"block\"\nforce = [0, \"1e-6 N\"]\n")
+}
 
 #[test]
 fn a_particle_faster_than_three_times_the_signal_speed_stops_the_run_naming_it() {
     let dir = fresh_dir("kicked");
-    let o = run(&dir, &[("kicked.sph", KICKED_MODEL), ("case.toml", KICKED_CASE)], "cpu");
+    let o = run(&dir, &[("kicked.sph", KICKED_MODEL), ("case.toml", &kicked_case())], "cpu");
     let stderr = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(1), "{stderr}");
     // Checked every 10 steps: the kick at step 11 is seen at step 20. The speed scale is the
@@ -187,46 +193,20 @@ fn a_particle_faster_than_three_times_the_signal_speed_stops_the_run_naming_it()
 }
 
 /// A block that falls freely for 1 s gains 4.9 m of fall's energy from gravity: no bound trips.
-const FALLING_CASE: &str = r#"name = "falling"
-model = "falling.sph"
-dim = 2
-integrator = "symplectic"
-end_time = "1 s"
-dt_max = "1 ms"
-gravity = [0, "-9.81 m/s^2"]
+fn falling_case() -> String {
+    block_case(
+        "falling.sph",
+        "integrator = \"symplectic\"\nend_time = \"1 s\"\ngravity = [0, \"-9.81 m/s^2\"]",
+        "quantity = \"speed_at_the_end\"\nreference = \"9.81 m/s\"",
+    )
+}
 
-[materials.metal]
-rho0 = "1000 kg/m^3"
-
-[[bodies]]
-name = "block"
-group = "metal"
-material = "metal"
-shape = { box = { min = [0, 0], max = ["60 mm", "60 mm"] } }
-
-[resolutions]
-ci = "10 mm"
-
-[[probes]]
-name = "speed"
-body = "block"
-field = "v"
-component = "norm"
-reduce = "max"
-unit = "m/s"
-
-[[results]]
-quantity = "speed_at_the_end"
-probe = "speed"
-at = "end"
-reference = "9.81 m/s"
-"#;
+const FALLING_MODEL: &str = "use kernels\ngroup metal\nkernel = wendland_c2\nintegrate { x' = v  v' = 0 }\n";
 
 #[test]
 fn a_block_falling_freely_for_a_second_is_not_stopped_and_reaches_g_times_t() {
     let dir = fresh_dir("falling");
-    let model = "use kernels\ngroup metal\nkernel = wendland_c2\nintegrate { x' = v  v' = 0 }\n";
-    let o = run(&dir, &[("falling.sph", model), ("case.toml", FALLING_CASE)], "cpu");
+    let o = run(&dir, &[("falling.sph", FALLING_MODEL), ("case.toml", &falling_case())], "cpu");
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let speed = report(&dir)["results"][0]["value"].as_f64().expect("a figure");
     assert!((speed - 9.81).abs() < 1e-6 * 9.81, "speed {speed} m/s after 1 s of free fall");
@@ -236,9 +216,8 @@ fn a_block_falling_freely_for_a_second_is_not_stopped_and_reaches_g_times_t() {
 #[test]
 fn a_watchdog_factor_that_is_not_positive_is_an_error_at_its_line() {
     let dir = fresh_dir("factor");
-    let case = format!("{FALLING_CASE}\n[watchdog]\nenergy_factor = 0\n");
-    let model = "use kernels\ngroup metal\nkernel = wendland_c2\nintegrate { x' = v  v' = 0 }\n";
-    let o = run(&dir, &[("falling.sph", model), ("case.toml", &case)], "cpu");
+    let case = format!("{}\n[watchdog]\nenergy_factor = 0\n", falling_case());
+    let o = run(&dir, &[("falling.sph", FALLING_MODEL), ("case.toml", &case)], "cpu");
     let stderr = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(1), "{stderr}");
     assert!(stderr.contains("C0041") && stderr.contains("`watchdog.energy_factor` must be positive"), "{stderr}");
