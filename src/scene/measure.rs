@@ -4,6 +4,7 @@
 use super::spec::{Pick, ProbeKind, ProbeSpec, ResultSpec, Scene};
 use crate::backend::{Backend, BackendError};
 use crate::ir::{component_indices, Shape};
+use crate::schedule::Target;
 
 /// A named measurement with a documented, automatic definition (`docs/CASE_FILES.md`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -198,8 +199,8 @@ fn measure(m: Measure, scene: &Scene, b: &dyn Backend) -> Result<f64, BackendErr
         Measure::MinInterbodyDistance => interbody(&x, &which, dim, scene.dx).0 / scene.dx,
         // Particles of the first two bodies closer than Δx/2 to a particle of the other body.
         Measure::Interpenetrated => interbody(&x, &which, dim, scene.dx).1 as f64,
-        // Where a wave front driven by the first body has got to.
-        Measure::FrontPosition => front_position(&x, &which, b)?,
+        // Where a wave front driven by the first moving constraint, or the first body, has got to.
+        Measure::FrontPosition => front_position(&x, &drivers(scene, &which, b)?, b)?,
         Measure::MinPairDistance => spacing_extremes(&x, b)?.0,
         Measure::MaxNeighbourGap => spacing_extremes(&x, b)?.1,
         Measure::KineticEnergy => kinetic_energy(b)?,
@@ -386,15 +387,30 @@ fn percentile(v: &mut [f64], q: f64) -> f64 {
     v[((v.len() - 1) as f64 * q).round() as usize]
 }
 
-/// Where a wave front driven by the first body has got to: along the first axis, the position at
-/// which the speed falls through half the driver's mean speed, interpolated linearly between the
-/// last particle above and the next one below (particles ordered by position).
-fn front_position(x: &[[f64; 3]], body: &[u32], b: &dyn Backend) -> Result<f64, BackendError> {
+/// The particles that drive a wave front: those of the first constraint that moves (a piston,
+/// a body of its own or a region of the body it drives), else the first body.
+fn drivers(scene: &Scene, body: &[u32], b: &dyn Backend) -> Result<Vec<bool>, BackendError> {
+    let moving = scene.spec.constraints.iter().find(|c| c.velocity.iter().any(|v| *v != 0.0));
+    let first_body = || body.iter().map(|w| *w == 0).collect();
+    Ok(match moving.map(|c| c.target) {
+        Some(Target::Body(k)) => body.iter().map(|w| *w as usize == k).collect(),
+        Some(Target::Part(k)) => match b.plan().model.field_id("part").map(|f| b.read(f)).transpose()?.flatten() {
+            Some((_, part)) => part.iter().map(|p| *p == k as f64).collect(),
+            None => first_body(),
+        },
+        None => first_body(),
+    })
+}
+
+/// Where a wave front has got to: along the first axis, the position at which the speed falls
+/// through half the drivers' mean speed, interpolated linearly between the last particle above
+/// and the next one below (particles ordered by position).
+fn front_position(x: &[[f64; 3]], driving: &[bool], b: &dyn Backend) -> Result<f64, BackendError> {
     let Some(v) = b.plan().model.field_id("v") else { return Ok(f64::NAN) };
     let Some((c, v)) = b.read(v)? else { return Ok(f64::NAN) };
     let speed: Vec<f64> =
         (0..x.len()).map(|k| v[k * c..(k + 1) * c].iter().map(|u| u * u).sum::<f64>().sqrt()).collect();
-    let driver: Vec<f64> = (0..x.len()).filter(|k| body[*k] == 0).map(|k| speed[k]).collect();
+    let driver: Vec<f64> = (0..x.len()).filter(|k| driving[*k]).map(|k| speed[k]).collect();
     if driver.is_empty() {
         return Ok(f64::NAN);
     }

@@ -13,27 +13,27 @@ fn in_groups(mask: u32, g: u32) -> bool { return ((mask >> g) & 1u) == 1u; }
 // In 1D every vec and tensor is a single f32.
 fn frob(a: f32) -> f32 { return abs(a); }
 fn ld_rho(i: u32) -> f32 {
-    let b = u32(info[8 + G] + i32(i) * 1);
+    let b = u32(info[9 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho(i: u32, v: f32) {
-    let b = u32(info[8 + G] + i32(i) * 1);
+    let b = u32(info[9 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_p(i: u32) -> f32 {
-    let b = u32(info[14 + G] + i32(i) * 1);
+    let b = u32(info[15 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p(i: u32, v: f32) {
-    let b = u32(info[14 + G] + i32(i) * 1);
+    let b = u32(info[15 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_c(i: u32) -> f32 {
-    let b = u32(info[15 + G] + i32(i) * 1);
+    let b = u32(info[16 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_c(i: u32, v: f32) {
-    let b = u32(info[15 + G] + i32(i) * 1);
+    let b = u32(info[16 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {

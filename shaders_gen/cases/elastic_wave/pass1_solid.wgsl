@@ -304,7 +304,7 @@ fn pos3(p: u32) -> vec3<f32> {
     let b = u32(info[3u + ints[p]] + i32(p) * 1);
     return vec3<f32>(data[b + 0u], 0.0, 0.0);
 }
-fn h_of(p: u32) -> f32 { return data[u32(info[9u + ints[p]] + i32(p))]; }
+fn h_of(p: u32) -> f32 { return data[u32(info[10u + ints[p]] + i32(p))]; }
 fn ld_v(i: u32) -> f32 {
     let b = u32(info[4 + G] + i32(i) * 1);
     return data[b];
@@ -348,100 +348,100 @@ fn ldj_body(j: u32, sgn: vec3<f32>) -> f32 {
     return data[b];
 }
 fn ld_m(i: u32) -> f32 {
-    let b = u32(info[7 + G] + i32(i) * 1);
+    let b = u32(info[8 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_m(i: u32, v: f32) {
-    let b = u32(info[7 + G] + i32(i) * 1);
+    let b = u32(info[8 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_m(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[7 + ints[j]];
-    if (base == -2147483648) { return 0.0; }
-    let b = u32(base + i32(j) * 1);
-    return data[b];
-}
-fn ld_rho(i: u32) -> f32 {
-    let b = u32(info[8 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_rho(i: u32, v: f32) {
-    let b = u32(info[8 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ldj_rho(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[8 + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
-fn ld_h(i: u32) -> f32 {
+fn ld_rho(i: u32) -> f32 {
     let b = u32(info[9 + G] + i32(i) * 1);
     return data[b];
 }
-fn st_h(i: u32, v: f32) {
+fn st_rho(i: u32, v: f32) {
     let b = u32(info[9 + G] + i32(i) * 1);
     data[b] = v;
 }
-fn ldj_h(j: u32, sgn: vec3<f32>) -> f32 {
+fn ldj_rho(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[9 + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
-fn ld_L_inv(i: u32) -> f32 {
+fn ld_h(i: u32) -> f32 {
     let b = u32(info[10 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_h(i: u32, v: f32) {
+    let b = u32(info[10 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ldj_h(j: u32, sgn: vec3<f32>) -> f32 {
+    let base = info[10 + ints[j]];
+    if (base == -2147483648) { return 0.0; }
+    let b = u32(base + i32(j) * 1);
+    return data[b];
+}
+fn ld_L_inv(i: u32) -> f32 {
+    let b = u32(info[11 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_L_inv(i: u32, v: f32) {
-    let b = u32(info[10 + G] + i32(i) * 1);
+    let b = u32(info[11 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_edot(i: u32) -> f32 {
-    let b = u32(info[11 + G] + i32(i) * 1);
+    let b = u32(info[12 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_edot(i: u32, v: f32) {
-    let b = u32(info[11 + G] + i32(i) * 1);
+    let b = u32(info[12 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s(i: u32) -> f32 {
-    let b = u32(info[12 + G] + i32(i) * 1);
+    let b = u32(info[13 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_s(i: u32, v: f32) {
-    let b = u32(info[12 + G] + i32(i) * 1);
+    let b = u32(info[13 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_spin(i: u32) -> f32 {
-    let b = u32(info[13 + G] + i32(i) * 0);
+    let b = u32(info[14 + G] + i32(i) * 0);
     return 0.0;
 }
 fn st_spin(i: u32, v: f32) {
-    let b = u32(info[13 + G] + i32(i) * 0);
+    let b = u32(info[14 + G] + i32(i) * 0);
 }
 fn ld_drho(i: u32) -> f32 {
-    let b = u32(info[16 + G] + i32(i) * 1);
+    let b = u32(info[17 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho(i: u32, v: f32) {
-    let b = u32(info[16 + G] + i32(i) * 1);
+    let b = u32(info[17 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_ds(i: u32) -> f32 {
-    let b = u32(info[17 + G] + i32(i) * 1);
+    let b = u32(info[18 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_ds(i: u32, v: f32) {
-    let b = u32(info[17 + G] + i32(i) * 1);
+    let b = u32(info[18 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_a_contact(i: u32) -> f32 {
-    let b = u32(info[19 + G] + i32(i) * 1);
+    let b = u32(info[20 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_a_contact(i: u32, v: f32) {
-    let b = u32(info[19 + G] + i32(i) * 1);
+    let b = u32(info[20 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_G(i: u32) -> f32 {

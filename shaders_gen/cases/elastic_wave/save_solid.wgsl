@@ -29,51 +29,51 @@ fn st_v(i: u32, v: f32) {
     data[b] = v;
 }
 fn ld_rho(i: u32) -> f32 {
-    let b = u32(info[8 + G] + i32(i) * 1);
+    let b = u32(info[9 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho(i: u32, v: f32) {
-    let b = u32(info[8 + G] + i32(i) * 1);
+    let b = u32(info[9 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s(i: u32) -> f32 {
-    let b = u32(info[12 + G] + i32(i) * 1);
+    let b = u32(info[13 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_s(i: u32, v: f32) {
-    let b = u32(info[12 + G] + i32(i) * 1);
+    let b = u32(info[13 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_x_0(i: u32) -> f32 {
-    let b = u32(info[20 + G] + i32(i) * 1);
+    let b = u32(info[21 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_x_0(i: u32, v: f32) {
-    let b = u32(info[20 + G] + i32(i) * 1);
+    let b = u32(info[21 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_v_0(i: u32) -> f32 {
-    let b = u32(info[21 + G] + i32(i) * 1);
+    let b = u32(info[22 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_v_0(i: u32, v: f32) {
-    let b = u32(info[21 + G] + i32(i) * 1);
+    let b = u32(info[22 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_rho_0(i: u32) -> f32 {
-    let b = u32(info[22 + G] + i32(i) * 1);
+    let b = u32(info[23 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho_0(i: u32, v: f32) {
-    let b = u32(info[22 + G] + i32(i) * 1);
+    let b = u32(info[23 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s_0(i: u32) -> f32 {
-    let b = u32(info[23 + G] + i32(i) * 1);
+    let b = u32(info[24 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_s_0(i: u32, v: f32) {
-    let b = u32(info[23 + G] + i32(i) * 1);
+    let b = u32(info[24 + G] + i32(i) * 1);
     data[b] = v;
 }
 @compute @workgroup_size(64)

@@ -28,108 +28,108 @@ fn st_v(i: u32, v: f32) {
     let b = u32(info[4 + G] + i32(i) * 1);
     data[b] = v;
 }
-fn ld_body(i: u32) -> f32 {
-    let b = u32(info[6 + G] + i32(i) * 1);
+fn ld_part(i: u32) -> f32 {
+    let b = u32(info[7 + G] + i32(i) * 1);
     return data[b];
 }
-fn st_body(i: u32, v: f32) {
-    let b = u32(info[6 + G] + i32(i) * 1);
+fn st_part(i: u32, v: f32) {
+    let b = u32(info[7 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_rho(i: u32) -> f32 {
-    let b = u32(info[8 + G] + i32(i) * 1);
+    let b = u32(info[9 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho(i: u32, v: f32) {
-    let b = u32(info[8 + G] + i32(i) * 1);
+    let b = u32(info[9 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s(i: u32) -> f32 {
-    let b = u32(info[12 + G] + i32(i) * 1);
+    let b = u32(info[13 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_s(i: u32, v: f32) {
-    let b = u32(info[12 + G] + i32(i) * 1);
+    let b = u32(info[13 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_p(i: u32) -> f32 {
-    let b = u32(info[14 + G] + i32(i) * 1);
+    let b = u32(info[15 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p(i: u32, v: f32) {
-    let b = u32(info[14 + G] + i32(i) * 1);
+    let b = u32(info[15 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_c(i: u32) -> f32 {
-    let b = u32(info[15 + G] + i32(i) * 1);
+    let b = u32(info[16 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_c(i: u32, v: f32) {
-    let b = u32(info[15 + G] + i32(i) * 1);
+    let b = u32(info[16 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_drho(i: u32) -> f32 {
-    let b = u32(info[16 + G] + i32(i) * 1);
+    let b = u32(info[17 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho(i: u32, v: f32) {
-    let b = u32(info[16 + G] + i32(i) * 1);
+    let b = u32(info[17 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_ds(i: u32) -> f32 {
-    let b = u32(info[17 + G] + i32(i) * 1);
+    let b = u32(info[18 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_ds(i: u32, v: f32) {
-    let b = u32(info[17 + G] + i32(i) * 1);
+    let b = u32(info[18 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_dv(i: u32) -> f32 {
-    let b = u32(info[18 + G] + i32(i) * 1);
+    let b = u32(info[19 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_dv(i: u32, v: f32) {
-    let b = u32(info[18 + G] + i32(i) * 1);
+    let b = u32(info[19 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_a_contact(i: u32) -> f32 {
-    let b = u32(info[19 + G] + i32(i) * 1);
+    let b = u32(info[20 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_a_contact(i: u32, v: f32) {
-    let b = u32(info[19 + G] + i32(i) * 1);
+    let b = u32(info[20 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_x_0(i: u32) -> f32 {
-    let b = u32(info[20 + G] + i32(i) * 1);
+    let b = u32(info[21 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_x_0(i: u32, v: f32) {
-    let b = u32(info[20 + G] + i32(i) * 1);
+    let b = u32(info[21 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_v_0(i: u32) -> f32 {
-    let b = u32(info[21 + G] + i32(i) * 1);
+    let b = u32(info[22 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_v_0(i: u32, v: f32) {
-    let b = u32(info[21 + G] + i32(i) * 1);
+    let b = u32(info[22 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_rho_0(i: u32) -> f32 {
-    let b = u32(info[22 + G] + i32(i) * 1);
+    let b = u32(info[23 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho_0(i: u32, v: f32) {
-    let b = u32(info[22 + G] + i32(i) * 1);
+    let b = u32(info[23 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s_0(i: u32) -> f32 {
-    let b = u32(info[23 + G] + i32(i) * 1);
+    let b = u32(info[24 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_s_0(i: u32, v: f32) {
-    let b = u32(info[23 + G] + i32(i) * 1);
+    let b = u32(info[24 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
@@ -163,7 +163,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let rate_of_rho = ld_drho(i);
     let rate_of_s = ld_ds(i);
     v_i = (ld_v_0(i) + (0.5 * (dt * rate_of_v)));
-    v_i = select(v_i, (1.0 * prm__constraint0(i)), (ld_body(i) == 0.0));
+    v_i = select(v_i, (1.0 * prm__constraint0(i)), (ld_part(i) == 0.0));
     x_i = (ld_x_0(i) + (0.5 * (dt * rate_of_x)));
     rho_i = (ld_rho_0(i) + (0.5 * (dt * rate_of_rho)));
     s_i = (ld_s_0(i) + (0.5 * (dt * rate_of_s)));
