@@ -169,8 +169,8 @@ impl Checker {
             .map(|f| Accumulator { field: *f, reduce: st.reduce.get(f).map(|r| r.0).unwrap_or(Reduce::Sum) })
             .collect();
         self.temps.clear();
-        let own = p.own || self.module_scope.2;
-        let body = if p.own_body || self.module_scope.3 { self.within_own_body(body) } else { body };
+        let own = p.own || self.module_scope.own_group;
+        let body = if p.own_body || self.module_scope.own_body { self.within_own_body(body) } else { body };
         let kind =
             EquationKind::PairSum { sources, own, accumulators, init, body, finally, compensated: p.compensated };
         self.push_equation(&p.name.name, kind, dest, stored, p.span);

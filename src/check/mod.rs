@@ -137,11 +137,23 @@ fn dedup(diags: &mut Vec<Diagnostic>) {
 pub const RESERVED: [&str; 15] =
     ["t", "dt", "dim", "I", "pi", "inf", "x_ij", "r_ij", "v_ij", "h_ij", "W_ij", "gradW_ij", "true", "false", "R"];
 
-/// A module's scope: the groups its equations run on, the groups its pair sums see, and whether
-/// they see only the destination's own group.
-/// A module's scope: the groups its equations run on, the groups its pair sums see, and whether
-/// they see only particle i's own group (`from own`) and only its own body (`from own body`).
-pub(crate) type Scope = (GroupSet, GroupSet, bool, bool);
+/// A module's scope, from the `use … on G from S` clauses that reach it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct Scope {
+    /// The groups its equations run on.
+    pub on: GroupSet,
+    /// The groups its pair sums see.
+    pub from: GroupSet,
+    /// Its pair sums see only particle i's own group (`from own`).
+    pub own_group: bool,
+    /// Its pair sums see only particle i's own body (`from own body`).
+    pub own_body: bool,
+}
+
+impl Scope {
+    /// Every group, no restriction.
+    const ALL: Scope = Scope { on: GroupSet::ALL, from: GroupSet::ALL, own_group: false, own_body: false };
+}
 
 /// The binding of a `let` whose value had an error: later uses stay quiet instead of reporting an
 /// unknown name.
@@ -196,7 +208,7 @@ impl Checker {
             depth: 0,
             work: 0,
             too_deep_reported: false,
-            module_scope: (GroupSet::ALL, GroupSet::ALL, false, false),
+            module_scope: Scope::ALL,
         }
     }
 
@@ -269,7 +281,7 @@ impl Checker {
                 _ => {}
             }
         }
-        self.module_scope = (GroupSet::ALL, GroupSet::ALL, false, false);
+        self.module_scope = Scope::ALL;
         self.check_unchecked_helpers();
         self.check_writers();
         if is_model && !self.diags.iter().any(|d| d.is_error()) {
@@ -284,12 +296,10 @@ impl Checker {
     /// each says it).
     fn module_scopes(&mut self, modules: &[load::Module]) -> Vec<Scope> {
         let all = self.model.all_groups();
-        let none: Scope = (GroupSet::default(), GroupSet::default(), true, true);
-        let mut scopes: Vec<Scope> = modules
-            .iter()
-            .enumerate()
-            .map(|(k, m)| if m.root || k == 0 { (all, all, false, false) } else { none })
-            .collect();
+        let none = Scope { on: GroupSet::default(), from: GroupSet::default(), own_group: true, own_body: true };
+        let root = Scope { on: all, from: all, own_group: false, own_body: false };
+        let mut scopes: Vec<Scope> =
+            modules.iter().enumerate().map(|(k, m)| if m.root || k == 0 { root } else { none }).collect();
         let mut edges = vec![];
         for (k, m) in modules.iter().enumerate() {
             for e in &m.uses {
@@ -302,15 +312,15 @@ impl Checker {
             let mut changed = false;
             for &(a, b, on, from, own, own_body) in &edges {
                 let (sa, sb) = (scopes[a], scopes[b]);
-                if sa.0.intersect(on).is_empty() {
+                if sa.on.intersect(on).is_empty() {
                     continue;
                 }
-                let reach = (
-                    sb.0.union(sa.0.intersect(on)),
-                    sb.1.union(sa.1.intersect(from)),
-                    sb.2 && (sa.2 || own),
-                    sb.3 && (sa.3 || own_body),
-                );
+                let reach = Scope {
+                    on: sb.on.union(sa.on.intersect(on)),
+                    from: sb.from.union(sa.from.intersect(from)),
+                    own_group: sb.own_group && (sa.own_group || own),
+                    own_body: sb.own_body && (sa.own_body || own_body),
+                };
                 if reach != sb {
                     scopes[b] = reach;
                     changed = true;
@@ -330,7 +340,7 @@ impl Checker {
         span: Span,
         what: &str,
     ) -> GroupSet {
-        let scope = if sources { self.module_scope.1 } else { self.module_scope.0 };
+        let scope = if sources { self.module_scope.from } else { self.module_scope.on };
         let set = self.groups(list).intersect(scope);
         if set.is_empty() && scope != GroupSet::ALL && scope != self.model.all_groups() {
             let word = if sources { "neighbour" } else { "particle" };

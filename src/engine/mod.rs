@@ -285,7 +285,7 @@ impl<B: Backend> Engine<B> {
     /// running away is what usually drives the step down).
     fn timestep_collapse(&self) -> Result<Instability, RunError> {
         let (i, speed) = watchdog::Motion::read(&self.backend)?.map_or((0, f64::NAN), |m| m.fastest());
-        self.instability_at(i, "v", Cause::TimestepCollapse { dt: self.dt, dt0: self.dt0, speed })
+        self.instability_at(i, Cause::TimestepCollapse { dt: self.dt, dt0: self.dt0, speed })
     }
 
     /// The instability of a particle too fast or of energy grown without a source, if any.
@@ -298,16 +298,16 @@ impl<B: Backend> Engine<B> {
                 (particle, Cause::TooFast { speed, bound: bounds.max_speed, scale: bounds.speed_scale })
             }
             Some(watchdog::Breach::Energy { growth, particle, speed }) => {
-                let bound = bounds.max_growth.clone().unwrap_or(f64::INFINITY);
+                let bound = bounds.max_growth.unwrap_or(f64::INFINITY);
                 (particle, Cause::EnergyGrowth { growth, bound, speed })
             }
         };
-        Ok(Some(self.instability_at(i, "v", cause)?))
+        Ok(Some(self.instability_at(i, cause)?))
     }
 
-    /// An instability at particle `i` (in the backend's current order) now, with the last good
-    /// state kept by the watchdog.
-    fn instability_at(&self, i: usize, field: &str, cause: Cause) -> Result<Instability, RunError> {
+    /// An instability of particle `i`'s velocity (`i` in the backend's current order) now, with the
+    /// last good state kept by the watchdog.
+    fn instability_at(&self, i: usize, cause: Cause) -> Result<Instability, RunError> {
         let (last_good, last_good_time) =
             self.good.as_ref().map(|g| (g.0.clone(), g.1)).expect("kept at initialisation");
         let plan = self.backend.plan();
@@ -317,7 +317,7 @@ impl<B: Backend> Engine<B> {
             time: self.time,
             particle: self.backend.ids()?.get(i).copied().unwrap_or(0),
             group: group.unwrap_or_default(),
-            field: field.into(),
+            field: "v".into(),
             cause,
             last_good,
             last_good_time,

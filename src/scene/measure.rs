@@ -1,6 +1,7 @@
 //! Probes: what a case measures during a run — a field component reduced over a body, or a named
 //! measurement with a documented, automatic definition — and the results taken from them.
 
+use super::max_keeping_nan;
 use super::spec::{Pick, ProbeKind, ProbeSpec, ResultSpec, Scene};
 use crate::backend::{Backend, BackendError};
 use crate::ir::{component_indices, Shape};
@@ -171,11 +172,6 @@ fn locate_extreme(reduce: &str, values: &[(usize, f64)], axis: usize, b: &dyn Ba
     Ok(positions(b)?.map(|x| x[k][axis]).unwrap_or(f64::NAN))
 }
 
-/// The largest of `start` and `values`, NaN if any of them is NaN (`f64::max` would drop it).
-fn max_keeping_nan(start: f64, values: impl IntoIterator<Item = f64>) -> f64 {
-    values.into_iter().fold(start, |m, x| if m.is_nan() || x.is_nan() { f64::NAN } else { m.max(x) })
-}
-
 fn reduce_values(reduce: &str, v: &[f64]) -> f64 {
     if v.is_empty() {
         return f64::NAN;
@@ -227,7 +223,10 @@ fn plug_velocity(x: &[[f64; 3]], body: &[u32], scene: &Scene, b: &dyn Backend) -
     let Some(vf) = b.plan().model.field_id("v") else { return Ok(f64::NAN) };
     let Some((c, v)) = b.read(vf)? else { return Ok(f64::NAN) };
     let rear = plate.particles.clone().map(|k| axis.coords(scene.particles.x[k]).0).fold(f64::NEG_INFINITY, f64::max);
-    let nose = (0..x.len()).filter(|k| body[*k] == 0).map(|k| axis.coords(x[k]).0).fold(f64::NEG_INFINITY, f64::max);
+    let nose = max_keeping_nan(f64::NEG_INFINITY, (0..x.len()).filter(|k| body[*k] == 0).map(|k| axis.coords(x[k]).0));
+    if nose.is_nan() {
+        return Ok(f64::NAN);
+    }
     let beyond = (rear + scene.dx).max(nose);
     let speeds: Vec<f64> = (0..x.len())
         .filter(|k| body[*k] == 1 && axis.coords(x[*k]).0 > beyond)
@@ -246,7 +245,10 @@ fn spacing_extremes(x: &[[f64; 3]], b: &dyn Backend) -> Result<(f64, f64), Backe
     let dim = b.plan().dim;
     let Some(dxf) = b.plan().model.field_id("dx") else { return Ok((f64::NAN, f64::NAN)) };
     let Some((_, dx)) = b.read(dxf)? else { return Ok((f64::NAN, f64::NAN)) };
-    let reach = 3.0 * dx.iter().copied().fold(0.0, f64::max);
+    let reach = 3.0 * max_keeping_nan(0.0, dx.iter().copied());
+    if !reach.is_finite() {
+        return Ok((f64::NAN, f64::NAN));
+    }
     let flat: Vec<f64> = x.iter().flat_map(|p| p[..dim].to_vec()).collect();
     let grid = crate::grid::Grid::build(&flat, dim, reach);
     let (mut least, mut gap) = (f64::INFINITY, 0.0f64);
@@ -342,7 +344,10 @@ fn hole_diameter(axis: &Axis, initial: &[[f64; 3]], now: impl Iterator<Item = [f
     let initial: Vec<(f64, f64)> = initial.iter().map(|p| axis.coords(*p)).collect();
     let (lo, hi) = initial.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, p| (a.0.min(p.0), a.1.max(p.0)));
     let t = hi - lo;
-    let r_max = initial.iter().map(|p| p.1).fold(0.0, f64::max);
+    let r_max = max_keeping_nan(0.0, initial.iter().map(|p| p.1));
+    if r_max.is_nan() {
+        return f64::NAN;
+    }
     let n = (r_max / ring).ceil() as usize + 1;
     let mut before = vec![0.0; n];
     for p in &initial {

@@ -11,4 +11,9 @@ pub mod study;
 pub mod template;
 
 pub use build::load;
+
+/// The largest of `start` and `values`, NaN if any of them is NaN (`f64::max` would drop it).
+pub(crate) fn max_keeping_nan(start: f64, values: impl IntoIterator<Item = f64>) -> f64 {
+    values.into_iter().fold(start, |m, x| if m.is_nan() || x.is_nan() { f64::NAN } else { m.max(x) })
+}
 pub use spec::{split_resolution, Options, Scene};

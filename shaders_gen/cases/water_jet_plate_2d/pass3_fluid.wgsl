@@ -332,14 +332,6 @@ fn ldj_v(j: u32, sgn: vec3<f32>) -> vec2<f32> {
     let b = u32(base + i32(j) * 2);
     return (vec2<f32>(data[b], data[b + 1u]) * sgn.xy);
 }
-fn ld_m(i: u32) -> f32 {
-    let b = u32(info[13 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_m(i: u32, v: f32) {
-    let b = u32(info[13 + G] + i32(i) * 1);
-    data[b] = v;
-}
 fn ldj_m(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[13 + ints[j]];
     if (base == -2147483648) { return 0.0; }
@@ -437,7 +429,6 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // pairsum momentum: accumulators
     var dv: vec2<f32> = vec2<f32>(0.0);
     let v_i = ld_v(i);
-    let m_i = ld_m(i);
     let rho_i = ld_rho(i);
     let c_i = ld_c(i);
     let sigma_i = ld_sigma(i);
@@ -480,28 +471,29 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let r_ij = sqrt(r2);
             let W_ij = kernel_w(r_ij, h_ij);
             let gradW_ij = kernel_grad(r_ij, h_ij) * x_ij;
-            // pairsum momentum (stdlib/coupling/fluid_solid.sph:78)
-            let same = ((in_groups(1u, ints[i]) && in_groups(1u, ints[j])) || (in_groups(2u, ints[i]) && in_groups(2u, ints[j])));
-            let c_i_2 = c_i;
-            let c_j = ldj_c(j, sgn);
-            let vr = dot((v_i - ldj_v(j, sgn)), x_ij);
-            let hh = h_ij;
-            let p1 = (prm_eta_ratio(i) * hh);
-            let phi = ((hh * vr) / ((r_ij * r_ij) + (p1 * p1)));
-            let c_bar = ((c_i_2 + c_j) / 2.0);
-            let rho_bar = (0.5 * (rho_i + ldj_rho(j, sgn)));
-            let across = ((((((((-m_i) / rho_i) * ldj_m(j, sgn)) / ldj_rho(j, sgn)) * (p_interface_i + ldj_p_interface(j, sgn))) / m_i) * gradW_ij) - ((ldj_m(j, sgn) * select(0.0, (((((-prm_visc_a(i)) * c_bar) * phi) + (prm_visc_b(i) * (phi * phi))) / rho_bar), (vr < 0.0))) * gradW_ij));
-            let p2 = ldj_rho(j, sgn);
-            let c_i_3 = c_i;
-            let c_j_2 = ldj_c(j, sgn);
-            let vr_2 = dot((v_i - ldj_v(j, sgn)), x_ij);
-            let hh_2 = h_ij;
-            let p3 = (prm_eta_ratio(i) * hh_2);
-            let phi_2 = ((hh_2 * vr_2) / ((r_ij * r_ij) + (p3 * p3)));
-            let c_bar_2 = ((c_i_3 + c_j_2) / 2.0);
-            let rho_bar_2 = (0.5 * (rho_i + ldj_rho(j, sgn)));
-            let within = (ldj_m(j, sgn) * (((div_m(sigma_i, (rho_i * rho_i)) + div_m(ldj_sigma(j, sgn), (p2 * p2))) - (select(0.0, (((((-prm_visc_a(i)) * c_bar_2) * phi_2) + (prm_visc_b(i) * (phi_2 * phi_2))) / rho_bar_2), (vr_2 < 0.0)) * eye())) * gradW_ij));
-            dv = dv + select(across, within, same);
+            // pairsum momentum (stdlib/coupling/fluid_solid.sph:84)
+            if (((in_groups(1u, ints[i]) && in_groups(1u, ints[j])) || (in_groups(2u, ints[i]) && in_groups(2u, ints[j])))) {
+                let p1 = ldj_rho(j, sgn);
+                let c_i_2 = c_i;
+                let c_j = ldj_c(j, sgn);
+                let vr = dot((v_i - ldj_v(j, sgn)), x_ij);
+                let hh = h_ij;
+                let p2 = (prm_eta_ratio(i) * hh);
+                let phi = ((hh * vr) / ((r_ij * r_ij) + (p2 * p2)));
+                let c_bar = ((c_i_2 + c_j) / 2.0);
+                let rho_bar = (0.5 * (rho_i + ldj_rho(j, sgn)));
+                dv = dv + (ldj_m(j, sgn) * (((div_m(sigma_i, (rho_i * rho_i)) + div_m(ldj_sigma(j, sgn), (p1 * p1))) - (select(0.0, (((((-prm_visc_a(i)) * c_bar) * phi) + (prm_visc_b(i) * (phi * phi))) / rho_bar), (vr < 0.0)) * eye())) * gradW_ij));
+            } else {
+                let c_i_3 = c_i;
+                let c_j_2 = ldj_c(j, sgn);
+                let vr_2 = dot((v_i - ldj_v(j, sgn)), x_ij);
+                let hh_2 = h_ij;
+                let p3 = (prm_eta_ratio(i) * hh_2);
+                let phi_2 = ((hh_2 * vr_2) / ((r_ij * r_ij) + (p3 * p3)));
+                let c_bar_2 = ((c_i_3 + c_j_2) / 2.0);
+                let rho_bar_2 = (0.5 * (rho_i + ldj_rho(j, sgn)));
+                dv = dv + (((-ldj_m(j, sgn)) * (((p_interface_i + ldj_p_interface(j, sgn)) / (rho_i * ldj_rho(j, sgn))) + select(0.0, (((((-prm_visc_a(i)) * c_bar_2) * phi_2) + (prm_visc_b(i) * (phi_2 * phi_2))) / rho_bar_2), (vr_2 < 0.0)))) * gradW_ij);
+            }
         }
         }}}
     }

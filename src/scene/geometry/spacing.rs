@@ -219,7 +219,7 @@ impl Bins {
 /// sample, the extent over the node count per axis), enlarged until every axis has at most
 /// [`MAX_PER_AXIS`] cells.
 fn cell_size(points: &[[f64; 3]], finite: &[u32], dim: usize, (lo, hi): ([f64; 3], [f64; 3])) -> f64 {
-    let extent = (0..dim).map(|i| hi[i] - lo[i]).fold(0.0, f64::max);
+    let extent = crate::scene::max_keeping_nan(0.0, (0..dim).map(|i| hi[i] - lo[i]));
     let mut h = sample_median(points, finite);
     if !(h > 0.0 && h.is_finite()) {
         h = extent / (finite.len() as f64).powf(1.0 / dim as f64);
