@@ -86,19 +86,17 @@ probe = "kinetic_energy"
 at = "end"
 "#;
 
-fn colliding_bars_that_gain_energy_are_stopped(backend: &str) {
-    let dir = fresh_dir(&format!("bars-{backend}"));
-    let o = run(&dir, &[("mixing.sph", MIXING_MODEL), ("case.toml", BARS_CASE)], backend);
-    let stderr = String::from_utf8_lossy(&o.stderr);
+/// Runs the bars on `backend`, with `[watchdog]` keys `watchdog`, and checks what every stopped
+/// run must show: exit 1 within the impact (2L/c ≈ 20 µs, long before the 0.1 ms asked for), the
+/// particle and group named, a report without figures and a finite last good state. Returns
+/// stderr.
+fn colliding_bars_stopped(tag: &str, backend: &str, watchdog: &str) -> String {
+    let dir = fresh_dir(&format!("bars-{tag}-{backend}"));
+    let case = format!("{BARS_CASE}\n[watchdog]\n{watchdog}\n");
+    let o = run(&dir, &[("mixing.sph", MIXING_MODEL), ("case.toml", &case)], backend);
+    let stderr = String::from_utf8_lossy(&o.stderr).to_string();
     assert_eq!(o.status.code(), Some(1), "{stderr}");
-    assert!(stderr.contains("the energy (kinetic, internal and gravity's potential) grew by "), "{stderr}");
-    assert!(stderr.contains("in a case without loads or moving constraints; the fastest particle, "), "{stderr}");
-    assert!(stderr.contains("(group solid), has `v` = "), "{stderr}");
-    // The bound is the energy at t = 0: ½ · 2 · 7850 kg/m³ · (50 × 10 mm²) · 1 m · (10 m/s)² = 392.5 J.
-    let bound: f64 =
-        stderr.split("the watchdog's bound ").nth(1).and_then(|s| s.split(' ').next()).unwrap().parse().unwrap();
-    assert!((bound - 392.5).abs() < 0.01 * 392.5, "bound {bound} J: {stderr}");
-    // Stopped within the impact (2L/c ≈ 20 µs), long before the 0.1 ms it was asked to run.
+    assert!(stderr.contains("(group solid)"), "{stderr}");
     let t: f64 = stderr.split("(t = ").nth(1).and_then(|s| s.split(' ').next()).unwrap().parse().unwrap();
     assert!(t < 5e-5, "stopped at t = {t} s: {stderr}");
     let report = report(&dir);
@@ -109,22 +107,52 @@ fn colliding_bars_that_gain_energy_are_stopped(backend: &str) {
     let v = &kept.fields.iter().find(|f| f.name == "v").expect("v kept").data;
     assert!(v.iter().all(|x| x.is_finite()), "the last good state holds a non-finite velocity");
     let _ = std::fs::remove_dir_all(&dir);
+    stderr
+}
+
+/// The number after `after` in `text`, up to the next space.
+fn number_after(text: &str, after: &str) -> f64 {
+    text.split(after).nth(1).and_then(|s| s.split(' ').next()).unwrap().parse().unwrap()
+}
+
+/// The bars meet at ±10 m/s: a particle past 30 m/s stops the run (at step 230, t = 19.4 µs, on
+/// either backend), before the energy bound does (step 260).
+fn colliding_bars_stop_on_three_times_their_initial_speed(backend: &str) {
+    let stderr = colliding_bars_stopped("speed", backend, "");
+    assert!(stderr.contains("faster than the watchdog's bound 3.000e1 m/s (3.000 × the case's speed scale, 1.000e1 m/s, from the fastest initial speed)"), "{stderr}");
+    assert!(number_after(&stderr, "moves at `v` = ") > 30.0, "{stderr}");
 }
 
 #[test]
-fn colliding_bars_that_gain_energy_stop_on_the_energy_bound_on_the_cpu() {
-    colliding_bars_that_gain_energy_are_stopped("cpu");
+fn colliding_bars_that_gain_energy_stop_on_three_times_their_initial_speed_on_the_cpu() {
+    colliding_bars_stop_on_three_times_their_initial_speed("cpu");
 }
 
 #[test]
-fn colliding_bars_that_gain_energy_stop_on_the_energy_bound_on_the_gpu() {
-    colliding_bars_that_gain_energy_are_stopped("gpu");
+fn colliding_bars_that_gain_energy_stop_on_three_times_their_initial_speed_on_the_gpu() {
+    colliding_bars_stop_on_three_times_their_initial_speed("gpu");
 }
 
-/// From t = 10.5 ms the particles at x > 25 mm accelerate at 10⁵ m/s²: 100 m/s after one 1 ms step.
-const KICKED_MODEL: &str = "use kernels\ngroup metal\nkernel = wendland_c2\n\
-    particle kick -> dv: vec [m/s^2] { dv = select(t > 0.0105 [s] && x.x > 0.025 [m], vec(1e5 [m/s^2], 0 [m/s^2]), 0) }\n\
-    integrate { x' = v  v' = dv }\n";
+#[test]
+fn colliding_bars_that_gain_energy_stop_on_the_energy_bound_without_the_speed_bound() {
+    let stderr = colliding_bars_stopped("energy", "cpu", "speed_factor = inf");
+    assert!(stderr.contains("the energy (kinetic, internal and gravity's potential) grew by "), "{stderr}");
+    assert!(stderr.contains("in a case without loads or moving constraints; the fastest particle, "), "{stderr}");
+    assert!(stderr.contains("(group solid), has `v` = "), "{stderr}");
+    // The bound is the energy at t = 0: ½ · 2 · 7850 kg/m³ · (50 × 10 mm²) · 1 m · (10 m/s)² = 392.5 J.
+    let bound = number_after(&stderr, "the watchdog's bound ");
+    assert!((bound - 392.5).abs() < 0.01 * 392.5, "bound {bound} J: {stderr}");
+}
+
+/// For one 1 ms step from t = 10.5 ms, the particles at x > 25 mm accelerate at `kick`: they move
+/// at `kick` × 1 ms from then on.
+fn kicked_model(kick: &str) -> String {
+    format!(
+        "use kernels\ngroup metal\nkernel = wendland_c2\n\
+         particle kick -> dv: vec [m/s^2] {{ dv = select(t > 0.0105 [s] && t < 0.0115 [s] && x.x > 0.025 [m], vec({kick}, 0 [m/s^2]), 0) }}\n\
+         integrate {{ x' = v  v' = dv }}\n"
+    )
+}
 
 /// A case of one block of 6 × 6 particles at 10 mm, its largest speed probed, with the model
 /// `model`, the top-level keys `top` and the result `result` on the probe `speed`.
@@ -164,32 +192,47 @@ at = "end"
     )
 }
 
-/// The kicked block, with a load (of a micronewton) that makes the energy bound step aside, so
-/// that the speed bound must catch the kick.
-fn kicked_case() -> String {
-    let case = block_case("kicked.sph", "integrator = \"euler\"\nend_time = \"50 ms\"", "quantity = \"largest_speed\"");
-    format!("{case}\n[[loads]]\nbody = \"block\"\nforce = [0, \"1e-6 N\"]\n")
-}
-
-#[test]
-fn a_particle_faster_than_three_times_the_signal_speed_stops_the_run_naming_it() {
-    let dir = fresh_dir("kicked");
-    let o = run(&dir, &[("kicked.sph", KICKED_MODEL), ("case.toml", &kicked_case())], "cpu");
-    let stderr = String::from_utf8_lossy(&o.stderr);
+/// Runs the kicked block with the top-level keys `top` and checks that the kick, seen at the
+/// first check after it (step 20), stops the run, naming a kicked particle. Returns stderr.
+fn kicked_block_stopped(tag: &str, kick: &str, top: &str) -> String {
+    let dir = fresh_dir(tag);
+    let case = block_case(
+        "kicked.sph",
+        &format!("integrator = \"euler\"\nend_time = \"50 ms\"\n{top}"),
+        "quantity = \"largest_speed\"",
+    );
+    let o = run(&dir, &[("kicked.sph", &kicked_model(kick)), ("case.toml", &case)], "cpu");
+    let stderr = String::from_utf8_lossy(&o.stderr).to_string();
     assert_eq!(o.status.code(), Some(1), "{stderr}");
-    // Checked every 10 steps: the kick at step 11 is seen at step 20. The speed scale is the
-    // signal speed min h / Δt₀ = 1.2 · 10 mm / 1 ms = 12 m/s; the bound three times that.
     assert!(stderr.contains("went unstable at step 20 "), "{stderr}");
     assert!(stderr.contains("(group metal) moves at `v` = "), "{stderr}");
-    assert!(
-        stderr.contains("faster than the watchdog's bound 3.600e1 m/s (3.000 × the case's speed scale, 1.200e1 m/s"),
-        "{stderr}"
-    );
     let particle: usize = stderr.split("particle ").nth(1).and_then(|s| s.split(' ').next()).unwrap().parse().unwrap();
     // Filled row by row from the corner: 6 × 6 at 10 mm, x = 5 … 55 mm.
     assert!(particle % 6 >= 3, "particle {particle} lies at x < 25 mm and was never kicked");
     assert_eq!(report(&dir)["results"].as_array().map(Vec::len), Some(0));
     let _ = std::fs::remove_dir_all(&dir);
+    stderr
+}
+
+#[test]
+fn a_particle_kicked_past_three_times_the_signal_speed_in_a_scene_nothing_drives_stops_the_run_naming_it() {
+    // At rest, without gravity, loads or drivers, the scale is the signal speed
+    // min h / Δt₀ = 1.2 · 10 mm / 1 ms = 12 m/s; the kick gives 100 m/s.
+    let stderr = kicked_block_stopped("kicked-signal", "1e5 [m/s^2]", "");
+    let expected = "faster than the watchdog's bound 3.600e1 m/s (3.000 × the case's speed scale, 1.200e1 m/s, \
+                    from nothing drives the motion: the signal speed min h / Δt₀)";
+    assert!(stderr.contains(expected), "{stderr}");
+}
+
+#[test]
+fn a_particle_kicked_below_the_signal_speed_in_a_falling_block_is_stopped_by_three_times_the_fall_speed() {
+    // Under gravity the scale is the fall through the block's 50 mm, √(2 g · 50 mm) = 0.9905 m/s,
+    // not the signal speed (12 m/s): the 10 m/s kick, under 3 × 12 m/s, stops the run.
+    let stderr = kicked_block_stopped("kicked-falling", "1e4 [m/s^2]", "gravity = [0, \"-9.81 m/s^2\"]");
+    let expected = "faster than the watchdog's bound 2.971e0 m/s (3.000 × the case's speed scale, 9.905e-1 m/s, \
+                    from a fall through the scene)";
+    assert!(stderr.contains(expected), "{stderr}");
+    assert!((number_after(&stderr, "moves at `v` = ") - 10.0).abs() < 0.1, "{stderr}");
 }
 
 /// A block that falls freely for 1 s gains 4.9 m of fall's energy from gravity: no bound trips.

@@ -73,7 +73,7 @@ pub enum Cause {
     TimestepCollapse { dt: f64, dt0: f64, speed: f64 },
     /// The particle moves at `speed`, faster than `bound`, `speed_factor` times the case's speed
     /// scale `scale`.
-    TooFast { speed: f64, bound: f64, scale: f64 },
+    TooFast { speed: f64, bound: f64, scale: f64, scale_from: &'static str },
     /// The energy grew by `growth` since t = 0, more than `bound`; the particle is the fastest,
     /// at `speed`.
     EnergyGrowth { growth: f64, bound: f64, speed: f64 },
@@ -105,11 +105,10 @@ impl std::fmt::Display for RunError {
                          (group {}), has `{}` = {speed:.3e} m/s",
                         u.particle, u.group, u.field
                     )?,
-                    Cause::TooFast { speed, bound, scale } => write!(
+                    Cause::TooFast { speed, bound, scale, scale_from } => write!(
                         f,
                         "particle {} (group {}) moves at `{}` = {speed:.3e} m/s, faster than the watchdog's bound \
-                         {bound:.3e} m/s ({:.3} × the case's speed scale, {scale:.3e} m/s: the fastest of the \
-                         initial speeds, a fall through the scene and min h / Δt₀)",
+                         {bound:.3e} m/s ({:.3} × the case's speed scale, {scale:.3e} m/s, from {scale_from})",
                         u.particle,
                         u.group,
                         u.field,
@@ -294,9 +293,15 @@ impl<B: Backend> Engine<B> {
         let Some(now) = watchdog::Motion::read(&self.backend)? else { return Ok(None) };
         let (i, cause) = match bounds.check(&now) {
             None => return Ok(None),
-            Some(watchdog::Breach::Speed { particle, speed }) => {
-                (particle, Cause::TooFast { speed, bound: bounds.max_speed, scale: bounds.speed_scale })
-            }
+            Some(watchdog::Breach::Speed { particle, speed }) => (
+                particle,
+                Cause::TooFast {
+                    speed,
+                    bound: bounds.max_speed,
+                    scale: bounds.speed_scale,
+                    scale_from: bounds.scale_from,
+                },
+            ),
             Some(watchdog::Breach::Energy { growth, particle, speed }) => {
                 let bound = bounds.max_growth.unwrap_or(f64::INFINITY);
                 (particle, Cause::EnergyGrowth { growth, bound, speed })

@@ -2,10 +2,14 @@
 //! grows without a source. Both are measured against the state at t = 0, from what the plan knows
 //! of the scene (gravity, loads, prescribed motions), on any backend (it reads fields).
 //!
-//! - **Speed.** The case's speed scale is the largest of: the fastest particle at t = 0, the speed
-//!   of a fall through the scene's height (or for the whole run, if that is longer), and the
-//!   signal speed `min h / Δt₀` (about the fastest wave speed over the CFL number). A particle
-//!   faster than `speed_factor` times that scale stops the run.
+//! - **Speed.** The case's speed scale is what drives its motion: the largest of the fastest
+//!   particle at t = 0, the speed of a fall through the scene's height (or for the whole run, if
+//!   that is longer), the speed of its moving constraints (a turning one's at the farthest
+//!   particle), and the speed a load's acceleration gives over the whole run. Only a scene with
+//!   none of these (at rest, without gravity, loads or drivers) falls back on the signal speed
+//!   `min h / Δt₀` (about the fastest wave speed over the CFL number). A particle faster than
+//!   `speed_factor` times the scale stops the run. The sound speed bounds nothing in a flow: next
+//!   to a stiff solid it is km/s, and water running away at 50 m/s would pass it.
 //! - **Energy.** `E = Σ ½ m |v|² + Σ m e − Σ m g·x` (kinetic, internal when the model has a state
 //!   `e`, and gravity's potential) cannot grow in a case without loads or moving constraints: the
 //!   energy stored in strain or compression is not counted, and that only ever takes energy out
@@ -15,6 +19,7 @@
 
 use crate::backend::{Backend, BackendError};
 use crate::ir::FieldId;
+use crate::scene::max_keeping_nan;
 use crate::schedule::{Plan, SceneRole};
 
 /// The state the bounds read.
@@ -89,6 +94,8 @@ impl Motion {
 #[derive(Clone, Debug)]
 pub struct Bounds {
     pub speed_scale: f64,
+    /// What set the speed scale, in words.
+    pub scale_from: &'static str,
     pub max_speed: f64,
     gravity: Vec<f64>,
     energy0: f64,
@@ -119,9 +126,8 @@ impl Bounds {
         let (low, high) = along.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), s| (l.min(*s), h.max(*s)));
         let height = if g > 0.0 && high >= low { (high - low) / g } else { 0.0 };
         let fall = (2.0 * g * height).sqrt().max(g * end_time.min(1e30));
-        let signal = h.iter().copied().fold(f64::INFINITY, f64::min) / dt0;
-        let fastest = at_start.fastest().1;
-        let speed_scale = [fastest, fall, signal].into_iter().filter(|s| s.is_finite()).fold(0.0, f64::max);
+        let (speed_scale, scale_from) =
+            speed_scale(plan, at_start, fall, h.iter().copied().fold(f64::INFINITY, f64::min) / dt0, end_time);
         let (max_growth, energy0) = match &at_start.m {
             Some(_) if feeds_energy(plan) => (None, 0.0),
             None => (None, 0.0),
@@ -134,7 +140,7 @@ impl Bounds {
                 (Some(energy_factor * in_play), at_start.energy(m, &gravity))
             }
         };
-        Bounds { speed_scale, max_speed: speed_factor * speed_scale, energy0, gravity, max_growth }
+        Bounds { speed_scale, scale_from, max_speed: speed_factor * speed_scale, energy0, gravity, max_growth }
     }
 
     /// The first bound the state passes, if any.
@@ -147,6 +153,45 @@ impl Bounds {
         let growth = now.energy(m, &self.gravity) - self.energy0;
         (growth > *max).then_some(Breach::Energy { growth, particle, speed })
     }
+}
+
+/// The case's speed scale and what set it: the fastest of what drives the motion (the initial
+/// speeds, a fall, the drivers), or where nothing does, the signal speed.
+fn speed_scale(plan: &Plan, at_start: &Motion, fall: f64, signal: f64, end_time: f64) -> (f64, &'static str) {
+    let driven = [
+        (at_start.fastest().1, "the fastest initial speed"),
+        (fall, "a fall through the scene"),
+        (driver_speed(plan, at_start, end_time), "the moving constraints and loads"),
+    ];
+    match driven.into_iter().fold((0.0, ""), |best, d| if d.0.is_nan() || d.0 > best.0 { d } else { best }) {
+        (s, from) if s > 0.0 || s.is_nan() => (s, from),
+        _ if signal.is_finite() => (signal, "nothing drives the motion: the signal speed min h / Δt₀"),
+        _ => (0.0, "nothing drives the motion"),
+    }
+}
+
+/// The fastest a load or a prescribed motion can drive a particle: a moving constraint's speed, a
+/// turning one's at the particle farthest from its centre, and a load's acceleration over the
+/// whole run (its ramp only makes it slower).
+fn driver_speed(plan: &Plan, at_start: &Motion, end_time: f64) -> f64 {
+    let norm = |v: &[f64]| v.iter().map(|a| a * a).sum::<f64>().sqrt();
+    let farthest = |centre: &[f64]| {
+        let distances = at_start
+            .x
+            .chunks(at_start.dim)
+            .map(|x| x.iter().zip(centre).map(|(a, b)| (a - b).powi(2)).sum::<f64>().sqrt());
+        max_keeping_nan(0.0, distances)
+    };
+    let speeds = plan.scene_params.iter().filter_map(|p| match p.role {
+        SceneRole::Constraint(_) => Some(norm(&p.value)),
+        SceneRole::Load(_) => Some(norm(&p.value) * end_time),
+        SceneRole::AngularSpeed(k) => {
+            let centre = plan.scene_params.iter().find(|c| c.role == SceneRole::Center(k));
+            Some(norm(&p.value) * centre.map_or(0.0, |c| farthest(&c.value)))
+        }
+        _ => None,
+    });
+    max_keeping_nan(0.0, speeds)
 }
 
 /// Whether something feeds energy into the scene that the watchdog cannot account for: a load or
