@@ -462,7 +462,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let r_ij = sqrt(r2);
             let W_ij = kernel_w(r_ij, h_ij);
             let gradW_ij = kernel_grad(r_ij, h_ij) * x_ij;
-            // pairsum continuity (stdlib/continuity/fourtakas.sph:14)
+            // pairsum continuity (stdlib/continuity/fourtakas.sph:20)
             div_v = div_v + (ldj_m(j, sgn) * dot((v_i - ldj_v(j, sgn)), gradW_ij));
             let p1 = prm_c0(i);
             let rho_h = (prm_rho0(i) * (pow((1.0 + ((prm_rho0(i) * dot(prm_gravity(i), x_ij)) / (((p1 * p1) * prm_rho0(i)) / prm_gamma(i)))), (1.0 / prm_gamma(i))) - 1.0));
