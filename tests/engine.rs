@@ -565,3 +565,52 @@ fn plastic_work_heats_the_metal_and_softens_it() {
     }
     assert!(softest < 0.8, "the block hardly softened: the least factor 1 − T*^m is {softest}");
 }
+
+/// A gas whose density is summed (`rhos`, a neighbour pass) and whose sound speed, which the time
+/// step reads, comes from it: before issue 41 both were 0 until the first step's passes, so the
+/// first time step came out infinite.
+fn summed_gas(sound: &str) -> pairsum::ir::Model {
+    model(&format!(
+        "use kernels\ngroup gas\nkernel = wendland_c2\n\
+         field rhos: scalar [kg/m^3]\nfield c: scalar [m/s]\n\
+         pairsum density -> rhos {{ rhos += m[j] * W_ij }}\n\
+         particle sound -> c {{ c = {sound} }}\n\
+         timestep cfl = min_over(0.3 * h) / max_over(c + norm(v))\n\
+         integrate {{ x' = v  v' = 0 }}\n"
+    ))
+}
+
+fn summed_gas_engine(m: &pairsum::ir::Model) -> Engine<CpuBackend<f64>> {
+    let inp = input(2, lattice(2, 6, 0.01), 0.01);
+    let mat = material(m, &[("rho0", vec![1.0])]);
+    let b = backend::<f64>(m, &scene(m, 2, &["rhos", "c"], IntegratorKind::Euler), &inp, &[mat], vec![]);
+    Engine::new(b, RunConfig { end_time: 1.0, ..RunConfig::default() })
+}
+
+#[test]
+fn fields_of_neighbour_passes_are_computed_before_the_first_time_step() {
+    let m = summed_gas("sqrt(1e5 [Pa] / rhos)");
+    let mut e = summed_gas_engine(&m);
+    e.initialise().unwrap_or_else(|err| panic!("initialise: {err}"));
+    let (_, rhos) = field_by_id(&e.backend, "rhos");
+    let (_, h) = field_by_id(&e.backend, "h");
+    assert!(rhos.iter().all(|r| *r > 0.1 && r.is_finite()), "summed density at t = 0: {rhos:?}");
+    // The step from the summed density, computed here: 0.3 min h / max √(p / ρ_s).
+    let fastest = rhos.iter().map(|r| (1e5 / r).sqrt()).fold(0.0, f64::max);
+    let least_h = h.iter().copied().fold(f64::INFINITY, f64::min);
+    let expected = 0.3 * least_h / fastest;
+    assert!((e.dt - expected).abs() < 1e-12 * expected, "first time step {} s, expected {expected} s", e.dt);
+}
+
+#[test]
+fn a_time_step_that_is_not_finite_names_its_limit_and_the_fields_it_reads() {
+    let m = summed_gas("0 [m/s]");
+    let mut e = summed_gas_engine(&m);
+    let err = e.initialise().expect_err("a sound speed of 0 at rest gives no time step");
+    let message = err.to_string();
+    assert!(matches!(err, RunError::BadTimestep { step: 0, .. }), "{message}");
+    assert!(message.contains("`cfl` gives inf s (it reads "), "{message}");
+    for field in ["`c`", "`h`", "`v`"] {
+        assert!(message.contains(field), "{field} missing: {message}");
+    }
+}

@@ -33,6 +33,18 @@ pub fn value(model: &Model, timesteps: &[usize], values: &[f64], time: f64, dt: 
     best
 }
 
+/// Each limit's value and the fields it reads, for an error that names the limit that failed.
+pub fn describe(model: &Model, timesteps: &[usize], values: &[f64], time: f64, dt: f64) -> String {
+    let mut next = 0;
+    let limits = timesteps.iter().map(|t| {
+        let limit = &model.timesteps[*t];
+        let value = eval(&limit.value, values, &mut next, time, dt);
+        let reads: Vec<String> = limit.reads.iter().map(|f| format!("`{}`", model.field(*f).name)).collect();
+        format!("`{}` gives {value:e} s (it reads {})", limit.name, reads.join(", "))
+    });
+    limits.collect::<Vec<_>>().join("; ")
+}
+
 fn eval(e: &Expr, values: &[f64], next: &mut usize, time: f64, dt: f64) -> f64 {
     let mut go = |x: &Expr| eval(x, values, next, time, dt);
     match &e.kind {

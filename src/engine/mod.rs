@@ -83,10 +83,12 @@ pub enum Cause {
 pub enum RunError {
     Unstable(Box<Instability>),
     Backend(BackendError),
-    /// The time step is not positive or not finite.
+    /// The time step is not positive or not finite; `limits` says what each `timestep` limit
+    /// gave and which fields it reads.
     BadTimestep {
         step: u64,
         dt: f64,
+        limits: String,
     },
 }
 
@@ -125,10 +127,11 @@ impl std::fmt::Display for RunError {
                 write!(f, "; the last good state (t = {:.6e} s) was kept", u.last_good_time)
             }
             RunError::Backend(e) => write!(f, "{e}"),
-            RunError::BadTimestep { step, dt } => {
+            RunError::BadTimestep { step, dt, limits } => {
                 write!(
                     f,
-                    "the time step at step {step} is {dt:e} s: the `timestep` limits gave no positive finite value"
+                    "the time step at step {step} is {dt:e} s: the `timestep` limits gave no positive finite \
+                     value: {limits}"
                 )
             }
         }
@@ -163,12 +166,18 @@ impl<B: Backend> Engine<B> {
         Engine { backend, config, time: 0.0, step: 0, dt: 0.0, watched, good: None, dt0: 0.0, bounds: None }
     }
 
-    /// Initial values, state-only equations, and a first time step for equations that read `dt`.
+    /// Initial values, state-only equations, every field the passes compute (so that the t = 0
+    /// output, the first probes and the first time step see them, not zeros), and the first time
+    /// step. The passes run once with a provisional step from the initial values (0 where those
+    /// give none), for equations that read `dt`.
     pub fn initialise(&mut self) -> Result<(), RunError> {
         self.backend.initialise()?;
-        self.dt = self.next_dt(Globals { time: 0.0, dt: 0.0 })?;
+        let provisional = self.next_dt(Globals { time: 0.0, dt: 0.0 })?;
+        let provisional = if provisional > 0.0 && provisional.is_finite() { provisional } else { 0.0 };
+        self.backend.evaluate(Globals { time: 0.0, dt: provisional })?;
+        self.dt = self.next_dt(Globals { time: 0.0, dt: provisional })?;
         if !(self.dt > 0.0 && self.dt.is_finite()) {
-            return Err(RunError::BadTimestep { step: 0, dt: self.dt });
+            return Err(self.bad_timestep(0, self.dt, Globals { time: 0.0, dt: provisional }));
         }
         self.dt0 = self.dt;
         self.bounds = self.measure_bounds()?;
@@ -185,6 +194,20 @@ impl<B: Backend> Engine<B> {
         };
         let factors = (self.config.speed_factor, self.config.energy_factor);
         Ok(Some(watchdog::Bounds::new(plan, &motion, &h, self.dt0, self.config.end_time, factors)))
+    }
+
+    /// The error of a time step `dt` that is not positive and finite, with what each limit gives
+    /// now.
+    fn bad_timestep(&mut self, step: u64, dt: f64, g: Globals) -> RunError {
+        let plan = self.backend.plan();
+        let timesteps = plan.timesteps.clone();
+        let limits = match self.backend.reductions(g) {
+            Ok(values) => timestep::describe(&self.backend.plan().model, &timesteps, &values, g.time, g.dt),
+            Err(e) => format!("reading the limits failed too: {e}"),
+        };
+        let limits =
+            if timesteps.is_empty() { "the model declares none and `dt_max` is not set".into() } else { limits };
+        RunError::BadTimestep { step, dt, limits }
     }
 
     fn next_dt(&mut self, g: Globals) -> Result<f64, RunError> {
@@ -206,7 +229,7 @@ impl<B: Backend> Engine<B> {
         {
             let (time, dt, step) = r?;
             if !(dt > 0.0 && dt.is_finite()) {
-                return Err(RunError::BadTimestep { step: self.step + 1, dt });
+                return Err(self.bad_timestep(self.step + 1, dt, Globals { time, dt: self.dt }));
             }
             (self.time, self.dt, self.step) = (time, dt, step);
             if self.config.reorder_every > 0 && self.step.is_multiple_of(self.config.reorder_every) {
@@ -227,7 +250,7 @@ impl<B: Backend> Engine<B> {
                         dt = remaining;
                     }
                     if !(dt > 0.0 && dt.is_finite()) {
-                        return Err(RunError::BadTimestep { step: self.step + 1, dt });
+                        return Err(self.bad_timestep(self.step + 1, dt, Globals { time: self.time, dt: self.dt }));
                     }
                 }
                 Action::Update { stage, time_fraction } => {
