@@ -19,7 +19,7 @@ fn shepard_model(kernel: &str) -> pairsum::ir::Model {
          pairsum shepard -> sum_w: scalar [-], grad_sum: vec [1/m] {{\n\
              sum_w += vol[j] * W_ij\n\
              grad_sum += vol[j] * gradW_ij\n\
-             finally {{ sum_w = sum_w + vol * W_at(0 [m], h) }}\n\
+             finally {{ sum_w = sum_w + vol * W_at(0, h) }}\n\
          }}\n\
          integrate {{ }}\n"
     ))
@@ -160,7 +160,7 @@ fn gradw_at_the_pair_separation_is_gradw_ij_and_zero_at_the_origin_and_past_the_
                  by_pair += vol[j] * gradW_ij\n\
                  by_at += vol[j] * gradW_at(x_ij, h_ij)\n\
                  finally {{\n\
-                     outside = norm(gradW_at(vec(0 [m], 0 [m], 0 [m]), h)) + norm(gradW_at(vec({past} * h, 0 [m], 0 [m]), h))\n\
+                     outside = norm(gradW_at(0, h)) + norm(gradW_at(vec({past} * h, 0 [m], 0 [m]), h))\n\
                      built = vec(1 [m], 2 [m], 3 [m])\n\
                  }}\n\
              }}\n\

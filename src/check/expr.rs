@@ -56,6 +56,10 @@ impl Cx {
     }
 }
 
+/// How a type error names two operands of an operator, and two arguments of a call.
+const OPERANDS: [&str; 2] = ["left", "right"];
+const ARGUMENTS: [&str; 2] = ["first argument", "second argument"];
+
 const PAIR_NAMES: [&str; 6] = ["x_ij", "r_ij", "v_ij", "h_ij", "W_ij", "gradW_ij"];
 
 /// A literal `0` or `inf` (without a unit) fits any unit, and `0` any shape.
@@ -123,11 +127,13 @@ fn mk(kind: ExprKind, ty: Type, span: Span) -> Expr {
 }
 
 impl Checker {
-    fn type_error(&mut self, e: TypeError, span: Span, operands: &[&Expr]) {
+    /// Reports a type error; where two operands' units differ, labels each with its unit, named
+    /// after `sides` (`left`/`right` of an operator, the arguments of a call).
+    fn type_error(&mut self, e: TypeError, span: Span, operands: &[&Expr], sides: [&str; 2]) {
         let code = e.code;
         let mut d = Diagnostic::error(code, e.message).at(span, e.label);
         if code == "E0201" && operands.len() == 2 && operands[0].ty.unit != operands[1].ty.unit {
-            for (o, side) in operands.iter().zip(["left", "right"]) {
+            for (o, side) in operands.iter().zip(sides) {
                 d = d.also(o.span, format!("{side}: {}", o.ty.unit));
             }
         }
@@ -300,7 +306,7 @@ impl Checker {
                 match types::binary_op(*op, x, y, span) {
                     Ok(r) => Some(r),
                     Err(te) => {
-                        self.type_error(te, span, &[&sx, &sy]);
+                        self.type_error(te, span, &[&sx, &sy], OPERANDS);
                         None
                     }
                 }
@@ -593,7 +599,7 @@ impl Checker {
                 let (a, b) = (a?, b?);
                 let (sa, sb) = (a.clone(), b.clone());
                 return types::binary_op(BinOp::Pow, a, b, span)
-                    .map_err(|e| self.type_error(e, span, &[&sa, &sb]))
+                    .map_err(|e| self.type_error(e, span, &[&sa, &sb], OPERANDS))
                     .ok();
             }
             "select" => return self.select(f, args, span, cx),
@@ -648,6 +654,12 @@ impl Checker {
                 }
             }
         }
+        if let Some(expected) = types::fixed_arguments(b) {
+            // A free zero or infinity takes the argument's own type: `W_at(0, h)`.
+            for ((t, a), to) in typed.iter_mut().zip(args).zip(expected) {
+                fit_free(t, a, &to);
+            }
+        }
         if matches!(b, Builtin::KernelAt | Builtin::KernelGradAt) && cx.at == Where::Kernel {
             let msg = format!("a kernel cannot be defined in terms of `{}`", b.name());
             self.error(Diagnostic::error("E0214", msg).at(span, "here"));
@@ -658,7 +670,7 @@ impl Checker {
             Ok(e) => Some(e),
             Err(te) => {
                 let refs: Vec<&Expr> = shown.iter().collect();
-                self.type_error(te, span, if refs.len() == 2 { &refs } else { &[] });
+                self.type_error(te, span, if refs.len() == 2 { &refs } else { &[] }, ARGUMENTS);
                 None
             }
         }
@@ -687,7 +699,7 @@ impl Checker {
         fit_free(&mut a, &args[1], &tb);
         fit_free(&mut b, &args[2], &ta);
         if let Err(te) = types::same_unit(&a.ty, &b.ty, "the branches of `select`") {
-            self.type_error(te, span, &[&a, &b]);
+            self.type_error(te, span, &[&a, &b], OPERANDS);
             return None;
         }
         let (sa, sb) = (a.clone(), b.clone());
@@ -697,7 +709,7 @@ impl Checker {
                 Some(mk(ExprKind::Select(Box::new(c), Box::new(a), Box::new(b)), ty, span))
             }
             Err(te) => {
-                self.type_error(te, span, &[&sa, &sb]);
+                self.type_error(te, span, &[&sa, &sb], OPERANDS);
                 None
             }
         }

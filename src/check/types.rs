@@ -228,6 +228,17 @@ fn power(a: Expr, b: Expr, span: crate::diag::Span) -> Result<Expr, TypeError> {
     Ok(binary(Op::Pow, a, b, Type::scalar(unit), span))
 }
 
+/// The argument types of a builtin whose arguments have one type each, where free literals
+/// (`0`, `inf`) take it.
+pub fn fixed_arguments(f: Builtin) -> Option<Vec<Type>> {
+    let m = |shape| Type::new(shape, Unit::M);
+    match f {
+        Builtin::KernelAt => Some(vec![m(Shape::Scalar), m(Shape::Scalar)]),
+        Builtin::KernelGradAt => Some(vec![m(Shape::Vec), m(Shape::Scalar)]),
+        _ => None,
+    }
+}
+
 /// Types a builtin call. `args` are typed; arity was checked by the caller.
 pub fn builtin(f: Builtin, mut args: Vec<Expr>, span: crate::diag::Span) -> Result<Expr, TypeError> {
     let shapes: Vec<Shape> = args.iter().map(|a| a.ty.shape).collect();
