@@ -4,6 +4,9 @@
   cases/cantilever_2d.toml:  the mean vertical displacement of the last 25 mm of a 0.5 × 0.1 m
                              cantilever under 100 N per metre of depth spread over those 25 mm;
   cases/beam_vibration_2d.toml: the period of the first bending mode of a 0.2 × 0.02 m cantilever.
+  cases/clamped_plate_2d.toml: the mean vertical displacement of the middle 20 mm of a 0.4 × 0.04 m
+                             strip clamped at both ends (a plate in cylindrical bending) under a
+                             uniform load of 100 Pa × 0.4 m spread by volume (a body force).
 
   cases/cantilever.toml's probe: the same for the 0.5 × 0.1 × 0.1 m LSR beam in 3D under 10 N (Q27
                              elements to 8 deep; the clamp's edges and corners make them converge
@@ -11,11 +14,12 @@
                              mean over its last 25 mm with LSR's 5.153 mm, the tip's deflection
                              under a point load at the tip: 9 % more than this.
 
-All beams are clamped over their whole depth at x = 0 (all displacements zero, as the fixed
-particles behind x = 0 hold them), E = 10 MPa, ν = 0.3, ρ = 1000 kg/m³. Biquadratic (Q9)
+All beams are clamped over their whole depth at x = 0 (and the plate at x = L too: all
+displacements zero, as the fixed particles beyond the span hold them), E = 10 MPa, ν = 0.3, ρ = 1000 kg/m³. Biquadratic (Q9)
 elements on meshes refined three times; the printed reference is Richardson's extrapolation of
 the two finest. Beam theories for comparison: Timoshenko's deflection (E' = E/(1 − ν²), κ = 5/6)
-and the Euler–Bernoulli period, 2π / (1.8751² √(E'I / (ρ A L⁴))).
+and the Euler–Bernoulli period, 2π / (1.8751² √(E'I / (ρ A L⁴))); for the plate, plate theory
+with Timoshenko's shear term, w = q L⁴ / (384 D) + q L² / (8 κ G t).
 
 Needs numpy and scipy (python3 -m pip install numpy scipy). Runs in a few seconds.
 """
@@ -30,8 +34,9 @@ def shape_1d(s):
     return np.array([s * (s - 1) / 2, 1 - s * s, s * (s + 1) / 2]), np.array([s - 0.5, -2 * s, s + 0.5])
 
 
-def assemble(length, depth, nx, ny):
-    """Stiffness and consistent mass of a Q9 mesh of nx × ny elements; node (i, j) is i * NY + j."""
+def assemble(length, depth, nx, ny, clamped_ends=1):
+    """Stiffness and consistent mass of a Q9 mesh of nx × ny elements; node (i, j) is i * NY + j.
+    The end x = 0 is clamped, and with `clamped_ends = 2` the end x = length too."""
     lam = E * NU / ((1 + NU) * (1 - 2 * NU))
     mu = E / (2 * (1 + NU))
     c = np.array([[lam + 2 * mu, lam, 0], [lam, lam + 2 * mu, 0], [0, 0, mu]])
@@ -70,6 +75,8 @@ def assemble(length, depth, nx, ny):
     m = sp.csr_matrix((np.concatenate(mv), (r, cc)), shape=(size, size))
     free = np.ones(size, bool)
     free[: 2 * n_y] = False  # the clamped end x = 0
+    if clamped_ends == 2:
+        free[-2 * n_y :] = False  # and x = length
     return k, m, free, elements, ne
 
 
@@ -83,6 +90,20 @@ def cantilever_mean_deflection(ny, length=0.5, depth=0.1, load=100.0, end=0.025)
     u = np.zeros(k.shape[0])
     u[free] = spl.spsolve(k[free][:, free].tocsc(), f[free])
     return -sum(ne @ u[2 * ids + 1] for ids in loaded) / (len(loaded) * ne.sum())
+
+
+def clamped_plate_mean_deflection(ny, length=0.4, depth=0.04, load=40.0, strip=(0.19, 0.21)):
+    """The strip clamped at both ends under `load` (N per metre of depth) spread by volume; the
+    area mean of u_y over the strip (whole elements: nx is a multiple of 20)."""
+    nx = 10 * ny
+    k, _, free, elements, ne = assemble(length, depth, nx, ny, clamped_ends=2)
+    f = np.zeros(k.shape[0])
+    for _, ids in elements:
+        f[2 * ids + 1] -= load / (length * depth) * ne
+    u = np.zeros(k.shape[0])
+    u[free] = spl.spsolve(k[free][:, free].tocsc(), f[free])
+    inside = [ids for xc, ids in elements if strip[0] < xc < strip[1]]
+    return -sum(ne @ u[2 * ids + 1] for ids in inside) / (len(inside) * ne.sum())
 
 
 def first_period(ny, length=0.2, depth=0.02):
@@ -180,6 +201,15 @@ def main():
     w = integrate(integrate(moment / (ep * inertia))) + integrate(shear / (5 / 6 * g * depth))
     span = x >= length - end
     print(f"  Timoshenko beam, same load and span: {np.trapezoid(w[span], x[span]) / end:.5e} m")
+    pl = [clamped_plate_mean_deflection(n) for n in meshes]
+    pl0, p = richardson(pl)
+    print("clamped_plate_2d: mean deflection of the middle 20 mm")
+    for n, v in zip(meshes, pl):
+        print(f"  Q9, {n:2d} elements deep: {v:.6e} m")
+    print(f"  Richardson (order {p:.2f}): {pl0:.5e} m")
+    q, span, thick = 100.0, 0.4, 0.04
+    plate = q * span**4 / (384 * ep * thick**3 / 12) + q * span**2 / (8 * 5 / 6 * g * thick)
+    print(f"  plate theory at mid-span (with shear): {plate:.5e} m")
     d3 = [cantilever_3d_mean_deflection(n) for n in (2, 4, 8)]
     print("cantilever (3D, 10 N): mean deflection of the last 25 mm")
     for n, v in zip((2, 4, 8), d3):

@@ -33,6 +33,7 @@ RUNS = [
     ("cantilever", {}),
     ("cantilever_lsm", {}),
     ("cantilever_2d", {}),
+    ("clamped_plate_2d", {}),
     ("beam_vibration_2d", {}),
     ("dam_break_2d", {"boundary": "dbc"}),
     ("dam_break_2d", {"boundary": "adami"}),

@@ -897,6 +897,11 @@ fn total_lagrangian_cantilever_2d_deflection_error_halves_from_4_to_8_particles_
 }
 
 #[test]
+fn total_lagrangian_clamped_plate_2d_deflection_is_within_its_tolerance_at_8_particles_across() {
+    run_and_check("clamped_plate_2d", Precision::F64);
+}
+
+#[test]
 fn total_lagrangian_beam_vibration_2d_period_is_within_its_tolerance_at_8_particles_across() {
     run_and_check("beam_vibration_2d", Precision::F64);
 }
