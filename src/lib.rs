@@ -12,6 +12,7 @@ pub mod config;
 pub mod diag;
 pub mod engine;
 pub mod grid;
+pub mod host_eval;
 pub mod ir;
 pub mod output_dir;
 pub mod particles;

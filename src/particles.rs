@@ -37,6 +37,9 @@ pub trait Real:
     fn sin(self) -> Self;
     fn cos(self) -> Self;
     fn acos(self) -> Self;
+    fn sinh(self) -> Self;
+    fn cosh(self) -> Self;
+    fn tanh(self) -> Self;
     fn powf(self, e: Self) -> Self;
     fn abs(self) -> Self;
     fn min(self, o: Self) -> Self;
@@ -91,6 +94,18 @@ macro_rules! real {
             #[inline(always)]
             fn acos(self) -> Self {
                 <$t>::acos(self)
+            }
+            #[inline(always)]
+            fn sinh(self) -> Self {
+                <$t>::sinh(self)
+            }
+            #[inline(always)]
+            fn cosh(self) -> Self {
+                <$t>::cosh(self)
+            }
+            #[inline(always)]
+            fn tanh(self) -> Self {
+                <$t>::tanh(self)
             }
             #[inline(always)]
             fn powf(self, e: Self) -> Self {

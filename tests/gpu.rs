@@ -663,3 +663,28 @@ fn the_watchdog_finds_a_nan_on_the_gpu_at_the_step_particle_and_field_the_cpu_fi
     let kept = b.last_good.columns[q.index()].as_ref().expect("q stored");
     assert!(max_abs("the GPU's last good q", kept) > 0.0);
 }
+
+/// sinh, cosh and tanh in a particle equation: the GPU (WGSL's own functions) and the CPU in f32
+/// agree with the formula in f64.
+#[test]
+fn hyperbolic_functions_on_the_gpu_and_the_cpu_equal_the_formula() {
+    let m = model(
+        "use kernels\ngroup metal\nkernel = wendland_c2\nfield y: scalar [-]\n\
+         particle hyperbolic -> y { y = sinh(x.x / 0.02 [m]) + cosh(x.y / 0.02 [m]) * tanh(x.x / 0.01 [m] - 3) }\n\
+         integrate { x' = v  v' = 0 }\n",
+    );
+    let inp = input(2, lattice(2, 6, 0.01), 0.01);
+    let mats = [material(&m, &[("rho0", vec![1000.0])])];
+    let (mut cpu, mut gpu) = pair(&m, 2, &inp, &mats, &["y"]);
+    let g = Globals { time: 0.0, dt: 1e-3 };
+    cpu.evaluate(g).expect("cpu evaluate");
+    gpu.evaluate(g).expect("gpu evaluate");
+    compare_fields(&cpu, &gpu, &["y"], 1e-6, "sinh, cosh and tanh");
+    let (_, x) = field_by_id(&cpu, "x");
+    let (_, y) = field_by_id(&cpu, "y");
+    for k in 0..36 {
+        let (px, py) = (x[2 * k], x[2 * k + 1]);
+        let exact = (px / 0.02).sinh() + (py / 0.02).cosh() * (px / 0.01 - 3.0).tanh();
+        assert!((y[k] - exact).abs() <= 1e-5 * exact.abs().max(1.0), "particle {k}: y = {} against {exact}", y[k]);
+    }
+}

@@ -1,7 +1,8 @@
 //! The time step from the model's `timestep` limits: every reduction over particles is computed
 //! by the backend; the rest of the expression (constants, arithmetic) here, in f64.
 
-use crate::ir::{Builtin, Expr, ExprKind, Global, Model, Op, Reduce};
+use crate::host_eval;
+use crate::ir::{Expr, ExprKind, FieldId, Global, Model, ParamId, Reduce};
 
 /// The reductions of all timestep expressions, in order: (reduce, per-particle expression).
 pub fn reductions(model: &Model, timesteps: &[usize]) -> Vec<(Reduce, Expr)> {
@@ -22,10 +23,8 @@ fn collect(e: &Expr, out: &mut Vec<(Reduce, Expr)>) {
 
 /// The least of the limits, given the reduction values (in `reductions` order).
 pub fn value(model: &Model, timesteps: &[usize], values: &[f64], time: f64, dt: f64) -> f64 {
-    let mut next = 0;
     let mut best = f64::INFINITY;
-    for t in timesteps {
-        let v = eval(&model.timesteps[*t].value, values, &mut next, time, dt);
+    for v in limits(model, timesteps, values, time, dt) {
         if v.is_finite() && v > 0.0 {
             best = best.min(v);
         }
@@ -35,55 +34,56 @@ pub fn value(model: &Model, timesteps: &[usize], values: &[f64], time: f64, dt: 
 
 /// Each limit's value and the fields it reads, for an error that names the limit that failed.
 pub fn describe(model: &Model, timesteps: &[usize], values: &[f64], time: f64, dt: f64) -> String {
-    let mut next = 0;
-    let limits = timesteps.iter().map(|t| {
+    let values = limits(model, timesteps, values, time, dt);
+    let limits = timesteps.iter().zip(values).map(|(t, value)| {
         let limit = &model.timesteps[*t];
-        let value = eval(&limit.value, values, &mut next, time, dt);
         let reads: Vec<String> = limit.reads.iter().map(|f| format!("`{}`", model.field(*f).name)).collect();
         format!("`{}` gives {value:e} s (it reads {})", limit.name, reads.join(", "))
     });
     limits.collect::<Vec<_>>().join("; ")
 }
 
-fn eval(e: &Expr, values: &[f64], next: &mut usize, time: f64, dt: f64) -> f64 {
-    let mut go = |x: &Expr| eval(x, values, next, time, dt);
-    match &e.kind {
-        ExprKind::Const(v) => *v,
-        ExprKind::Reduction(..) => {
-            let v = values.get(*next).copied().unwrap_or(f64::NAN);
-            *next += 1;
-            v
+/// The value of each limit (NaN where the host cannot evaluate it).
+fn limits(model: &Model, timesteps: &[usize], values: &[f64], time: f64, dt: f64) -> Vec<f64> {
+    let mut next = 0;
+    timesteps
+        .iter()
+        .map(|t| {
+            let limit = &model.timesteps[*t].value;
+            let order = host_eval::reductions_of(limit);
+            let mine = values.get(next..next + order.len()).unwrap_or(&[]);
+            next += order.len();
+            let mut leaves = TimestepLeaves { order, values: mine, time, dt };
+            host_eval::eval(limit, 1, &mut leaves).map_or(f64::NAN, |v| v[0])
+        })
+        .collect()
+}
+
+/// A limit's leaves: its reductions' values and the clock; fields, parameters and `dim` only
+/// inside a reduction (evaluated by the backend).
+struct TimestepLeaves<'a> {
+    order: Vec<*const Expr>,
+    values: &'a [f64],
+    time: f64,
+    dt: f64,
+}
+
+impl host_eval::Leaves for TimestepLeaves<'_> {
+    fn field(&mut self, _: FieldId) -> Result<Vec<f64>, String> {
+        Err("it reads a field outside a reduction".into())
+    }
+    fn param(&mut self, _: ParamId) -> Result<Vec<f64>, String> {
+        Err("it reads a parameter outside a reduction".into())
+    }
+    fn global(&mut self, g: Global) -> Result<f64, String> {
+        match g {
+            Global::Time => Ok(self.time),
+            Global::Dt => Ok(self.dt),
+            Global::Dim => Err("it reads `dim` outside a reduction".into()),
         }
-        ExprKind::Global(Global::Time) => time,
-        ExprKind::Global(Global::Dt) => dt,
-        ExprKind::Unary(Op::Neg, a) => -go(a),
-        ExprKind::Binary(op, a, b) => {
-            let (x, y) = (go(a), go(b));
-            match op {
-                Op::Add => x + y,
-                Op::Sub => x - y,
-                Op::Scale => x * y,
-                Op::Div => x / y,
-                Op::Pow => x.powf(y),
-                _ => f64::NAN,
-            }
-        }
-        ExprKind::Call(f, args) => {
-            let a: Vec<f64> = args.iter().map(&mut go).collect();
-            match f {
-                Builtin::Sqrt => a[0].sqrt(),
-                Builtin::Min => a.iter().copied().fold(f64::INFINITY, f64::min),
-                Builtin::Max => a.iter().copied().fold(f64::NEG_INFINITY, f64::max),
-                Builtin::Abs => a[0].abs(),
-                Builtin::Exp => a[0].exp(),
-                Builtin::Ln => a[0].ln(),
-                Builtin::Sin => a[0].sin(),
-                Builtin::Cos => a[0].cos(),
-                Builtin::Acos => a[0].acos(),
-                _ => f64::NAN,
-            }
-        }
-        ExprKind::Let(_, _, body) => go(body),
-        _ => f64::NAN,
+    }
+    fn reduction(&mut self, _: Reduce, e: &Expr) -> Result<f64, String> {
+        let at = self.order.iter().position(|p| std::ptr::eq(*p, e)).ok_or("it takes a reduction never collected")?;
+        self.values.get(at).copied().ok_or_else(|| "a reduction without its value".into())
     }
 }

@@ -349,7 +349,14 @@ pub fn builtin(f: Builtin, mut args: Vec<Expr>, span: crate::diag::Span) -> Resu
             let u = units[0].powr(Ratio { num: 1, den: 2 }).ok_or_else(unit_overflow)?;
             Ok(call(args, Type::scalar(u)))
         }
-        Builtin::Exp | Builtin::Ln | Builtin::Sin | Builtin::Cos | Builtin::Acos => {
+        Builtin::Exp
+        | Builtin::Ln
+        | Builtin::Sin
+        | Builtin::Cos
+        | Builtin::Acos
+        | Builtin::Sinh
+        | Builtin::Cosh
+        | Builtin::Tanh => {
             if shapes[0] != Shape::Scalar {
                 return Err(bad("a scalar", None));
             }
@@ -459,6 +466,9 @@ pub fn builtin_by_name(name: &str) -> Option<(Builtin, Option<usize>)> {
         "sin" => (Sin, Some(1)),
         "cos" => (Cos, Some(1)),
         "acos" => (Acos, Some(1)),
+        "sinh" => (Sinh, Some(1)),
+        "cosh" => (Cosh, Some(1)),
+        "tanh" => (Tanh, Some(1)),
         "abs" => (Abs, Some(1)),
         "min" => (Min, None),
         "max" => (Max, None),
@@ -471,7 +481,7 @@ pub fn builtin_by_name(name: &str) -> Option<(Builtin, Option<usize>)> {
 }
 
 /// Every callable name the language knows besides user helpers (for suggestions).
-pub const CALLABLE: [&str; 30] = [
+pub const CALLABLE: [&str; 33] = [
     "diag",
     "dot",
     "outer",
@@ -490,6 +500,9 @@ pub const CALLABLE: [&str; 30] = [
     "sin",
     "cos",
     "acos",
+    "sinh",
+    "cosh",
+    "tanh",
     "abs",
     "min",
     "max",

@@ -2,7 +2,8 @@
 //! the scene-set fields written, every material's parameters resolved (defaults included) and
 //! checked against what the plan reads.
 
-use crate::ir::{self, Builtin, Expr, ExprKind, FieldId, GroupId, GroupSet, Model, Op, ParamId, Side};
+use crate::host_eval;
+use crate::ir::{self, Expr, ExprKind, FieldId, GroupId, GroupSet, Model, ParamId, Side};
 use crate::particles::{Real, Store};
 use crate::schedule::Plan;
 use std::collections::{BTreeMap, BTreeSet};
@@ -149,7 +150,7 @@ fn resolve(
     if !busy.insert(p) {
         return None;
     }
-    let v = eval(model, dim, &default, out, busy, None)?;
+    let v = eval(model, dim, &default, out, busy, None).ok()?;
     out[p.index()] = Some(v.clone());
     Some(v)
 }
@@ -158,60 +159,52 @@ fn resolve(
 /// in the scene's order.
 pub type HostFields = BTreeMap<FieldId, (usize, Vec<f64>)>;
 
-/// Evaluates a parameter default or an initial value (constants, parameters, fields of one
-/// particle, arithmetic) component-wise, on the host.
+/// The leaves of a parameter default or an initial value: the material's parameters (resolved
+/// in turn) and, for an initial value, the fields the scene set on one particle.
+struct HostLeaves<'a> {
+    model: &'a Model,
+    dim: usize,
+    params: &'a mut Vec<Option<Vec<f64>>>,
+    busy: &'a mut BTreeSet<ParamId>,
+    particle: Option<(&'a HostFields, usize)>,
+}
+
+impl host_eval::Leaves for HostLeaves<'_> {
+    fn field(&mut self, f: FieldId) -> Result<Vec<f64>, String> {
+        let (comps, values) = self.particle.and_then(|(fields, k)| fields.get(&f).map(|c| (c, k))).map_or_else(
+            || Err(format!("it reads `{}`, which the scene does not set", self.model.field(f).name)),
+            |((comps, values), k)| Ok((*comps, &values[k * comps..(k + 1) * comps])),
+        )?;
+        debug_assert_eq!(values.len(), comps);
+        Ok(values.to_vec())
+    }
+    fn param(&mut self, p: ParamId) -> Result<Vec<f64>, String> {
+        resolve(self.model, self.dim, p, self.params, self.busy).ok_or_else(|| {
+            format!("it reads `{}`, which the material does not bind", self.model.params[p.index()].name)
+        })
+    }
+    fn global(&mut self, g: ir::Global) -> Result<f64, String> {
+        if g == ir::Global::Dim {
+            return Ok(self.dim as f64);
+        }
+        Err(format!("it reads `{}`, which has no value before the run", if g == ir::Global::Time { "t" } else { "dt" }))
+    }
+    fn reduction(&mut self, _: ir::Reduce, _: &Expr) -> Result<f64, String> {
+        Err("it takes a reduction over particles".into())
+    }
+}
+
+/// Evaluates a parameter default or an initial value on the host (`host_eval`); `Err` says what
+/// it reads that has no value here.
 fn eval(
     model: &Model,
     dim: usize,
     e: &Expr,
-    out: &mut Vec<Option<Vec<f64>>>,
+    params: &mut Vec<Option<Vec<f64>>>,
     busy: &mut BTreeSet<ParamId>,
     particle: Option<(&HostFields, usize)>,
-) -> Option<Vec<f64>> {
-    let n = ir::components(e.ty.shape, dim);
-    let mut go = |x: &Expr| eval(model, dim, x, out, busy, particle);
-    Some(match &e.kind {
-        ExprKind::Const(v) => vec![*v; n],
-        ExprKind::Param(p, _) => return resolve(model, dim, *p, out, busy),
-        ExprKind::Field(f, _) => {
-            let (fields, k) = particle?;
-            let (comps, values) = fields.get(f)?;
-            values[k * comps..(k + 1) * comps].to_vec()
-        }
-        ExprKind::Global(ir::Global::Dim) => vec![dim as f64],
-        ExprKind::Component(a, r, _) if a.ty.shape == ir::Shape::Vec => vec![*go(a)?.get(*r as usize)?],
-        ExprKind::Unary(Op::Neg, a) => go(a)?.iter().map(|x| -x).collect(),
-        ExprKind::Binary(op, a, b) => {
-            let (x, y) = (go(a)?, go(b)?);
-            match op {
-                Op::Add => x.iter().zip(&y).map(|(a, b)| a + b).collect(),
-                Op::Sub => x.iter().zip(&y).map(|(a, b)| a - b).collect(),
-                Op::Scale => y.iter().map(|b| x[0] * b).collect(),
-                Op::Div => x.iter().map(|a| a / y[0]).collect(),
-                Op::Pow => vec![x[0].powf(y[0])],
-                _ => return None,
-            }
-        }
-        ExprKind::Call(f, args) => {
-            let a: Vec<Vec<f64>> = args.iter().map(&mut go).collect::<Option<_>>()?;
-            match f {
-                Builtin::Sqrt => vec![a[0][0].sqrt()],
-                Builtin::Exp => vec![a[0][0].exp()],
-                Builtin::Ln => vec![a[0][0].ln()],
-                Builtin::Sin => vec![a[0][0].sin()],
-                Builtin::Cos => vec![a[0][0].cos()],
-                Builtin::Acos => vec![a[0][0].acos()],
-                Builtin::Abs => a[0].iter().map(|x| x.abs()).collect(),
-                Builtin::Min => a[0].iter().zip(&a[1]).map(|(x, y)| x.min(*y)).collect(),
-                Builtin::Max => a[0].iter().zip(&a[1]).map(|(x, y)| x.max(*y)).collect(),
-                Builtin::Norm => vec![a[0].iter().map(|x| x * x).sum::<f64>().sqrt()],
-                Builtin::Dot => vec![a[0].iter().zip(&a[1]).map(|(x, y)| x * y).sum()],
-                Builtin::Vector => (0..dim).map(|k| a.get(k).map_or(0.0, |c| c[0])).collect(),
-                _ => return None,
-            }
-        }
-        _ => return None,
-    })
+) -> Result<Vec<f64>, String> {
+    host_eval::eval(e, dim, &mut HostLeaves { model, dim, params, busy, particle })
 }
 
 /// Sorts particles group-major (stable) and returns the permutation: new index k holds input
@@ -318,12 +311,8 @@ pub fn host_fields(
         let mut params = materials.to_vec();
         for k in 0..n {
             let params = &mut params[input.material[k] as usize];
-            let v = eval(model, dim, init, params, &mut BTreeSet::new(), Some((&fields, k))).ok_or_else(|| {
-                SetupError(format!(
-                    "cannot compute the initial value of `{}` (it reads something the scene does not set)",
-                    field.name
-                ))
-            })?;
+            let v = eval(model, dim, init, params, &mut BTreeSet::new(), Some((&fields, k)))
+                .map_err(|what| SetupError(format!("cannot compute the initial value of `{}`: {what}", field.name)))?;
             values[k * comps..(k + 1) * comps].copy_from_slice(&v[..comps]);
         }
         fields.insert(*f, (comps, values));
@@ -334,9 +323,9 @@ pub fn host_fields(
         let mut values = fields.get(&iv.field).map(|f| f.1.clone()).unwrap_or_else(|| vec![0.0; n * comps]);
         for k in (0..n).filter(|k| input.body[*k] == iv.body) {
             let params = &mut params[input.material[k] as usize];
-            let v = eval(model, dim, &iv.value, params, &mut BTreeSet::new(), Some((&fields, k))).ok_or_else(|| {
+            let v = eval(model, dim, &iv.value, params, &mut BTreeSet::new(), Some((&fields, k))).map_err(|what| {
                 SetupError(format!(
-                    "cannot compute the case's initial value of `{}` (it reads something the scene does not set)",
+                    "cannot compute the case's initial value of `{}`: {what}",
                     model.field(iv.field).name
                 ))
             })?;

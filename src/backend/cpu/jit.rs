@@ -278,6 +278,7 @@ fn supported(node: &Node) -> Result<(), String> {
     match node {
         Node::Un(Un::Ln, _) => Err("ln".into()),
         Node::Un(Un::Sin | Un::Cos | Un::Acos, _) => Err("sin, cos and acos".into()),
+        Node::Un(Un::Sinh | Un::Cosh | Un::Tanh, _) => Err("sinh, cosh and tanh".into()),
         Node::Bin(Bin::Pow, _, _) => Err("pow with a varying exponent".into()),
         Node::Load { side: Side::I, .. } | Node::Param { side: Side::I, .. } => {
             Err("a value of particle i read per lane".into())
@@ -542,7 +543,9 @@ impl<'a, 'b, T: Real> Emitter<'a, 'b, T> {
                             self.truth(m, one, zero)
                         }
                         Un::Exp => self.exp(a, T::EXP),
-                        Un::Ln | Un::Sin | Un::Cos | Un::Acos => unreachable!("checked by `supported`"),
+                        Un::Ln | Un::Sin | Un::Cos | Un::Acos | Un::Sinh | Un::Cosh | Un::Tanh => {
+                            unreachable!("checked by `supported`")
+                        }
                     }
                 }
                 Node::Bin(op, a, c) => {

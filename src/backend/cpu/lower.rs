@@ -21,6 +21,9 @@ pub enum Un {
     Sin,
     Cos,
     Acos,
+    Sinh,
+    Cosh,
+    Tanh,
     Abs,
 }
 
@@ -145,6 +148,9 @@ impl Graph {
                 Un::Sin => x.sin(),
                 Un::Cos => x.cos(),
                 Un::Acos => x.acos(),
+                Un::Sinh => x.sinh(),
+                Un::Cosh => x.cosh(),
+                Un::Tanh => x.tanh(),
                 Un::Abs => x.abs(),
             };
             return self.c(r);
@@ -750,7 +756,16 @@ impl<'a> Lowerer<'a> {
                 let det = self.det(&args[0]);
                 scalar(det)
             }
-            Builtin::Sqrt | Builtin::Exp | Builtin::Ln | Builtin::Sin | Builtin::Cos | Builtin::Acos | Builtin::Abs => {
+            Builtin::Sqrt
+            | Builtin::Exp
+            | Builtin::Ln
+            | Builtin::Sin
+            | Builtin::Cos
+            | Builtin::Acos
+            | Builtin::Sinh
+            | Builtin::Cosh
+            | Builtin::Tanh
+            | Builtin::Abs => {
                 let op = match f {
                     Builtin::Sqrt => Un::Sqrt,
                     Builtin::Exp => Un::Exp,
@@ -758,6 +773,9 @@ impl<'a> Lowerer<'a> {
                     Builtin::Sin => Un::Sin,
                     Builtin::Cos => Un::Cos,
                     Builtin::Acos => Un::Acos,
+                    Builtin::Sinh => Un::Sinh,
+                    Builtin::Cosh => Un::Cosh,
+                    Builtin::Tanh => Un::Tanh,
                     _ => Un::Abs,
                 };
                 let c = args[0].c.iter().map(|x| self.g.un(op, *x)).collect();

@@ -236,6 +236,9 @@ fn un_instr<T: Real>(op: Un, o: usize, a: usize) -> Instr<T> {
         Un::Sin => lanes1!(o, a, |x| x.sin()),
         Un::Cos => lanes1!(o, a, |x| x.cos()),
         Un::Acos => lanes1!(o, a, |x| x.acos()),
+        Un::Sinh => lanes1!(o, a, |x| x.sinh()),
+        Un::Cosh => lanes1!(o, a, |x| x.cosh()),
+        Un::Tanh => lanes1!(o, a, |x| x.tanh()),
         Un::Abs => lanes1!(o, a, |x| x.abs()),
     }
 }

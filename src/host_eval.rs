@@ -1,0 +1,171 @@
+//! The one evaluator of IR expressions on the host, in f64: parameter defaults and initial values
+//! (`engine::setup`) and the arithmetic of the time-step limits around their reductions
+//! (`backend::timestep`). A value is the stored components of its shape (`ir::components`); what
+//! a leaf is (a field of one particle, a parameter, a reduction's value) the caller says through
+//! [`Leaves`]. Tensor products, inverses and kernels are not evaluated here: an expression that
+//! needs them is an error that names them.
+
+use crate::ir::{self, Builtin, Expr, ExprKind, FieldId, Global, LocalId, Op, ParamId, Reduce, Shape};
+
+/// What the leaves of an expression are worth; each answers `Err` with a clause that says what
+/// it cannot give ("it reads `rho`, which the scene does not set").
+pub trait Leaves {
+    fn field(&mut self, f: FieldId) -> Result<Vec<f64>, String>;
+    fn param(&mut self, p: ParamId) -> Result<Vec<f64>, String>;
+    /// `t`, `dt` or `dim`.
+    fn global(&mut self, g: Global) -> Result<f64, String>;
+    fn reduction(&mut self, r: Reduce, e: &Expr) -> Result<f64, String>;
+}
+
+/// The value of `e`, or a clause that says what in it the host cannot evaluate.
+pub fn eval(e: &Expr, dim: usize, leaves: &mut dyn Leaves) -> Result<Vec<f64>, String> {
+    Evaluator { dim, leaves, locals: vec![] }.value(e)
+}
+
+/// What the host evaluates, for the errors of what it does not.
+const BEYOND: &str = "which is not evaluated before the run (initial values, parameter defaults and time-step \
+                      limits take arithmetic, comparisons, `select`, components and scalar functions)";
+
+struct Evaluator<'a> {
+    dim: usize,
+    leaves: &'a mut dyn Leaves,
+    locals: Vec<(LocalId, Vec<f64>)>,
+}
+
+fn truth(b: bool) -> Vec<f64> {
+    vec![if b { 1.0 } else { 0.0 }]
+}
+
+impl Evaluator<'_> {
+    fn value(&mut self, e: &Expr) -> Result<Vec<f64>, String> {
+        let n = ir::components(e.ty.shape, self.dim);
+        Ok(match &e.kind {
+            ExprKind::Const(v) => vec![*v; n],
+            ExprKind::Field(f, _) => self.leaves.field(*f)?,
+            ExprKind::Param(p, _) => self.leaves.param(*p)?,
+            ExprKind::Global(g) => vec![self.leaves.global(*g)?],
+            ExprKind::Reduction(r, inner) => vec![self.leaves.reduction(*r, inner)?],
+            ExprKind::Local(l) => {
+                self.locals.iter().rev().find(|(k, _)| k == l).ok_or("it reads a local it never bound")?.1.clone()
+            }
+            ExprKind::Let(l, value, body) => {
+                let v = self.value(value)?;
+                self.locals.push((*l, v));
+                let out = self.value(body);
+                self.locals.pop();
+                out?
+            }
+            ExprKind::Identity => ir::component_indices(e.ty.shape, self.dim)
+                .iter()
+                .map(|(a, b)| if a == b { 1.0 } else { 0.0 })
+                .collect(),
+            ExprKind::Component(a, r, c) => self.component(a, *r as usize, *c as usize)?,
+            ExprKind::Unary(Op::Neg, a) => self.value(a)?.iter().map(|x| -x).collect(),
+            ExprKind::Unary(Op::Not, a) => truth(self.value(a)?[0] == 0.0),
+            ExprKind::Binary(op, a, b) => self.binary(*op, a, b)?,
+            ExprKind::Select(c, a, b) => {
+                if self.value(c)?[0] != 0.0 {
+                    self.value(a)?
+                } else {
+                    self.value(b)?
+                }
+            }
+            ExprKind::Call(f, args) => self.call(*f, args)?,
+            ExprKind::ToTensor(a) => self.widened(a)?,
+            ExprKind::Pair(_) | ExprKind::InGroup(..) => return Err("it reads a neighbour".into()),
+            ExprKind::Unary(..) => return Err(format!("it takes an operator, {BEYOND}")),
+        })
+    }
+
+    /// A symmetric or skew tensor's stored components spread over a full tensor's.
+    fn widened(&mut self, a: &Expr) -> Result<Vec<f64>, String> {
+        let v = self.value(a)?;
+        let stored = ir::component_indices(a.ty.shape, self.dim);
+        let at = |r: usize, c: usize| stored.iter().position(|&rc| rc == (r, c)).map(|k| v[k]);
+        let full = ir::component_indices(Shape::Tensor, self.dim).into_iter().map(|(r, c)| match a.ty.shape {
+            Shape::SymTensor => at(r.min(c), r.max(c)).unwrap_or(0.0),
+            Shape::SkewTensor if r < c => at(r, c).unwrap_or(0.0),
+            Shape::SkewTensor if r > c => -at(c, r).unwrap_or(0.0),
+            Shape::SkewTensor => 0.0,
+            _ => v.get(r * self.dim + c).copied().unwrap_or(0.0),
+        });
+        Ok(full.collect())
+    }
+
+    fn component(&mut self, a: &Expr, r: usize, c: usize) -> Result<Vec<f64>, String> {
+        let v = self.value(a)?;
+        let (r, c) = if a.ty.shape == Shape::SymTensor && r > c { (c, r) } else { (r, c) };
+        let at = ir::component_indices(a.ty.shape, self.dim).iter().position(|&rc| rc == (r, c));
+        Ok(vec![*at
+            .and_then(|k| v.get(k))
+            .ok_or_else(|| format!("it takes a component of a skew tensor, {BEYOND}"))?])
+    }
+
+    fn binary(&mut self, op: Op, a: &Expr, b: &Expr) -> Result<Vec<f64>, String> {
+        // `&&` and `||` look at their right side only when they must, as the backends do.
+        match op {
+            Op::And => return Ok(truth(self.value(a)?[0] != 0.0 && self.value(b)?[0] != 0.0)),
+            Op::Or => return Ok(truth(self.value(a)?[0] != 0.0 || self.value(b)?[0] != 0.0)),
+            _ => {}
+        }
+        let (x, y) = (self.value(a)?, self.value(b)?);
+        let elementwise = |f: fn(f64, f64) -> f64| x.iter().zip(&y).map(|(p, q)| f(*p, *q)).collect();
+        Ok(match op {
+            Op::Add => elementwise(|p, q| p + q),
+            Op::Sub => elementwise(|p, q| p - q),
+            Op::Scale => y.iter().map(|q| x[0] * q).collect(),
+            Op::Div => x.iter().map(|p| p / y[0]).collect(),
+            Op::Pow => vec![x[0].powf(y[0])],
+            Op::Lt => truth(x[0] < y[0]),
+            Op::Le => truth(x[0] <= y[0]),
+            Op::Gt => truth(x[0] > y[0]),
+            Op::Ge => truth(x[0] >= y[0]),
+            Op::Eq => truth(x == y),
+            Op::Ne => truth(x != y),
+            _ => return Err(format!("it multiplies tensors, {BEYOND}")),
+        })
+    }
+
+    fn call(&mut self, f: Builtin, args: &[Expr]) -> Result<Vec<f64>, String> {
+        let a: Vec<Vec<f64>> = args.iter().map(|x| self.value(x)).collect::<Result<_, _>>()?;
+        let scalar = |g: fn(f64) -> f64| vec![g(a[0][0])];
+        let weights = |e: &Expr| -> Vec<f64> {
+            ir::component_indices(e.ty.shape, self.dim).iter().map(|(r, c)| if r == c { 1.0 } else { 2.0 }).collect()
+        };
+        Ok(match f {
+            Builtin::Sqrt => scalar(f64::sqrt),
+            Builtin::Exp => scalar(f64::exp),
+            Builtin::Ln => scalar(f64::ln),
+            Builtin::Sin => scalar(f64::sin),
+            Builtin::Cos => scalar(f64::cos),
+            Builtin::Acos => scalar(f64::acos),
+            Builtin::Sinh => scalar(f64::sinh),
+            Builtin::Cosh => scalar(f64::cosh),
+            Builtin::Tanh => scalar(f64::tanh),
+            Builtin::Abs => a[0].iter().map(|x| x.abs()).collect(),
+            Builtin::Min => a[1..].iter().fold(a[0].clone(), |m, x| m.iter().zip(x).map(|(p, q)| p.min(*q)).collect()),
+            Builtin::Max => a[1..].iter().fold(a[0].clone(), |m, x| m.iter().zip(x).map(|(p, q)| p.max(*q)).collect()),
+            Builtin::Dot => vec![a[0].iter().zip(&a[1]).map(|(x, y)| x * y).sum()],
+            // A tensor's Frobenius norm counts each stored off-diagonal component twice.
+            Builtin::Norm => vec![a[0].iter().zip(weights(&args[0])).map(|(x, w)| w * x * x).sum::<f64>().sqrt()],
+            Builtin::Trace => {
+                let diagonal = ir::component_indices(args[0].ty.shape, self.dim);
+                vec![a[0].iter().zip(diagonal).filter(|(_, (r, c))| r == c).map(|(x, _)| x).sum()]
+            }
+            Builtin::Vector => (0..self.dim).map(|k| a.get(k).map_or(0.0, |c| c[0])).collect(),
+            _ => return Err(format!("it calls `{}`, {BEYOND}", f.name())),
+        })
+    }
+}
+
+/// The reductions of `e` in the order [`crate::backend::timestep::reductions`] lists them, by
+/// address: a leaf resolver finds each one's value whatever order the evaluator meets them in.
+pub fn reductions_of(e: &Expr) -> Vec<*const Expr> {
+    let mut out = vec![];
+    ir::walk_expr(e, &mut |x| {
+        if let ExprKind::Reduction(_, inner) = &x.kind {
+            out.push(&**inner as *const Expr);
+        }
+    });
+    out
+}
