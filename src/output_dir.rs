@@ -6,7 +6,8 @@
 //!
 //! - A **run directory** (`pairsum run --out`: reports, plots, VTK series, checkpoints) is marked
 //!   with a `.pairsum-output` file when pairsum first writes into it. A directory that exists, is
-//!   not empty and has no marker is refused.
+//!   not empty and has no marker is refused. In a directory that was marked, a fresh run replaces
+//!   the frames of its case's earlier series (those its `.pvd` lists), and nothing else.
 //! - A **WGSL directory** (`pairsum emit -o`) may hold only kernels pairsum generated (recognised
 //!   by their first line); after writing, the generated kernels it no longer produces are removed,
 //!   and nothing else ever is.
@@ -31,19 +32,34 @@ impl std::fmt::Display for Refused {
 }
 
 /// Makes `dir` a run directory: creates it, or accepts it when it is empty or already marked;
-/// a directory holding anything else is refused unless `force`. Writes the marker.
-pub fn claim_run_dir(dir: &Path, force: bool) -> Result<(), Refused> {
+/// a directory holding anything else is refused unless `force`. Writes the marker. Returns
+/// whether everything in it was pairsum's already (new, empty or marked), so that an earlier
+/// run's outputs there may be replaced.
+pub fn claim_run_dir(dir: &Path, force: bool) -> Result<bool, Refused> {
     let marked = dir.join(RUN_MARKER).is_file();
-    if !marked && !force {
-        let foreign = entries(dir)?;
-        if !foreign.is_empty() {
-            return Err(refusal(dir, &foreign, "run outputs"));
-        }
+    let foreign = if marked { vec![] } else { entries(dir)? };
+    if !foreign.is_empty() && !force {
+        return Err(refusal(dir, &foreign, "run outputs"));
     }
     std::fs::create_dir_all(dir).map_err(|e| Refused(format!("cannot create `{}`: {e}", dir.display())))?;
     if !marked {
         std::fs::write(dir.join(RUN_MARKER), "pairsum writes its run outputs here (report, plots, VTK, checkpoints)\n")
             .map_err(|e| Refused(format!("cannot write into `{}`: {e}", dir.display())))?;
+    }
+    Ok(foreign.is_empty())
+}
+
+/// Removes the snapshots an earlier run of the series `basename` wrote into `vtk_dir`: the
+/// `.vtu` files its `.pvd` lists, nothing else. Call it only on a directory that was pairsum's
+/// before this run ([`claim_run_dir`]), before a fresh series starts there.
+pub fn remove_earlier_series(vtk_dir: &Path, basename: &str) -> io::Result<()> {
+    let Ok(pvd) = std::fs::read_to_string(vtk_dir.join(format!("{basename}.pvd"))) else { return Ok(()) };
+    let prefix = format!("{basename}_");
+    for file in pvd.split("file=\"").skip(1).filter_map(|rest| rest.split('"').next()) {
+        let ours = file.starts_with(&prefix) && file.ends_with(".vtu") && !file.contains(['/', '\\']);
+        if ours && vtk_dir.join(file).is_file() {
+            std::fs::remove_file(vtk_dir.join(file))?;
+        }
     }
     Ok(())
 }

@@ -106,7 +106,12 @@ pub fn prepare(path: &Path, opts: &scene::Options) -> Result<(Scene, Plan), RunF
 pub fn run_case(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailure> {
     let (scene, plan) = prepare(path, &opts.scene)?;
     eprint!("{}", scene.warnings.concat());
-    claim_out(opts)?;
+    let ours = claim_out(opts)?;
+    if ours && opts.vtk && opts.restart.is_none() {
+        // A fresh series: an earlier run's frames past this one's last would be left beside it.
+        crate::output_dir::remove_earlier_series(&opts.out.join("vtk"), &scene.name)
+            .map_err(|e| RunFailure::Run(format!("removing the earlier run's VTK frames: {e}")))?;
+    }
     match opts.backend {
         BackendChoice::Cpu => run_cpu_precision(scene, plan, opts),
         BackendChoice::Gpu => match crate::backend::gpu::device::Gpu::new() {
@@ -130,8 +135,9 @@ pub fn run_case(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailure
     }
 }
 
-/// Claims `opts.out` for this run's outputs (see [`crate::output_dir`]).
-fn claim_out(opts: &RunOptions) -> Result<(), RunFailure> {
+/// Claims `opts.out` for this run's outputs (see [`crate::output_dir`]); returns whether it was
+/// pairsum's already.
+fn claim_out(opts: &RunOptions) -> Result<bool, RunFailure> {
     crate::output_dir::claim_run_dir(&opts.out, opts.force).map_err(|e| RunFailure::Input(format!("error: {e}\n")))
 }
 

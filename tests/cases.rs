@@ -910,3 +910,24 @@ fn total_lagrangian_beam_vibration_2d_period_is_within_its_tolerance_at_8_partic
 fn total_lagrangian_beam_vibration_2d_period_error_halves_from_4_to_8_particles_across() {
     assert_error_halves("beam_vibration_2d", "ci@5mm", "ci");
 }
+
+/// A material no body uses is not checked against the model (a case that switches models keeps
+/// the other model's materials): a warning, not error C0007.
+#[test]
+fn a_material_no_body_uses_is_a_warning_not_an_unknown_parameter_error() {
+    let dir = out_dir("unused-material");
+    std::fs::create_dir_all(&dir).expect("dir");
+    let path = dir.join("spare.toml");
+    let text = std::fs::read_to_string(case("elastic_wave")).expect("case");
+    std::fs::write(&path, format!("{text}\n[materials.spare]\nnot_a_parameter = 1\n")).expect("write");
+    let (scene, _) = prepare(&path, &Default::default()).unwrap_or_else(|e| panic!("{e}"));
+    let warnings = scene.warnings.join("\n");
+    assert!(warnings.contains("C0042") && warnings.contains("material `spare` is used by no body"), "{warnings}");
+    // A material a body uses is still checked.
+    let used = text.replace("[materials.bar]", "[materials.bar]\nnot_a_parameter = 1");
+    assert_ne!(used, text, "elastic_wave's material is not `bar`");
+    std::fs::write(&path, used).expect("write");
+    let err = prepare(&path, &Default::default()).err().map(|e| e.to_string()).unwrap_or_default();
+    assert!(err.contains("C0007") && err.contains("`not_a_parameter`"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -173,3 +173,37 @@ fn a_plan_error_has_its_code_and_points_at_the_model() {
     assert!(pairsum(&d, &["plan", "m.sph", "--dim", "3"]).status.success());
     std::fs::remove_dir_all(&d).unwrap();
 }
+
+/// The `.vtu` files in `dir`, sorted.
+fn frames(dir: &Path) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.ends_with(".vtu"))
+        .collect();
+    names.sort();
+    names
+}
+
+#[test]
+fn a_shorter_run_into_an_earlier_runs_directory_leaves_none_of_its_frames_and_none_of_the_users_files_behind() {
+    let d = scratch("rerun");
+    let run = |end: &str| {
+        let args = ["run", "elastic_wave", "--backend", "cpu", "--out", "out", "--end-time", end, "--quiet"];
+        let o = pairsum(&d, &args);
+        assert!(o.status.success(), "{}", stderr(&o));
+    };
+    run("1e-3");
+    let long = frames(&d.join("out/vtk"));
+    std::fs::write(d.join("out/vtk/notes.txt"), "mine").unwrap();
+    run("4e-4");
+    let short = frames(&d.join("out/vtk"));
+    assert!(short.len() < long.len(), "{short:?} against {long:?}");
+    // Exactly the frames the new series lists: none of the longer run's later ones.
+    let pvd = std::fs::read_to_string(d.join("out/vtk/elastic_wave.pvd")).unwrap();
+    let listed: Vec<&str> = pvd.split("file=\"").skip(1).filter_map(|r| r.split('"').next()).collect();
+    assert_eq!(short, listed, "frames on disk against the .pvd");
+    assert_eq!(std::fs::read_to_string(d.join("out/vtk/notes.txt")).unwrap(), "mine");
+    std::fs::remove_dir_all(&d).unwrap();
+}

@@ -314,6 +314,18 @@ pub fn load_text(
     }
 }
 
+/// The keys serde's "unknown field" message lists after the key: "expected `a`", "expected `a`
+/// or `b`", "expected one of `a`, `b`, `c`", or none ("there are no fields").
+fn expected_keys(message: &str) -> Vec<&str> {
+    let Some((_, list)) = message.split_once("expected ") else { return vec![] };
+    let list = list.strip_prefix("one of ").unwrap_or(list);
+    list.split(", ")
+        .flat_map(|k| k.split(" or "))
+        .map(|k| k.trim().trim_matches('`'))
+        .filter(|k| !k.is_empty())
+        .collect()
+}
+
 /// A TOML or shape error of the case file, with a suggestion for a misspelt key.
 fn toml_error(file: u32, e: &toml::de::Error) -> Diagnostic {
     let span = e.span().unwrap_or(0..0);
@@ -321,12 +333,12 @@ fn toml_error(file: u32, e: &toml::de::Error) -> Diagnostic {
     let at = Span::new(file, span.start, span.end);
     if let Some(rest) = msg.strip_prefix("unknown field `") {
         let key = rest.split('`').next().unwrap_or("");
-        let expected: Vec<&str> =
-            rest.split("expected one of ").nth(1).unwrap_or("").split(", ").map(|k| k.trim_matches('`')).collect();
+        let expected = expected_keys(rest);
         let mut d = Diagnostic::error("C0001", format!("case file: unknown key `{key}`")).at(at, "not a key here");
-        d = match closest(key, expected.iter().copied()) {
-            Some(best) => d.help(format!("did you mean `{best}`?")),
-            None => d.note(format!("the keys here are: {}", expected.join(", "))),
+        d = match (closest(key, expected.iter().copied()), expected.is_empty()) {
+            (Some(best), _) => d.help(format!("did you mean `{best}`?")),
+            (None, false) => d.note(format!("the keys here are: {}", expected.join(", "))),
+            (None, true) => d.note("this table takes no keys"),
         };
         return d;
     }
@@ -470,10 +482,20 @@ fn build(
     }
     // Materials.
     let mut materials = vec![];
+    let used: std::collections::BTreeSet<&str> =
+        case.bodies.get_ref().iter().map(|b| b.material.get_ref().as_str()).collect();
     for (mat_name, values) in &case.materials {
         let mut mi = MaterialInput { name: mat_name.clone(), ..Default::default() };
+        let unused = !used.contains(mat_name.as_str());
+        if let Some(first) = values.values().next().filter(|_| unused) {
+            let msg = format!("material `{mat_name}` is used by no body: its keys are not checked against the model");
+            cx.diags.push(Diagnostic::warning("C0042", msg).at(cx.span(first.span()), "in this material"));
+        }
         for (key, v) in values {
             let Some(p) = model.param_id(key) else {
+                if unused {
+                    continue;
+                }
                 let names: Vec<&str> = model.params.iter().map(|p| p.name.as_str()).collect();
                 let mut d = Diagnostic::error(
                     "C0007",
@@ -1555,7 +1577,19 @@ fn neighbour_search(cx: &mut Ctx, model: &Model, n: Option<&case::Neighbours>, v
 
 #[cfg(test)]
 mod tests {
-    use super::string_layout;
+    use super::{expected_keys, string_layout};
+
+    #[test]
+    fn the_keys_of_an_unknown_key_message_are_read_for_one_two_or_many_keys_or_none() {
+        for (message, keys) in [
+            ("axs`, expected `axis`", vec!["axis"]),
+            ("foo`, expected `min` or `max`", vec!["min", "max"]),
+            ("foo`, expected one of `name`, `group`, `shape`", vec!["name", "group", "shape"]),
+            ("foo`, there are no fields", vec![]),
+        ] {
+            assert_eq!(expected_keys(message), keys, "{message}");
+        }
+    }
 
     #[test]
     fn a_string_is_laid_out_as_the_file_writes_it() {
