@@ -178,16 +178,21 @@ def richardson(values):
     return c + (c - b) / (2**p - 1), p
 
 
+def print_refinement(title, meshes, value_of, unit):
+    """Prints a value on Q9 meshes `meshes` elements deep and its Richardson extrapolation."""
+    values = [value_of(n) for n in meshes]
+    limit, order = richardson(values)
+    print(title)
+    for n, v in zip(meshes, values):
+        print(f"  Q9, {n:2d} elements deep: {v:.7e} {unit}")
+    print(f"  Richardson (order {order:.2f}): {limit:.6e} {unit}")
+
+
 def main():
     ep = E / (1 - NU**2)
     g = E / (2 * (1 + NU))
     meshes = [4, 8, 16, 32]
-    d = [cantilever_mean_deflection(n) for n in meshes]
-    d0, p = richardson(d)
-    print("cantilever_2d: mean deflection of the last 25 mm")
-    for n, v in zip(meshes, d):
-        print(f"  Q9, {n:2d} elements deep: {v:.6e} m")
-    print(f"  Richardson (order {p:.2f}): {d0:.5e} m")
+    print_refinement("cantilever_2d: mean deflection of the last 25 mm", meshes, cantilever_mean_deflection, "m")
     x = np.linspace(0, 0.5, 200001)
     # Timoshenko for the same load, averaged over the same span
     load, end, length, depth = 100.0, 0.025, 0.5, 0.1
@@ -201,12 +206,7 @@ def main():
     w = integrate(integrate(moment / (ep * inertia))) + integrate(shear / (5 / 6 * g * depth))
     span = x >= length - end
     print(f"  Timoshenko beam, same load and span: {np.trapezoid(w[span], x[span]) / end:.5e} m")
-    pl = [clamped_plate_mean_deflection(n) for n in meshes]
-    pl0, p = richardson(pl)
-    print("clamped_plate_2d: mean deflection of the middle 20 mm")
-    for n, v in zip(meshes, pl):
-        print(f"  Q9, {n:2d} elements deep: {v:.6e} m")
-    print(f"  Richardson (order {p:.2f}): {pl0:.5e} m")
+    print_refinement("clamped_plate_2d: mean deflection of the middle 20 mm", meshes, clamped_plate_mean_deflection, "m")
     q, span, thick = 100.0, 0.4, 0.04
     plate = q * span**4 / (384 * ep * thick**3 / 12) + q * span**2 / (8 * 5 / 6 * g * thick)
     print(f"  plate theory at mid-span (with shear): {plate:.5e} m")
@@ -215,12 +215,7 @@ def main():
     for n, v in zip((2, 4, 8), d3):
         print(f"  Q27, {n:2d} elements deep: {v:.6e} m")
     print(f"  (the finest is the reference; it moved {100 * (d3[2] / d3[1] - 1):+.2f} % from 4 to 8 deep)")
-    t = [first_period(n) for n in meshes]
-    t0, p = richardson(t)
-    print("beam_vibration_2d: period of the first bending mode")
-    for n, v in zip(meshes, t):
-        print(f"  Q9, {n:2d} elements deep: {v:.7f} s")
-    print(f"  Richardson (order {p:.2f}): {t0:.6f} s")
+    print_refinement("beam_vibration_2d: period of the first bending mode", meshes, first_period, "s")
     omega = 1.875104**2 * np.sqrt(ep * 0.02**2 / 12 / (RHO * 0.2**4))
     print(f"  Euler–Bernoulli: {2 * np.pi / omega:.6f} s (ω = {omega:.4f} rad/s)")
 
