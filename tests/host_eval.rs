@@ -11,28 +11,11 @@ use std::path::PathBuf;
 
 const MODEL: &str = "use kernels\ngroup metal\nkernel = wendland_c2\nintegrate { x' = v  v' = 0 }\n";
 
-/// A 6 × 6 block at 10 mm (x = 5 … 55 mm) whose initial velocity is `velocity`.
+/// The block of `common::block_case` with its initial velocity `velocity`, written with the model
+/// into `dir`; the case's path.
 fn block_case(dir: &PathBuf, velocity: &str) -> PathBuf {
-    let case = format!(
-        r#"name = "block"
-model = "model.sph"
-dim = 2
-end_time = "1 ms"
-
-[resolutions]
-ci = "10 mm"
-
-[materials.metal]
-rho0 = "1000 kg/m^3"
-
-[[bodies]]
-name = "block"
-group = "metal"
-material = "metal"
-shape = {{ box = {{ min = [0, 0], max = ["60 mm", "60 mm"] }} }}
-initial = {{ v = "{velocity}" }}
-"#
-    );
+    let case =
+        common::block_case("model.sph", "end_time = \"1 ms\"", &format!("initial = {{ v = \"{velocity}\" }}"), "");
     std::fs::create_dir_all(dir).unwrap();
     std::fs::write(dir.join("model.sph"), MODEL).unwrap();
     std::fs::write(dir.join("case.toml"), case).unwrap();

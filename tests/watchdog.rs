@@ -4,6 +4,7 @@
 //! falling freely for a second). A stopped run exits 1, names the step, particle, group and
 //! field, keeps its last good state and reports no figures.
 
+mod common;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -154,42 +155,14 @@ fn kicked_model(kick: &str) -> String {
     )
 }
 
-/// A case of one block of 6 × 6 particles at 10 mm, its largest speed probed, with the model
-/// `model`, the top-level keys `top` and the result `result` on the probe `speed`.
+/// The block of `common::block_case` with the model `model`, the top-level keys `top` and its
+/// largest speed probed, the result `result` on that probe.
 fn block_case(model: &str, top: &str, result: &str) -> String {
-    format!(
-        r#"name = "block"
-model = "{model}"
-dim = 2
-{top}
-dt_max = "1 ms"
-
-[materials.metal]
-rho0 = "1000 kg/m^3"
-
-[[bodies]]
-name = "block"
-group = "metal"
-material = "metal"
-shape = {{ box = {{ min = [0, 0], max = ["60 mm", "60 mm"] }} }}
-
-[resolutions]
-ci = "10 mm"
-
-[[probes]]
-name = "speed"
-body = "block"
-field = "v"
-component = "norm"
-reduce = "max"
-unit = "m/s"
-
-[[results]]
-probe = "speed"
-at = "end"
-{result}
-"#
-    )
+    let probe = format!(
+        "[[probes]]\nname = \"speed\"\nbody = \"block\"\nfield = \"v\"\ncomponent = \"norm\"\nreduce = \"max\"\n\
+         unit = \"m/s\"\n\n[[results]]\nprobe = \"speed\"\nat = \"end\"\n{result}"
+    );
+    common::block_case(model, top, "", &probe)
 }
 
 /// Runs the kicked block with the top-level keys `top` and checks that the kick, seen at the

@@ -217,3 +217,32 @@ pub fn rnd(seed: &mut u64) -> f64 {
     *seed ^= *seed << 17;
     (*seed % 1_000_000) as f64 / 1_000_000.0
 }
+
+/// A case file of one block of 6 × 6 particles at 10 mm (x and y from 5 to 55 mm) of a material
+/// `metal` (ρ0 = 1000 kg/m³), group `metal`, run with the model file `model`: `top` adds
+/// top-level keys, `body` keys of the block, and `rest` tables after it (probes, results).
+pub fn block_case(model: &str, top: &str, body: &str, rest: &str) -> String {
+    format!(
+        r#"name = "block"
+model = "{model}"
+dim = 2
+{top}
+dt_max = "1 ms"
+
+[materials.metal]
+rho0 = "1000 kg/m^3"
+
+[[bodies]]
+name = "block"
+group = "metal"
+material = "metal"
+shape = {{ box = {{ min = [0, 0], max = ["60 mm", "60 mm"] }} }}
+{body}
+
+[resolutions]
+ci = "10 mm"
+
+{rest}
+"#
+    )
+}
