@@ -855,14 +855,22 @@ fn build(
             continue;
         };
         let at = r.at.as_ref().map(|a| a.get_ref().clone()).unwrap_or_else(|| "end".into());
-        if !["end", "min", "max", "abs_max", "mean_after", "slope", "zero_crossing", "at_time"].contains(&at.as_str()) {
+        const AT: [&str; 11] = [
+            "end",
+            "min",
+            "max",
+            "abs_max",
+            "mean",
+            "mean_after",
+            "period",
+            "frequency",
+            "slope",
+            "zero_crossing",
+            "at_time",
+        ];
+        if !AT.contains(&at.as_str()) {
             let span = r.at.as_ref().map(|a| a.span()).unwrap_or(0..0);
-            cx.err(
-                span,
-                "C0019",
-                format!("`at` is end, min, max, abs_max, mean_after, slope, zero_crossing or at_time, found `{at}`"),
-                "here",
-            );
+            cx.err(span, "C0019", format!("`at` is {}, found `{at}`", AT.join(", ")), "here");
             continue;
         }
         if (at == "at_time") != r.time.is_some() {

@@ -323,7 +323,8 @@ pub struct Probe {
 pub struct ResultSpec {
     pub quantity: Spanned<String>,
     pub probe: Spanned<String>,
-    /// `end` (default), `min`, `max`, `mean_after` (with `from`), `abs_max`.
+    /// `end` (default), `min`, `max`, `abs_max`, `mean` (over `from`–`to`), `mean_after`, `period`,
+    /// `frequency`, `slope`, `zero_crossing`, `at_time` (docs/CASE_FILES.md).
     #[serde(default)]
     pub at: Option<Spanned<String>>,
     #[serde(default)]

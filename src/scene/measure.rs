@@ -499,23 +499,47 @@ fn nan_or(points: &[(f64, f64)], f: impl Fn(&[(f64, f64)]) -> f64) -> f64 {
     }
 }
 
+/// The mean of the values (NaN for none).
+fn mean(values: &[(f64, f64)]) -> f64 {
+    if values.is_empty() {
+        f64::NAN
+    } else {
+        values.iter().map(|p| p.1).sum::<f64>() / values.len() as f64
+    }
+}
+
+/// The period of an oscillation: twice the mean spacing of the times at which the history crosses
+/// its mean over the window (interpolated linearly); NaN with fewer than three crossings (one
+/// whole period) or a NaN in the window.
+fn period(window: &[(f64, f64)]) -> f64 {
+    let level = mean(window);
+    let crossings: Vec<f64> = window
+        .windows(2)
+        .filter(|w| (w[0].1 - level) * (w[1].1 - level) < 0.0)
+        .map(|w| w[0].0 + (w[1].0 - w[0].0) * (w[0].1 - level) / (w[0].1 - w[1].1))
+        .collect();
+    match crossings.as_slice() {
+        [first, .., last] if crossings.len() >= 3 && level.is_finite() => {
+            2.0 * (last - first) / (crossings.len() - 1) as f64
+        }
+        _ => f64::NAN,
+    }
+}
+
 /// A result from its probe's history.
 pub fn result_value(r: &ResultSpec, h: &History) -> f64 {
     let pts = &h.points;
+    // The window [from, to] (the whole history by default).
+    let (from, to) = (r.from.unwrap_or(f64::NEG_INFINITY), r.to.unwrap_or(f64::INFINITY));
+    let window: Vec<(f64, f64)> = pts.iter().copied().filter(|p| p.0 >= from && p.0 <= to).collect();
     let v = match r.at.as_str() {
-        // A NaN recorded anywhere makes these NaN: `f64::min` and `f64::max` would drop it.
-        "min" => nan_or(pts, |p| p.iter().map(|p| p.1).fold(f64::INFINITY, f64::min)),
-        "max" => nan_or(pts, |p| p.iter().map(|p| p.1).fold(f64::NEG_INFINITY, f64::max)),
-        "abs_max" => nan_or(pts, |p| p.iter().map(|p| p.1.abs()).fold(0.0, f64::max)),
-        "mean_after" => {
-            let from = r.from.unwrap_or(0.0);
-            let sel: Vec<f64> = pts.iter().filter(|p| p.0 >= from).map(|p| p.1).collect();
-            if sel.is_empty() {
-                f64::NAN
-            } else {
-                sel.iter().sum::<f64>() / sel.len() as f64
-            }
-        }
+        // A NaN recorded in the window makes these NaN: `f64::min` and `f64::max` would drop it.
+        "min" => nan_or(&window, |p| p.iter().map(|p| p.1).fold(f64::INFINITY, f64::min)),
+        "max" => nan_or(&window, |p| p.iter().map(|p| p.1).fold(f64::NEG_INFINITY, f64::max)),
+        "abs_max" => nan_or(&window, |p| p.iter().map(|p| p.1.abs()).fold(0.0, f64::max)),
+        "mean" | "mean_after" => mean(&window),
+        "period" => nan_or(&window, period),
+        "frequency" => 1.0 / nan_or(&window, period),
         // The least-squares slope of the history between `from` and `to`.
         "slope" => {
             let (from, to) = (r.from.unwrap_or(f64::NEG_INFINITY), r.to.unwrap_or(f64::INFINITY));
@@ -590,6 +614,35 @@ mod tests {
             tolerance: None,
             tolerance_why: None,
         }
+    }
+
+    #[test]
+    fn period_frequency_and_window_extremes_of_a_sampled_damped_oscillation_about_an_offset() {
+        // 0.3 + e^(−t/20) sin(2π t / 0.7), sampled every 1e-3 over 0 … 5.
+        let points: Vec<(f64, f64)> = (0..=5000)
+            .map(|k| {
+                let t = k as f64 * 1e-3;
+                (t, 0.3 + (-t / 20.0).exp() * (2.0 * std::f64::consts::PI * t / 0.7).sin())
+            })
+            .collect();
+        let h = History { points, initial: None };
+        let window = |at: &str, from: f64, to: f64| {
+            let r = ResultSpec { from: Some(from), to: Some(to), ..result(at, None) };
+            result_value(&r, &h)
+        };
+        // The crossings of the window's mean are those of 0.3 to within the slow decay.
+        let p = window("period", 1.0, 4.5);
+        assert!((p - 0.7).abs() < 1e-3 * 0.7, "period {p}");
+        assert!((window("frequency", 1.0, 4.5) - 1.0 / p).abs() < 1e-12);
+        // Less than a whole period in the window: no period.
+        assert!(window("period", 1.0, 1.3).is_nan());
+        // The first quarter period peaks at 0.3 + e^(−0.175/20) = 1.2913; the window keeps the
+        // earlier, larger peak out of the later maximum.
+        let (early, late) = (window("max", 0.0, 0.35), window("max", 3.0, 5.0));
+        assert!((early - (0.3 + (-0.175_f64 / 20.0).exp())).abs() < 1e-5, "max {early}");
+        assert!(late < early - 0.1, "max over 3–5 s {late} against {early}");
+        let mean = window("mean", 0.0, 4.9);
+        assert!((mean - 0.3).abs() < 0.01, "mean over seven periods {mean}");
     }
 
     /// A plate 3 particles thick, Δx = 1 mm, 40 mm across, on a square lattice normal to z.
