@@ -477,6 +477,7 @@ fn run_plan(path: &Path, dim: usize, integrator: &str, precision: Precision, opt
         constraints: vec![],
         symmetry: vec![],
         search: Default::default(),
+        damping: None,
     };
     match crate::schedule::Plan::build(&model, &scene, None) {
         Ok(plan) => {
@@ -512,6 +513,7 @@ pub fn plan_of(path: &Path, dim: usize) -> Result<crate::schedule::Plan, String>
         constraints: vec![],
         symmetry: vec![],
         search: Default::default(),
+        damping: None,
     };
     crate::schedule::Plan::build(&checked.model, &scene, None).map_err(|e| render(&sources, &[*e.0]))
 }

@@ -688,3 +688,16 @@ fn hyperbolic_functions_on_the_gpu_and_the_cpu_equal_the_formula() {
         assert!((y[k] - exact).abs() <= 1e-5 * exact.abs().max(1.0), "particle {k}: y = {} against {exact}", y[k]);
     }
 }
+
+/// The case's `damping` (−c v in the rate of `v`) on the GPU: a falling block matches the CPU.
+#[test]
+fn a_damped_falling_block_on_the_gpu_matches_the_cpu() {
+    let dir = std::env::temp_dir().join(format!("pairsum-gpu-damped-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let top = "integrator = \"euler\"\nend_time = \"1 s\"\ngravity = [0, \"-9.81 m/s^2\"]\ndamping = \"10 1/s\"";
+    std::fs::write(dir.join("case.toml"), block_case("falling.sph", top, "", "")).expect("case");
+    let model = "use kernels\ngroup metal\nkernel = wendland_c2\nintegrate { x' = v  v' = 0 }\n";
+    std::fs::write(dir.join("falling.sph"), model).expect("model");
+    case_file_matches_cpu(&dir.join("case.toml"), &[], 300, &[], 1e-5);
+    let _ = std::fs::remove_dir_all(&dir);
+}

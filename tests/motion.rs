@@ -163,3 +163,29 @@ ramp = "20 ms"
     }
     let _ = std::fs::remove_dir_all(path.parent().expect("dir"));
 }
+
+/// A block falling under gravity with the case's `damping` c: every particle's velocity follows
+/// the explicit Euler recurrence v ← v + Δt (g − c v), v_n = −(g/c) (1 − (1 − c Δt)ⁿ), and tends to
+/// the terminal speed g/c.
+#[test]
+fn a_damped_falling_block_reaches_the_terminal_speed_g_over_c_as_euler_steps_it() {
+    let path = case_file(
+        "damped",
+        &common::block_case(
+            "falling.sph",
+            "integrator = \"euler\"\nend_time = \"1 s\"\ngravity = [0, \"-9.81 m/s^2\"]\ndamping = \"10 1/s\"",
+            "",
+            "",
+        ),
+    );
+    let model = "use kernels\ngroup metal\nkernel = wendland_c2\nintegrate { x' = v  v' = 0 }\n";
+    std::fs::write(path.with_file_name("falling.sph"), model).expect("write model");
+    let (engine, _, _) = run(&path, 1000);
+    let (_, v) = field_by_id(&engine.backend, "v");
+    let (g, c, dt) = (9.81, 10.0, 1e-3_f64);
+    let expected = -(g / c) * (1.0 - (1.0 - c * dt).powi(1000));
+    for (k, vy) in v.iter().skip(1).step_by(2).enumerate() {
+        assert!((vy - expected).abs() <= 1e-12 * expected.abs(), "particle {k}: v_y = {vy}, expected {expected}");
+    }
+    assert!((expected + g / c).abs() < 1e-4 * g / c, "not yet at the terminal speed: {expected}");
+}

@@ -974,7 +974,14 @@ fn build(
         None => f64::INFINITY,
     };
     let symmetry = mirrors.iter().map(|m| (m.axis, m.offset)).collect();
-    let spec = SceneSpec { dim, groups, outputs, integrator, gravity, loads, constraints, symmetry, search };
+    let damping = match &case.damping {
+        Some(v) => {
+            let c = cx.scalar(v, unit("1/s"), "damping")?;
+            Some(cx.positive(v.span(), c, "damping")?)
+        }
+        None => None,
+    };
+    let spec = SceneSpec { dim, groups, outputs, integrator, gravity, loads, constraints, symmetry, search, damping };
     let mut config =
         RunConfig { end_time, dt_max, reorder_every: case.reorder_every.unwrap_or(25), ..RunConfig::default() };
     if let Some(r) = &case.min_dt_ratio {

@@ -42,6 +42,9 @@ pub struct CaseFile {
     pub convergence: Option<Vec<String>>,
     #[serde(default)]
     pub gravity: Option<Value>,
+    /// Mass-proportional damping (1/s), to bring a loaded body to rest.
+    #[serde(default)]
+    pub damping: Option<Value>,
     /// Materials by name: `[materials.steel]` with parameter values.
     #[serde(default)]
     pub materials: BTreeMap<String, BTreeMap<String, Value>>,

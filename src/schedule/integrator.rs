@@ -10,7 +10,7 @@
 //!
 //! State that corrections change without a rate (plastic strain, damage) restarts every stage from
 //! its value at the start of the step, so a two-stage step counts its increment once.
-//! Gravity and body loads are added to the rate of `v`; prescribed velocities replace `v`; a
+//! Gravity, body loads and the case's damping (−c v) are added to the rate of `v`; prescribed velocities replace `v`; a
 //! particle that crosses a symmetry plane is reflected back with its normal velocity reversed.
 
 use super::live::Live;
@@ -71,6 +71,11 @@ pub fn scene_params(model: &mut Model, scene: &SceneSpec) -> Vec<SceneParam> {
         if let Some(r) = &c.rotation {
             out.extend(rotation_params(model, scene.dim, k, r));
         }
+    }
+    if let Some(c) = scene.damping {
+        let per_second = Unit::ONE.div(&Unit::S).unwrap_or(Unit::ONE);
+        let p = synthetic_param(model, "@damping", Shape::Scalar, per_second);
+        out.push(SceneParam { param: p, value: vec![c], role: SceneRole::Damping });
     }
     for (k, (axis, _)) in scene.symmetry.iter().enumerate() {
         let p = synthetic_param(model, &format!("@symmetry{k}"), Shape::Vec, Unit::ONE);
@@ -142,7 +147,7 @@ fn zero_vec(unit: Unit) -> Expr {
     Expr::constant(0.0, Type::new(Shape::Vec, unit))
 }
 
-/// The rate of `v` with gravity and loads added.
+/// The rate of `v` with gravity, loads and damping added.
 fn velocity_rate(plan: &Plan, scene: &SceneSpec, rate: Expr) -> Expr {
     let model = &plan.model;
     let mut r = rate;
@@ -150,6 +155,10 @@ fn velocity_rate(plan: &Plan, scene: &SceneSpec, rate: Expr) -> Expr {
         let p = Expr::param(sp.param, model.params[sp.param.index()].ty);
         if sp.role == SceneRole::Gravity {
             r = r.plus(p);
+        } else if sp.role == SceneRole::Damping {
+            if let Some(v) = model.field_id("v") {
+                r = r.minus(Expr::field(v, model.field(v).ty).scaled_by(p));
+            }
         } else if let SceneRole::Load(k) = sp.role {
             let load = &scene.loads[k];
             if let Some(cond) = on_target(model, load.target) {

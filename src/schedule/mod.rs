@@ -45,6 +45,9 @@ pub struct SceneSpec {
     pub symmetry: Vec<(usize, f64)>,
     /// How neighbours are found, and when kept lists are rebuilt.
     pub search: Search,
+    /// Mass-proportional damping c (1/s): `−c v` joins the rate of `v` of every particle, to bring
+    /// a loaded body to rest.
+    pub damping: Option<f64>,
 }
 
 /// The particles a load or a constraint acts on: a whole body, or a part (a region of a body).
@@ -183,6 +186,8 @@ pub enum SceneRole {
     AxisProjection(usize),
     /// The unit normal of symmetry plane `k`.
     Symmetry(usize),
+    /// The case's mass-proportional damping (1/s).
+    Damping,
 }
 
 #[derive(Clone, Debug)]

@@ -74,6 +74,7 @@ pub fn scene(model: &Model, dim: usize, outputs: &[&str], integrator: Integrator
         constraints: vec![],
         symmetry: vec![],
         search: Default::default(),
+        damping: None,
     }
 }
 

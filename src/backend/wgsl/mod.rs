@@ -204,6 +204,7 @@ mod tests {
                     constraints: vec![],
                     symmetry: vec![],
                     search: Default::default(),
+                    damping: None,
                 };
                 let plan = Plan::build(&checked.model, &scene, None).expect("plan");
                 let kernels = generate(&plan, cells).unwrap_or_else(|e| panic!("{m} {dim}D: {e}"));
