@@ -839,9 +839,10 @@ fn build(
                     }
                 },
             };
-            ProbeKind::Field { select, field: f, pick, reduce, relative: p.relative, locate }
+            ProbeKind::Field { select, field: f, pick, reduce, locate }
         };
         probes.push(ProbeSpec {
+            relative: p.relative,
             name: p.name.get_ref().clone(),
             kind,
             unit: p.unit.clone().unwrap_or_default(),

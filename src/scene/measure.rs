@@ -484,9 +484,8 @@ impl History {
     }
 
     pub fn record(&mut self, p: &ProbeSpec, t: f64, value: f64) {
-        let relative = matches!(p.kind, ProbeKind::Field { relative: true, .. });
         let base = *self.initial.get_or_insert(value);
-        self.points.push((t, if relative { value - base } else { value }));
+        self.points.push((t, if p.relative { value - base } else { value }));
     }
 }
 
@@ -643,6 +642,23 @@ mod tests {
         assert!(late < early - 0.1, "max over 3–5 s {late} against {early}");
         let mean = window("mean", 0.0, 4.9);
         assert!((mean - 0.3).abs() < 0.01, "mean over seven periods {mean}");
+    }
+
+    #[test]
+    fn a_relative_measure_records_its_change_from_the_first_value() {
+        let probe = |relative| ProbeSpec {
+            name: "e".into(),
+            kind: ProbeKind::Measure(Measure::ALL[0]),
+            relative,
+            unit: String::new(),
+            every: 1,
+        };
+        for (relative, expected) in [(true, [0.0, 2.5]), (false, [4.0, 6.5])] {
+            let mut h = History::default();
+            h.record(&probe(relative), 0.0, 4.0);
+            h.record(&probe(relative), 1.0, 6.5);
+            assert_eq!(h.points, vec![(0.0, expected[0]), (1.0, expected[1])], "relative = {relative}");
+        }
     }
 
     /// A plate 3 particles thick, Δx = 1 mm, 40 mm across, on a square lattice normal to z.

@@ -50,7 +50,6 @@ pub enum ProbeKind {
         field: FieldId,
         pick: Pick,
         reduce: String,
-        relative: bool,
         /// Report this coordinate of the particle where `reduce` (min, max, abs_max) is reached.
         locate: Option<usize>,
     },
@@ -74,6 +73,8 @@ pub enum Pick {
 pub struct ProbeSpec {
     pub name: String,
     pub kind: ProbeKind,
+    /// Record the change from the first value, a field's or a measure's.
+    pub relative: bool,
     pub unit: String,
     pub every: u64,
 }
