@@ -336,40 +336,13 @@ fn an_output_folder_that_cannot_be_written_is_a_clear_error_naming_it() {
 const BLOWS_UP_MODEL: &str = "use kernels\ngroup metal\nkernel = wendland_c2\nstate q: scalar [-]\n\
      integrate { x' = v  q' = select(t > 0.0105 [s] && x.x > 0.025 [m], ln(-1 [-] - q) / 1 [s], 1 [1/s]) }\n";
 
-const BLOWS_UP_CASE: &str = r#"name = "blows_up"
-model = "blows_up.sph"
-dim = 2
-integrator = "euler"
-end_time = "50 ms"
-dt_max = "1 ms"
-
-[materials.metal]
-rho0 = "1000 kg/m^3"
-
-[[bodies]]
-name = "block"
-group = "metal"
-material = "metal"
-shape = { box = { min = [0, 0], max = ["60 mm", "60 mm"] } }
-
-[resolutions]
-ci = "10 mm"
-
-[output]
-interval = "2 ms"
-fields = ["q"]
-
-[[probes]]
-name = "q_max"
-body = "block"
-field = "q"
-reduce = "max"
-unit = "1"
-
-[[results]]
-quantity = "q_at_the_end"
-probe = "q_max"
-"#;
+/// `common::block_case` run with the blowing-up model, its `q` written out and probed.
+fn blows_up_case() -> String {
+    let top = "integrator = \"euler\"\nend_time = \"50 ms\"";
+    let rest = "[output]\ninterval = \"2 ms\"\nfields = [\"q\"]\n\n[[probes]]\nname = \"q_max\"\nbody = \"block\"\n\
+                field = \"q\"\nreduce = \"max\"\nunit = \"1\"\n\n[[results]]\nquantity = \"q_at_the_end\"\nprobe = \"q_max\"";
+    common::block_case("blows_up.sph", top, "", rest)
+}
 
 /// A run whose field turns NaN stops on either backend with an error naming the step, the
 /// particle, its group and the field, exits 1, and keeps the last good state as `last_good.vtu`
@@ -377,7 +350,7 @@ probe = "q_max"
 fn an_unstable_run_stops_naming_step_particle_and_field_and_keeps_the_last_good_state(backend: &str) {
     let dir = fresh_dir(&format!("unstable-{backend}"));
     std::fs::write(dir.join("blows_up.sph"), BLOWS_UP_MODEL).unwrap();
-    std::fs::write(dir.join("blows_up.toml"), BLOWS_UP_CASE).unwrap();
+    std::fs::write(dir.join("blows_up.toml"), blows_up_case()).unwrap();
     let out = dir.join("out");
     let o = pairsum()
         .args(["run", "--quiet", "--backend", backend, "--out"])
