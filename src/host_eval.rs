@@ -157,15 +157,3 @@ impl Evaluator<'_> {
         })
     }
 }
-
-/// The reductions of `e` in the order [`crate::backend::timestep::reductions`] lists them, by
-/// address: a leaf resolver finds each one's value whatever order the evaluator meets them in.
-pub fn reductions_of(e: &Expr) -> Vec<*const Expr> {
-    let mut out = vec![];
-    ir::walk_expr(e, &mut |x| {
-        if let ExprKind::Reduction(_, inner) = &x.kind {
-            out.push(&**inner as *const Expr);
-        }
-    });
-    out
-}

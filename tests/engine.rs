@@ -596,8 +596,9 @@ fn fields_of_neighbour_passes_are_computed_before_the_first_time_step() {
     let (_, h) = field_by_id(&e.backend, "h");
     assert!(rhos.iter().all(|r| *r > 0.1 && r.is_finite()), "summed density at t = 0: {rhos:?}");
     // The step from the summed density, computed here: 0.3 min h / max √(p / ρ_s).
-    let fastest = rhos.iter().map(|r| (1e5 / r).sqrt()).fold(0.0, f64::max);
-    let least_h = h.iter().copied().fold(f64::INFINITY, f64::min);
+    let speeds: Vec<f64> = rhos.iter().map(|r| (1e5 / r).sqrt()).collect();
+    let fastest = largest("the sound speeds from the summed density", &speeds);
+    let least_h = least("the smoothing lengths", &h);
     let expected = 0.3 * least_h / fastest;
     assert!((e.dt - expected).abs() < 1e-12 * expected, "first time step {} s, expected {expected} s", e.dt);
 }

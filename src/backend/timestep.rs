@@ -6,19 +6,19 @@ use crate::ir::{Expr, ExprKind, FieldId, Global, Model, ParamId, Reduce};
 
 /// The reductions of all timestep expressions, in order: (reduce, per-particle expression).
 pub fn reductions(model: &Model, timesteps: &[usize]) -> Vec<(Reduce, Expr)> {
-    let mut out = vec![];
-    for t in timesteps {
-        collect(&model.timesteps[*t].value, &mut out);
-    }
-    out
+    let limits = timesteps.iter().map(|t| &model.timesteps[*t].value);
+    limits.flat_map(reductions_in).map(|(r, e)| (r, e.clone())).collect()
 }
 
-fn collect(e: &Expr, out: &mut Vec<(Reduce, Expr)>) {
+/// The reductions of one limit, in the order the backend computes them.
+fn reductions_in(e: &Expr) -> Vec<(Reduce, &Expr)> {
+    let mut out = vec![];
     crate::ir::walk_expr(e, &mut |x| {
         if let ExprKind::Reduction(r, inner) = &x.kind {
-            out.push((*r, (**inner).clone()));
+            out.push((*r, &**inner));
         }
     });
+    out
 }
 
 /// The least of the limits, given the reduction values (in `reductions` order).
@@ -50,7 +50,7 @@ fn limits(model: &Model, timesteps: &[usize], values: &[f64], time: f64, dt: f64
         .iter()
         .map(|t| {
             let limit = &model.timesteps[*t].value;
-            let order = host_eval::reductions_of(limit);
+            let order: Vec<&Expr> = reductions_in(limit).into_iter().map(|(_, e)| e).collect();
             let mine = values.get(next..next + order.len()).unwrap_or(&[]);
             next += order.len();
             let mut leaves = TimestepLeaves { order, values: mine, time, dt };
@@ -62,7 +62,8 @@ fn limits(model: &Model, timesteps: &[usize], values: &[f64], time: f64, dt: f64
 /// A limit's leaves: its reductions' values and the clock; fields, parameters and `dim` only
 /// inside a reduction (evaluated by the backend).
 struct TimestepLeaves<'a> {
-    order: Vec<*const Expr>,
+    /// The limit's reductions, found by address whatever order the evaluator meets them in.
+    order: Vec<&'a Expr>,
     values: &'a [f64],
     time: f64,
     dt: f64,

@@ -199,14 +199,15 @@ impl<B: Backend> Engine<B> {
     /// The error of a time step `dt` that is not positive and finite, with what each limit gives
     /// now.
     fn bad_timestep(&mut self, step: u64, dt: f64, g: Globals) -> RunError {
-        let plan = self.backend.plan();
-        let timesteps = plan.timesteps.clone();
-        let limits = match self.backend.reductions(g) {
-            Ok(values) => timestep::describe(&self.backend.plan().model, &timesteps, &values, g.time, g.dt),
-            Err(e) => format!("reading the limits failed too: {e}"),
+        let timesteps = self.backend.plan().timesteps.clone();
+        let limits = if timesteps.is_empty() {
+            "the model declares none and `dt_max` is not set".into()
+        } else {
+            match self.backend.reductions(g) {
+                Ok(values) => timestep::describe(&self.backend.plan().model, &timesteps, &values, g.time, g.dt),
+                Err(e) => format!("reading the limits failed too: {e}"),
+            }
         };
-        let limits =
-            if timesteps.is_empty() { "the model declares none and `dt_max` is not set".into() } else { limits };
         RunError::BadTimestep { step, dt, limits }
     }
 

@@ -171,12 +171,10 @@ struct HostLeaves<'a> {
 
 impl host_eval::Leaves for HostLeaves<'_> {
     fn field(&mut self, f: FieldId) -> Result<Vec<f64>, String> {
-        let (comps, values) = self.particle.and_then(|(fields, k)| fields.get(&f).map(|c| (c, k))).map_or_else(
-            || Err(format!("it reads `{}`, which the scene does not set", self.model.field(f).name)),
-            |((comps, values), k)| Ok((*comps, &values[k * comps..(k + 1) * comps])),
-        )?;
-        debug_assert_eq!(values.len(), comps);
-        Ok(values.to_vec())
+        let not_set = || format!("it reads `{}`, which the scene does not set", self.model.field(f).name);
+        let (fields, k) = self.particle.ok_or_else(not_set)?;
+        let (comps, values) = fields.get(&f).ok_or_else(not_set)?;
+        Ok(values[k * comps..(k + 1) * comps].to_vec())
     }
     fn param(&mut self, p: ParamId) -> Result<Vec<f64>, String> {
         resolve(self.model, self.dim, p, self.params, self.busy).ok_or_else(|| {
@@ -184,10 +182,12 @@ impl host_eval::Leaves for HostLeaves<'_> {
         })
     }
     fn global(&mut self, g: ir::Global) -> Result<f64, String> {
-        if g == ir::Global::Dim {
-            return Ok(self.dim as f64);
-        }
-        Err(format!("it reads `{}`, which has no value before the run", if g == ir::Global::Time { "t" } else { "dt" }))
+        let name = match g {
+            ir::Global::Dim => return Ok(self.dim as f64),
+            ir::Global::Time => "t",
+            ir::Global::Dt => "dt",
+        };
+        Err(format!("it reads `{name}`, which has no value before the run"))
     }
     fn reduction(&mut self, _: ir::Reduce, _: &Expr) -> Result<f64, String> {
         Err("it takes a reduction over particles".into())

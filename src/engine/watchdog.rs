@@ -126,8 +126,8 @@ impl Bounds {
         let (low, high) = along.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), s| (l.min(*s), h.max(*s)));
         let height = if g > 0.0 && high >= low { (high - low) / g } else { 0.0 };
         let fall = (2.0 * g * height).sqrt().max(g * end_time.min(1e30));
-        let (speed_scale, scale_from) =
-            speed_scale(plan, at_start, fall, h.iter().copied().fold(f64::INFINITY, f64::min) / dt0, end_time);
+        let least_h = -max_keeping_nan(f64::NEG_INFINITY, h.iter().map(|x| -x));
+        let (speed_scale, scale_from) = speed_scale(plan, at_start, fall, least_h / dt0, end_time);
         let (max_growth, energy0) = match &at_start.m {
             Some(_) if feeds_energy(plan) => (None, 0.0),
             None => (None, 0.0),

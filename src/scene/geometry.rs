@@ -123,7 +123,7 @@ impl std::error::Error for GeometryError {}
 pub fn inside(shape: &Primitive, dim: usize, points: &[[f64; 3]]) -> Result<Vec<bool>, GeometryError> {
     let s = primitive::Shape::resolve(shape, dim)?;
     let (lo, hi) = s.bbox();
-    let size = (0..dim).map(|k| hi[k] - lo[k]).fold(0.0, f64::max);
+    let size = super::max_keeping_nan(0.0, (0..dim).map(|k| hi[k] - lo[k]));
     let tol = 1e-9 * size.max(1e-300);
     Ok(points.iter().map(|p| s.contains(*p, tol)).collect())
 }

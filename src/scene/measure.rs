@@ -532,10 +532,10 @@ pub fn result_value(r: &ResultSpec, h: &History) -> f64 {
     let (from, to) = (r.from.unwrap_or(f64::NEG_INFINITY), r.to.unwrap_or(f64::INFINITY));
     let window: Vec<(f64, f64)> = pts.iter().copied().filter(|p| p.0 >= from && p.0 <= to).collect();
     let v = match r.at.as_str() {
-        // A NaN recorded in the window makes these NaN: `f64::min` and `f64::max` would drop it.
-        "min" => nan_or(&window, |p| p.iter().map(|p| p.1).fold(f64::INFINITY, f64::min)),
-        "max" => nan_or(&window, |p| p.iter().map(|p| p.1).fold(f64::NEG_INFINITY, f64::max)),
-        "abs_max" => nan_or(&window, |p| p.iter().map(|p| p.1.abs()).fold(0.0, f64::max)),
+        // A NaN recorded in the window makes these NaN (`f64::min` and `f64::max` would drop it).
+        "min" => -max_keeping_nan(f64::NEG_INFINITY, window.iter().map(|p| -p.1)),
+        "max" => max_keeping_nan(f64::NEG_INFINITY, window.iter().map(|p| p.1)),
+        "abs_max" => max_keeping_nan(0.0, window.iter().map(|p| p.1.abs())),
         "mean" | "mean_after" => mean(&window),
         "period" => nan_or(&window, period),
         "frequency" => 1.0 / nan_or(&window, period),
