@@ -5,7 +5,6 @@ use crate::backend::cpu::CpuBackend;
 use crate::backend::{Backend, BackendError};
 use crate::diag::{Diagnostic, Sources};
 use crate::engine::{checkpoint, setup, Engine, RunError};
-use crate::ir::FieldId;
 use crate::particles::Real;
 use crate::report::{self, Curve, GroupBytes, History, PointField, ResultRow, RunReport};
 use crate::scene::{self, measure, Scene};
@@ -249,8 +248,7 @@ impl Recorder<'_> {
             }
         }
         if self.opts.checkpoint_every.is_some_and(|n| n > 0 && e.step.is_multiple_of(n)) {
-            checkpoint::write(e, &self.record_so_far(), &self.opts.out.join("checkpoint.bin"))
-                .map_err(|err| format!("writing a checkpoint: {err} (the last one written, if any, is kept)"))?;
+            self.checkpoint(e)?;
         }
         if let Some(pb) = &self.progress {
             let end = e.config.end_time;
@@ -259,6 +257,15 @@ impl Recorder<'_> {
             pb.set_message(format!("t = {:.4e} s, step {}, {:.1} steps/s, dt = {:.2e} s", e.time, e.step, rate, e.dt));
         }
         Ok(())
+    }
+
+    /// Writes `histories.csv` up to this step, then `checkpoint.bin`: a run killed at any time
+    /// leaves histories at least as far as its last checkpoint.
+    fn checkpoint<B: Backend>(&self, e: &Engine<B>) -> Result<(), String> {
+        report::write_histories_csv(&self.opts.out, &history_plots(self.scene, &self.histories))
+            .map_err(|err| format!("writing histories.csv with a checkpoint: {err}"))?;
+        checkpoint::write(e, &self.record_so_far(), &self.opts.out.join("checkpoint.bin"))
+            .map_err(|err| format!("writing a checkpoint: {err} (the last one written, if any, is kept)"))
     }
 
     fn write_vtk<B: Backend>(&mut self, b: &B, time: f64) -> Result<(), String> {
@@ -344,6 +351,11 @@ fn drive<B: Backend>(scene: Scene, backend: B, opts: &RunOptions, precision: &st
             {
                 rec.write_vtk(&engine.backend, engine.time).map_err(RunFailure::Run)?;
             }
+            // A run that checkpoints ends with one, so that `--restart` with a later
+            // `--end-time` extends it.
+            if opts.checkpoint_every.is_some() {
+                rec.checkpoint(&engine).map_err(RunFailure::Run)?;
+            }
         }
         Err(RunError::Unstable(u)) => {
             // Keep the last good state where the user will look for it.
@@ -419,23 +431,7 @@ fn make_report<B: Backend>(
             bytes: plan.bytes_per_particle(g, real),
         })
         .collect();
-    let plots = scene
-        .probes
-        .iter()
-        .zip(histories)
-        .map(|(p, h)| History {
-            name: p.name.clone(),
-            x_label: "t [s]".into(),
-            y_label: if p.unit.is_empty() { p.name.clone() } else { format!("{} [{}]", p.name, p.unit) },
-            series: vec![Curve::new(p.name.clone(), h.points.clone())],
-            reference: scene
-                .results
-                .iter()
-                .find(|r| scene.probes[r.probe].name == p.name)
-                .and_then(|r| r.reference.map(|x| x / r.scale)),
-            log_log: false,
-        })
-        .collect();
+    let plots = history_plots(scene, histories);
     let mut notes = vec![format!("resolution `{}`: particle spacing {} m", scene.resolution, scene.dx)];
     let search = &engine.backend.plan().search;
     if search.keeps_lists() {
@@ -445,7 +441,6 @@ fn make_report<B: Backend>(
     if let Some(f) = failure {
         notes.push(format!("the run did not complete: {f}"));
     }
-    let _: Option<FieldId> = None;
     RunReport {
         case: scene.name.clone(),
         backend: engine.backend.describe(),
@@ -463,6 +458,27 @@ fn make_report<B: Backend>(
         end_time: engine.time,
         tables: vec![],
     }
+}
+
+/// Each probe's history as a plot (and a column of `histories.csv`), with its result's reference.
+fn history_plots(scene: &Scene, histories: &[measure::History]) -> Vec<History> {
+    scene
+        .probes
+        .iter()
+        .zip(histories)
+        .map(|(p, h)| History {
+            name: p.name.clone(),
+            x_label: "t [s]".into(),
+            y_label: if p.unit.is_empty() { p.name.clone() } else { format!("{} [{}]", p.name, p.unit) },
+            series: vec![Curve::new(p.name.clone(), h.points.clone())],
+            reference: scene
+                .results
+                .iter()
+                .find(|r| scene.probes[r.probe].name == p.name)
+                .and_then(|r| r.reference.map(|x| x / r.scale)),
+            log_log: false,
+        })
+        .collect()
 }
 
 /// For the GPU backend's caller: a backend error as a run failure.

@@ -99,7 +99,7 @@ fn walk(dir: &Path) -> Vec<PathBuf> {
 
 /// Two text files are the same; otherwise fails at the first line that differs.
 fn assert_same_text(a: &Path, b: &Path) {
-    let (x, y) = (String::from_utf8(bytes(a)).expect("text"), String::from_utf8(bytes(b)).expect("text"));
+    let (x, y) = (text(a), text(b));
     let (xs, ys): (Vec<&str>, Vec<&str>) = (x.lines().collect(), y.lines().collect());
     if let Some(k) = (0..xs.len().max(ys.len())).find(|k| xs.get(*k) != ys.get(*k)) {
         panic!(
@@ -146,6 +146,10 @@ fn killed_and_restarted_equals_uninterrupted(backend: &str) {
     assert_eq!(status.signal(), Some(9), "the run was not killed but ended: {status}");
     let at = checkpoint_step(&file);
     assert!(at >= 100 && at < steps, "checkpoint at step {at} of {steps}");
+    // The killed run left its histories up to its last checkpoint, the straight run's first rows.
+    let (left, whole) = (text(&killed.join("histories.csv")), text(&straight.join("histories.csv")));
+    assert!(left.lines().count() as u64 >= at + 2, "histories.csv left by the killed run at step {at}:\n{left}");
+    assert!(whole.starts_with(&left), "the killed run's histories.csv is not the start of the straight run's");
 
     let mut resume = wave_args(backend, &killed);
     resume.extend(["--restart".into(), file.display().to_string()]);
@@ -162,6 +166,50 @@ fn killed_and_restarted_equals_uninterrupted(backend: &str) {
     assert!(notes.contains(&format!("restarted from the checkpoint at step {at}")), "the report does not say so");
     let _ = std::fs::remove_dir_all(&straight);
     let _ = std::fs::remove_dir_all(&killed);
+}
+
+fn text(path: &Path) -> String {
+    String::from_utf8(bytes(path)).expect("text")
+}
+
+/// The times of a `histories.csv`, each with its row.
+fn rows(csv: &str) -> Vec<(f64, &str)> {
+    csv.lines().skip(1).map(|l| (l.split(',').next().unwrap().parse().expect("a time"), l)).collect()
+}
+
+/// A run that ends leaves a checkpoint, and `--restart` from it with a later `--end-time` goes on:
+/// its histories begin at t = 0 with the first run's, and its result is the one of a run straight
+/// to the later time (within the one step the first run shortened to land on its end time).
+#[test]
+fn a_finished_run_restarted_with_a_later_end_time_continues_its_histories_to_the_straight_runs_result() {
+    let work = fresh_dir("extend");
+    let args = |out: &Path, end: &str| -> Vec<String> {
+        let a = ["run", "elastic_wave", "--quiet", "--checkpoint-every", "1000", "--end-time", end, "--out"];
+        a.iter().map(|s| s.to_string()).chain([out.display().to_string()]).collect()
+    };
+    let (first, straight) = (work.join("first"), work.join("straight"));
+    run_to_end(&args(&first, "1.1e-3"));
+    run_to_end(&args(&straight, "2.2e-3"));
+    let first_csv = text(&first.join("histories.csv"));
+    let mut resume = args(&first, "2.2e-3");
+    resume.extend(["--restart".into(), first.join("checkpoint.bin").display().to_string()]);
+    run_to_end(&resume);
+
+    let (before, after, whole) =
+        (rows(&first_csv), text(&first.join("histories.csv")), text(&straight.join("histories.csv")));
+    let (after, whole) = (rows(&after), rows(&whole));
+    assert_eq!(before.last().map(|r| r.0), Some(1.1e-3), "the first run ends at 1.1 ms");
+    assert_eq!(&after[..before.len()], &before[..], "the extended histories do not begin with the first run's");
+    assert_eq!(after.last().map(|r| r.0), Some(2.2e-3), "the extended histories do not reach 2.2 ms");
+    // Up to the step the first run shortened, the straight run's rows are the same bits.
+    assert_eq!(&after[..before.len() - 1], &whole[..before.len() - 1]);
+    let speed = |out: &Path| f64::from_bits(results(out)[0].1);
+    let (extended, straight_speed) = (speed(&first), speed(&straight));
+    assert!(
+        ((extended - straight_speed) / straight_speed).abs() < 1e-4,
+        "wave speed {extended} after the extension, {straight_speed} straight"
+    );
+    let _ = std::fs::remove_dir_all(&work);
 }
 
 #[test]

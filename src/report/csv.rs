@@ -4,12 +4,11 @@
 //! the sampling times, in order, with an empty cell where a probe was not sampled (probes may be
 //! sampled every few steps). Values are written with Rust's shortest round-trip formatting.
 
-use super::json::{History, RunReport};
+use super::json::History;
 
-/// The text of `histories.csv`, or `None` when the report has no time history.
-pub fn histories_csv(report: &RunReport) -> Option<String> {
-    let columns: Vec<(String, &[(f64, f64)])> = report
-        .histories
+/// The text of `histories.csv` for a run's histories, or `None` when none is a time history.
+pub fn histories_csv(histories: &[History]) -> Option<String> {
+    let columns: Vec<(String, &[(f64, f64)])> = histories
         .iter()
         .filter(|h| is_time(h))
         .flat_map(|h| h.series.iter().map(move |c| (column_name(h, &c.name), c.points.as_slice())))
@@ -81,14 +80,11 @@ mod tests {
 
     #[test]
     fn probes_sampled_at_different_times_share_one_time_column() {
-        let report = RunReport {
-            histories: vec![
-                history("a", vec![(0.0, 1.0), (0.5, 2.0), (1.0, 3.0)]),
-                history("b, wide", vec![(0.0, -1.0), (1.0, -3.0)]),
-            ],
-            ..RunReport::default()
-        };
-        let csv = histories_csv(&report).expect("a csv");
+        let histories = [
+            history("a", vec![(0.0, 1.0), (0.5, 2.0), (1.0, 3.0)]),
+            history("b, wide", vec![(0.0, -1.0), (1.0, -3.0)]),
+        ];
+        let csv = histories_csv(&histories).expect("a csv");
         assert_eq!(csv, "time [s],a [m],\"b, wide [m]\"\n0.0,1.0,-1.0\n0.5,2.0,\n1.0,3.0,-3.0\n");
     }
 }

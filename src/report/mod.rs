@@ -29,11 +29,18 @@ pub use vtk::{read_vtu, write_vtu, PointField, Series, VtuData};
 /// histories) and, for every history, `dir/<name>.svg` (see
 /// [`markdown::plot_file_name`]). Creates `dir` if needed. A plot that cannot be drawn does not
 /// fail the report: `report.md` says why in its place. Errors are I/O errors only.
+/// Writes `histories.csv` into `dir` (atomically: a reader sees the old file or the new), when
+/// any of `histories` is a time history.
+pub fn write_histories_csv(dir: &Path, histories: &[History]) -> io::Result<()> {
+    match csv::histories_csv(histories) {
+        Some(text) => crate::output_dir::write_atomic(&dir.join("histories.csv"), text.as_bytes()),
+        None => Ok(()),
+    }
+}
+
 pub fn write(dir: &Path, report: &RunReport) -> io::Result<()> {
     std::fs::create_dir_all(dir)?;
     json::write_json(&dir.join("report.json"), report)?;
-    if let Some(text) = csv::histories_csv(report) {
-        crate::output_dir::write_atomic(&dir.join("histories.csv"), text.as_bytes())?;
-    }
+    write_histories_csv(dir, &report.histories)?;
     markdown::write_markdown(dir, report)
 }
