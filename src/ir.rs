@@ -519,6 +519,23 @@ impl Model {
     pub fn field(&self, id: FieldId) -> &Field {
         &self.fields[id.index()]
     }
+
+    /// A correction: a particle equation that writes state. It runs after each integration stage
+    /// (radial return, damage), while every other equation runs in the evaluation of the rates.
+    pub fn is_correction(&self, e: &Equation) -> bool {
+        !e.is_pair() && e.writes.iter().any(|f| self.field(*f).storage == Storage::State)
+    }
+
+    /// Whether `f` is computed during the evaluation of a step: a field, or a state that a pair
+    /// sum computes (summation density: `rho` summed, not integrated). Readers of such a value
+    /// run after its writer.
+    pub fn computed_in_step(&self, f: FieldId) -> bool {
+        match self.field(f).storage {
+            Storage::Field => true,
+            Storage::Temp => false,
+            Storage::State => self.equations.iter().any(|e| e.is_pair() && e.writes.contains(&f)),
+        }
+    }
     pub fn field_id(&self, name: &str) -> Option<FieldId> {
         self.fields.iter().position(|f| f.name == name).map(|i| FieldId(i as u32))
     }

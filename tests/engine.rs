@@ -615,3 +615,61 @@ fn a_time_step_that_is_not_finite_names_its_limit_and_the_fields_it_reads() {
         assert!(message.contains(field), "{field} missing: {message}");
     }
 }
+
+/// Wendland C2 in 2D at distance r with smoothing length h, written out here.
+fn wendland_c2_2d(r: f64, h: f64) -> f64 {
+    let q = r / h;
+    if q >= 2.0 {
+        return 0.0;
+    }
+    7.0 / (4.0 * std::f64::consts::PI * h * h) * (1.0 - q / 2.0).powi(4) * (2.0 * q + 1.0)
+}
+
+/// `density::summation` writes the state `rho` itself (issue 41): in every evaluation ρ_i =
+/// Σ_j m_j W(r_ij, h_ij) over the particle and its neighbours, and the equation of state reads
+/// that value, not the one carried from the step before.
+#[test]
+fn summation_density_writes_rho_in_each_evaluation_and_the_pressure_reads_it() {
+    let m = model(
+        "use kernels\nuse density::summation\ngroup gas\nkernel = wendland_c2\n\
+         field p: scalar [Pa]\n\
+         particle pressure -> p { p = 1e5 [Pa] * (rho / rho0 - 1) }\n\
+         timestep cfl = min_over(0.3 * h) / 100 [m/s]\n\
+         integrate { x' = v  v' = 0 }\n",
+    );
+    let dx = 0.01;
+    let mut inp = input(2, lattice(2, 7, dx), dx);
+    // A velocity field that squeezes the lattice along x, so that the density changes in time.
+    inp.v = inp.x.iter().map(|x| [-5.0 * (x[0] - 0.035), 0.0, 0.0]).collect();
+    let mat = material(&m, &[("rho0", vec![1000.0])]);
+    let b = backend::<f64>(&m, &scene(&m, 2, &["rho", "p"], IntegratorKind::Euler), &inp, &[mat], vec![]);
+    let mut e = Engine::new(b, RunConfig { end_time: 1e-2, ..RunConfig::default() });
+    e.initialise().unwrap_or_else(|err| panic!("initialise: {err}"));
+    let mass = 1000.0 * dx * dx;
+    let h = 1.2 * dx;
+    let check = |e: &Engine<CpuBackend<f64>>, when: &str| {
+        let (_, x) = field_by_id(&e.backend, "x");
+        let (_, rho) = field_by_id(&e.backend, "rho");
+        let (_, p) = field_by_id(&e.backend, "p");
+        let n = rho.len();
+        for i in 0..n {
+            let expected: f64 = (0..n)
+                .map(|j| mass * wendland_c2_2d((x[2 * i] - x[2 * j]).hypot(x[2 * i + 1] - x[2 * j + 1]), h))
+                .sum();
+            assert!(
+                (rho[i] - expected).abs() < 1e-9 * expected,
+                "{when}: particle {i}: rho {} against {expected}",
+                rho[i]
+            );
+            let pressure = 1e5 * (rho[i] / 1000.0 - 1.0);
+            assert!((p[i] - pressure).abs() < 1e-6, "{when}: particle {i}: p {} against {pressure} from rho", p[i]);
+        }
+        rho
+    };
+    let before = check(&e, "at t = 0");
+    e.run(&mut |_| Ok(())).unwrap_or_else(|err| panic!("run: {err}"));
+    // The particles moved after the last evaluation; evaluate once more where they are now.
+    e.backend.evaluate(pairsum::backend::Globals { time: e.time, dt: e.dt }).expect("evaluate");
+    let after = check(&e, "at the end");
+    assert!(after[24] > 1.03 * before[24], "the squeezed centre's density went from {} to {}", before[24], after[24]);
+}

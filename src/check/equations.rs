@@ -77,7 +77,7 @@ impl Checker {
         self.error(d);
     }
 
-    fn resolve_outputs(&mut self, outputs: &[ast::Output], is_pair: bool, what: &str) -> Option<Vec<FieldId>> {
+    fn resolve_outputs(&mut self, outputs: &[ast::Output], what: &str) -> Option<Vec<FieldId>> {
         let mut ids = vec![];
         let mut ok = true;
         for o in outputs {
@@ -88,18 +88,6 @@ impl Checker {
                 ok = false;
                 continue;
             };
-            if is_pair && self.model.field(id).storage == Storage::State {
-                self.error(
-                    Diagnostic::error(
-                        "E0306",
-                        format!("a pair sum computes new values; it cannot write state field `{}`", o.name.name),
-                    )
-                    .at(o.name.span, "state field")
-                    .help("sum into a new accumulator and update the state with a particle equation or `integrate`"),
-                );
-                ok = false;
-                continue;
-            }
             if ids.contains(&id) {
                 self.error(
                     Diagnostic::error(
@@ -120,7 +108,7 @@ impl Checker {
         let what = format!("pairsum `{}`", p.name.name);
         let dest = self.scoped_groups(p.on.as_ref(), false, p.name.span, &what);
         let sources = self.scoped_groups(p.from.as_ref(), true, p.name.span, &what);
-        let Some(stored) = self.resolve_outputs(&p.outputs, true, &what) else {
+        let Some(stored) = self.resolve_outputs(&p.outputs, &what) else {
             return;
         };
         for f in &stored {
@@ -189,7 +177,7 @@ impl Checker {
     pub(crate) fn particle(&mut self, p: &ast::ParticleDef) {
         let what = format!("particle equation `{}`", p.name.name);
         let dest = self.scoped_groups(p.on.as_ref(), false, p.name.span, &what);
-        let Some(outputs) = self.resolve_outputs(&p.outputs, false, &what) else {
+        let Some(outputs) = self.resolve_outputs(&p.outputs, &what) else {
             return;
         };
         let mut st = EqState { what: what.clone(), outputs: outputs.clone(), is_pair: false, reduce: HashMap::new() };

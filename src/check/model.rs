@@ -10,6 +10,7 @@ use std::collections::BTreeSet;
 impl Checker {
     pub(crate) fn model_checks(&mut self) {
         self.check_provided();
+        self.check_summed_state();
         self.check_cycles();
         self.check_initial_values();
         self.warn_unused();
@@ -29,6 +30,30 @@ impl Checker {
             .iter()
             .filter(|e| e.writes.contains(&f))
             .fold(GroupSet::default(), |acc, e| acc.union(e.dest))
+    }
+
+    /// A state is obtained one way on each group: integrated from a rate, or computed by a pair
+    /// sum in each evaluation (summation density), never both.
+    fn check_summed_state(&mut self) {
+        let mut errors = vec![];
+        for e in self.model.equations.iter().filter(|e| e.is_pair()) {
+            for f in e.writes.iter().filter(|f| self.is_state(**f)) {
+                for r in self.model.rates.iter().filter(|r| r.state == *f && !r.dest.intersect(e.dest).is_empty()) {
+                    let name = &self.model.field(*f).name;
+                    let groups = self.model.group_names(r.dest.intersect(e.dest));
+                    errors.push(
+                        Diagnostic::error(
+                            "E0306",
+                            format!("`{name}` is both integrated and summed by `{}` on {groups}", e.name),
+                        )
+                        .at(e.span, format!("`{}` computes `{name}` in every evaluation", e.name))
+                        .also(r.span, format!("and this rate integrates `{name}`"))
+                        .help("a state is either integrated from a rate or computed by a pair sum on a group: restrict one of them with `on`, or drop one"),
+                    );
+                }
+            }
+        }
+        self.diags.extend(errors);
     }
 
     fn first_read_span(stmts: &[&[ir::Stmt]], f: FieldId, side: Side) -> Option<Span> {
@@ -109,14 +134,16 @@ impl Checker {
     /// corrections (those that update state after each integration stage).
     fn check_cycles(&mut self) {
         let n = self.model.equations.len();
-        let writes_state: Vec<bool> =
-            self.model.equations.iter().map(|e| e.writes.iter().any(|f| self.is_state(*f))).collect();
+        let writes_state: Vec<bool> = self.model.equations.iter().map(|e| self.model.is_correction(e)).collect();
+        let summed: BTreeSet<FieldId> =
+            self.model.equations.iter().filter(|e| e.is_pair()).flat_map(|e| e.writes.iter().copied()).collect();
         let mut edges: Vec<Vec<(usize, FieldId)>> = vec![vec![]; n];
-        // What `ew` writes that `er` reads on groups where both run, among fields of its class.
+        // What `ew` writes that `er` reads on groups where both run, among fields of its class:
+        // state for corrections; for the evaluation, fields and the state pair sums compute.
         let link = |ew: &ir::Equation, er: &ir::Equation, state: bool| -> Option<FieldId> {
             er.reads.iter().find_map(|&(f, side)| {
                 let reader_groups = if side == Side::I { er.dest } else { er.sources() };
-                let relevant = self.is_state(f) == state;
+                let relevant = if state { self.is_state(f) } else { !self.is_state(f) || summed.contains(&f) };
                 (relevant && ew.writes.contains(&f) && !ew.dest.intersect(reader_groups).is_empty()).then_some(f)
             })
         };

@@ -47,10 +47,9 @@ fn reads_of(model: &Model, e: EqId) -> Reads {
 }
 
 fn writes_state(model: &Model, e: EqId) -> bool {
-    model.equations[e.index()].writes.iter().any(|f| model.field(*f).storage == Storage::State)
+    model.is_correction(&model.equations[e.index()])
 }
 
-/// Passes, then corrections and state-only particle equations (both in run order).
 /// The passes, then the corrections and the state-only particle equations, in run order.
 pub struct Fused {
     pub passes: Vec<Pass>,
@@ -77,14 +76,15 @@ pub fn fuse(model: &Model, scene: &SceneSpec, live: &Live) -> Result<Fused, Plan
         let r = &reads[&e];
         let eq = &model.equations[e.index()];
         let mut d = BTreeSet::new();
+        // A field, or a state a pair sum computes (`writers` finds no other state's writer).
         for &(f, side) in &r.early {
-            if model.field(f).storage == Storage::Field {
+            if model.field(f).storage != Storage::Temp {
                 let groups = if side == Side::I { live.dest[&e] } else { eq.sources() };
                 d.extend(writers(f, groups));
             }
         }
         for &f in &r.finally {
-            if model.field(f).storage == Storage::Field {
+            if model.field(f).storage != Storage::Temp {
                 d.extend(writers(f, live.dest[&e]));
             }
         }
