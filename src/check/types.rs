@@ -216,6 +216,24 @@ fn power(a: Expr, b: Expr, span: crate::diag::Span) -> Result<Expr, TypeError> {
     let unit = if a.ty.unit.is_one() {
         Unit::ONE
     } else {
+        let reads_dim = {
+            let mut found = false;
+            crate::ir::walk_expr(&b, &mut |e| found |= matches!(e.kind, ExprKind::Global(crate::ir::Global::Dim)));
+            found
+        };
+        if reads_dim {
+            return Err(unit_err(
+                format!(
+                    "a quantity with units ({}) cannot be raised to a power that depends on `dim`: a model's units are checked once, for every dimension",
+                    a.ty.unit
+                ),
+                "this exponent reads `dim`",
+                Some(
+                    "make the base dimensionless: a particle's volume m / rho is in m^3 in every dimension (a 1D bar has a 1 m^2 section, a 2D slab is 1 m thick), so its spacing is `dx * (m / (rho * vol))^(1/dim)`, with `dx` and `vol` where it was placed"
+                        .into(),
+                ),
+            ));
+        }
         let p = const_value(&b).and_then(Ratio::from_f64).ok_or_else(|| {
             unit_err(
                 format!("a quantity with units ({}) can only be raised to a constant rational power", a.ty.unit),
