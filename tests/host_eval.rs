@@ -79,3 +79,73 @@ fn an_initial_value_the_host_cannot_evaluate_names_what_it_calls() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A probe of an expression (issue 40) is the same evaluator over the run's fields: the kinetic
+/// energy written as `0.5 * m * dot(v, v)` summed over the block is the `kinetic_energy` measure,
+/// and the mean of a tensor expression's component (`s - p * I`, `xx`) is the mean of `s.xx` less
+/// the mean of `p`, at every recorded step.
+#[test]
+fn a_probe_of_an_expression_equals_the_measure_and_the_fields_it_is_written_from() {
+    let dir = fresh_dir("probe-expression");
+    std::fs::create_dir_all(&dir).unwrap();
+    let probes = r#"
+[[probes]]
+name = "by_expression"
+expression = "0.5 * m * dot(v, v)"
+reduce = "sum"
+
+[[probes]]
+name = "measured"
+measure = "kinetic_energy"
+
+[[probes]]
+name = "total_xx"
+expression = "s - p * I"
+component = "xx"
+
+[[probes]]
+name = "s_xx"
+field = "s"
+component = "xx"
+
+[[probes]]
+name = "p"
+field = "p"
+"#;
+    // A block squeezed along x by its initial velocity: stress and pressure build up.
+    let case = common::block_case(
+        "models::elastic_solid",
+        "end_time = \"0.2 ms\"",
+        "initial = { v = \"vec(-2 [1/s] * (x.x - 0.03 [m]), 0 [m/s])\" }",
+        probes,
+    )
+    .replace("rho0 = \"1000 kg/m^3\"", "rho0 = \"1000 kg/m^3\"\nE = \"1 GPa\"\nnu = 0.3")
+    .replace("group = \"metal\"", "group = \"solid\"");
+    std::fs::write(dir.join("case.toml"), case).unwrap();
+    let opts = pairsum::runner::RunOptions {
+        backend: pairsum::runner::BackendChoice::Cpu,
+        out: dir.join("out"),
+        vtk: false,
+        ..Default::default()
+    };
+    let outcome = pairsum::runner::run_case(&dir.join("case.toml"), &opts).unwrap_or_else(|e| panic!("{e}"));
+    let history = |name: &str| outcome.histories.iter().find(|(n, _)| n == name).expect("probe").1.clone();
+    let (by_expression, measured) = (history("by_expression"), history("measured"));
+    assert!(by_expression.len() > 10 && by_expression.len() == measured.len());
+    for ((t, a), (_, b)) in by_expression.iter().zip(&measured) {
+        assert!(*b > 0.0 && (a - b).abs() <= 1e-12 * b, "t = {t}: ½ m v·v summed {a} J, kinetic energy {b} J");
+    }
+    let (total, s_xx, p) = (history("total_xx"), history("s_xx"), history("p"));
+    assert!(p.iter().any(|(_, v)| *v > 1e4), "the block was not squeezed: p = {p:?} Pa");
+    for k in 0..total.len() {
+        let expected = s_xx[k].1 - p[k].1;
+        let scale = s_xx[k].1.abs() + p[k].1.abs();
+        assert!(
+            (total[k].1 - expected).abs() <= 1e-12 * scale,
+            "t = {}: mean(s.xx − p) {} Pa, mean s.xx − mean p {expected} Pa",
+            total[k].0,
+            total[k].1
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

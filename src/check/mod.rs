@@ -107,21 +107,26 @@ fn modules_used(modules: &[load::Module]) -> HashMap<u32, BTreeSet<u32>> {
         .collect()
 }
 
-/// Checks an expression written outside the model (a case file's initial value of `field`, the
-/// text standing at byte `offset` of source `file`) against the checked model: names, shapes and
-/// units as in an `init` of the model, and the field's type.
-pub fn initial_value(
+/// Checks an expression written outside the model (a case file's initial value of `field`, or a
+/// probe's expression when `field` is `None`: the text standing at byte `offset` of source `file`)
+/// against the checked model: names, shapes and units as in an `init` of the model, and the
+/// field's type.
+pub fn case_expression(
     model: &Model,
     file: u32,
     offset: usize,
     text: &str,
-    field: FieldId,
+    field: Option<FieldId>,
 ) -> Result<ir::Expr, Vec<Diagnostic>> {
     let ast = crate::syntax::parse_expr(file, offset, text).map_err(|d| vec![*d])?;
     let mut checker = Checker::new();
     checker.model = model.clone();
-    let cx = expr::Cx::particle("an initial value");
-    let value = checker.expr_as(&ast, &cx, model.field(field).ty, "the initial value");
+    let value = match field {
+        Some(f) => {
+            checker.expr_as(&ast, &expr::Cx::particle("an initial value"), model.field(f).ty, "the initial value")
+        }
+        None => checker.expr(&ast, &expr::Cx::particle("a probe's expression")),
+    };
     match value {
         Some(v) if !checker.diags.iter().any(|d| d.is_error()) => Ok(v),
         _ => Err(checker.diags),

@@ -136,6 +136,31 @@ pub fn resolve_material(model: &Model, dim: usize, m: &MaterialInput) -> Vec<Opt
     out
 }
 
+/// Every material's parameters, defaults resolved, with the scene's own constants (gravity, loads,
+/// prescribed velocities), which are the same for all.
+pub fn resolved_materials(plan: &Plan, materials: &[MaterialInput]) -> Vec<Vec<Option<Vec<f64>>>> {
+    let mut resolved: Vec<Vec<Option<Vec<f64>>>> =
+        materials.iter().map(|m| resolve_material(&plan.model, plan.dim, m)).collect();
+    for values in &mut resolved {
+        for sp in &plan.scene_params {
+            values[sp.param.index()] = Some(sp.value.clone());
+        }
+    }
+    resolved
+}
+
+/// The value of a case's expression for particle `k` of `fields` (a probe's `expression`), with
+/// its material's parameters `params`.
+pub fn particle_value(
+    plan: &Plan,
+    e: &Expr,
+    params: &mut Vec<Option<Vec<f64>>>,
+    fields: &HostFields,
+    k: usize,
+) -> Result<Vec<f64>, String> {
+    eval(&plan.model, plan.dim, e, params, &mut BTreeSet::new(), Some((fields, k)))
+}
+
 fn resolve(
     model: &Model,
     dim: usize,
@@ -222,7 +247,6 @@ pub fn build_store<T: Real>(
     materials: &[MaterialInput],
 ) -> Result<Store<T>, SetupError> {
     let model = &plan.model;
-    let dim = plan.dim;
     if input.is_empty() {
         return Err(SetupError("the scene has no particles".into()));
     }
@@ -232,13 +256,7 @@ pub fn build_store<T: Real>(
     let material: Vec<u32> = (0..input.len()).map(|k| input.material[pick(k)]).collect();
     let mut store: Store<T> = Store::new(plan, group, material, materials.len());
     store.id = perm.clone();
-    let mut resolved: Vec<Vec<Option<Vec<f64>>>> = materials.iter().map(|m| resolve_material(model, dim, m)).collect();
-    // The scene's own constants (gravity, loads, prescribed velocities) are the same for all.
-    for values in &mut resolved {
-        for sp in &plan.scene_params {
-            values[sp.param.index()] = Some(sp.value.clone());
-        }
-    }
+    let resolved = resolved_materials(plan, materials);
     let host = host_fields(plan, input, &resolved)?;
     for (f, (comps, values)) in &host {
         let ordered: Vec<f64> =

@@ -6,7 +6,7 @@ use super::case::{self, CaseFile, Value};
 use super::geometry::{self, Primitive};
 use super::measure::Measure;
 use super::quantity;
-use super::spec::{BodyInfo, Options, Pick, ProbeKind, ProbeSpec, ResultSpec, Scene};
+use super::spec::{BodyInfo, Options, Pick, ProbeKind, ProbeSpec, ProbeValue, ResultSpec, Scene};
 use crate::backend::Mirror;
 use crate::check::{self, Stdlib};
 use crate::diag::{closest, Diagnostic, Sources, Span};
@@ -760,16 +760,34 @@ fn build(
             };
             ProbeKind::Measure(measure)
         } else {
-            let Some(fname) = &p.field else {
-                cx.err(
-                    p.name.span(),
-                    "C0016",
-                    "a probe needs a `field` (with `body`, `component`, `reduce`) or a `measure`",
-                    "here",
-                );
-                continue;
+            let value = match (&p.field, &p.expression) {
+                (Some(fname), None) => match field(cx, fname) {
+                    Some(f) => ProbeValue::Field(f),
+                    None => continue,
+                },
+                (None, Some(text)) => match probe_expression(&model, text, cx) {
+                    Some(e) => ProbeValue::Expression(e),
+                    None => continue,
+                },
+                (Some(_), Some(text)) => {
+                    cx.err(
+                        text.span(),
+                        "C0016",
+                        "a probe takes a `field` or an `expression`, not both",
+                        "second value",
+                    );
+                    continue;
+                }
+                (None, None) => {
+                    cx.err(
+                        p.name.span(),
+                        "C0016",
+                        "a probe needs a `field` or an `expression` (with `body`, `component`, `reduce`), or a `measure`",
+                        "here",
+                    );
+                    continue;
+                }
             };
-            let Some(f) = field(cx, fname) else { continue };
             let body = match &p.body {
                 Some(b) => Some(body_index(cx, b)?),
                 None => None,
@@ -794,7 +812,10 @@ fn build(
                     continue;
                 }
             }
-            let shape = model.field(f).ty.shape;
+            let shape = match &value {
+                ProbeValue::Field(f) => model.field(*f).ty.shape,
+                ProbeValue::Expression(e) => e.ty.shape,
+            };
             let pick = match &p.component {
                 None => Pick::Component(0),
                 Some(c) => match (c.get_ref().as_str(), shape) {
@@ -839,7 +860,7 @@ fn build(
                     }
                 },
             };
-            ProbeKind::Field { select, field: f, pick, reduce, locate }
+            ProbeKind::Field { select, value, pick, reduce, locate }
         };
         probes.push(ProbeSpec {
             relative: p.relative,
@@ -930,8 +951,8 @@ fn build(
     };
     let mut outputs = output_fields.clone();
     for p in &probes {
-        if let ProbeKind::Field { field, locate, .. } = p.kind {
-            outputs.push(field);
+        if let ProbeKind::Field { value, locate, .. } = &p.kind {
+            outputs.extend(value.fields());
             if locate.is_some() {
                 outputs.extend(model.field_id("x"));
             }
@@ -1332,21 +1353,32 @@ fn initial_value(
         cx.diags.push(d);
         return None;
     };
-    // The expression as the file writes it, escapes and all, so that its diagnostics point into
-    // the file; the TOML value itself when the string cannot be read back (it always can).
-    let span = text.span();
-    let (offset, expr) = cx
-        .text
-        .get(span.clone())
-        .and_then(string_layout)
-        .map_or((span.start + 1, text.get_ref().clone()), |(k, e)| (span.start + k, e));
-    match check::initial_value(model, cx.file, offset, &expr, f) {
+    let (offset, expr) = as_written(text, cx);
+    match check::case_expression(model, cx.file, offset, &expr, Some(f)) {
         Ok(e) => Some((f, e)),
         Err(d) => {
             cx.diags.extend(d);
             None
         }
     }
+}
+
+/// A probe's `expression`: any shape, checked like an initial value (names, units, and the errors
+/// pointing into the string).
+fn probe_expression(model: &Model, text: &toml::Spanned<String>, cx: &mut Ctx) -> Option<ir::Expr> {
+    let (offset, expr) = as_written(text, cx);
+    check::case_expression(model, cx.file, offset, &expr, None).map_err(|d| cx.diags.extend(d)).ok()
+}
+
+/// An expression in a case string as the file writes it, escapes and all, with where it starts,
+/// so that its diagnostics point into the file; the TOML value itself when the string cannot be
+/// read back (it always can).
+fn as_written(text: &toml::Spanned<String>, cx: &Ctx) -> (usize, String) {
+    let span = text.span();
+    cx.text
+        .get(span.clone())
+        .and_then(string_layout)
+        .map_or((span.start + 1, text.get_ref().clone()), |(k, e)| (span.start + k, e))
 }
 
 /// A TOML string as written (`"…"`, `'…'`, or either tripled) → where its content starts, and its

@@ -302,6 +302,9 @@ pub struct Probe {
     pub region: Option<Spanned<Shape>>,
     #[serde(default)]
     pub field: Option<Spanned<String>>,
+    /// An expression of the particle's fields and its material's parameters, instead of `field`.
+    #[serde(default)]
+    pub expression: Option<Spanned<String>>,
     #[serde(default)]
     pub component: Option<Spanned<String>>,
     #[serde(default)]

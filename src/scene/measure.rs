@@ -2,7 +2,7 @@
 //! measurement with a documented, automatic definition — and the results taken from them.
 
 use super::max_keeping_nan;
-use super::spec::{Pick, ProbeKind, ProbeSpec, ResultSpec, Scene};
+use super::spec::{Pick, ProbeKind, ProbeSpec, ProbeValue, ResultSpec, Scene};
 use crate::backend::{Backend, BackendError};
 use crate::ir::{component_indices, Shape};
 use crate::schedule::Target;
@@ -116,9 +116,8 @@ pub fn positions(b: &dyn Backend) -> Result<Option<Vec<[f64; 3]>>, BackendError>
 /// The value of a probe now (NaN where it has none); an error only when the backend fails.
 pub fn evaluate(p: &ProbeSpec, scene: &Scene, b: &dyn Backend) -> Result<f64, BackendError> {
     match &p.kind {
-        ProbeKind::Field { select, field, pick, reduce, locate, .. } => {
-            let Some((comps, values)) = b.read(*field)? else { return Ok(f64::NAN) };
-            let shape = b.plan().model.field(*field).ty.shape;
+        ProbeKind::Field { select, value, pick, reduce, locate, .. } => {
+            let Some((comps, values, shape)) = probed_values(value, scene, b)? else { return Ok(f64::NAN) };
             let dim = b.plan().dim;
             let ids = b.ids()?;
             let selected: Vec<(usize, f64)> = (0..ids.len())
@@ -133,6 +132,36 @@ pub fn evaluate(p: &ProbeSpec, scene: &Scene, b: &dyn Backend) -> Result<f64, Ba
         }
         ProbeKind::Measure(m) => measure(*m, scene, b),
     }
+}
+
+/// Every particle's value of a probe's field or expression (`comps` numbers each, in the backend's
+/// order), and its shape; `None` where a field it reads is not stored.
+fn probed_values(
+    value: &ProbeValue,
+    scene: &Scene,
+    b: &dyn Backend,
+) -> Result<Option<(usize, Vec<f64>, Shape)>, BackendError> {
+    let plan = b.plan();
+    let e = match value {
+        ProbeValue::Field(f) => return Ok(b.read(*f)?.map(|(c, v)| (c, v, plan.model.field(*f).ty.shape))),
+        ProbeValue::Expression(e) => e,
+    };
+    let mut fields = crate::engine::setup::HostFields::new();
+    for f in value.fields() {
+        let Some(column) = b.read(f)? else { return Ok(None) };
+        fields.insert(f, column);
+    }
+    let ids = b.ids()?;
+    let mut materials = crate::engine::setup::resolved_materials(plan, &scene.materials);
+    let comps = crate::ir::components(e.ty.shape, plan.dim);
+    let mut out = Vec::with_capacity(ids.len() * comps);
+    for (k, id) in ids.iter().enumerate() {
+        let params = &mut materials[scene.particles.material[*id as usize] as usize];
+        let v = crate::engine::setup::particle_value(plan, e, params, &fields, k)
+            .map_err(|what| BackendError(format!("cannot evaluate the expression: {what}")))?;
+        out.extend_from_slice(&v[..comps]);
+    }
+    Ok(Some((comps, out, e.ty.shape)))
 }
 
 /// One particle's value of a field as a probe reads it.

@@ -47,7 +47,7 @@ pub enum ProbeKind {
     /// A field component reduced over a set of particles (by their index in the scene).
     Field {
         select: Option<Vec<bool>>,
-        field: FieldId,
+        value: ProbeValue,
         pick: Pick,
         reduce: String,
         /// Report this coordinate of the particle where `reduce` (min, max, abs_max) is reached.
@@ -55,6 +55,34 @@ pub enum ProbeKind {
     },
     /// A named measurement (`scene::measure`).
     Measure(Measure),
+}
+
+/// What a field probe takes of each particle: a stored field, or an expression of fields and the
+/// material's parameters (`expression = "s - p * I"`), evaluated on the host (`host_eval`).
+#[derive(Clone, Debug)]
+pub enum ProbeValue {
+    Field(FieldId),
+    Expression(crate::ir::Expr),
+}
+
+impl ProbeValue {
+    /// The fields it reads.
+    pub fn fields(&self) -> Vec<FieldId> {
+        match self {
+            ProbeValue::Field(f) => vec![*f],
+            ProbeValue::Expression(e) => {
+                let mut out = vec![];
+                crate::ir::walk_expr(e, &mut |x| {
+                    if let crate::ir::ExprKind::Field(f, _) = x.kind {
+                        if !out.contains(&f) {
+                            out.push(f);
+                        }
+                    }
+                });
+                out
+            }
+        }
+    }
 }
 
 /// What a field probe reads of each particle's value.
