@@ -60,6 +60,17 @@ pub fn component_indices(shape: Shape, dim: usize) -> Vec<(usize, usize)> {
     }
 }
 
+/// The names of the stored components of a shape (`""` for a scalar, `x`, `y` of a vec, `xx`,
+/// `xy` of a tensor), in the order `component_indices` gives.
+pub fn component_names(shape: Shape, dim: usize) -> Vec<String> {
+    let axis = |a: usize| ["x", "y", "z"][a];
+    match shape {
+        Shape::Scalar | Shape::Bool => vec![String::new()],
+        Shape::Vec => (0..dim).map(|a| axis(a).to_string()).collect(),
+        _ => component_indices(shape, dim).into_iter().map(|(a, b)| format!("{}{}", axis(a), axis(b))).collect(),
+    }
+}
+
 macro_rules! id {
     ($name:ident) => {
         #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]

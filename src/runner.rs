@@ -7,6 +7,7 @@ use crate::diag::{Diagnostic, Sources};
 use crate::engine::{checkpoint, setup, Engine, RunError};
 use crate::particles::Real;
 use crate::report::{self, Curve, GroupBytes, History, PointField, ResultRow, RunReport};
+use crate::scene::spec::ProfileSpec;
 use crate::scene::{self, measure, Scene};
 use crate::schedule::Plan;
 use std::path::{Path, PathBuf};
@@ -178,6 +179,8 @@ struct Recorder<'a> {
     series: Option<report::Series>,
     next_output: f64,
     histories: Vec<measure::History>,
+    /// Per profile, the index of its next time.
+    next_profile: Vec<usize>,
     progress: Option<indicatif::ProgressBar>,
     started: Instant,
 }
@@ -241,6 +244,13 @@ impl Recorder<'_> {
                 h.record(p, e.time, v);
             }
         }
+        for (k, p) in self.scene.profiles.iter().enumerate() {
+            while p.times.get(self.next_profile[k]).is_some_and(|t| e.time >= t * (1.0 - 1e-12)) {
+                write_profile(self.scene, p, self.next_profile[k], &e.backend, &self.opts.out)
+                    .map_err(|err| format!("profile `{}`: {err}", p.name))?;
+                self.next_profile[k] += 1;
+            }
+        }
         if let Some(interval) = self.scene.output_interval {
             if e.time >= self.next_output - 1e-12 * interval {
                 self.write_vtk(&e.backend, e.time)?;
@@ -274,6 +284,40 @@ impl Recorder<'_> {
         series.add(time, &positions, &fields).map_err(|e| format!("writing VTK: {e}"))?;
         Ok(())
     }
+}
+
+/// Writes `profiles/<name>_<k>.csv`: the selected particles' coordinates, id, body and fields now,
+/// sorted along the profile's axis.
+fn write_profile<B: Backend>(scene: &Scene, p: &ProfileSpec, k: usize, b: &B, out: &Path) -> Result<(), String> {
+    let dim = b.plan().dim;
+    let x = measure::positions(b).map_err(|e| e.0)?.unwrap_or_default();
+    let ids = b.ids().map_err(|e| e.0)?;
+    let inside = match &p.region {
+        Some(r) => crate::scene::geometry::inside(r, dim, &x).map_err(|e| e.to_string())?,
+        None => vec![true; x.len()],
+    };
+    let body = |k: usize| scene.particles.body[ids[k] as usize] as usize;
+    let mut rows: Vec<usize> = (0..x.len()).filter(|k| inside[*k] && p.body.is_none_or(|b| body(*k) == b)).collect();
+    rows.sort_by(|a, c| x[*a][p.along].total_cmp(&x[*c][p.along]));
+    let mut columns: Vec<(String, Vec<f64>)> =
+        (0..dim).map(|a| (format!("{} [m]", ["x", "y", "z"][a]), rows.iter().map(|k| x[*k][a]).collect())).collect();
+    columns.push(("id".into(), rows.iter().map(|k| ids[*k] as f64).collect()));
+    columns.push(("body".into(), rows.iter().map(|k| body(*k) as f64).collect()));
+    let model = &b.plan().model;
+    for f in &p.fields {
+        let field = model.field(*f);
+        let Some((comps, data)) = b.read(*f).map_err(|e| e.0)? else { continue };
+        for (c, suffix) in crate::ir::component_names(field.ty.shape, dim).iter().enumerate() {
+            let name = if suffix.is_empty() { field.name.clone() } else { format!("{}.{suffix}", field.name) };
+            let name = if field.ty.unit.is_one() { name } else { format!("{name} [{}]", field.ty.unit.label()) };
+            columns.push((name, rows.iter().map(|k| data[k * comps + c]).collect()));
+        }
+    }
+    let dir = out.join("profiles");
+    std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let path = dir.join(format!("{}_{k}.csv", p.name));
+    crate::output_dir::write_atomic(&path, report::csv::profile_csv(&columns).as_bytes())
+        .map_err(|e| format!("{}: {e}", path.display()))
 }
 
 /// Positions and output fields of every particle, for a VTK file.
@@ -328,12 +372,19 @@ fn drive<B: Backend>(scene: Scene, backend: B, opts: &RunOptions, precision: &st
         series,
         next_output: engine.time,
         histories: vec![measure::History::default(); scene.probes.len()],
+        next_profile: vec![0; scene.profiles.len()],
         progress,
         started: Instant::now(),
     };
     match record.filter(|r| !r.is_empty()) {
         // The checkpoint was written after its step was observed.
-        Some(r) => rec.resume(&r).map_err(|e| cannot_restart(&e))?,
+        Some(r) => {
+            rec.resume(&r).map_err(|e| cannot_restart(&e))?;
+            // Profiles up to the checkpoint's time were written by the run that wrote it.
+            for (next, p) in rec.next_profile.iter_mut().zip(&scene.profiles) {
+                *next = p.times.iter().filter(|t| engine.time >= *t * (1.0 - 1e-12)).count();
+            }
+        }
         None => rec.observe(&engine).map_err(RunFailure::Run)?,
     }
     let (start_step, start_time) = (engine.step, engine.time);

@@ -137,6 +137,19 @@ impl Unit {
     pub const KNOWN: [&'static str; 10] = ["kg", "m", "s", "K", "N", "Pa", "J", "W", "Hz", "rad"];
 
     /// The derived unit this is, if it is one of the common ones (for messages).
+    /// The unit as a column or axis label: its common name where it has one (`Pa`, `kg/m^3`,
+    /// `J/kg`), else its SI base units (`m^2 s^-1`); empty when dimensionless.
+    pub fn label(&self) -> String {
+        if self.is_one() {
+            return String::new();
+        }
+        if let Some(a) = self.alias().or_else(|| (parse_simple("J/kg").as_ref() == Some(self)).then_some("J/kg")) {
+            return a.to_string();
+        }
+        let text = self.to_string();
+        text.split(" (").next().unwrap_or(&text).to_string()
+    }
+
     fn alias(&self) -> Option<&'static str> {
         const ALIASES: [(&str, &str); 9] = [
             ("N", "N"),

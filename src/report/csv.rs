@@ -40,6 +40,18 @@ pub fn histories_csv(histories: &[History]) -> Option<String> {
     Some(out)
 }
 
+/// The text of a profile: a header of column names, then one row per particle.
+pub fn profile_csv(columns: &[(String, Vec<f64>)]) -> String {
+    let mut out = columns.iter().map(|(name, _)| quote(name)).collect::<Vec<_>>().join(",");
+    out.push('\n');
+    for k in 0..columns.first().map_or(0, |c| c.1.len()) {
+        let row: Vec<String> = columns.iter().map(|(_, v)| format!("{:?}", v[k])).collect();
+        out.push_str(&row.join(","));
+        out.push('\n');
+    }
+    out
+}
+
 fn is_time(h: &History) -> bool {
     h.x_label == "t [s]"
 }

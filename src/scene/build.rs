@@ -6,7 +6,7 @@ use super::case::{self, CaseFile, Value};
 use super::geometry::{self, Primitive};
 use super::measure::Measure;
 use super::quantity;
-use super::spec::{BodyInfo, Options, Pick, ProbeKind, ProbeSpec, ProbeValue, ResultSpec, Scene};
+use super::spec::{BodyInfo, Options, Pick, ProbeKind, ProbeSpec, ProbeValue, ProfileSpec, ResultSpec, Scene};
 use crate::backend::Mirror;
 use crate::check::{self, Stdlib};
 use crate::diag::{closest, Diagnostic, Sources, Span};
@@ -950,6 +950,10 @@ fn build(
         None => IntegratorKind::PredictorCorrector,
     };
     let mut outputs = output_fields.clone();
+    for p in &case.profiles {
+        outputs.extend(p.fields.iter().filter_map(|f| model.field_id(f.get_ref())));
+        outputs.extend(model.field_id("x"));
+    }
     for p in &probes {
         if let ProbeKind::Field { value, locate, .. } = &p.kind {
             outputs.extend(value.fields());
@@ -1027,7 +1031,7 @@ fn build(
         }
         *into = *f.get_ref();
     }
-    let _ = GroupSet::default();
+    let profiles = profiles(case, &field, &body_index, end_time, time_scale, cx);
     Some(Scene {
         warnings: vec![],
         name: case.name.get_ref().clone(),
@@ -1050,8 +1054,66 @@ fn build(
         output_fields,
         probes,
         results,
+        profiles,
         resolutions,
     })
+}
+
+/// The case's `[[profiles]]`: their fields, times (× the time scale; past the end time they are
+/// never reached, and say so) and selection.
+fn profiles(
+    case: &CaseFile,
+    field: &dyn Fn(&mut Ctx, &toml::Spanned<String>) -> Option<FieldId>,
+    body_index: &dyn Fn(&mut Ctx, &toml::Spanned<String>) -> Option<usize>,
+    end_time: f64,
+    time_scale: f64,
+    cx: &mut Ctx,
+) -> Vec<ProfileSpec> {
+    let mut out = vec![];
+    for p in &case.profiles {
+        let fields: Option<Vec<FieldId>> = p.fields.iter().map(|f| field(cx, f)).collect();
+        let times: Option<Vec<f64>> = p
+            .times
+            .get_ref()
+            .iter()
+            .map(|t| cx.scalar(t, Unit::S, "a profile's time").map(|x| x * time_scale))
+            .collect();
+        let body = match &p.body {
+            Some(b) => body_index(cx, b).map(Some),
+            None => Some(None),
+        };
+        let region = match &p.region {
+            Some(r) => primitive(r.get_ref(), cx).map(Some),
+            None => Some(None),
+        };
+        let along = match &p.along {
+            None => Some(0),
+            Some(a) => {
+                let k = "xyz".find(a.get_ref().as_str()).filter(|k| *k < cx.dim && a.get_ref().len() == 1);
+                if k.is_none() {
+                    cx.err(a.span(), "C0043", format!("`along` is an axis (x, y, z) of a {}D case", cx.dim), "here");
+                }
+                k
+            }
+        };
+        let (Some(fields), Some(mut times), Some(body), Some(region), Some(along)) =
+            (fields, times, body, region, along)
+        else {
+            continue;
+        };
+        if times.is_empty() || times.iter().any(|t| t.is_nan() || *t < 0.0) {
+            cx.err(p.times.span(), "C0043", "a profile needs one or more times, none negative", "here");
+            continue;
+        }
+        if times.iter().any(|t| *t > end_time * (1.0 + 1e-12)) {
+            let d = Diagnostic::warning("C0044", "a profile time is past the end time: that profile is not written")
+                .at(cx.span(p.times.span()), "here");
+            cx.diags.push(d);
+        }
+        times.sort_by(f64::total_cmp);
+        out.push(ProfileSpec { name: p.name.get_ref().clone(), fields, times, body, region, along });
+    }
+    out
 }
 
 /// A constraint's rigid rotation: its centre, angular speed (divided by the time scale, like

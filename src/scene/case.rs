@@ -64,6 +64,8 @@ pub struct CaseFile {
     pub probes: Vec<Probe>,
     #[serde(default)]
     pub results: Vec<ResultSpec>,
+    #[serde(default)]
+    pub profiles: Vec<Profile>,
     /// Defaults of the case's `${name}` placeholders (already substituted when this is parsed).
     #[serde(default)]
     pub parameters: Option<toml::Table>,
@@ -288,6 +290,25 @@ pub struct Output {
     pub interval: Option<Value>,
     #[serde(default)]
     pub fields: Vec<Spanned<String>>,
+}
+
+/// Every selected particle's values of some fields at chosen times, as CSV
+/// (`profiles/<name>_<k>.csv`): a shock tube's or a boundary layer's profile.
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct Profile {
+    pub name: Spanned<String>,
+    pub fields: Vec<Spanned<String>>,
+    pub times: Spanned<Vec<Value>>,
+    /// Only this body's particles.
+    #[serde(default)]
+    pub body: Option<Spanned<String>>,
+    /// Only the particles inside this region when the profile is written.
+    #[serde(default)]
+    pub region: Option<Spanned<Shape>>,
+    /// The axis the rows are sorted along (default: x).
+    #[serde(default)]
+    pub along: Option<Spanned<String>>,
 }
 
 #[derive(Deserialize, Debug)]

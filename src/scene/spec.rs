@@ -57,6 +57,19 @@ pub enum ProbeKind {
     Measure(Measure),
 }
 
+/// Every selected particle's values of `fields` at `times` (s), one CSV file per time, rows sorted
+/// along axis `along` (`[[profiles]]`).
+#[derive(Clone, Debug)]
+pub struct ProfileSpec {
+    pub name: String,
+    pub fields: Vec<FieldId>,
+    pub times: Vec<f64>,
+    pub body: Option<usize>,
+    /// Only the particles inside it when the profile is written.
+    pub region: Option<super::geometry::Primitive>,
+    pub along: usize,
+}
+
 /// What a field probe takes of each particle: a stored field, or an expression of fields and the
 /// material's parameters (`expression = "s - p * I"`), evaluated on the host (`host_eval`).
 #[derive(Clone, Debug)]
@@ -149,6 +162,7 @@ pub struct Scene {
     pub output_fields: Vec<FieldId>,
     pub probes: Vec<ProbeSpec>,
     pub results: Vec<ResultSpec>,
+    pub profiles: Vec<ProfileSpec>,
     /// Per resolution name: its dx (for listings).
     pub resolutions: Vec<(String, f64)>,
 }
