@@ -34,6 +34,7 @@ RUNS = [
     ("cantilever_lsm", {}),
     ("cantilever_2d", {}),
     ("clamped_plate_2d", {}),
+    ("sod_shock_tube", {}),
     ("beam_vibration_2d", {}),
     ("dam_break_2d", {"boundary": "dbc"}),
     ("dam_break_2d", {"boundary": "adami"}),
