@@ -85,7 +85,7 @@ fn elastic_store<T: crate::particles::Real>(n: usize) -> Result<(Plan, Store<T>)
         damping: None,
     };
     let plan = Plan::build(&model, &scene, None).map_err(|e| e.to_string())?;
-    let mut store: Store<T> = build_store(&plan, &input, &[mat]).map_err(|e| e.0)?;
+    let mut store: Store<T> = build_store(&plan, &input, &[mat]).map_err(|e| e.to_string())?;
     // A non-trivial stress state.
     let s = plan.model.field_id("s").expect("s");
     if let Some(col) = store.column_mut(s) {

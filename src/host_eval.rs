@@ -19,7 +19,14 @@ pub trait Leaves {
 
 /// The value of `e`, or a clause that says what in it the host cannot evaluate.
 pub fn eval(e: &Expr, dim: usize, leaves: &mut dyn Leaves) -> Result<Vec<f64>, String> {
-    Evaluator { dim, leaves, locals: vec![] }.value(e)
+    Evaluator { dim, leaves, locals: vec![], every_branch: false }.value(e)
+}
+
+/// Whether `e` can be evaluated here, before any value is known: every branch of every `select`,
+/// `&&` and `||` is taken, and `leaves` answer with stand-ins (zeros) or with what they cannot
+/// give. `Err` is the clause `eval` would give for the first thing it cannot evaluate.
+pub fn check(e: &Expr, dim: usize, leaves: &mut dyn Leaves) -> Result<(), String> {
+    Evaluator { dim, leaves, locals: vec![], every_branch: true }.value(e).map(|_| ())
 }
 
 /// What the host evaluates, for the errors of what it does not.
@@ -30,6 +37,8 @@ struct Evaluator<'a> {
     dim: usize,
     leaves: &'a mut dyn Leaves,
     locals: Vec<(LocalId, Vec<f64>)>,
+    /// Evaluate both sides of every choice (`check`).
+    every_branch: bool,
 }
 
 fn truth(b: bool) -> Vec<f64> {
@@ -63,6 +72,11 @@ impl Evaluator<'_> {
             ExprKind::Unary(Op::Neg, a) => self.value(a)?.iter().map(|x| -x).collect(),
             ExprKind::Unary(Op::Not, a) => truth(self.value(a)?[0] == 0.0),
             ExprKind::Binary(op, a, b) => self.binary(*op, a, b)?,
+            ExprKind::Select(c, a, b) if self.every_branch => {
+                self.value(c)?;
+                self.value(b)?;
+                self.value(a)?
+            }
             ExprKind::Select(c, a, b) => {
                 if self.value(c)?[0] != 0.0 {
                     self.value(a)?
@@ -104,6 +118,11 @@ impl Evaluator<'_> {
     fn binary(&mut self, op: Op, a: &Expr, b: &Expr) -> Result<Vec<f64>, String> {
         // `&&` and `||` look at their right side only when they must, as the backends do.
         match op {
+            Op::And | Op::Or if self.every_branch => {
+                self.value(a)?;
+                self.value(b)?;
+                return Ok(truth(false));
+            }
             Op::And => return Ok(truth(self.value(a)?[0] != 0.0 && self.value(b)?[0] != 0.0)),
             Op::Or => return Ok(truth(self.value(a)?[0] != 0.0 || self.value(b)?[0] != 0.0)),
             _ => {}

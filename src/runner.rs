@@ -158,16 +158,21 @@ fn run_gpu(
     if opts.precision == Precision::F64 && opts.backend == BackendChoice::Gpu {
         eprintln!("note: the GPU backend computes in f32");
     }
-    let store = setup::build_store::<f32>(&plan, &scene.particles, &scene.materials)
-        .map_err(|e| RunFailure::Input(format!("error: {e}\n")))?;
+    let store =
+        setup::build_store::<f32>(&plan, &scene.particles, &scene.materials).map_err(|e| setup_failure(&scene, e))?;
     let backend =
         crate::backend::gpu::GpuBackend::new(gpu, plan, store, &scene.mirrors).map_err(|e| RunFailure::Run(e.0))?;
     drive(scene, backend, opts, "f32")
 }
 
+/// A scene that cannot be set up, as an error of its case file.
+fn setup_failure(scene: &Scene, e: setup::SetupError) -> RunFailure {
+    RunFailure::Input(format!("{e}\n  = in the case file {}\n", scene.path.display()))
+}
+
 fn run_cpu<T: Real>(scene: Scene, plan: Plan, opts: &RunOptions) -> Result<RunOutcome, RunFailure> {
-    let store = setup::build_store::<T>(&plan, &scene.particles, &scene.materials)
-        .map_err(|e| RunFailure::Input(format!("error: {e}\n")))?;
+    let store =
+        setup::build_store::<T>(&plan, &scene.particles, &scene.materials).map_err(|e| setup_failure(&scene, e))?;
     let backend = CpuBackend::new(plan, store, scene.mirrors.clone()).map_err(|e| RunFailure::Run(e.0))?;
     drive(scene, backend, opts, T::NAME)
 }

@@ -53,12 +53,23 @@ pub struct MaterialInput {
     pub values: BTreeMap<ParamId, Vec<f64>>,
 }
 
+/// A scene that cannot be set up: a code of `docs/ERRORS.md` and what is wrong, naming the
+/// material, body or field of the case.
 #[derive(Debug, Clone)]
-pub struct SetupError(pub String);
+pub struct SetupError {
+    pub code: &'static str,
+    pub message: String,
+}
+
+impl SetupError {
+    fn new(code: &'static str, message: impl Into<String>) -> Self {
+        SetupError { code, message: message.into() }
+    }
+}
 
 impl std::fmt::Display for SetupError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&self.0)
+        write!(f, "error[{}]: {}", self.code, self.message)
     }
 }
 
@@ -248,7 +259,7 @@ pub fn build_store<T: Real>(
 ) -> Result<Store<T>, SetupError> {
     let model = &plan.model;
     if input.is_empty() {
-        return Err(SetupError("the scene has no particles".into()));
+        return Err(SetupError::new("C0011", "the scene has no particles"));
     }
     let perm = group_order(input);
     let pick = |k: usize| perm[k] as usize;
@@ -280,12 +291,13 @@ pub fn build_store<T: Real>(
                     let need = used.get(&ParamId(p as u32)).copied().unwrap_or_default();
                     if !need.intersect(groups).is_empty() {
                         let param = &model.params[p];
-                        return Err(SetupError(format!(
-                            "material `{}` does not bind parameter `{}` ({}), which the model reads on {}",
+                        return Err(SetupError::new("C0046", format!(
+                            "material `{}` does not bind parameter `{}` ({}), which the model reads on {}: give it a value in `[materials.{}]`",
                             m.name,
                             param.name,
                             param.ty,
-                            model.group_names(need.intersect(groups))
+                            model.group_names(need.intersect(groups)),
+                            m.name
                         )));
                     }
                 }
@@ -329,8 +341,12 @@ pub fn host_fields(
         let mut params = materials.to_vec();
         for k in 0..n {
             let params = &mut params[input.material[k] as usize];
-            let v = eval(model, dim, init, params, &mut BTreeSet::new(), Some((&fields, k)))
-                .map_err(|what| SetupError(format!("cannot compute the initial value of `{}`: {what}", field.name)))?;
+            let v = eval(model, dim, init, params, &mut BTreeSet::new(), Some((&fields, k))).map_err(|what| {
+                SetupError::new(
+                    "C0045",
+                    format!("cannot compute the model's initial value of `{}`: {what}", field.name),
+                )
+            })?;
             values[k * comps..(k + 1) * comps].copy_from_slice(&v[..comps]);
         }
         fields.insert(*f, (comps, values));
@@ -342,10 +358,10 @@ pub fn host_fields(
         for k in (0..n).filter(|k| input.body[*k] == iv.body) {
             let params = &mut params[input.material[k] as usize];
             let v = eval(model, dim, &iv.value, params, &mut BTreeSet::new(), Some((&fields, k))).map_err(|what| {
-                SetupError(format!(
-                    "cannot compute the case's initial value of `{}`: {what}",
-                    model.field(iv.field).name
-                ))
+                SetupError::new(
+                    "C0045",
+                    format!("cannot compute the case's initial value of `{}`: {what}", model.field(iv.field).name),
+                )
             })?;
             values[k * comps..(k + 1) * comps].copy_from_slice(&v[..comps]);
         }

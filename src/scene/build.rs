@@ -616,8 +616,10 @@ fn build(
             particles.group.push(group.0);
             particles.material.push(material as u32);
         }
+        let mut set_here = vec![];
         for (field, text) in &body.initial {
-            if let Some(value) = initial_value(&model, field, text, cx) {
+            if let Some(value) = initial_value(&model, field, text, &set_here, cx) {
+                set_here.push(value.0);
                 particles.initial.push(InitialValue { field: value.0, body: b as u32, value: value.1 });
             }
         }
@@ -1398,6 +1400,7 @@ fn initial_value(
     model: &Model,
     field: &str,
     text: &toml::Spanned<String>,
+    set_before: &[FieldId],
     cx: &mut Ctx,
 ) -> Option<(FieldId, ir::Expr)> {
     const PLACED: [&str; 5] = ["x", "vol", "dx", "body", "part"];
@@ -1416,12 +1419,60 @@ fn initial_value(
         return None;
     };
     let (offset, expr) = as_written(text, cx);
-    match check::case_expression(model, cx.file, offset, &expr, Some(f)) {
-        Ok(e) => Some((f, e)),
+    let e = match check::case_expression(model, cx.file, offset, &expr, Some(f)) {
+        Ok(e) => e,
         Err(d) => {
             cx.diags.extend(d);
-            None
+            return None;
         }
+    };
+    // Computed on the host before the run (engine::setup), from what the scene places, the
+    // model's initial values and this body's earlier ones (in the order of their names).
+    let known = |g: FieldId| ["v"].iter().chain(&PLACED).any(|n| *n == model.field(g).name) || set_before.contains(&g);
+    let mut leaves = BeforeTheRun { model, dim: cx.dim, known: &known };
+    if let Err(what) = crate::host_eval::check(&e, cx.dim, &mut leaves) {
+        let d = Diagnostic::error(
+            "C0045",
+            format!("the initial value of `{field}` cannot be computed before the run: {what}"),
+        )
+        .at(cx.span(text.span()), "this expression");
+        cx.diags.push(d);
+        return None;
+    }
+    Some((f, e))
+}
+
+/// The leaves of an initial value as the host will know them before the run, with stand-in
+/// values: `check` asks only whether each can be had.
+struct BeforeTheRun<'a> {
+    model: &'a Model,
+    dim: usize,
+    known: &'a dyn Fn(FieldId) -> bool,
+}
+
+impl crate::host_eval::Leaves for BeforeTheRun<'_> {
+    fn field(&mut self, g: FieldId) -> Result<Vec<f64>, String> {
+        let field = self.model.field(g);
+        if (self.known)(g) || field.init.is_some() {
+            Ok(vec![0.0; ir::components(field.ty.shape, self.dim)])
+        } else if field.storage == ir::Storage::State {
+            Err(format!("it reads `{}`, which neither the scene nor the model sets before the run", field.name))
+        } else {
+            Err(format!("it reads `{}`, which is computed during each step, after the initial values", field.name))
+        }
+    }
+    fn param(&mut self, p: ir::ParamId) -> Result<Vec<f64>, String> {
+        Ok(vec![0.0; ir::components(self.model.params[p.index()].ty.shape, self.dim)])
+    }
+    fn global(&mut self, g: ir::Global) -> Result<f64, String> {
+        match g {
+            ir::Global::Dim => Ok(self.dim as f64),
+            ir::Global::Time => Err("it reads `t`, which has no value before the run".into()),
+            ir::Global::Dt => Err("it reads `dt`, which has no value before the run".into()),
+        }
+    }
+    fn reduction(&mut self, _: ir::Reduce, _: &ir::Expr) -> Result<f64, String> {
+        Err("it takes a reduction over particles".into())
     }
 }
 
