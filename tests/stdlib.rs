@@ -135,3 +135,29 @@ fn every_plasticity_thermal_and_eos_module_compose() {
     }
     assert_eq!(checked_models, 20);
 }
+
+/// Modules whose equations share a name combine across groups (issue 41): a fluid's
+/// `continuity::fourtakas`, `eos::tait` and `momentum::fluid` beside a solid's `continuity::plain`,
+/// `eos::linear` and `momentum::inviscid_stress` give one `continuity`, `eos` and `momentum` on
+/// each group, from its own module.
+#[test]
+fn modules_whose_equations_share_names_combine_across_groups() {
+    let text = "use kernels\n\
+        use continuity::fourtakas on fluid from fluid\nuse continuity::plain on solid from solid\n\
+        use eos::tait on fluid\nuse eos::linear on solid\n\
+        use momentum::pressure_term on fluid\nuse momentum::fluid on fluid from fluid\n\
+        use momentum::inviscid_stress on solid from solid\nuse timestep::acoustic\n\
+        group fluid, solid\nkernel = wendland_c2\nintegrate { x' = v  v' = dv  rho' = drho }\n";
+    let mut sources = Sources::new();
+    let checked = pairsum::check::check_text(&mut sources, "mixed.sph", text, Stdlib::Dir(stdlib_dir()));
+    assert!(!checked.has_errors(), "{}", render(&sources, &checked.diags));
+    let model = &checked.model;
+    let (fluid, solid) = (model.group_id("fluid").unwrap(), model.group_id("solid").unwrap());
+    for name in ["continuity", "eos", "momentum"] {
+        let eqs: Vec<_> = model.equations.iter().filter(|e| e.name == name).collect();
+        assert_eq!(eqs.len(), 2, "`{name}`: {} equations", eqs.len());
+        assert!(eqs[0].span.file != eqs[1].span.file, "`{name}` twice from one file");
+        let on: Vec<(bool, bool)> = eqs.iter().map(|e| (e.dest.contains(fluid), e.dest.contains(solid))).collect();
+        assert!(on.contains(&(true, false)) && on.contains(&(false, true)), "`{name}` runs on {on:?}");
+    }
+}

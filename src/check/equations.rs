@@ -188,7 +188,10 @@ impl Checker {
     }
 
     fn push_equation(&mut self, name: &str, kind: EquationKind, dest: ir::GroupSet, writes: Vec<FieldId>, span: Span) {
-        if let Some(other) = self.model.equations.iter().find(|e| e.name == name) {
+        // Two modules may each have an equation of one name (`continuity::fourtakas` on a fluid,
+        // `continuity::plain` on a solid): equations are told apart by their module. One file
+        // may not define a name twice; two writers of one field on a group are E0305.
+        if let Some(other) = self.model.equations.iter().find(|e| e.name == name && e.span.file == span.file) {
             let other_span = other.span;
             self.error(
                 Diagnostic::error("E0101", format!("equation `{name}` is defined twice"))

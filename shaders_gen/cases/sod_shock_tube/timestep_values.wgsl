@@ -28,11 +28,11 @@ fn st_h(i: u32, v: f32) {
     data[b] = v;
 }
 fn ld_c(i: u32) -> f32 {
-    let b = u32(info[13 + ints[i]] + i32(i) * 1);
+    let b = u32(info[14 + ints[i]] + i32(i) * 1);
     return data[b];
 }
 fn st_c(i: u32, v: f32) {
-    let b = u32(info[13 + ints[i]] + i32(i) * 1);
+    let b = u32(info[14 + ints[i]] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_cfl_alpha(i: u32) -> f32 {

@@ -391,43 +391,43 @@ fn ldj_p(j: u32, sgn: vec3<f32>) -> f32 {
     return data[b];
 }
 fn ld_p_over_rho2(i: u32) -> f32 {
-    let b = u32(info[12 + G] + i32(i) * 1);
+    let b = u32(info[13 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p_over_rho2(i: u32, v: f32) {
-    let b = u32(info[12 + G] + i32(i) * 1);
+    let b = u32(info[13 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_p_over_rho2(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[12 + ints[j]];
-    if (base == -2147483648) { return 0.0; }
-    let b = u32(base + i32(j) * 1);
-    return data[b];
-}
-fn ld_c(i: u32) -> f32 {
-    let b = u32(info[13 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_c(i: u32, v: f32) {
-    let b = u32(info[13 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ldj_c(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[13 + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
-fn ld_alpha_visc(i: u32) -> f32 {
+fn ld_c(i: u32) -> f32 {
     let b = u32(info[14 + G] + i32(i) * 1);
     return data[b];
 }
-fn st_alpha_visc(i: u32, v: f32) {
+fn st_c(i: u32, v: f32) {
     let b = u32(info[14 + G] + i32(i) * 1);
     data[b] = v;
 }
-fn ldj_alpha_visc(j: u32, sgn: vec3<f32>) -> f32 {
+fn ldj_c(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[14 + ints[j]];
+    if (base == -2147483648) { return 0.0; }
+    let b = u32(base + i32(j) * 1);
+    return data[b];
+}
+fn ld_alpha_visc(i: u32) -> f32 {
+    let b = u32(info[15 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_alpha_visc(i: u32, v: f32) {
+    let b = u32(info[15 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ldj_alpha_visc(j: u32, sgn: vec3<f32>) -> f32 {
+    let base = info[15 + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];

@@ -388,35 +388,35 @@ fn st_p(i: u32, v: f32) {
     let b = u32(info[11 + G] + i32(i) * 1);
     data[b] = v;
 }
-fn ld_p_over_rho2(i: u32) -> f32 {
-    let b = u32(info[12 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_p_over_rho2(i: u32, v: f32) {
-    let b = u32(info[12 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ld_c(i: u32) -> f32 {
-    let b = u32(info[13 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_c(i: u32, v: f32) {
-    let b = u32(info[13 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ld_alpha_visc(i: u32) -> f32 {
-    let b = u32(info[14 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_alpha_visc(i: u32, v: f32) {
-    let b = u32(info[14 + G] + i32(i) * 1);
-    data[b] = v;
-}
 fn ld_omega(i: u32) -> f32 {
-    let b = u32(info[15 + G] + i32(i) * 1);
+    let b = u32(info[12 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_omega(i: u32, v: f32) {
+    let b = u32(info[12 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_p_over_rho2(i: u32) -> f32 {
+    let b = u32(info[13 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_p_over_rho2(i: u32, v: f32) {
+    let b = u32(info[13 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_c(i: u32) -> f32 {
+    let b = u32(info[14 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_c(i: u32, v: f32) {
+    let b = u32(info[14 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_alpha_visc(i: u32) -> f32 {
+    let b = u32(info[15 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_alpha_visc(i: u32, v: f32) {
     let b = u32(info[15 + G] + i32(i) * 1);
     data[b] = v;
 }
@@ -535,9 +535,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     dalpha_i = (((-(ld_alpha_visc(i) - prm_visc_alpha_min(i))) / tau) + (max((-div_v), 0.0) * (prm_visc_alpha_max(i) - ld_alpha_visc(i))));
     st_rho(i, rho);
     st_p(i, p_i);
+    st_omega(i, omega);
     st_p_over_rho2(i, p_over_rho2_i);
     st_c(i, c_i);
-    st_omega(i, omega);
     st_div_v(i, div_v);
     st_dalpha(i, dalpha_i);
 }

@@ -102,11 +102,11 @@ fn st_e(i: u32, v: f32) {
     data[b] = v;
 }
 fn ld_alpha_visc(i: u32) -> f32 {
-    let b = u32(info[14 + G] + i32(i) * 1);
+    let b = u32(info[15 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_alpha_visc(i: u32, v: f32) {
-    let b = u32(info[14 + G] + i32(i) * 1);
+    let b = u32(info[15 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_dv(i: u32) -> vec3<f32> {
