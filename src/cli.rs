@@ -457,7 +457,16 @@ fn run_plan(path: &Path, dim: usize, integrator: &str, precision: Precision, opt
             Ok((scene, plan)) => {
                 eprint!("{}", scene.warnings.concat());
                 print!("{}", plan.describe(real));
-                0
+                match crate::runner::cost_estimate(&scene, &plan, precision) {
+                    Ok(text) => {
+                        print!("cost:\n{}", text.lines().map(|l| format!("  {l}\n")).collect::<String>());
+                        0
+                    }
+                    Err(e) => {
+                        eprint!("{e}");
+                        1
+                    }
+                }
             }
             Err(e) => {
                 eprint!("{e}");

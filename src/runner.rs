@@ -102,6 +102,76 @@ pub fn prepare(path: &Path, opts: &scene::Options) -> Result<(Scene, Plan), RunF
     Ok((scene, plan))
 }
 
+/// What a run of the case will cost on this machine (`pairsum plan CASE`): the particles of each
+/// body, the first time step and the steps it implies, and the wall time those take at the cost
+/// per step measured here, on the CPU backend, over a few steps (about a second of them).
+pub fn cost_estimate(scene: &Scene, plan: &Plan, precision: Precision) -> Result<String, RunFailure> {
+    match precision {
+        Precision::F32 => estimate_on::<f32>(scene, plan),
+        Precision::F64 => estimate_on::<f64>(scene, plan),
+    }
+}
+
+fn estimate_on<T: Real>(scene: &Scene, plan: &Plan) -> Result<String, RunFailure> {
+    let mut out = String::new();
+    let bodies: Vec<String> = scene.bodies.iter().map(|b| format!("{} {}", b.name, b.particles.len())).collect();
+    out.push_str(&format!("particles: {} ({} in all)\n", bodies.join(", "), scene.particles.len()));
+    let store =
+        setup::build_store::<T>(plan, &scene.particles, &scene.materials).map_err(|e| setup_failure(scene, e))?;
+    let backend = CpuBackend::new(plan.clone(), store, scene.mirrors.clone()).map_err(|e| RunFailure::Run(e.0))?;
+    let mut engine = Engine::new(backend, scene.config.clone());
+    engine.initialise().map_err(|e| RunFailure::Run(e.to_string()))?;
+    let (dt0, end) = (engine.dt, scene.config.end_time);
+    let steps = (end / dt0).ceil();
+    out.push_str(&format!(
+        "first time step: {dt0:.4e} s; to the end time {end:.4e} s that is about {steps:.0} steps\n"
+    ));
+    // The first step pays for what is built once (lists, caches); time the ones after it.
+    let first = Instant::now();
+    engine.step().map_err(|e| RunFailure::Run(e.to_string()))?;
+    let first = first.elapsed().as_secs_f64();
+    let (started, t_start) = (Instant::now(), engine.time);
+    let mut timed = 0u32;
+    let ended = |e: &Engine<CpuBackend<T>>| e.time >= end * (1.0 - 1e-12);
+    while !ended(&engine) && (timed < 3 || started.elapsed().as_secs_f64() < 1.0) {
+        engine.step().map_err(|e| RunFailure::Run(e.to_string()))?;
+        timed += 1;
+    }
+    let elapsed = started.elapsed().as_secs_f64();
+    let on = engine.backend.describe();
+    if ended(&engine) {
+        out.push_str(&format!(
+            "measured on {on}: the whole run, {} steps in {} (the GPU backend costs differently)\n",
+            engine.step,
+            human_seconds(first + elapsed)
+        ));
+        return Ok(out);
+    }
+    let per_step = elapsed / timed as f64;
+    // The steps left at the mean time step of those timed, which follows the run better than
+    // the first (a shock, an impact shorten it).
+    let mean_dt = (engine.time - t_start) / timed as f64;
+    let total = engine.step as f64 + (end - engine.time) / mean_dt;
+    out.push_str(&format!(
+        "measured on {on}: {per_step:.3e} s per step ({:.1} ns per particle-step), mean time step {mean_dt:.4e} s, \
+         over {timed} steps; the run: about {total:.0} steps, {} (the GPU backend costs differently)\n",
+        per_step / scene.particles.len().max(1) as f64 * 1e9,
+        human_seconds(per_step * total)
+    ));
+    Ok(out)
+}
+
+/// A duration for a person: seconds, minutes or hours.
+fn human_seconds(s: f64) -> String {
+    if s < 120.0 {
+        format!("{s:.1} s")
+    } else if s < 7200.0 {
+        format!("{:.1} min", s / 60.0)
+    } else {
+        format!("{:.1} h", s / 3600.0)
+    }
+}
+
 /// Runs a case on the chosen backend and writes its outputs and report into `opts.out`.
 pub fn run_case(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailure> {
     let (scene, plan) = prepare(path, &opts.scene)?;

@@ -1023,3 +1023,45 @@ fn sod_shock_tube_shock_arrival_error_halves_from_5_to_2_5_mm() {
         100.0 * ci
     );
 }
+
+/// `pairsum plan CASE` prints what a run will cost (issue 40): the particles of each body, the
+/// first time step, and the steps and wall time measured here. A run short enough to time whole
+/// (Sod's tube at 5 mm, 0.1 s of wall time) gives its exact step count; a longer one (the elastic wave at 0.5 mm,
+/// about 2,000 steps) is extrapolated from its first second, here within 2 % of the steps the run
+/// takes.
+#[test]
+fn pairsum_plan_estimates_the_steps_a_run_takes() {
+    let plan = |args: &[&str]| -> String {
+        let o =
+            std::process::Command::new(env!("CARGO_BIN_EXE_pairsum")).arg("plan").args(args).output().expect("runs");
+        assert!(o.status.success(), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8(o.stdout).expect("text")
+    };
+    let steps_of = |name: &str, resolution: &str| -> u64 {
+        let mut opts = RunOptions {
+            backend: BackendChoice::Cpu,
+            out: out_dir(&format!("plan-{name}-{resolution}")),
+            vtk: false,
+            ..RunOptions::default()
+        };
+        opts.scene.resolution = Some(resolution.to_string());
+        let outcome = run_case(&case(name), &opts).unwrap_or_else(|e| panic!("{e}"));
+        let _ = std::fs::remove_dir_all(&opts.out);
+        outcome.report.steps
+    };
+    let sod = plan(&[case("sod_shock_tube").to_str().unwrap(), "--resolution", "coarse"]);
+    assert!(sod.contains("particles: left 200, right 25 (225 in all)"), "{sod}");
+    assert!(sod.contains("first time step: "), "{sod}");
+    let whole = format!("the whole run, {} steps in ", steps_of("sod_shock_tube", "coarse"));
+    assert!(sod.contains(&whole), "expected `{whole}` in:\n{sod}");
+
+    let wave = plan(&[case("elastic_wave").to_str().unwrap(), "--resolution", "paper"]);
+    let about: f64 = wave
+        .split("the run: about ")
+        .nth(1)
+        .and_then(|r| r.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no estimate of the steps in:\n{wave}"));
+    let steps = steps_of("elastic_wave", "paper") as f64;
+    assert!((about - steps).abs() <= 0.02 * steps, "estimated {about} steps, the run took {steps}");
+}
