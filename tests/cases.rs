@@ -995,6 +995,7 @@ fn sod_shock_tube_plateaus_and_profile_match_the_exact_solution_and_energy_is_co
     let (e0, e1) = (energy[0].1, energy[energy.len() - 1].1);
     assert!((e1 - e0).abs() < 2e-5 * e0, "total energy {e0} J at t = 0, {e1} J at the end");
     assert!(history(&histories, "total_momentum").iter().all(|(_, p)| p.abs() < 1e-12), "momentum not kept at 0");
+    assert!(history(&histories, "alpha_in_rarefaction").iter().all(|(_, a)| *a == 1.0), "α moved without the switch");
 
     let opts =
         RunOptions { backend: BackendChoice::Cpu, out: out_dir("sod-profile"), vtk: false, ..RunOptions::default() };
@@ -1064,4 +1065,15 @@ fn pairsum_plan_estimates_the_steps_a_run_takes() {
         .unwrap_or_else(|| panic!("no estimate of the steps in:\n{wave}"));
     let steps = steps_of("elastic_wave", "paper") as f64;
     assert!((about - steps).abs() <= 0.02 * steps, "estimated {about} steps, the run took {steps}");
+}
+
+/// Sod's shock tube with the Morris–Monaghan switch (`models::ideal_gas_switch`): the plateaus
+/// within the same tolerances, and the viscosity coefficient in the rarefaction decayed from 1
+/// to near its minimum 0.1 (it stays 1 without the switch).
+#[test]
+fn sod_shock_tube_with_the_viscosity_switch_keeps_its_plateaus_and_lets_alpha_decay_in_the_rarefaction() {
+    let with = run_and_check_with("sod_shock_tube", &[("model", "models::ideal_gas_switch")], Precision::F64);
+    let alpha = history(&with, "alpha_in_rarefaction");
+    let (first, last) = (alpha[0].1, alpha[alpha.len() - 1].1);
+    assert!(first == 1.0 && (0.1..0.12).contains(&last), "α in the rarefaction: {first} at t = 0, {last} at the end");
 }
