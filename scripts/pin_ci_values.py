@@ -35,6 +35,7 @@ RUNS = [
     ("cantilever_2d", {}),
     ("clamped_plate_2d", {}),
     ("sod_shock_tube", {}),
+    ("poiseuille_2d", {}),
     ("sod_shock_tube", {"model": "models::ideal_gas_switch"}),
     ("beam_vibration_2d", {}),
     ("dam_break_2d", {"boundary": "dbc"}),

@@ -80,7 +80,7 @@ fn elastic_store<T: crate::particles::Real>(n: usize) -> Result<(Plan, Store<T>)
         gravity: None,
         loads: vec![],
         constraints: vec![],
-        symmetry: vec![],
+        planes: vec![],
         search: Default::default(),
         damping: None,
     };

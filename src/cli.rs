@@ -484,7 +484,7 @@ fn run_plan(path: &Path, dim: usize, integrator: &str, precision: Precision, opt
         gravity: None,
         loads: vec![],
         constraints: vec![],
-        symmetry: vec![],
+        planes: vec![],
         search: Default::default(),
         damping: None,
     };
@@ -520,7 +520,7 @@ pub fn plan_of(path: &Path, dim: usize) -> Result<crate::schedule::Plan, String>
         gravity: None,
         loads: vec![],
         constraints: vec![],
-        symmetry: vec![],
+        planes: vec![],
         search: Default::default(),
         damping: None,
     };

@@ -117,7 +117,7 @@ fn a_symmetry_plane_gives_the_same_motion_as_the_mirrored_full_model() {
     let half_in = two_blocks(3, n, dx, 20.0, true);
     let sc = scene(&m, 3, &["m"], IntegratorKind::PredictorCorrector);
     let full = backend::<f64>(&m, &sc, &full_in, &[steel(&m)], vec![]);
-    let half = backend::<f64>(&m, &sc, &half_in, &[steel(&m)], vec![Mirror { axis: 0, offset: 0.0 }]);
+    let half = backend::<f64>(&m, &sc, &half_in, &[steel(&m)], vec![Mirror::symmetry(0, 0.0)]);
     let (mut ef, mut eh) = (engine(full, 1.0), engine(half, 1.0));
     for _ in 0..80 {
         ef.step().expect("full step");
@@ -298,8 +298,11 @@ fn reflected_at_a_plane(m: &pairsum::ir::Model) {
     inp.v = vec![[-1.0, 0.5, 0.0], [-1.0, 0.5, 0.0]];
     let mat = material(&m, &[("rho0", vec![1000.0])]);
     for integrator in [IntegratorKind::Euler, IntegratorKind::PredictorCorrector, IntegratorKind::Symplectic] {
-        let spec = pairsum::schedule::SceneSpec { symmetry: vec![(0, 0.0)], ..scene(&m, 2, &["v"], integrator) };
-        let mirrors = vec![Mirror { axis: 0, offset: 0.0 }];
+        let spec = pairsum::schedule::SceneSpec {
+            planes: vec![pairsum::backend::Mirror::symmetry(0, 0.0)],
+            ..scene(&m, 2, &["v"], integrator)
+        };
+        let mirrors = vec![Mirror::symmetry(0, 0.0)];
         let b = backend::<f64>(&m, &spec, &inp, std::slice::from_ref(&mat), mirrors);
         let mut e = Engine::new(b, RunConfig { end_time: 0.02, dt_max: 1e-3, ..RunConfig::default() });
         e.initialise().expect("initialise");

@@ -50,7 +50,7 @@ fn missed(lists: &Lists<f64>, x: &[f64], h: &[f64], dim: usize, mirrors: &[Mirro
 #[test]
 fn verlet_lists_never_miss_a_pair_under_the_conservative_bound() {
     for dim in 1..=3 {
-        let mirrors: Vec<Mirror> = (0..dim.min(2)).map(|axis| Mirror { axis, offset: 0.0 }).collect();
+        let mirrors: Vec<Mirror> = (0..dim.min(2)).map(|axis| Mirror::symmetry(axis, 0.0)).collect();
         let n = [60, 200, 400][dim - 1];
         let mut seed = 7 + dim as u64;
         // A cloud on the positive side of the mirrors, 1 unit across, h ≈ 0.1–0.15.

@@ -16,11 +16,21 @@ pub struct Globals {
     pub dt: f64,
 }
 
-/// A symmetry plane `x[axis] = offset`: neighbours see the mirror image of every particle.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Mirror {
-    pub axis: usize,
-    pub offset: f64,
+pub use crate::schedule::Mirror;
+
+/// Err when a periodic domain is no longer than twice the largest cut-off (`support · h_max`):
+/// a particle would then meet its own image, or one neighbour twice.
+pub fn check_periods(planes: &[Mirror], support: f64, h_max: f64) -> Result<(), BackendError> {
+    let cut_off = support * h_max;
+    match planes.iter().find(|p| p.shift > 0.0 && p.shift <= 2.0 * cut_off) {
+        Some(p) => Err(BackendError(format!(
+            "the periodic domain along {} is {} m long, no longer than twice the largest cut-off ({cut_off} m): \
+             make it longer or the particles smaller",
+            ["x", "y", "z"][p.axis],
+            p.shift
+        ))),
+        None => Ok(()),
+    }
 }
 
 /// A backend-independent copy of the particle state (checkpoints, restarts, last good state).

@@ -563,7 +563,32 @@ fn build(
             Some(v) => cx.scalar(v, m, "symmetry plane position")?,
             None => 0.0,
         };
-        mirrors.push(Mirror { axis, offset: at });
+        mirrors.push(Mirror::symmetry(axis, at));
+    }
+    let mut periodic_spans = vec![];
+    if let Some(periodic) = &case.periodic {
+        for (axis, range) in [&periodic.x, &periodic.y, &periodic.z].into_iter().enumerate() {
+            let Some(range) = range else { continue };
+            let name = ["x", "y", "z"][axis];
+            let bounds: Option<Vec<f64>> =
+                range.get_ref().iter().map(|v| cx.scalar(v, m, "a periodic domain's side")).collect();
+            let Some(bounds) = bounds else { continue };
+            let problem = if axis >= dim {
+                Some(format!("a {dim}D case has no axis {name}"))
+            } else if bounds.len() != 2 || bounds[0].partial_cmp(&bounds[1]) != Some(std::cmp::Ordering::Less) {
+                Some(format!("`{name}` is the domain [min, max) along the axis, two lengths with min < max"))
+            } else if mirrors.iter().any(|m| m.axis == axis) {
+                Some(format!("axis {name} has a symmetry plane: an axis is periodic or has one, not both"))
+            } else {
+                None
+            };
+            if let Some(p) = problem {
+                cx.err(range.span(), "C0047", p, "here");
+                continue;
+            }
+            mirrors.extend(Mirror::periodic(axis, bounds[0], bounds[1]));
+            periodic_spans.push((axis, range.span()));
+        }
     }
     // Bodies, within the scene's particle budget.
     let max_particles = match &case.max_particles {
@@ -573,6 +598,8 @@ fn build(
     .min(limits.max_particles.unwrap_or(u64::MAX));
     let mut particles = ParticleInput::default();
     let mut bodies: Vec<BodyInfo> = vec![];
+    // A body is cut at the symmetry planes; a periodic domain holds its bodies whole.
+    let symmetry: Vec<Mirror> = mirrors.iter().filter(|m| m.shift == 0.0).copied().collect();
     for (b, body) in case.bodies.get_ref().iter().enumerate() {
         let name = body.name.get_ref().clone();
         let Some(group) = model.group_id(body.group.get_ref()) else {
@@ -598,7 +625,7 @@ fn build(
         };
         let spacing = dx * body.spacing_factor.unwrap_or(1.0);
         let budget = Budget { left: max_particles.saturating_sub(particles.len() as u64), limit: max_particles };
-        let Some(placed) = place(body, spacing, dx, dir, &mirrors, budget, cx) else { continue };
+        let Some(placed) = place(body, spacing, dx, dir, &symmetry, budget, cx) else { continue };
         let velocity = match &body.velocity {
             Some(v) => cx.vector(v, unit("m/s"), &format!("velocity of body `{name}`"))?,
             None => [0.0; 3],
@@ -624,6 +651,17 @@ fn build(
             }
         }
         bodies.push(BodyInfo { name, group, material, particles: start..particles.len(), mass });
+    }
+    // Every particle inside each periodic domain [lo, hi).
+    for (axis, span) in &periodic_spans {
+        let Some(plane) = mirrors.iter().find(|m| m.axis == *axis && m.shift > 0.0) else { continue };
+        let (lo, hi) = (plane.offset, plane.offset + plane.shift);
+        if let Some(k) = particles.x.iter().position(|x| !(x[*axis] >= lo && x[*axis] < hi)) {
+            let name = &bodies[particles.body[k] as usize].name;
+            let at = particles.x[k][*axis];
+            let msg = format!("body `{name}` has a particle at {at} m along the periodic axis, outside [{lo}, {hi}) m");
+            cx.err(span.clone(), "C0047", msg, "the periodic domain");
+        }
     }
     if particles.is_empty() {
         if !cx.diags.iter().any(|d| d.is_error()) {
@@ -972,6 +1010,13 @@ fn build(
         }
     }
     let search = neighbour_search(cx, &model, case.neighbours.as_ref(), opts.verlet)?;
+    let list_limit = crate::backend::cpu::lists::INDEX_MASK as usize + 1;
+    if search.keeps_lists() && particles.len() > list_limit {
+        let msg =
+            format!("{} particles: with kept neighbour lists a scene holds at most {list_limit}", particles.len());
+        cx.err(case.bodies.span(), "C0039", msg, "these bodies");
+        return None;
+    }
     if let Search::Adaptive { field, .. } = &search {
         outputs.push(*field);
     }
@@ -1001,7 +1046,7 @@ fn build(
         },
         None => f64::INFINITY,
     };
-    let symmetry = mirrors.iter().map(|m| (m.axis, m.offset)).collect();
+    let planes = mirrors.clone();
     let damping = match &case.damping {
         Some(v) => {
             let c = cx.scalar(v, unit("1/s"), "damping")?;
@@ -1009,7 +1054,7 @@ fn build(
         }
         None => None,
     };
-    let spec = SceneSpec { dim, groups, outputs, integrator, gravity, loads, constraints, symmetry, search, damping };
+    let spec = SceneSpec { dim, groups, outputs, integrator, gravity, loads, constraints, planes, search, damping };
     let mut config =
         RunConfig { end_time, dt_max, reorder_every: case.reorder_every.unwrap_or(25), ..RunConfig::default() };
     if let Some(r) = &case.min_dt_ratio {

@@ -55,6 +55,9 @@ pub struct CaseFile {
     pub constraints: Vec<Constraint>,
     #[serde(default)]
     pub symmetry: Vec<Symmetry>,
+    /// `[periodic]`: the axes along which the domain repeats.
+    #[serde(default)]
+    pub periodic: Option<Periodic>,
     /// How neighbours are found (`[neighbours]`; the cell list when absent).
     #[serde(default)]
     pub neighbours: Option<Neighbours>,
@@ -258,6 +261,18 @@ pub struct Watchdog {
     /// the start.
     #[serde(default)]
     pub energy_factor: Option<Spanned<f64>>,
+}
+
+/// `[periodic]`: per axis, the domain `[min, max)` that repeats along it.
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct Periodic {
+    #[serde(default)]
+    pub x: Option<Spanned<Vec<Value>>>,
+    #[serde(default)]
+    pub y: Option<Spanned<Vec<Value>>>,
+    #[serde(default)]
+    pub z: Option<Spanned<Vec<Value>>>,
 }
 
 #[derive(Deserialize, Debug)]

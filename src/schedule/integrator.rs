@@ -77,10 +77,15 @@ pub fn scene_params(model: &mut Model, scene: &SceneSpec) -> Vec<SceneParam> {
         let p = synthetic_param(model, "@damping", Shape::Scalar, per_second);
         out.push(SceneParam { param: p, value: vec![c], role: SceneRole::Damping });
     }
-    for (k, (axis, _)) in scene.symmetry.iter().enumerate() {
-        let p = synthetic_param(model, &format!("@symmetry{k}"), Shape::Vec, Unit::ONE);
-        let normal = (0..scene.dim).map(|c| if c == *axis { 1.0 } else { 0.0 }).collect();
-        out.push(SceneParam { param: p, value: normal, role: SceneRole::Symmetry(k) });
+    for (k, plane) in scene.planes.iter().enumerate() {
+        let along = |length: f64| (0..scene.dim).map(|c| if c == plane.axis { length } else { 0.0 }).collect();
+        if plane.shift == 0.0 {
+            let p = synthetic_param(model, &format!("@symmetry{k}"), Shape::Vec, Unit::ONE);
+            out.push(SceneParam { param: p, value: along(1.0), role: SceneRole::Symmetry(k) });
+        } else if plane.shift > 0.0 {
+            let p = synthetic_param(model, &format!("@period{k}"), Shape::Vec, Unit::M);
+            out.push(SceneParam { param: p, value: along(plane.shift), role: SceneRole::Period(k) });
+        }
     }
     out
 }
@@ -267,16 +272,46 @@ fn rigid_motion(plan: &Plan, scene: &SceneSpec, k: usize, x_ref: FieldId) -> Opt
     Some(Block { name: format!("prescribed motion {k}"), dest: c.groups.intersect(scene.groups), stmts })
 }
 
+/// Periodic axes, after `x` is updated in the step's last stage: a particle at or beyond the
+/// upper side `hi` moves back by the period L, one below the lower side `lo` forward by it
+/// (`@period{k}`, L along the axis).
+fn wrap(plan: &Plan, scene: &SceneSpec, x: FieldId) -> Vec<Stmt> {
+    let model = &plan.model;
+    let x_ty = model.field(x).ty;
+    let mut out = vec![];
+    for sp in &plan.scene_params {
+        let SceneRole::Period(k) = sp.role else { continue };
+        let plane = scene.planes[k];
+        let (lo, hi) = (plane.offset, plane.offset + plane.shift);
+        let period = Expr::param(sp.param, model.params[sp.param.index()].ty);
+        let along = Expr::new(
+            ExprKind::Component(Box::new(Expr::field(x, x_ty)), plane.axis as u8, 0),
+            Type::scalar(x_ty.unit),
+        );
+        let at = |v: f64| Expr::constant(v, Type::scalar(x_ty.unit));
+        let beyond = Expr::binary(Op::Ge, along.clone(), at(hi), Type::BOOL);
+        let below = Expr::binary(Op::Lt, along, at(lo), Type::BOOL);
+        let x_now = Expr::field(x, x_ty);
+        let wrapped = Expr::select(
+            beyond,
+            x_now.clone().minus(period.clone()),
+            Expr::select(below, x_now.clone().plus(period), x_now),
+        );
+        out.push(Stmt::Set(x, wrapped));
+    }
+    out
+}
+
 /// Reflection at the symmetry planes, after `x` and `v` are updated in the step's last stage
 /// (a predictor may leave a particle behind a plane for half a step): where `x[axis] < offset`,
 /// `v[axis]` changes sign and `x[axis]` becomes `2 offset − x[axis]` (`n` is the plane's unit
 /// normal, the parameter `@symmetry{k}`).
 fn reflect(plan: &Plan, scene: &SceneSpec, x: FieldId, v: Option<FieldId>) -> Vec<Stmt> {
     let model = &plan.model;
-    let mut out = vec![];
+    let mut out = wrap(plan, scene, x);
     for sp in &plan.scene_params {
         let SceneRole::Symmetry(k) = sp.role else { continue };
-        let (axis, offset) = scene.symmetry[k];
+        let (axis, offset) = (scene.planes[k].axis, scene.planes[k].offset);
         let n = Expr::param(sp.param, model.params[sp.param.index()].ty);
         let component = |f: FieldId| {
             let ty = model.field(f).ty;

@@ -25,6 +25,29 @@ use crate::diag::{Diagnostic, Span};
 use crate::ir::{self, EqId, FieldId, GroupId, GroupSet, Model, ParamId, Storage};
 use crate::units::Unit;
 
+/// A plane `x[axis] = offset` that gives the particles within reach of it an image their
+/// neighbours see: a symmetry plane (`shift` 0) reflects them across it; a side of a periodic
+/// domain (`shift` ±L, the domain's length) moves them by `shift` along the axis, the lower side
+/// by +L, the upper by −L.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Mirror {
+    pub axis: usize,
+    pub offset: f64,
+    pub shift: f64,
+}
+
+impl Mirror {
+    /// A symmetry plane.
+    pub fn symmetry(axis: usize, offset: f64) -> Mirror {
+        Mirror { axis, offset, shift: 0.0 }
+    }
+
+    /// The two sides of a periodic domain `[lo, hi)` along `axis`.
+    pub fn periodic(axis: usize, lo: f64, hi: f64) -> [Mirror; 2] {
+        [Mirror { axis, offset: lo, shift: hi - lo }, Mirror { axis, offset: hi, shift: lo - hi }]
+    }
+}
+
 /// What a scene asks of the model; the scene module fills it from a case file.
 #[derive(Clone, Debug)]
 pub struct SceneSpec {
@@ -40,9 +63,11 @@ pub struct SceneSpec {
     pub loads: Vec<Load>,
     /// Bodies whose velocity is prescribed.
     pub constraints: Vec<Constraint>,
-    /// Symmetry planes `(axis, offset)`: the particles live on the side `x[axis] > offset`, and
-    /// one that crosses a plane is reflected back, its normal velocity reversed.
-    pub symmetry: Vec<(usize, f64)>,
+    /// The image planes: symmetry planes (the particles live on the side `x[axis] > offset`, and
+    /// one that crosses a plane is reflected back, its normal velocity reversed) and the sides of
+    /// periodic axes (a particle that leaves the domain `[lo, hi)` comes back in at the other
+    /// side).
+    pub planes: Vec<Mirror>,
     /// How neighbours are found, and when kept lists are rebuilt.
     pub search: Search,
     /// Mass-proportional damping c (1/s): `−c v` joins the rate of `v` of every particle, to bring
@@ -184,8 +209,10 @@ pub enum SceneRole {
     AxisCross(usize),
     /// Rotating constraint `k` in 3D: the projection onto its axis, `axis ⊗ axis`.
     AxisProjection(usize),
-    /// The unit normal of symmetry plane `k`.
+    /// The unit normal of symmetry plane `k` (of `SceneSpec::planes`).
     Symmetry(usize),
+    /// The period of the periodic axis whose lower side is plane `k`: its length along the axis.
+    Period(usize),
     /// The case's mass-proportional damping (1/s).
     Damping,
 }
@@ -213,6 +240,8 @@ pub struct Plan {
     pub saved: Vec<(FieldId, FieldId)>,
     /// How neighbours are found, and when kept lists are rebuilt (the backends follow it).
     pub search: Search,
+    /// The image planes: symmetry planes and the sides of periodic axes.
+    pub planes: Vec<Mirror>,
 }
 
 /// A reason the plan cannot be made for this scene: a diagnostic with a code (`P…`, listed in
@@ -271,6 +300,7 @@ impl Plan {
             scene_params,
             saved: vec![],
             search: scene.search.clone(),
+            planes: scene.planes.clone(),
             model,
         };
         integrator::build(&mut plan, scene, &live);

@@ -36,6 +36,14 @@ pub fn describe(plan: &Plan, real: usize) -> String {
         real
     );
     let _ = writeln!(s, "neighbours: {}", plan.search.describe());
+    for p in &plan.planes {
+        let axis = ["x", "y", "z"][p.axis];
+        if p.shift == 0.0 {
+            let _ = writeln!(s, "symmetry plane: {axis} = {} m", p.offset);
+        } else if p.shift > 0.0 {
+            let _ = writeln!(s, "periodic: {axis} in [{}, {}) m", p.offset, p.offset + p.shift);
+        }
+    }
     let x_h: Vec<FieldId> = ["x", "h"].iter().filter_map(|n| m.field_id(n)).collect();
     let mut total_r = 0;
     let mut total_w = 0;

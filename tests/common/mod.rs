@@ -72,7 +72,7 @@ pub fn scene(model: &Model, dim: usize, outputs: &[&str], integrator: Integrator
         gravity: None,
         loads: vec![],
         constraints: vec![],
-        symmetry: vec![],
+        planes: vec![],
         search: Default::default(),
         damping: None,
     }
@@ -247,3 +247,60 @@ ci = "10 mm"
 "#
     )
 }
+
+/// A 0.2 m square of water, 20 × 20 particles, at 1 % above its rest density (so under pressure),
+/// moving at `vx` along x; `periodic` and `rest` are further case text.
+pub fn lattice_case(vx: &str, end: &str, periodic: &str, rest: &str) -> String {
+    format!(
+        r#"name = "lattice"
+model = "models::wcsph_fluid"
+dim = 2
+integrator = "symplectic"
+end_time = "{end}"
+
+[resolutions]
+ci = "10 mm"
+
+{periodic}
+
+[materials.water]
+rho0 = "1000 kg/m^3"
+c0 = "10 m/s"
+gamma = 7
+visc_a = 0.1
+visc_b = 0
+nu0 = "1e-6 m^2/s"
+
+[[bodies]]
+name = "water"
+group = "fluid"
+material = "water"
+shape = {{ box = {{ min = [0, 0], max = ["0.2 m", "0.2 m"] }} }}
+velocity = ["{vx}", 0]
+initial = {{ rho = "1.01 * rho0" }}
+
+[[probes]]
+name = "max_speed"
+measure = "max_speed"
+
+[[probes]]
+name = "momentum"
+expression = "m * v.x"
+reduce = "sum"
+
+[[probes]]
+name = "x_min"
+field = "x"
+reduce = "min"
+
+[[probes]]
+name = "x_max"
+field = "x"
+reduce = "max"
+
+{rest}
+"#
+    )
+}
+
+pub const BOTH_AXES: &str = "[periodic]\nx = [0, \"0.2 m\"]\ny = [0, \"0.2 m\"]";

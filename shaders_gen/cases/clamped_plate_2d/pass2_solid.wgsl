@@ -218,22 +218,27 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let P_i = ld_P(i);
     let xi = pos3(i);
     let hi = h_of(i);
-    let mirrors = u32(globals[8u]);
+    let mirrors = u32(globals[72u]);
     let n_all = u32(info[0]);
     let stride = lists[0u];
     let list_start = 16u + n_all + i * stride;
     for (var k_list = list_start; k_list < list_start + lists[16u + i]; k_list++) {
         let entry = lists[k_list];
-        let j = entry & 0x1fffffffu;
-        let tr = entry >> 29u;
+        let j = entry & 0x3ffffffu;
+        let tr = entry >> 26u;
         var yi = xi;
         var sgn = vec3<f32>(1.0);
         for (var m = 0u; m < mirrors; m++) {
             if (((tr >> m) & 1u) == 1u) {
-                let axis = u32(globals[9u + 2u * m]);
-                let at = globals[10u + 2u * m];
-                yi[axis] = 2.0 * at - xi[axis];
-                sgn[axis] = -sgn[axis];
+                let axis = u32(globals[73u + 3u * m]);
+                let at = globals[74u + 3u * m];
+                let shift = globals[75u + 3u * m];
+                if (shift == 0.0) {
+                    yi[axis] = 2.0 * at - xi[axis];
+                    sgn[axis] = -sgn[axis];
+                } else {
+                    yi[axis] = xi[axis] + shift;
+                }
             }
         }
         let dxv = yi - pos3(j);

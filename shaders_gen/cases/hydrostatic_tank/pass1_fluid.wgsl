@@ -475,22 +475,29 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let c_i = ld_c(i);
     let xi = pos3(i);
     let hi = h_of(i);
-    let mirrors = u32(globals[8u]);
+    let mirrors = u32(globals[72u]);
     let h_max = bitcast<f32>(grid[9]);
     for (var tr = 0u; tr < (1u << mirrors); tr++) {
         var yi = xi;
         var sgn = vec3<f32>(1.0);
         var skip = false;
+        var shifted = vec3<u32>(0u);
         for (var m = 0u; m < mirrors; m++) {
             if (((tr >> m) & 1u) == 1u) {
-                let axis = u32(globals[9u + 2u * m]);
-                let at = globals[10u + 2u * m];
+                let axis = u32(globals[73u + 3u * m]);
+                let at = globals[74u + 3u * m];
+                let shift = globals[75u + 3u * m];
                 if (abs(xi[axis] - at) >= 2.0 * h_max) { skip = true; }
-                yi[axis] = 2.0 * at - xi[axis];
-                sgn[axis] = -sgn[axis];
+                if (shift == 0.0) {
+                    yi[axis] = 2.0 * at - xi[axis];
+                    sgn[axis] = -sgn[axis];
+                } else {
+                    yi[axis] = xi[axis] + shift;
+                    shifted[axis] += 1u;
+                }
             }
         }
-        if (skip) { continue; }
+        if (skip || any(shifted > vec3<u32>(1u))) { continue; }
         let c = cell_coords(yi);
         let dims = grid_dims();
         let lo = select(c - vec3<u32>(1u), vec3<u32>(0u), c == vec3<u32>(0u));

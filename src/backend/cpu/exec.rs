@@ -2,7 +2,7 @@
 //! each particle gathering its neighbours in batches from the cell list (gather only: a chunk
 //! writes the rows of its own particles and nothing else).
 
-use super::lists::{beyond_reach, transformed, INDEX_MASK, TRANSFORM_SHIFT};
+use super::lists::{beyond_reach, shifts, transformed, INDEX_MASK, TRANSFORM_SHIFT};
 use super::program::{ColView, Ctx, Program, LANES};
 use super::{Mirror, PairRegs, Variant};
 use crate::grid::{Level, SizeLevels};
@@ -199,6 +199,9 @@ pub struct Neighbours<'a, T> {
     /// cut-off of it (`Grid::nearby_max`): its search reaches support · (h_i + h_near_i)/2. Empty
     /// when the walk follows kept lists.
     pub h_near: &'a [f64],
+    /// The largest smoothing length: what bounds the neighbours of an image across a periodic
+    /// side.
+    pub h_max: f64,
     pub mirrors: &'a [Mirror],
     pub walk: Walk<'a>,
 }
@@ -483,9 +486,10 @@ fn neighbours_of<T: Real, const D: usize>(
     let sources = w.v.sources;
     // No neighbour of i, nor of its images (a reflection only moves i away from the particles on
     // the planes' positive side), has a smoothing length above h_near.
-    let h_near = nb.h_near[i];
     for t in 0..1u32 << nb.mirrors.len() {
-        // Transform t reflects particle j across the mirrors whose bit is set.
+        // Across a periodic side the neighbours are not near i: any h may be among them.
+        let h_near = if shifts(t, nb.mirrors) { nb.h_max } else { nb.h_near[i] };
+        // Transform t reflects or moves particle i across the planes whose bit is set.
         if beyond_reach(xi, t, nb.mirrors, nb.support.to_f64() * h_near) {
             continue;
         }

@@ -11,8 +11,12 @@ use crate::particles::Real;
 use crate::schedule::{Drift, Rebuild, Search, SearchStats};
 use rayon::prelude::*;
 
-/// An entry holds the transform (which mirrors reflect the neighbour; at most 3) in its top bits.
-pub const TRANSFORM_SHIFT: u32 = 29;
+/// An entry holds the transform (which image planes, `Mirror`s, make the neighbour's image; at
+/// most 6) in its top bits, its index (below 2^26) in the others.
+pub const TRANSFORM_SHIFT: u32 = 26;
+
+/// The most image planes a scene may have: three symmetry planes, or two per periodic axis.
+pub const MAX_PLANES: usize = 6;
 pub const INDEX_MASK: u32 = (1 << TRANSFORM_SHIFT) - 1;
 
 /// The lists, with the state they were built on.
@@ -47,7 +51,14 @@ impl<T: Real> Lists<T> {
     pub fn prepare(&mut self, search: &Search, inp: &BuildInput<T>, field: impl Fn(FieldId) -> Vec<f64>) {
         self.stats.evaluations += 1;
         let support = inp.support;
-        let rebuild = search.rebuild(self.built, || (self.drift(inp), self.skin_len), support);
+        let mut rebuild = search.rebuild(self.built, || (self.drift(inp), self.skin_len), support);
+        // A particle that crossed a periodic side has new images: the adaptive search, which
+        // rebuilds only some lists, rebuilds them all then.
+        if let (Rebuild::Where { .. }, Some(half)) = (&rebuild, half_period(inp.mirrors)) {
+            if self.drift(inp).displacement.partial_cmp(&half) != Some(std::cmp::Ordering::Less) {
+                rebuild = Rebuild::All;
+            }
+        }
         match rebuild {
             Rebuild::Keep => {}
             Rebuild::All => {
@@ -143,27 +154,55 @@ impl<T: Real> Lists<T> {
     }
 }
 
-/// The mirror transform `t` applied to particle i's position: the point whose neighbours are the
-/// images, and the axes it flips.
+/// Half the shortest periodic domain, if any: no particle moves that far between two builds
+/// unless it crossed a side.
+pub fn half_period(mirrors: &[Mirror]) -> Option<f64> {
+    mirrors.iter().filter(|m| m.shift > 0.0).map(|m| 0.5 * m.shift).reduce(f64::min)
+}
+
+/// The transform `t` applied to particle i's position: the point whose neighbours are the images
+/// (i reflected across the symmetry planes of `t`, moved across the periodic sides of `t`), and
+/// the axes it flips.
 pub fn transformed<T: Real>(xi: [T; 3], t: u32, mirrors: &[Mirror]) -> ([T; 3], [bool; 3]) {
     let mut yi = xi;
     let mut flip = [false; 3];
     for (m, mirror) in mirrors.iter().enumerate() {
         if t >> m & 1 == 1 {
-            yi[mirror.axis] = T::from_f64(2.0 * mirror.offset) - xi[mirror.axis];
-            flip[mirror.axis] = !flip[mirror.axis];
+            if mirror.shift == 0.0 {
+                yi[mirror.axis] = T::from_f64(2.0 * mirror.offset) - xi[mirror.axis];
+                flip[mirror.axis] = !flip[mirror.axis];
+            } else {
+                yi[mirror.axis] = xi[mirror.axis] + T::from_f64(mirror.shift);
+            }
         }
     }
     (yi, flip)
 }
 
 /// Whether transform `t` holds no image within `radius` of i: images of j are near i exactly when
-/// j is near the reflection of i, and none is when i is that far from a plane `t` reflects across.
+/// j is near the transformed i, and none is when i is that far from a plane of `t`. Both sides of
+/// one periodic axis together move i nowhere: that transform is never taken.
 pub fn beyond_reach<T: Real>(xi: [T; 3], t: u32, mirrors: &[Mirror], radius: f64) -> bool {
-    mirrors
-        .iter()
-        .enumerate()
-        .any(|(m, mirror)| t >> m & 1 == 1 && (xi[mirror.axis].to_f64() - mirror.offset).abs() >= radius)
+    let far =
+        |(m, mirror): (usize, &Mirror)| t >> m & 1 == 1 && (xi[mirror.axis].to_f64() - mirror.offset).abs() >= radius;
+    mirrors.iter().enumerate().any(far) || both_sides(t, mirrors)
+}
+
+/// Whether `t` takes both sides of a periodic axis.
+fn both_sides(t: u32, mirrors: &[Mirror]) -> bool {
+    let mut shifted = [0; 3];
+    for (m, mirror) in mirrors.iter().enumerate() {
+        if t >> m & 1 == 1 && mirror.shift != 0.0 {
+            shifted[mirror.axis] += 1;
+        }
+    }
+    shifted.iter().any(|c| *c > 1)
+}
+
+/// Whether `t` moves i across a periodic side: its images' neighbours lie across the domain, and
+/// the largest smoothing length near i does not bound theirs.
+pub fn shifts(t: u32, mirrors: &[Mirror]) -> bool {
+    mirrors.iter().enumerate().any(|(m, mirror)| t >> m & 1 == 1 && mirror.shift != 0.0)
 }
 
 /// The skin, and per particle the largest smoothing length within the build reach of it
@@ -189,8 +228,10 @@ fn collect<T: Real, const D: usize>(
     xi[..D].copy_from_slice(&inp.x[i * D..i * D + D]);
     // h_ij ≤ (h_i + h_near_i)/2: no neighbour lies beyond support · that.
     let (hi, skin) = (inp.h[i].to_f64(), near.skin);
-    let radius = inp.support * 0.5 * (hi + near.h_near[i]) + skin;
     for t in 0..1u32 << inp.mirrors.len() {
+        // Across a periodic side the neighbours are not near i: any h may be among them.
+        let h_far = if shifts(t, inp.mirrors) { inp.h_max } else { near.h_near[i] };
+        let radius = inp.support * 0.5 * (hi + h_far) + skin;
         if beyond_reach(xi, t, inp.mirrors, radius) {
             continue;
         }
@@ -199,7 +240,7 @@ fn collect<T: Real, const D: usize>(
         for c in 0..D {
             p[c] = yi[c].to_f64();
         }
-        let reach = |level: &Level| level.reach(inp.support, hi, near.h_near[i], skin);
+        let reach = |level: &Level| level.reach(inp.support, hi, h_far, skin);
         levels.for_each_candidate(p, reach, ranges, |j| {
             if t == 0 && j as usize == i {
                 return;

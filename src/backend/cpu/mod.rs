@@ -602,6 +602,7 @@ impl<T: Real> Backend for CpuBackend<T> {
                 "the largest smoothing length is {h_max}: no neighbour search is possible"
             )));
         }
+        super::check_periods(&self.mirrors, self.support, h_max)?;
         let x: Vec<T> = self.positions().to_vec();
         let h: Vec<T> = self.store.column(self.h).expect("h is stored").data.clone();
         // Kept lists, brought up to date as the plan's search says; or a grid per particle size
@@ -642,7 +643,7 @@ impl<T: Real> Backend for CpuBackend<T> {
             Walk::Lists(_) => vec![],
         };
         let support = T::from_f64(self.support);
-        let nb = Neighbours { walk, x: &x, h: &h, dim, support, h_near: &h_near, mirrors: &self.mirrors };
+        let nb = Neighbours { walk, x: &x, h: &h, dim, support, h_near: &h_near, h_max, mirrors: &self.mirrors };
         for pass in &self.passes {
             self.chunks.par_iter().for_each_init(Scratch::default, |scratch, chunk| {
                 if let Some(v) = pass.iter().find(|v| v.group == chunk.group) {

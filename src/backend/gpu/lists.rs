@@ -58,10 +58,14 @@ struct ListParams {
     // Index in `info` of the adaptive field's base on group 0 (groups follow), or -1.
     field_base: i32,
     mirrors: u32,
-    pad0: u32,
+    // Half the shortest periodic domain (0: none): a particle that moved that far crossed a side,
+    // and the adaptive search rebuilds every list.
+    half_period: f32,
     pad1: u32,
-    axis: vec4<u32>,
-    at: vec4<f32>,
+    // Per image plane m: axis[m / 4][m % 4], at and shift likewise (shift 0: a symmetry plane).
+    axis: array<vec4<u32>, 2>,
+    at: array<vec4<f32>, 2>,
+    shift: array<vec4<f32>, 2>,
 }
 "#;
 
@@ -75,7 +79,8 @@ const DRIFT_WGSL: &str = r#"
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
         @builtin(local_invocation_index) li: u32) {
     let i = (wg.x + wg.y * nwg.x) * 64u + li;
-    if (i >= params.n || params.mode != 1u || atomicLoad(&lists[1]) == 0u) { return; }
+    let watched = params.mode == 1u || (params.mode == 2u && params.half_period > 0.0);
+    if (i >= params.n || !watched || atomicLoad(&lists[1]) == 0u) { return; }
     var d2 = 0.0;
     for (var k = 0u; k < params.dim; k++) {
         let d = data[params.x_offset + i * params.dim + k] - state[i * 3u + k];
@@ -98,7 +103,8 @@ fn main() {
     let growth = bitcast<f32>(lists[4]);
     let reach = 2.0 * displacement + params.support * growth;
     let exceeded = reach > bitcast<f32>(lists[8]) || reach != reach;
-    let rebuild = lists[1] == 0u || (params.mode == 1u && exceeded);
+    let wrapped = params.mode == 2u && params.half_period > 0.0 && !(displacement < params.half_period);
+    let rebuild = lists[1] == 0u || (params.mode == 1u && exceeded) || wrapped;
     lists[2] = select(0u, 1u, rebuild);
     if (rebuild) {
         lists[6] += 1u;
@@ -164,15 +170,23 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     for (var tr = 0u; tr < (1u << params.mirrors); tr++) {
         var yi = xi;
         var far = false;
+        var shifted = vec3<u32>(0u);
         for (var m = 0u; m < params.mirrors; m++) {
             if (((tr >> m) & 1u) == 1u) {
-                let axis = params.axis[m];
-                let at = params.at[m];
+                let axis = params.axis[m / 4u][m % 4u];
+                let at = params.at[m / 4u][m % 4u];
+                let shift = params.shift[m / 4u][m % 4u];
                 if (abs(xi[axis] - at) >= radius) { far = true; }
-                yi[axis] = 2.0 * at - xi[axis];
+                if (shift == 0.0) {
+                    yi[axis] = 2.0 * at - xi[axis];
+                } else {
+                    yi[axis] = xi[axis] + shift;
+                    shifted[axis] += 1u;
+                }
             }
         }
-        if (far) { continue; }
+        // Both sides of one periodic axis together move i nowhere.
+        if (far || any(shifted > vec3<u32>(1u))) { continue; }
         let c = cell_coords(yi);
         let dims = grid_dims();
         let lo = select(c - vec3<u32>(1u), vec3<u32>(0u), c == vec3<u32>(0u));
@@ -188,7 +202,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 // Each pair's own reach: its cut-off support · h_ij plus the skin.
                 let reach = min(params.support * 0.5 * (hi + data[params.h_offset + j]) + skin_len, radius);
                 if (dot(d, d) < reach * reach) {
-                    if (count < stride) { atomicStore(&lists[first + count], j | (tr << 29u)); }
+                    if (count < stride) { atomicStore(&lists[first + count], j | (tr << TRANSFORM_SHIFTu)); }
                     count++;
                 }
             }
@@ -248,11 +262,13 @@ impl GpuLists {
             Search::Verlet { .. } => (1, 0.0),
             Search::Adaptive { threshold, .. } => (2, threshold.min(f32::MAX as f64) as f32),
         };
-        let mut axis = [0u32; 4];
-        let mut at = [0f32; 4];
-        for (k, m) in scene.mirrors.iter().enumerate().take(3) {
+        let mut axis = [0u32; 8];
+        let mut at = [0f32; 8];
+        let mut shift = [0f32; 8];
+        for (k, m) in scene.mirrors.iter().enumerate().take(crate::backend::cpu::lists::MAX_PLANES) {
             axis[k] = m.axis as u32;
             at[k] = m.offset as f32;
+            shift[k] = m.shift as f32;
         }
         let words: Vec<u32> = [
             n as u32,
@@ -265,18 +281,25 @@ impl GpuLists {
             threshold.to_bits(),
             scene.field_base.map(|b| b as i32).unwrap_or(-1) as u32,
             scene.mirrors.len() as u32,
-            0,
+            (crate::backend::cpu::lists::half_period(scene.mirrors).unwrap_or(0.0) as f32).to_bits(),
             0,
         ]
         .into_iter()
         .chain(axis)
         .chain(at.map(f32::to_bits))
+        .chain(shift.map(f32::to_bits))
         .collect();
         let params = gpu.uniform_buffer("neighbour lists: params", &words);
         let drift = gpu.compile("neighbour lists: drift", &format!("{PARAMS_WGSL}{DRIFT_WGSL}"), "main")?;
         let decide = gpu.compile("neighbour lists: decide", &format!("{PARAMS_WGSL}{DECIDE_WGSL}"), "main")?;
-        let build =
-            gpu.compile("neighbour lists: build", &format!("{PARAMS_WGSL}{cell_helpers}{BUILD_WGSL}"), "main")?;
+        let build = gpu.compile(
+            "neighbour lists: build",
+            &format!(
+                "{PARAMS_WGSL}{cell_helpers}{}",
+                BUILD_WGSL.replace("TRANSFORM_SHIFT", &TRANSFORM_SHIFT.to_string())
+            ),
+            "main",
+        )?;
         Ok(GpuLists { n: n as u32, stride, lists, state, params, drift, decide, build })
     }
 

@@ -100,6 +100,16 @@ impl GpuBackend {
         }
         let reductions: Vec<Reduce> =
             crate::backend::timestep::reductions(&plan.model, &plan.timesteps).into_iter().map(|(r, _)| r).collect();
+        if reductions.len() > gl::PLANES - gl::REDUCTIONS {
+            return Err(BackendError(format!(
+                "the time step takes {} reductions over the particles; the GPU backend holds {} at most",
+                reductions.len(),
+                gl::PLANES - gl::REDUCTIONS
+            )));
+        }
+        if mirrors.len() > crate::backend::cpu::lists::MAX_PLANES {
+            return Err(BackendError(format!("{} image planes; at most 6", mirrors.len())));
+        }
         let scratch = len;
         len += n * reductions.len().max(1);
         let mut planned = vec![
@@ -170,10 +180,11 @@ impl GpuBackend {
         let reorder = Reorder::new(&gpu, &particles, &cells, &columns).map_err(err)?;
         gpu.upload(&params, 0, &store.params.values).map_err(err)?;
         let mut g = vec![0f32; gl::SIZE];
-        g[gl::MIRRORS] = mirrors.len() as f32;
+        g[gl::PLANES] = mirrors.len() as f32;
         for (k, m) in mirrors.iter().enumerate() {
-            g[gl::MIRRORS + 1 + 2 * k] = m.axis as f32;
-            g[gl::MIRRORS + 2 + 2 * k] = m.offset as f32;
+            g[gl::PLANES + 1 + 3 * k] = m.axis as f32;
+            g[gl::PLANES + 2 + 3 * k] = m.offset as f32;
+            g[gl::PLANES + 3 + 3 * k] = m.shift as f32;
         }
         gpu.upload(&globals, 0, &g).map_err(err)?;
         let x = plan.model.field_id("x").ok_or_else(|| BackendError("the model has no position field `x`".into()))?;
@@ -181,6 +192,9 @@ impl GpuBackend {
         let x_offset = offset[x.index()].ok_or_else(|| BackendError("positions are not stored".into()))? as u32;
         let h_offset = offset[h.index()].ok_or_else(|| BackendError("smoothing lengths are not stored".into()))? as u32;
         let support = plan.model.kernels[plan.kernel.index()].support as f32;
+        // At the start; the CPU checks it at every evaluation.
+        let h_start = store.column(h).map(|c| c.data.iter().fold(0.0f64, |m, v| m.max(*v as f64))).unwrap_or(0.0);
+        crate::backend::check_periods(mirrors, support as f64, h_start)?;
         let lists = match &plan.search {
             Search::Cells => None,
             search => {

@@ -911,7 +911,7 @@ fn pass_kernel(plan: &Plan, lay: &Layout, pass: usize, v: &PassVariant, cell_hel
     }
     w.line("let xi = pos3(i);");
     w.line("let hi = h_of(i);");
-    w.line(format!("let mirrors = u32(globals[{}u]);", gl::MIRRORS));
+    w.line(format!("let mirrors = u32(globals[{}u]);", gl::PLANES));
     let lists = plan.search.keeps_lists();
     let close = if lists { list_walk(&mut w) } else { cell_walk(&mut w, &support) };
     let all_present = v.sources == plan.groups;
@@ -1036,28 +1036,38 @@ fn list_walk(w: &mut Writer) -> Vec<(usize, &'static str)> {
     vec![(1, "}")]
 }
 
-/// `yi` and `sgn`: particle i reflected across the mirrors whose bit is set in transform `tr`,
-/// and the axes that flips. With `too_far` (a condition on `axis` and `at`), the transform is
-/// skipped when it holds for one of its mirrors.
+/// `yi` and `sgn`: particle i reflected across the symmetry planes and moved across the periodic
+/// sides whose bit is set in transform `tr`, and the axes that flips. With `too_far` (a condition
+/// on `axis` and `at`), the transform is skipped when it holds for one of its planes, or when it
+/// takes both sides of a periodic axis (which moves i nowhere).
 fn reflect(w: &mut Writer, too_far: Option<&str>) {
     w.line("var yi = xi;");
     w.line("var sgn = vec3<f32>(1.0);");
     if too_far.is_some() {
         w.line("var skip = false;");
+        w.line("var shifted = vec3<u32>(0u);");
     }
     w.line("for (var m = 0u; m < mirrors; m++) {");
     w.line("    if (((tr >> m) & 1u) == 1u) {");
-    w.line(format!("        let axis = u32(globals[{}u + 2u * m]);", gl::MIRRORS + 1));
-    w.line(format!("        let at = globals[{}u + 2u * m];", gl::MIRRORS + 2));
+    w.line(format!("        let axis = u32(globals[{}u + 3u * m]);", gl::PLANES + 1));
+    w.line(format!("        let at = globals[{}u + 3u * m];", gl::PLANES + 2));
+    w.line(format!("        let shift = globals[{}u + 3u * m];", gl::PLANES + 3));
     if let Some(cond) = too_far {
         w.line(format!("        if ({cond}) {{ skip = true; }}"));
     }
-    w.line("        yi[axis] = 2.0 * at - xi[axis];");
-    w.line("        sgn[axis] = -sgn[axis];");
+    w.line("        if (shift == 0.0) {");
+    w.line("            yi[axis] = 2.0 * at - xi[axis];");
+    w.line("            sgn[axis] = -sgn[axis];");
+    w.line("        } else {");
+    w.line("            yi[axis] = xi[axis] + shift;");
+    if too_far.is_some() {
+        w.line("            shifted[axis] += 1u;");
+    }
+    w.line("        }");
     w.line("    }");
     w.line("}");
     if too_far.is_some() {
-        w.line("if (skip) { continue; }");
+        w.line("if (skip || any(shifted > vec3<u32>(1u))) { continue; }");
     }
 }
 

@@ -9,7 +9,7 @@
 //! - `ints: array<u32>`: group of particle i at `[i]`, its material at `[n + i]`.
 //! - `params: array<f32>`: material m's parameter p, component c at `m * STRIDE + OFF(p) + c`.
 //! - `meta: array<i32>`: `[0]` n, `[1 + 2g]`/`[2 + 2g]` start and count of group g, then bases.
-//! - `globals: array<f32>`: time, dt, the step's dt, end time, dt_max, mirrors, reductions.
+//! - `globals: array<f32>`: time, dt, the step's dt, end time, dt_max, reductions, image planes.
 //! - `grid`, `cells`: the GPU cell list (`backend::gpu::cells`).
 //! - `lists`: kept neighbour lists (`backend::gpu::lists`), when the plan's search keeps them.
 
@@ -35,11 +35,13 @@ pub mod globals {
     pub const STEP: usize = 5;
     /// Always 0: XOR-ed into bits to hide values from the shader compiler's algebra (Kahan).
     pub const ZERO: usize = 6;
-    /// Number of mirrors, then (axis, offset) pairs.
-    pub const MIRRORS: usize = 8;
-    /// Values of the time-step reductions.
+    /// Values of the time-step reductions (up to `PLANES`).
     pub const REDUCTIONS: usize = 16;
-    pub const SIZE: usize = 64;
+    /// The number of image planes (symmetry planes, periodic sides), then (axis, offset, shift)
+    /// triples, six at most.
+    pub const PLANES: usize = 72;
+    /// The last word is the watchdog scan's.
+    pub const SIZE: usize = 96;
 }
 
 /// Marks a (field, group) without storage in `meta`.
@@ -202,7 +204,7 @@ mod tests {
                     gravity: None,
                     loads: vec![],
                     constraints: vec![],
-                    symmetry: vec![],
+                    planes: vec![],
                     search: Default::default(),
                     damping: None,
                 };
