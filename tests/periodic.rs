@@ -88,3 +88,20 @@ fn periodic_mistakes_are_errors_at_their_place() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A periodic axis beside a symmetry plane on another: the lattice, periodic along x and held by a
+/// symmetry plane at y = 0, spreads upward from its free top, and every row moves as one (the flow
+/// is the same at every x): no velocity along x anywhere, while the top rises.
+#[test]
+fn a_periodic_axis_beside_a_symmetry_plane_keeps_the_flow_uniform_along_it() {
+    let dir = fresh_dir("beside");
+    let planes = "[periodic]\nx = [0, \"0.2 m\"]\n\n[[symmetry]]\naxis = \"y\"";
+    let probes = "[[probes]]\nname = \"vx_abs_max\"\nfield = \"v\"\ncomponent = \"x\"\nreduce = \"abs_max\"\n\n\
+                  [[probes]]\nname = \"vy_max\"\nfield = \"v\"\ncomponent = \"y\"\nreduce = \"max\"\n\n\
+                  [watchdog]\nspeed_factor = inf\nenergy_factor = inf";
+    let h = run(&dir, &lattice_case("0 m/s", "0.005 s", planes, probes)).expect("runs");
+    let (vx, vy) = (last(&h, "vx_abs_max"), last(&h, "vy_max"));
+    assert!(vy > 0.01, "the free top rises at only {vy} m/s");
+    assert!(vx < 1e-12 * vy.max(1.0), "a velocity of {vx} m/s along the periodic axis");
+    let _ = std::fs::remove_dir_all(&dir);
+}
