@@ -676,3 +676,44 @@ fn summation_density_writes_rho_in_each_evaluation_and_the_pressure_reads_it() {
     let after = check(&e, "at the end");
     assert!(after[24] > 1.03 * before[24], "the squeezed centre's density went from {} to {}", before[24], after[24]);
 }
+
+/// A correction (a particle equation that writes state) runs after the integration stage and reads
+/// the evaluation before it, as docs/LANGUAGE.md says: `rho = rho_sum` copies the sum taken where
+/// the particles were at the start of the step, not where the step moved them.
+#[test]
+fn a_correction_copies_the_sum_of_the_evaluation_before_the_integration_stage() {
+    let m = model(
+        "use kernels\ngroup gas\nkernel = wendland_c2\n\
+         field rho_sum: scalar [kg/m^3]\n\
+         pairsum density -> rho_sum { init { rho_sum = m * W_at(0, h) }  rho_sum += m[j] * W_ij }\n\
+         particle fix -> rho { rho = rho_sum }\n\
+         timestep fixed = min_over(0.1 * h) / 1 [m/s]\n\
+         integrate { x' = v  v' = 0 }\n",
+    );
+    let dx = 0.01;
+    let mut inp = input(2, lattice(2, 7, dx), dx);
+    inp.v = inp.x.iter().map(|x| [-5.0 * (x[0] - 0.035), 0.0, 0.0]).collect();
+    let mat = material(&m, &[("rho0", vec![1000.0])]);
+    let b = backend::<f64>(&m, &scene(&m, 2, &["rho", "rho_sum"], IntegratorKind::Euler), &inp, &[mat], vec![]);
+    let mut e = Engine::new(b, RunConfig { end_time: 1.0, ..RunConfig::default() });
+    e.initialise().unwrap_or_else(|err| panic!("initialise: {err}"));
+    let (_, x_before) = field_by_id(&e.backend, "x");
+    e.step().unwrap_or_else(|err| panic!("step: {err}"));
+    let (_, x_after) = field_by_id(&e.backend, "x");
+    let (_, rho) = field_by_id(&e.backend, "rho");
+    let sum_at = |x: &[f64], i: usize| -> f64 {
+        (0..rho.len())
+            .map(|j| {
+                1000.0 * dx * dx * wendland_c2_2d((x[2 * i] - x[2 * j]).hypot(x[2 * i + 1] - x[2 * j + 1]), 1.2 * dx)
+            })
+            .sum()
+    };
+    let centre = 24;
+    let (before, after) = (sum_at(&x_before, centre), sum_at(&x_after, centre));
+    assert!((after - before).abs() > 1e-6 * before, "the step did not change the sum: {before} and {after}");
+    assert!(
+        (rho[centre] - before).abs() < 1e-9 * before,
+        "rho {} after the step: the sum before it is {before}, after it {after}",
+        rho[centre]
+    );
+}
