@@ -179,15 +179,21 @@ impl fmt::Display for Diagnostics {
 
 /// Edit distance, for "did you mean" suggestions.
 pub fn closest<'a>(name: &str, candidates: impl IntoIterator<Item = &'a str>) -> Option<&'a str> {
+    let candidates: Vec<&str> = candidates.into_iter().collect();
     let mut best: Option<(usize, &str)> = None;
-    for c in candidates {
+    for &c in &candidates {
         let d = levenshtein(name, c);
         let limit = (name.len().max(c.len()) / 3).max(1);
         if d <= limit && best.is_none_or(|(bd, bc)| d < bd || (d == bd && c < bc)) {
             best = Some((d, c));
         }
     }
-    best.map(|(_, c)| c)
+    // Else the one candidate the name begins (`energy` for `energy_factor`).
+    let mut begun = candidates.iter().filter(|c| name.len() >= 3 && c.starts_with(name));
+    best.map(|(_, c)| c).or_else(|| match (begun.next(), begun.next()) {
+        (Some(c), None) => Some(*c),
+        _ => None,
+    })
 }
 
 fn levenshtein(a: &str, b: &str) -> usize {
@@ -203,4 +209,18 @@ fn levenshtein(a: &str, b: &str) -> usize {
         prev = cur;
     }
     prev[b.len()]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::closest;
+
+    #[test]
+    fn closest_suggests_a_near_spelling_else_the_one_candidate_the_name_begins() {
+        assert_eq!(closest("enrgy_factor", ["speed_factor", "energy_factor"]), Some("energy_factor"));
+        assert_eq!(closest("energy", ["speed_factor", "energy_factor"]), Some("energy_factor"));
+        // Two candidates begin with it, or it is too short to mean one: no guess.
+        assert_eq!(closest("energy", ["energy_factor", "energy_floor"]), None);
+        assert_eq!(closest("en", ["energy_factor"]), None);
+    }
 }
