@@ -120,7 +120,7 @@ fn every_plasticity_thermal_and_eos_module_compose() {
                 gravity: None,
                 loads: vec![],
                 constraints: vec![],
-                symmetry: vec![],
+                planes: vec![],
                 search: Default::default(),
                 damping: None,
             };
