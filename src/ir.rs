@@ -60,10 +60,13 @@ pub fn component_indices(shape: Shape, dim: usize) -> Vec<(usize, usize)> {
     }
 }
 
+/// The axes' names, by index.
+pub const AXIS_NAMES: [&str; 3] = ["x", "y", "z"];
+
 /// The names of the stored components of a shape (`""` for a scalar, `x`, `y` of a vec, `xx`,
 /// `xy` of a tensor), in the order `component_indices` gives.
 pub fn component_names(shape: Shape, dim: usize) -> Vec<String> {
-    let axis = |a: usize| ["x", "y", "z"][a];
+    let axis = |a: usize| AXIS_NAMES[a];
     match shape {
         Shape::Scalar | Shape::Bool => vec![String::new()],
         Shape::Vec => (0..dim).map(|a| axis(a).to_string()).collect(),
@@ -535,17 +538,6 @@ impl Model {
     /// (radial return, damage), while every other equation runs in the evaluation of the rates.
     pub fn is_correction(&self, e: &Equation) -> bool {
         !e.is_pair() && e.writes.iter().any(|f| self.field(*f).storage == Storage::State)
-    }
-
-    /// Whether `f` is computed during the evaluation of a step: a field, or a state that a pair
-    /// sum computes (summation density: `rho` summed, not integrated). Readers of such a value
-    /// run after its writer.
-    pub fn computed_in_step(&self, f: FieldId) -> bool {
-        match self.field(f).storage {
-            Storage::Field => true,
-            Storage::Temp => false,
-            Storage::State => self.equations.iter().any(|e| e.is_pair() && e.writes.contains(&f)),
-        }
     }
     pub fn field_id(&self, name: &str) -> Option<FieldId> {
         self.fields.iter().position(|f| f.name == name).map(|i| FieldId(i as u32))

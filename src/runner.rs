@@ -320,7 +320,7 @@ impl Recorder<'_> {
             }
         }
         for (k, p) in self.scene.profiles.iter().enumerate() {
-            while p.times.get(self.next_profile[k]).is_some_and(|t| e.time >= t * (1.0 - 1e-12)) {
+            while p.times.get(self.next_profile[k]).is_some_and(|t| reached(e.time, *t)) {
                 write_profile(self.scene, p, self.next_profile[k], &e.backend, &self.opts.out)
                     .map_err(|err| format!("profile `{}`: {err}", p.name))?;
                 self.next_profile[k] += 1;
@@ -361,6 +361,11 @@ impl Recorder<'_> {
     }
 }
 
+/// Whether the clock at `time` has reached `at` (to a relative 1e-12, the engine's end test).
+fn reached(time: f64, at: f64) -> bool {
+    time >= at * (1.0 - 1e-12)
+}
+
 /// Writes `profiles/<name>_<k>.csv`: the selected particles' coordinates, id, body and fields now,
 /// sorted along the profile's axis.
 fn write_profile<B: Backend>(scene: &Scene, p: &ProfileSpec, k: usize, b: &B, out: &Path) -> Result<(), String> {
@@ -374,8 +379,9 @@ fn write_profile<B: Backend>(scene: &Scene, p: &ProfileSpec, k: usize, b: &B, ou
     let body = |k: usize| scene.particles.body[ids[k] as usize] as usize;
     let mut rows: Vec<usize> = (0..x.len()).filter(|k| inside[*k] && p.body.is_none_or(|b| body(*k) == b)).collect();
     rows.sort_by(|a, c| x[*a][p.along].total_cmp(&x[*c][p.along]));
-    let mut columns: Vec<(String, Vec<f64>)> =
-        (0..dim).map(|a| (format!("{} [m]", ["x", "y", "z"][a]), rows.iter().map(|k| x[*k][a]).collect())).collect();
+    let mut columns: Vec<(String, Vec<f64>)> = (0..dim)
+        .map(|a| (format!("{} [m]", crate::ir::AXIS_NAMES[a]), rows.iter().map(|k| x[*k][a]).collect()))
+        .collect();
     columns.push(("id".into(), rows.iter().map(|k| ids[*k] as f64).collect()));
     columns.push(("body".into(), rows.iter().map(|k| body(*k) as f64).collect()));
     let model = &b.plan().model;
@@ -457,7 +463,7 @@ fn drive<B: Backend>(scene: Scene, backend: B, opts: &RunOptions, precision: &st
             rec.resume(&r).map_err(|e| cannot_restart(&e))?;
             // Profiles up to the checkpoint's time were written by the run that wrote it.
             for (next, p) in rec.next_profile.iter_mut().zip(&scene.profiles) {
-                *next = p.times.iter().filter(|t| engine.time >= *t * (1.0 - 1e-12)).count();
+                *next = p.times.iter().filter(|t| reached(engine.time, **t)).count();
             }
         }
         None => rec.observe(&engine).map_err(RunFailure::Run)?,

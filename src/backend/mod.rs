@@ -26,7 +26,7 @@ pub fn check_periods(planes: &[Mirror], support: f64, h_max: f64) -> Result<(), 
         Some(p) => Err(BackendError(format!(
             "the periodic domain along {} is {} m long, no longer than twice the largest cut-off ({cut_off} m): \
              make it longer or the particles smaller",
-            ["x", "y", "z"][p.axis],
+            crate::ir::AXIS_NAMES[p.axis],
             p.shift
         ))),
         None => Ok(()),

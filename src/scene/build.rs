@@ -569,7 +569,7 @@ fn build(
     if let Some(periodic) = &case.periodic {
         for (axis, range) in [&periodic.x, &periodic.y, &periodic.z].into_iter().enumerate() {
             let Some(range) = range else { continue };
-            let name = ["x", "y", "z"][axis];
+            let name = ir::AXIS_NAMES[axis];
             let bounds: Option<Vec<f64>> =
                 range.get_ref().iter().map(|v| cx.scalar(v, m, "a periodic domain's side")).collect();
             let Some(bounds) = bounds else { continue };
@@ -1628,7 +1628,7 @@ fn warn_gap_at_planes(
         }
         let msg = format!(
             "body `{name}`: its particles nearest the symmetry plane {} = {} m lie {nearest:.2} spacings off it, {:.2} spacings from their mirror images: a slot along the plane",
-            ["x", "y", "z"][m.axis],
+            ir::AXIS_NAMES[m.axis],
             m.offset,
             2.0 * nearest
         );
@@ -1658,7 +1658,7 @@ fn warn_box_overhang(
     let axes: Vec<String> = (0..cx.dim)
         .map(|a| (a, (max[a] - min[a]) / spacing))
         .filter(|(_, n)| (n - n.round()).abs() > 1e-6)
-        .map(|(a, n)| format!("{} ({:.4} m = {n:.2} spacings)", ["x", "y", "z"][a], max[a] - min[a]))
+        .map(|(a, n)| format!("{} ({:.4} m = {n:.2} spacings)", ir::AXIS_NAMES[a], max[a] - min[a]))
         .collect();
     let more = if excess > 0.0 { "more" } else { "less" };
     let msg = format!(

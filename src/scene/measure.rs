@@ -117,7 +117,9 @@ pub fn positions(b: &dyn Backend) -> Result<Option<Vec<[f64; 3]>>, BackendError>
 pub fn evaluate(p: &ProbeSpec, scene: &Scene, b: &dyn Backend) -> Result<f64, BackendError> {
     match &p.kind {
         ProbeKind::Field { select, value, pick, reduce, locate, .. } => {
-            let Some((comps, values, shape)) = probed_values(value, scene, b)? else { return Ok(f64::NAN) };
+            let Some((comps, values, shape)) = probed_values(value, select.as_deref(), scene, b)? else {
+                return Ok(f64::NAN);
+            };
             let dim = b.plan().dim;
             let ids = b.ids()?;
             let selected: Vec<(usize, f64)> = (0..ids.len())
@@ -135,9 +137,11 @@ pub fn evaluate(p: &ProbeSpec, scene: &Scene, b: &dyn Backend) -> Result<f64, Ba
 }
 
 /// Every particle's value of a probe's field or expression (`comps` numbers each, in the backend's
-/// order), and its shape; `None` where a field it reads is not stored.
+/// order), and its shape; `None` where a field it reads is not stored. An expression is evaluated
+/// only for the particles `select` picks (by scene index); the others get zeros, never read.
 fn probed_values(
     value: &ProbeValue,
+    select: Option<&[bool]>,
     scene: &Scene,
     b: &dyn Backend,
 ) -> Result<Option<(usize, Vec<f64>, Shape)>, BackendError> {
@@ -154,12 +158,15 @@ fn probed_values(
     let ids = b.ids()?;
     let mut materials = crate::engine::setup::resolved_materials(plan, &scene.materials);
     let comps = crate::ir::components(e.ty.shape, plan.dim);
-    let mut out = Vec::with_capacity(ids.len() * comps);
+    let mut out = vec![0.0; ids.len() * comps];
     for (k, id) in ids.iter().enumerate() {
+        if select.is_some_and(|s| !s[*id as usize]) {
+            continue;
+        }
         let params = &mut materials[scene.particles.material[*id as usize] as usize];
         let v = crate::engine::setup::particle_value(plan, e, params, &fields, k)
             .map_err(|what| BackendError(format!("cannot evaluate the expression: {what}")))?;
-        out.extend_from_slice(&v[..comps]);
+        out[k * comps..(k + 1) * comps].copy_from_slice(&v[..comps]);
     }
     Ok(Some((comps, out, e.ty.shape)))
 }

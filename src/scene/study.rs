@@ -331,9 +331,9 @@ pub const STOPPED_BELOW: f64 = 0.05;
 /// Ipson's plugging values leaves the limit alone to fit.
 pub fn fit_recht_ipson(points: &[(f64, f64)], held: Held) -> Option<RechtIpson> {
     let perforated = |p: &(f64, f64)| p.1 > STOPPED_BELOW * p.0;
-    let stopped = points.iter().filter(|p| !perforated(p)).map(|p| p.0).fold(0.0, f64::max);
+    let stopped = super::max_keeping_nan(0.0, points.iter().filter(|p| !perforated(p)).map(|p| p.0));
     let through: Vec<(f64, f64)> = points.iter().copied().filter(perforated).collect();
-    let lowest = through.iter().map(|p| p.0).fold(f64::INFINITY, f64::min);
+    let lowest = super::min_keeping_nan(f64::INFINITY, through.iter().map(|p| p.0));
     if through.len() < 2 {
         return None;
     }

@@ -37,7 +37,7 @@ pub fn describe(plan: &Plan, real: usize) -> String {
     );
     let _ = writeln!(s, "neighbours: {}", plan.search.describe());
     for p in &plan.planes {
-        let axis = ["x", "y", "z"][p.axis];
+        let axis = crate::ir::AXIS_NAMES[p.axis];
         if p.shift == 0.0 {
             let _ = writeln!(s, "symmetry plane: {axis} = {} m", p.offset);
         } else if p.shift > 0.0 {

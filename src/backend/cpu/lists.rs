@@ -188,21 +188,22 @@ pub fn beyond_reach<T: Real>(xi: [T; 3], t: u32, mirrors: &[Mirror], radius: f64
     mirrors.iter().enumerate().any(far) || both_sides(t, mirrors)
 }
 
+/// The periodic sides transform `t` moves i across.
+fn sides(t: u32, mirrors: &[Mirror]) -> impl Iterator<Item = &Mirror> {
+    mirrors.iter().enumerate().filter(move |(m, mirror)| t >> m & 1 == 1 && mirror.shift != 0.0).map(|(_, p)| p)
+}
+
 /// Whether `t` takes both sides of a periodic axis.
 fn both_sides(t: u32, mirrors: &[Mirror]) -> bool {
-    let mut shifted = [0; 3];
-    for (m, mirror) in mirrors.iter().enumerate() {
-        if t >> m & 1 == 1 && mirror.shift != 0.0 {
-            shifted[mirror.axis] += 1;
-        }
-    }
-    shifted.iter().any(|c| *c > 1)
+    let mut per_axis = [0; 3];
+    sides(t, mirrors).for_each(|p| per_axis[p.axis] += 1);
+    per_axis.iter().any(|c| *c > 1)
 }
 
 /// Whether `t` moves i across a periodic side: its images' neighbours lie across the domain, and
 /// the largest smoothing length near i does not bound theirs.
 pub fn shifts(t: u32, mirrors: &[Mirror]) -> bool {
-    mirrors.iter().enumerate().any(|(m, mirror)| t >> m & 1 == 1 && mirror.shift != 0.0)
+    sides(t, mirrors).next().is_some()
 }
 
 /// The skin, and per particle the largest smoothing length within the build reach of it

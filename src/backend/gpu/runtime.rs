@@ -192,8 +192,12 @@ impl GpuBackend {
         let x_offset = offset[x.index()].ok_or_else(|| BackendError("positions are not stored".into()))? as u32;
         let h_offset = offset[h.index()].ok_or_else(|| BackendError("smoothing lengths are not stored".into()))? as u32;
         let support = plan.model.kernels[plan.kernel.index()].support as f32;
-        // At the start; the CPU checks it at every evaluation.
-        let h_start = store.column(h).map(|c| c.data.iter().fold(0.0f64, |m, v| m.max(*v as f64))).unwrap_or(0.0);
+        // The largest finite h at the start: the periods are checked against it here (the CPU
+        // checks them at every evaluation), and the lists' stride is estimated with it.
+        let h_start = crate::scene::max_keeping_nan(
+            0.0,
+            store.column(h).iter().flat_map(|c| c.data.iter().map(|v| *v as f64)).filter(|v| v.is_finite()),
+        );
         crate::backend::check_periods(mirrors, support as f64, h_start)?;
         let lists = match &plan.search {
             Search::Cells => None,
@@ -210,7 +214,17 @@ impl GpuBackend {
                     support,
                     mirrors,
                     field_base,
-                    stride: list_stride(&store, x, h, plan.dim, support as f64, search.skin(), mirrors),
+                    stride: list_stride(
+                        store.column(x).zip(store.column(h)).map(|(xc, hc)| crate::backend::cpu::lists::BuildInput {
+                            x: &xc.data,
+                            h: &hc.data,
+                            dim: plan.dim,
+                            support: support as f64,
+                            h_max: h_start,
+                            mirrors,
+                        }),
+                        search.skin(),
+                    ),
                 };
                 Some(GpuLists::new(&gpu, search, &scene, super::cells::wgsl_helpers()).map_err(err)?)
             }
@@ -606,18 +620,8 @@ impl Backend for GpuBackend {
 
 /// Entries per particle of the device's lists: twice the most candidates any particle has at the
 /// start within the cut-off plus the skin (counted on the host), plus 16.
-fn list_stride(
-    store: &Store<f32>,
-    x: FieldId,
-    h: FieldId,
-    dim: usize,
-    support: f64,
-    skin: f64,
-    mirrors: &[Mirror],
-) -> u32 {
-    let (Some(x), Some(h)) = (store.column(x), store.column(h)) else { return 16 };
-    let h_max = h.data.iter().map(|v| *v as f64).filter(|v| v.is_finite()).fold(0.0, f64::max);
-    let inp = crate::backend::cpu::lists::BuildInput { x: &x.data, h: &h.data, dim, support, h_max, mirrors };
+fn list_stride(inp: Option<crate::backend::cpu::lists::BuildInput<f32>>, skin: f64) -> u32 {
+    let Some(inp) = inp else { return 16 };
     let mut lists = crate::backend::cpu::lists::Lists::default();
     lists.prepare(&Search::Verlet { skin }, &inp, |_| vec![]);
     let most = lists.of.iter().map(Vec::len).max().unwrap_or(0);
