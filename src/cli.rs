@@ -61,6 +61,10 @@ enum Command {
         /// its own outputs and deletes nothing)
         #[arg(long)]
         force: bool,
+        /// Measure where the run's time goes (steps, watchdog, probes and output; on the GPU each
+        /// kernel's device time, the submissions and the read-backs) and write it to timing.txt
+        #[arg(long)]
+        timing: bool,
         /// Set a case parameter (`${name}` in the case file): --set v_impact=250
         #[arg(long = "set", value_parser = parse_set)]
         set: Vec<(String, String)>,
@@ -159,6 +163,7 @@ pub fn main() -> i32 {
             max_steps,
             quiet,
             force,
+            timing,
             set,
             verlet,
             convergence,
@@ -175,6 +180,7 @@ pub fn main() -> i32 {
                 max_steps,
                 quiet,
                 force,
+                timing,
                 set,
                 verlet,
                 convergence,
@@ -371,6 +377,7 @@ struct RunArgs {
     max_steps: Option<u64>,
     quiet: bool,
     force: bool,
+    timing: bool,
     verlet: Option<f64>,
     convergence: Option<String>,
     reanalyse: bool,
@@ -402,6 +409,7 @@ fn run_run(case: &str, a: RunArgs) -> i32 {
         max_steps: a.max_steps,
         vtk: true,
         force: a.force,
+        timing: a.timing,
     };
     let outcome = match &a.convergence {
         None if a.reanalyse => crate::runner::reanalyse_file(&path, &opts),

@@ -263,12 +263,13 @@ impl<T: Real> Store<T> {
     pub fn read_f64_from(&self, f: FieldId, data: &[T]) -> Option<(usize, Vec<f64>)> {
         let c = self.column(f)?;
         let mut out = vec![f64::NAN; self.n * c.comps];
-        for i in 0..self.n {
-            let g = self.group[i] as usize;
-            if c.has(g) {
-                let row = c.row(i, g);
-                for k in 0..c.comps {
-                    out[i * c.comps + k] = data[row * c.comps + k].to_f64();
+        // Group by group: a group's rows are contiguous, in the column as in the output.
+        for (g, r) in &self.ranges {
+            if c.has(g.index()) && !r.is_empty() {
+                let first = c.row(r.start, g.index()) * c.comps;
+                let from = &data[first..first + r.len() * c.comps];
+                for (o, v) in out[r.start * c.comps..r.end * c.comps].iter_mut().zip(from) {
+                    *o = v.to_f64();
                 }
             }
         }

@@ -7,6 +7,7 @@ use crate::diag::{Diagnostic, Sources};
 use crate::engine::{checkpoint, setup, Engine, RunError};
 use crate::particles::Real;
 use crate::report::{self, Curve, GroupBytes, History, PointField, ResultRow, RunReport};
+use crate::scene::measure::Reader;
 use crate::scene::spec::ProfileSpec;
 use crate::scene::{self, measure, Scene};
 use crate::schedule::Plan;
@@ -44,6 +45,9 @@ pub struct RunOptions {
     pub vtk: bool,
     /// Write into an output directory that holds files pairsum did not write.
     pub force: bool,
+    /// Measure where the run's time goes and write it to `timing.txt` (on the GPU, each
+    /// kernel's device time where the adapter has timestamp queries).
+    pub timing: bool,
 }
 
 impl Default for RunOptions {
@@ -59,6 +63,7 @@ impl Default for RunOptions {
             max_steps: None,
             vtk: true,
             force: false,
+            timing: false,
         }
     }
 }
@@ -116,6 +121,7 @@ fn estimate_on<T: Real>(scene: &Scene, plan: &Plan) -> Result<String, RunFailure
     let mut out = String::new();
     let bodies: Vec<String> = scene.bodies.iter().map(|b| format!("{} {}", b.name, b.particles.len())).collect();
     out.push_str(&format!("particles: {} ({} in all)\n", bodies.join(", "), scene.particles.len()));
+    out.push_str(&crate::backend::gpu::runtime::step_traffic(plan, scene.particles.len()).map_err(RunFailure::Run)?);
     let store =
         setup::build_store::<T>(plan, &scene.particles, &scene.materials).map_err(|e| setup_failure(scene, e))?;
     let backend = CpuBackend::new(plan.clone(), store, scene.mirrors.clone()).map_err(|e| RunFailure::Run(e.0))?;
@@ -184,11 +190,11 @@ pub fn run_case(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailure
     }
     match opts.backend {
         BackendChoice::Cpu => run_cpu_precision(scene, plan, opts),
-        BackendChoice::Gpu => match crate::backend::gpu::device::Gpu::new() {
+        BackendChoice::Gpu => match crate::backend::gpu::device::Gpu::with_timing(opts.timing) {
             Ok(gpu) => run_gpu(gpu, scene, plan, opts),
             Err(e) => Err(RunFailure::Run(e.to_string())),
         },
-        BackendChoice::Auto => match crate::backend::gpu::device::Gpu::new() {
+        BackendChoice::Auto => match crate::backend::gpu::device::Gpu::with_timing(opts.timing) {
             Ok(gpu) if gpu.is_software() && crate::config::env().adapter.is_none() => {
                 eprintln!(
                     "note: running on the CPU backend: the only GPU adapter, {}, is a software one (`--backend gpu` uses it)",
@@ -313,22 +319,23 @@ impl Recorder<'_> {
     }
 
     fn observe<B: Backend>(&mut self, e: &Engine<B>) -> Result<(), String> {
+        let now = measure::Moment::new(&e.backend);
         for (p, h) in self.scene.probes.iter().zip(&mut self.histories) {
             if e.step.is_multiple_of(p.every) {
-                let v = measure::evaluate(p, self.scene, &e.backend).map_err(|e| format!("probe `{}`: {e}", p.name))?;
+                let v = measure::evaluate(p, self.scene, &now).map_err(|e| format!("probe `{}`: {e}", p.name))?;
                 h.record(p, e.time, v);
             }
         }
         for (k, p) in self.scene.profiles.iter().enumerate() {
             while p.times.get(self.next_profile[k]).is_some_and(|t| reached(e.time, *t)) {
-                write_profile(self.scene, p, self.next_profile[k], &e.backend, &self.opts.out)
+                write_profile(self.scene, p, self.next_profile[k], &now, &self.opts.out)
                     .map_err(|err| format!("profile `{}`: {err}", p.name))?;
                 self.next_profile[k] += 1;
             }
         }
         if let Some(interval) = self.scene.output_interval {
             if e.time >= self.next_output - 1e-12 * interval {
-                self.write_vtk(&e.backend, e.time)?;
+                self.write_vtk(&now, e.time)?;
                 self.next_output += interval;
             }
         }
@@ -353,7 +360,7 @@ impl Recorder<'_> {
             .map_err(|err| format!("writing a checkpoint: {err} (the last one written, if any, is kept)"))
     }
 
-    fn write_vtk<B: Backend>(&mut self, b: &B, time: f64) -> Result<(), String> {
+    fn write_vtk(&mut self, b: &dyn Reader, time: f64) -> Result<(), String> {
         let Some(series) = &mut self.series else { return Ok(()) };
         let (positions, fields) = vtk_data(self.scene, b).map_err(|e| e.0)?;
         series.add(time, &positions, &fields).map_err(|e| format!("writing VTK: {e}"))?;
@@ -368,7 +375,7 @@ fn reached(time: f64, at: f64) -> bool {
 
 /// Writes `profiles/<name>_<k>.csv`: the selected particles' coordinates, id, body and fields now,
 /// sorted along the profile's axis.
-fn write_profile<B: Backend>(scene: &Scene, p: &ProfileSpec, k: usize, b: &B, out: &Path) -> Result<(), String> {
+fn write_profile(scene: &Scene, p: &ProfileSpec, k: usize, b: &dyn Reader, out: &Path) -> Result<(), String> {
     let dim = b.plan().dim;
     let x = measure::positions(b).map_err(|e| e.0)?.unwrap_or_default();
     let ids = b.ids().map_err(|e| e.0)?;
@@ -387,7 +394,8 @@ fn write_profile<B: Backend>(scene: &Scene, p: &ProfileSpec, k: usize, b: &B, ou
     let model = &b.plan().model;
     for f in &p.fields {
         let field = model.field(*f);
-        let Some((comps, data)) = b.read(*f).map_err(|e| e.0)? else { continue };
+        let Some(column) = b.read(*f).map_err(|e| e.0)? else { continue };
+        let (comps, data) = (column.0, &column.1);
         for (c, suffix) in crate::ir::component_names(field.ty.shape, dim).iter().enumerate() {
             let name = if suffix.is_empty() { field.name.clone() } else { format!("{}.{suffix}", field.name) };
             let name = if field.ty.unit.is_one() { name } else { format!("{name} [{}]", field.ty.unit.label()) };
@@ -402,7 +410,7 @@ fn write_profile<B: Backend>(scene: &Scene, p: &ProfileSpec, k: usize, b: &B, ou
 }
 
 /// Positions and output fields of every particle, for a VTK file.
-pub fn vtk_data<B: Backend>(scene: &Scene, b: &B) -> Result<(Vec<[f64; 3]>, Vec<PointField>), BackendError> {
+pub fn vtk_data(scene: &Scene, b: &dyn Reader) -> Result<(Vec<[f64; 3]>, Vec<PointField>), BackendError> {
     let positions = measure::positions(b)?.unwrap_or_default();
     let ids = b.ids()?;
     let mut fields = vec![
@@ -411,7 +419,8 @@ pub fn vtk_data<B: Backend>(scene: &Scene, b: &B) -> Result<(Vec<[f64; 3]>, Vec<
     ];
     let plan = b.plan();
     for f in &scene.output_fields {
-        if let Some((comps, data)) = b.read(*f)? {
+        if let Some(column) = b.read(*f)? {
+            let (comps, data) = (column.0, column.1.clone());
             fields.push(PointField::new(plan.model.field(*f).name.clone(), comps, data));
         }
     }
@@ -508,6 +517,9 @@ fn drive<B: Backend>(scene: Scene, backend: B, opts: &RunOptions, precision: &st
         Err(e) => failure = Some(e.to_string()),
     }
     let steps = engine.step - start_step;
+    if opts.timing {
+        write_timing(&opts.out, &engine, steps, wall).map_err(RunFailure::Run)?;
+    }
     let mut report = make_report(&scene, &engine, &rec.histories, wall, steps, precision, failure.as_deref());
     if opts.restart.is_some() {
         report.notes.push(format!(
@@ -527,6 +539,23 @@ fn drive<B: Backend>(scene: Scene, backend: B, opts: &RunOptions, precision: &st
     }
     let histories = scene.probes.iter().zip(&rec.histories).map(|(p, h)| (p.name.clone(), h.points.clone())).collect();
     Ok(RunOutcome { report, out: opts.out.clone(), histories })
+}
+
+/// `timing.txt`: where the run's time went, on the host and on the backend; also printed.
+fn write_timing<B: Backend>(out: &Path, engine: &Engine<B>, steps: u64, wall: f64) -> Result<(), String> {
+    let mut text = format!(
+        "{} particles, {steps} steps in {wall:.3} s on {} ({:.3} ms per step)\n",
+        engine.backend.particles(),
+        engine.backend.describe(),
+        wall * 1e3 / steps.max(1) as f64
+    );
+    text += &engine.phases.describe(steps);
+    if let Some(t) = engine.backend.timing(steps) {
+        text += &t;
+    }
+    eprint!("{text}");
+    let path = out.join("timing.txt");
+    crate::output_dir::write_atomic(&path, text.as_bytes()).map_err(|e| format!("{}: {e}", path.display()))
 }
 
 fn make_report<B: Backend>(

@@ -736,3 +736,97 @@ fn a_damped_falling_block_on_the_gpu_matches_the_cpu() {
     case_file_matches_cpu(&dir.join("case.toml"), &[], 300, &[], 1e-5);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The watchdog's reductions on the device (the largest speed; the energy Σ m (½|v|² + e − g·x)
+/// and its magnitude) against the same sums in f64 over the fields the GPU holds, after 20 steps
+/// of a case with gravity and walls (the dam break) and of one with an internal energy (Sod's
+/// tube, 1D).
+#[test]
+fn the_gpu_watchdog_reductions_equal_the_speed_and_energy_of_its_fields() {
+    use pairsum::schedule::SceneRole;
+    for name in ["dam_break_2d", "sod_shock_tube"] {
+        let (_, mut gpu) = run_both(Path::new(&case(name)), &[], 20);
+        let b = &gpu.backend;
+        let model = &b.plan().model;
+        let read = |f: &str| b.read(model.field_id(f).expect("field")).expect("read").expect("stored");
+        let ((dim, x), (_, v), (_, m)) = (read("x"), read("v"), read("m"));
+        let e = model.field_id("e").map(|_| read("e").1);
+        let g = b.plan().scene_params.iter().find(|p| p.role == SceneRole::Gravity).map(|p| p.value.clone());
+        let g = g.unwrap_or(vec![0.0; dim]);
+        let (mut fastest, mut energy, mut magnitude) = (0.0f64, 0.0, 0.0);
+        for i in 0..m.len() {
+            let (vi, xi) = (&v[i * dim..(i + 1) * dim], &x[i * dim..(i + 1) * dim]);
+            if m[i].is_nan() || vi[0].is_nan() || xi[0].is_nan() {
+                continue;
+            }
+            let v2: f64 = vi.iter().map(|a| a * a).sum();
+            let gx: f64 = xi.iter().zip(&g).map(|(a, b)| a * b).sum();
+            let ei = e.as_ref().map_or(0.0, |e| if e[i].is_nan() { 0.0 } else { e[i] });
+            let term = m[i] * (0.5 * v2 + ei - gx);
+            fastest = fastest.max(v2.sqrt());
+            energy += term;
+            magnitude += term.abs();
+        }
+        assert!(fastest > 0.0 && magnitude > 0.0, "{name}: nothing moves");
+        let w = gpu.backend.watch_values().expect("watch values").expect("the GPU reduces on the device");
+        assert!((w.max_speed - fastest).abs() <= 1e-6 * fastest, "{name}: speed {} vs {fastest}", w.max_speed);
+        assert!((w.energy - energy).abs() <= 1e-5 * magnitude, "{name}: energy {} vs {energy}", w.energy);
+        assert!((w.energy_magnitude - magnitude).abs() <= 1e-5 * magnitude, "{name}: {}", w.energy_magnitude);
+    }
+}
+
+/// Reads fields from a backend but never lets it reduce: probes evaluated through it take the
+/// host's path.
+struct HostReads<'a>(&'a GpuBackend);
+
+impl pairsum::scene::measure::Reader for HostReads<'_> {
+    fn plan(&self) -> &pairsum::schedule::Plan {
+        Backend::plan(self.0)
+    }
+    fn read(
+        &self,
+        f: pairsum::ir::FieldId,
+    ) -> Result<Option<pairsum::scene::measure::Column>, pairsum::backend::BackendError> {
+        Ok(Backend::read(self.0, f)?.map(std::rc::Rc::new))
+    }
+    fn ids(&self) -> Result<std::rc::Rc<Vec<u32>>, pairsum::backend::BackendError> {
+        Ok(std::rc::Rc::new(Backend::ids(self.0)?))
+    }
+}
+
+/// Every probe of three cases (the dam break's front: a maximum over one body; Sod's tube:
+/// means over regions and sums of expressions; the colliding bars: means), evaluated with the GPU
+/// reducing the field on the device (whatever the particle count) and with the host reducing the
+/// fields it reads back, after 30 steps: equal to the f32 sums' rounding, 1e-5 of the value plus
+/// 1e-6 of the largest magnitude.
+#[test]
+fn probes_reduced_on_the_gpu_equal_the_host_reduction_of_the_same_fields() {
+    use pairsum::scene::measure::evaluate;
+    use pairsum::scene::spec::{ProbeKind, ProbeValue};
+    for name in ["dam_break_2d", "sod_shock_tube", "colliding_bars_1d"] {
+        let path = case(name);
+        let (scene, plan) = pairsum::runner::prepare(Path::new(&path), &Default::default()).expect("case");
+        let store = build_store::<f32>(&plan, &scene.particles, &scene.materials).expect("store");
+        let mut backend = GpuBackend::new(gpu(), plan, store, &scene.mirrors).expect("gpu");
+        backend.reduce_probes_on_device_from(0);
+        let mut engine = pairsum::engine::Engine::new(backend, scene.config.clone());
+        engine.initialise().expect("initialise");
+        for _ in 0..30 {
+            engine.step().expect("step");
+        }
+        let mut on_device = 0;
+        for p in &scene.probes {
+            let device = evaluate(p, &scene, &engine.backend).expect("device");
+            let host = evaluate(p, &scene, &HostReads(&engine.backend)).expect("host");
+            let mut largest = p.clone();
+            if let ProbeKind::Field { reduce, value, locate: None, .. } = &mut largest.kind {
+                on_device += matches!(value, ProbeValue::Field(_)) as usize;
+                *reduce = "abs_max".into();
+            }
+            let scale = evaluate(&largest, &scene, &HostReads(&engine.backend)).expect("scale").abs();
+            let tol = 1e-5 * host.abs() + 1e-6 * scale;
+            assert!((device - host).abs() <= tol, "{name}: probe `{}`: GPU {device}, host {host}", p.name);
+        }
+        assert!(on_device > 0, "{name}: no probe reduced on the device");
+    }
+}

@@ -42,6 +42,29 @@ pub struct Snapshot {
     pub material: Vec<u32>,
 }
 
+/// A probe's reduction of one field over selected particles (see [`Backend::reduce_field`]).
+pub struct FieldReduction<'a> {
+    pub field: FieldId,
+    /// `None`: the length of the vector; otherwise this stored component.
+    pub component: Option<usize>,
+    /// `min`, `max`, `abs_max`, `sum` or `mean`, over the values that are not NaN.
+    pub reduce: &'a str,
+    /// By scene index, the particles it takes; `None`: every particle that stores the field.
+    pub select: Option<&'a [bool]>,
+}
+
+/// The watchdog's reductions over the particles that store `x`, `v` and `m` (see
+/// [`crate::engine::watchdog`]), in the backend's precision.
+#[derive(Debug, Clone, Copy)]
+pub struct WatchValues {
+    /// The largest speed.
+    pub max_speed: f64,
+    /// `Σ m (½|v|² + e − g·x)`.
+    pub energy: f64,
+    /// `Σ |m (½|v|² + e − g·x)|`, the scale of the energy sum's rounding.
+    pub energy_magnitude: f64,
+}
+
 #[derive(Debug, Clone)]
 pub struct BackendError(pub String);
 
@@ -79,6 +102,32 @@ pub trait Backend {
     fn groups(&self) -> Vec<u32>;
     fn snapshot(&self) -> Result<Snapshot, BackendError>;
     fn restore(&mut self, s: &Snapshot) -> Result<(), BackendError>;
+    /// Keeps the current state as the last good one, where the state lives (the watchdog keeps
+    /// one every few steps; on the GPU it is a copy on the device, nothing read back).
+    fn keep(&mut self) -> Result<(), BackendError>;
+    /// The state last kept by [`keep`](Self::keep).
+    fn kept(&self) -> Result<Snapshot, BackendError>;
+    /// Goes back to the state last kept by [`keep`](Self::keep).
+    fn restore_kept(&mut self) -> Result<(), BackendError>;
+    /// The watchdog's reductions computed where the state lives (on the GPU, so that a check
+    /// reads back three numbers instead of the particles), or None where the engine reads the
+    /// fields itself (the CPU).
+    fn watch_values(&mut self) -> Result<Option<WatchValues>, BackendError> {
+        Ok(None)
+    }
+    /// A probe's reduction computed where the state lives (on the GPU, so that a probe reads back
+    /// two numbers instead of the field and the ids), or None where the caller reduces the
+    /// fields it reads (the CPU). NaN when no selected particle has a value.
+    fn reduce_field(&self, r: &FieldReduction) -> Result<Option<f64>, BackendError> {
+        let _ = r;
+        Ok(None)
+    }
+    /// Where the run's time went on this backend, per step over `steps` steps, when it was asked
+    /// to time the run (`pairsum run --timing`).
+    fn timing(&self, steps: u64) -> Option<String> {
+        let _ = steps;
+        None
+    }
     /// The first particle (in the current order) and field that is NaN or infinite among `fields`.
     fn first_non_finite(&mut self, fields: &[FieldId]) -> Result<Option<(usize, FieldId)>, BackendError>;
     /// What the neighbour search has done so far (rebuilds of kept lists).

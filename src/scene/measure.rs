@@ -3,9 +3,14 @@
 
 use super::max_keeping_nan;
 use super::spec::{Pick, ProbeKind, ProbeSpec, ProbeValue, ResultSpec, Scene};
-use crate::backend::{Backend, BackendError};
+use crate::backend::{Backend, BackendError, FieldReduction};
+use crate::ir::FieldId;
 use crate::ir::{component_indices, Shape};
+use crate::schedule::Plan;
 use crate::schedule::Target;
+use std::cell::{OnceCell, RefCell};
+use std::collections::HashMap;
+use std::rc::Rc;
 
 /// A named measurement with a documented, automatic definition (`docs/CASE_FILES.md`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -93,15 +98,86 @@ pub struct History {
     initial: Option<f64>,
 }
 
+/// A field of every particle as a [`Reader`] gives it: components per particle, and `n × comps`
+/// values (NaN where the particle's group does not store it), shared rather than copied.
+pub type Column = Rc<(usize, Vec<f64>)>;
+
+/// What probes, profiles and output read of the particles: the plan, fields and ids, in the
+/// backend's current order.
+pub trait Reader {
+    fn plan(&self) -> &Plan;
+    fn read(&self, f: FieldId) -> Result<Option<Column>, BackendError>;
+    fn ids(&self) -> Result<Rc<Vec<u32>>, BackendError>;
+    /// A probe's reduction where the backend computes it itself ([`Backend::reduce_field`]).
+    fn reduce_field(&self, r: &FieldReduction) -> Result<Option<f64>, BackendError> {
+        let _ = r;
+        Ok(None)
+    }
+}
+
+impl<B: Backend> Reader for B {
+    fn plan(&self) -> &Plan {
+        Backend::plan(self)
+    }
+    fn read(&self, f: FieldId) -> Result<Option<Column>, BackendError> {
+        Ok(Backend::read(self, f)?.map(Rc::new))
+    }
+    fn ids(&self) -> Result<Rc<Vec<u32>>, BackendError> {
+        Ok(Rc::new(Backend::ids(self)?))
+    }
+    fn reduce_field(&self, r: &FieldReduction) -> Result<Option<f64>, BackendError> {
+        Backend::reduce_field(self, r)
+    }
+}
+
+/// A backend read at one moment: each field and the ids come from the backend once, however many
+/// probes, profiles and outputs read them (on the GPU every read waits for the device).
+pub struct Moment<'a, B: Backend> {
+    backend: &'a B,
+    fields: RefCell<HashMap<FieldId, Option<Column>>>,
+    ids: OnceCell<Rc<Vec<u32>>>,
+}
+
+impl<'a, B: Backend> Moment<'a, B> {
+    pub fn new(backend: &'a B) -> Self {
+        Moment { backend, fields: RefCell::new(HashMap::new()), ids: OnceCell::new() }
+    }
+}
+
+impl<B: Backend> Reader for Moment<'_, B> {
+    fn plan(&self) -> &Plan {
+        self.backend.plan()
+    }
+    fn read(&self, f: FieldId) -> Result<Option<Column>, BackendError> {
+        if let Some(column) = self.fields.borrow().get(&f) {
+            return Ok(column.clone());
+        }
+        let column = Reader::read(self.backend, f)?;
+        self.fields.borrow_mut().insert(f, column.clone());
+        Ok(column)
+    }
+    fn ids(&self) -> Result<Rc<Vec<u32>>, BackendError> {
+        if let Some(ids) = self.ids.get() {
+            return Ok(ids.clone());
+        }
+        let ids = Reader::ids(self.backend)?;
+        Ok(self.ids.get_or_init(|| ids).clone())
+    }
+    fn reduce_field(&self, r: &FieldReduction) -> Result<Option<f64>, BackendError> {
+        Backend::reduce_field(self.backend, r)
+    }
+}
+
 /// Each particle's body, in the backend's current order.
 fn bodies_now(scene: &Scene, ids: &[u32]) -> Vec<u32> {
     ids.iter().map(|i| scene.particles.body[*i as usize]).collect()
 }
 
 /// Positions in the backend's current order.
-pub fn positions(b: &dyn Backend) -> Result<Option<Vec<[f64; 3]>>, BackendError> {
+pub fn positions(b: &dyn Reader) -> Result<Option<Vec<[f64; 3]>>, BackendError> {
     let Some(x) = b.plan().model.field_id("x") else { return Ok(None) };
-    let Some((c, v)) = b.read(x)? else { return Ok(None) };
+    let Some(column) = b.read(x)? else { return Ok(None) };
+    let (c, v) = (column.0, &column.1);
     Ok(Some(
         (0..v.len() / c)
             .map(|k| {
@@ -114,25 +190,54 @@ pub fn positions(b: &dyn Backend) -> Result<Option<Vec<[f64; 3]>>, BackendError>
 }
 
 /// The value of a probe now (NaN where it has none); an error only when the backend fails.
-pub fn evaluate(p: &ProbeSpec, scene: &Scene, b: &dyn Backend) -> Result<f64, BackendError> {
+pub fn evaluate(p: &ProbeSpec, scene: &Scene, b: &dyn Reader) -> Result<f64, BackendError> {
     match &p.kind {
         ProbeKind::Field { select, value, pick, reduce, locate, .. } => {
-            let Some((comps, values, shape)) = probed_values(value, select.as_deref(), scene, b)? else {
+            if let Some(v) = reduced_by_backend(value, *pick, reduce, select.as_deref(), locate.is_some(), b)? {
+                return Ok(v);
+            }
+            let Some((column, shape)) = probed_values(value, select.as_deref(), scene, b)? else {
                 return Ok(f64::NAN);
             };
+            let (comps, values) = (column.0, &column.1);
             let dim = b.plan().dim;
             let ids = b.ids()?;
-            let selected: Vec<(usize, f64)> = (0..ids.len())
+            // The selected particles' values, NaN left out, without collecting them unless the
+            // extreme's position is asked for.
+            let selected = (0..ids.len())
                 .filter(|k| select.as_ref().is_none_or(|s| s[ids[*k] as usize]))
                 .map(|k| (k, picked(*pick, shape, dim, &values[k * comps..(k + 1) * comps])))
-                .filter(|(_, v)| !v.is_nan())
-                .collect();
+                .filter(|(_, v)| !v.is_nan());
             match locate {
-                Some(axis) => locate_extreme(reduce, &selected, *axis, b),
-                None => Ok(reduce_values(reduce, &selected.iter().map(|p| p.1).collect::<Vec<_>>())),
+                Some(axis) => locate_extreme(reduce, &selected.collect::<Vec<_>>(), *axis, b),
+                None => Ok(reduce_values(reduce, selected.map(|p| p.1))),
             }
         }
         ProbeKind::Measure(m) => measure(*m, scene, b),
+    }
+}
+
+/// A probe of a field's component or length, reduced where the backend holds the field (the
+/// GPU); None where the backend does not, or for an expression, a von Mises stress or the position
+/// of an extreme, which the host computes from the fields.
+fn reduced_by_backend(
+    value: &ProbeValue,
+    pick: Pick,
+    reduce: &str,
+    select: Option<&[bool]>,
+    locate: bool,
+    b: &dyn Reader,
+) -> Result<Option<f64>, BackendError> {
+    let component = match pick {
+        Pick::Component(c) => Some(c),
+        Pick::Norm => None,
+        Pick::VonMises => return Ok(None),
+    };
+    match value {
+        ProbeValue::Field(field) if !locate => {
+            b.reduce_field(&FieldReduction { field: *field, component, reduce, select })
+        }
+        _ => Ok(None),
     }
 }
 
@@ -143,17 +248,17 @@ fn probed_values(
     value: &ProbeValue,
     select: Option<&[bool]>,
     scene: &Scene,
-    b: &dyn Backend,
-) -> Result<Option<(usize, Vec<f64>, Shape)>, BackendError> {
+    b: &dyn Reader,
+) -> Result<Option<(Column, Shape)>, BackendError> {
     let plan = b.plan();
     let e = match value {
-        ProbeValue::Field(f) => return Ok(b.read(*f)?.map(|(c, v)| (c, v, plan.model.field(*f).ty.shape))),
+        ProbeValue::Field(f) => return Ok(b.read(*f)?.map(|c| (c, plan.model.field(*f).ty.shape))),
         ProbeValue::Expression(e) => e,
     };
     let mut fields = crate::engine::setup::HostFields::new();
     for f in value.fields() {
         let Some(column) = b.read(f)? else { return Ok(None) };
-        fields.insert(f, column);
+        fields.insert(f, (column.0, column.1.clone()));
     }
     let ids = b.ids()?;
     let mut materials = crate::engine::setup::resolved_materials(plan, &scene.materials);
@@ -168,7 +273,7 @@ fn probed_values(
             .map_err(|what| BackendError(format!("cannot evaluate the expression: {what}")))?;
         out[k * comps..(k + 1) * comps].copy_from_slice(&v[..comps]);
     }
-    Ok(Some((comps, out, e.ty.shape)))
+    Ok(Some((Rc::new((comps, out)), e.ty.shape)))
 }
 
 /// One particle's value of a field as a probe reads it.
@@ -198,7 +303,7 @@ fn picked(pick: Pick, shape: Shape, dim: usize, v: &[f64]) -> f64 {
 }
 
 /// The `axis` coordinate of the particle where the reduction is reached.
-fn locate_extreme(reduce: &str, values: &[(usize, f64)], axis: usize, b: &dyn Backend) -> Result<f64, BackendError> {
+fn locate_extreme(reduce: &str, values: &[(usize, f64)], axis: usize, b: &dyn Reader) -> Result<f64, BackendError> {
     let key = |v: f64| match reduce {
         "min" => -v,
         "abs_max" => v.abs(),
@@ -208,21 +313,34 @@ fn locate_extreme(reduce: &str, values: &[(usize, f64)], axis: usize, b: &dyn Ba
     Ok(positions(b)?.map(|x| x[k][axis]).unwrap_or(f64::NAN))
 }
 
-fn reduce_values(reduce: &str, v: &[f64]) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
+fn reduce_values(reduce: &str, v: impl Iterator<Item = f64>) -> f64 {
+    let mut n = 0usize;
+    let v = v.inspect(|_| n += 1);
     // A NaN anywhere makes min, max and abs_max NaN, as it makes the sum and the mean.
-    match reduce {
-        "min" => -max_keeping_nan(f64::NEG_INFINITY, v.iter().map(|x| -x)),
-        "max" => max_keeping_nan(f64::NEG_INFINITY, v.iter().copied()),
-        "abs_max" => max_keeping_nan(0.0, v.iter().map(|x| x.abs())),
-        "sum" => v.iter().sum(),
-        _ => v.iter().sum::<f64>() / v.len() as f64,
+    let r = match reduce {
+        "min" => -max_keeping_nan(f64::NEG_INFINITY, v.map(|x| -x)),
+        "max" => max_keeping_nan(f64::NEG_INFINITY, v),
+        "abs_max" => max_keeping_nan(0.0, v.map(|x| x.abs())),
+        _ => v.sum::<f64>(),
+    };
+    match (n, reduce) {
+        (0, _) => f64::NAN,
+        (_, "min" | "max" | "abs_max" | "sum") => r,
+        _ => r / n as f64,
     }
 }
 
-fn measure(m: Measure, scene: &Scene, b: &dyn Backend) -> Result<f64, BackendError> {
+fn measure(m: Measure, scene: &Scene, b: &dyn Reader) -> Result<f64, BackendError> {
+    // These read only velocities and masses, not where the particles are.
+    match m {
+        Measure::KineticEnergy => kinetic_energy(b),
+        Measure::MaxSpeed => Ok(max_keeping_nan(0.0, speeds(b)?)),
+        _ => measure_at_positions(m, scene, b),
+    }
+}
+
+/// The measures that read where the particles are and which body each belongs to.
+fn measure_at_positions(m: Measure, scene: &Scene, b: &dyn Reader) -> Result<f64, BackendError> {
     let Some(x) = positions(b)? else { return Ok(f64::NAN) };
     let which = bodies_now(scene, &b.ids()?);
     let dim = b.plan().dim;
@@ -254,10 +372,11 @@ fn measure(m: Measure, scene: &Scene, b: &dyn Backend) -> Result<f64, BackendErr
 /// initial rear face (by more than Δx) and the projectile's nose. Whether the plug leaves whole
 /// or breaks up and spreads sideways, that is the plate material ahead of the projectile; zero
 /// while there is none (below the ballistic limit, or before the plug leaves).
-fn plug_velocity(x: &[[f64; 3]], body: &[u32], scene: &Scene, b: &dyn Backend) -> Result<f64, BackendError> {
+fn plug_velocity(x: &[[f64; 3]], body: &[u32], scene: &Scene, b: &dyn Reader) -> Result<f64, BackendError> {
     let (Some(axis), Some(plate)) = (Axis::of(scene), scene.bodies.get(1)) else { return Ok(f64::NAN) };
     let Some(vf) = b.plan().model.field_id("v") else { return Ok(f64::NAN) };
-    let Some((c, v)) = b.read(vf)? else { return Ok(f64::NAN) };
+    let Some(column) = b.read(vf)? else { return Ok(f64::NAN) };
+    let (c, v) = (column.0, &column.1);
     let rear = plate.particles.clone().map(|k| axis.coords(scene.particles.x[k]).0).fold(f64::NEG_INFINITY, f64::max);
     let nose = max_keeping_nan(f64::NEG_INFINITY, (0..x.len()).filter(|k| body[*k] == 0).map(|k| axis.coords(x[k]).0));
     if nose.is_nan() {
@@ -277,10 +396,11 @@ fn plug_velocity(x: &[[f64; 3]], body: &[u32], scene: &Scene, b: &dyn Backend) -
 /// Over every particle, relative to its own spacing Δx_i: the least distance to another particle
 /// (clumping: the tensile instability pulls particles together) and the largest distance to its
 /// nearest neighbour (a crack or a particle left alone). Neighbours within 3 Δx_i are searched.
-fn spacing_extremes(x: &[[f64; 3]], b: &dyn Backend) -> Result<(f64, f64), BackendError> {
+fn spacing_extremes(x: &[[f64; 3]], b: &dyn Reader) -> Result<(f64, f64), BackendError> {
     let dim = b.plan().dim;
     let Some(dxf) = b.plan().model.field_id("dx") else { return Ok((f64::NAN, f64::NAN)) };
-    let Some((_, dx)) = b.read(dxf)? else { return Ok((f64::NAN, f64::NAN)) };
+    let Some(column) = b.read(dxf)? else { return Ok((f64::NAN, f64::NAN)) };
+    let (_, dx) = (column.0, &column.1);
     let reach = 3.0 * max_keeping_nan(0.0, dx.iter().copied());
     if !reach.is_finite() {
         return Ok((f64::NAN, f64::NAN));
@@ -303,17 +423,19 @@ fn spacing_extremes(x: &[[f64; 3]], b: &dyn Backend) -> Result<(f64, f64), Backe
     Ok((least, gap))
 }
 
-fn speeds(b: &dyn Backend) -> Result<Vec<f64>, BackendError> {
+fn speeds(b: &dyn Reader) -> Result<Vec<f64>, BackendError> {
     let Some(v) = b.plan().model.field_id("v") else { return Ok(vec![]) };
-    let Some((c, v)) = b.read(v)? else { return Ok(vec![]) };
+    let Some(column) = b.read(v)? else { return Ok(vec![]) };
+    let (c, v) = (column.0, &column.1);
     Ok(v.chunks(c).map(|u| u.iter().map(|x| x * x).sum::<f64>().sqrt()).collect())
 }
 
 /// Σ ½ m |v|² over every particle.
-fn kinetic_energy(b: &dyn Backend) -> Result<f64, BackendError> {
+fn kinetic_energy(b: &dyn Reader) -> Result<f64, BackendError> {
     let Some(m) = b.plan().model.field_id("m") else { return Ok(f64::NAN) };
-    let Some((_, m)) = b.read(m)? else { return Ok(f64::NAN) };
-    Ok(speeds(b)?.iter().zip(&m).map(|(s, m)| 0.5 * m * s * s).sum())
+    let Some(column) = b.read(m)? else { return Ok(f64::NAN) };
+    let (_, m) = (column.0, &column.1);
+    Ok(speeds(b)?.iter().zip(m).map(|(s, m)| 0.5 * m * s * s).sum())
 }
 
 /// The impact axis: through the first body's centroid at t = 0, along its initial velocity.
@@ -370,9 +492,9 @@ fn plate_now<'a>(x: &'a [[f64; 3]], body: &'a [u32], damage: Option<&'a [f64]>) 
 }
 
 /// The damage `D` of every particle, or none where the model has no damage (nothing has failed).
-fn damage(b: &dyn Backend) -> Result<Option<Vec<f64>>, BackendError> {
+fn damage(b: &dyn Reader) -> Result<Option<Vec<f64>>, BackendError> {
     let Some(d) = b.plan().model.field_id("D") else { return Ok(None) };
-    Ok(b.read(d)?.map(|(_, d)| d))
+    Ok(b.read(d)?.map(|d| d.1.clone()))
 }
 
 /// [`crater_diameter`] of a plate whose particles were at `initial` and are now at `now`.
@@ -430,13 +552,13 @@ fn percentile(v: &mut [f64], q: f64) -> f64 {
 
 /// The particles that drive a wave front: those of the first constraint that moves (a piston,
 /// a body of its own or a region of the body it drives), else the first body.
-fn drivers(scene: &Scene, body: &[u32], b: &dyn Backend) -> Result<Vec<bool>, BackendError> {
+fn drivers(scene: &Scene, body: &[u32], b: &dyn Reader) -> Result<Vec<bool>, BackendError> {
     let moving = scene.spec.constraints.iter().find(|c| c.velocity.iter().any(|v| *v != 0.0));
     let first_body = || body.iter().map(|w| *w == 0).collect();
     Ok(match moving.map(|c| c.target) {
         Some(Target::Body(k)) => body.iter().map(|w| *w as usize == k).collect(),
         Some(Target::Part(k)) => match b.plan().model.field_id("part").map(|f| b.read(f)).transpose()?.flatten() {
-            Some((_, part)) => part.iter().map(|p| *p == k as f64).collect(),
+            Some(part) => part.1.iter().map(|p| *p == k as f64).collect(),
             None => first_body(),
         },
         None => first_body(),
@@ -446,9 +568,10 @@ fn drivers(scene: &Scene, body: &[u32], b: &dyn Backend) -> Result<Vec<bool>, Ba
 /// Where a wave front has got to: along the first axis, the position at which the speed falls
 /// through half the drivers' mean speed, interpolated linearly between the last particle above
 /// and the next one below (particles ordered by position).
-fn front_position(x: &[[f64; 3]], driving: &[bool], b: &dyn Backend) -> Result<f64, BackendError> {
+fn front_position(x: &[[f64; 3]], driving: &[bool], b: &dyn Reader) -> Result<f64, BackendError> {
     let Some(v) = b.plan().model.field_id("v") else { return Ok(f64::NAN) };
-    let Some((c, v)) = b.read(v)? else { return Ok(f64::NAN) };
+    let Some(column) = b.read(v)? else { return Ok(f64::NAN) };
+    let (c, v) = (column.0, &column.1);
     let speed: Vec<f64> =
         (0..x.len()).map(|k| v[k * c..(k + 1) * c].iter().map(|u| u * u).sum::<f64>().sqrt()).collect();
     let driver: Vec<f64> = (0..x.len()).filter(|k| driving[*k]).map(|k| speed[k]).collect();
@@ -626,11 +749,13 @@ mod tests {
     fn a_nan_among_the_values_makes_every_extreme_nan() {
         let v = [1.0, f64::NAN, -3.0];
         for reduce in ["min", "max", "abs_max", "sum", "mean"] {
-            assert!(reduce_values(reduce, &v).is_nan(), "{reduce}");
+            assert!(reduce_values(reduce, v.into_iter()).is_nan(), "{reduce}");
         }
         assert!(max_keeping_nan(0.0, [2.0, f64::NAN, 5.0]).is_nan(), "a NaN speed among finite ones");
-        assert_eq!(reduce_values("min", &[1.0, -3.0]), -3.0);
-        assert_eq!(reduce_values("abs_max", &[1.0, -3.0]), 3.0);
+        assert_eq!(reduce_values("min", [1.0, -3.0].into_iter()), -3.0);
+        assert_eq!(reduce_values("abs_max", [1.0, -3.0].into_iter()), 3.0);
+        assert_eq!(reduce_values("mean", [1.0, -3.0].into_iter()), -1.0);
+        assert!(reduce_values("max", std::iter::empty()).is_nan());
         assert_eq!(max_keeping_nan(0.0, [2.0, 5.0]), 5.0);
     }
 

@@ -76,6 +76,16 @@ pub struct CpuBackend<T: Real> {
     h: FieldId,
     /// Neighbour lists kept across evaluations, when the plan's search keeps them.
     lists: lists::Lists<T>,
+    /// The state last kept as good ([`Backend::keep`]): the columns in the store's precision,
+    /// the ids and the materials, copied into buffers reused from one keep to the next.
+    kept: Option<Kept<T>>,
+}
+
+#[derive(Default)]
+struct Kept<T> {
+    columns: Vec<Option<Vec<T>>>,
+    id: Vec<u32>,
+    material: Vec<u32>,
 }
 
 fn is_stored(plan: &Plan, g: usize) -> impl Fn(FieldId) -> bool + '_ {
@@ -516,6 +526,7 @@ impl<T: Real> CpuBackend<T> {
             plan,
             store,
             lists: lists::Lists::default(),
+            kept: None,
         })
     }
 
@@ -759,6 +770,42 @@ impl<T: Real> Backend for CpuBackend<T> {
         }
         self.store.id = s.id.clone();
         self.store.material = s.material.clone();
+        self.lists.invalidate();
+        Ok(())
+    }
+
+    fn keep(&mut self) -> Result<(), BackendError> {
+        let kept = self.kept.get_or_insert_with(Kept::default);
+        kept.columns.resize(self.store.columns.len(), None);
+        for (k, c) in kept.columns.iter_mut().zip(&self.store.columns) {
+            match (k, c) {
+                (Some(k), Some(c)) => k.clone_from(&c.data),
+                (k, c) => *k = c.as_ref().map(|c| c.data.clone()),
+            }
+        }
+        kept.id.clone_from(&self.store.id);
+        kept.material.clone_from(&self.store.material);
+        Ok(())
+    }
+
+    fn kept(&self) -> Result<Snapshot, BackendError> {
+        let kept = self.kept.as_ref().ok_or_else(|| BackendError("no state was kept".into()))?;
+        Ok(Snapshot {
+            columns: kept.columns.iter().map(|c| c.as_ref().map(|c| c.iter().map(|v| v.to_f64()).collect())).collect(),
+            id: kept.id.clone(),
+            material: kept.material.clone(),
+        })
+    }
+
+    fn restore_kept(&mut self) -> Result<(), BackendError> {
+        let kept = self.kept.as_ref().ok_or_else(|| BackendError("no state was kept".into()))?;
+        for (c, k) in self.store.columns.iter_mut().zip(&kept.columns) {
+            if let (Some(c), Some(k)) = (c.as_mut(), k) {
+                c.data.copy_from_slice(k);
+            }
+        }
+        self.store.id.clone_from(&kept.id);
+        self.store.material.clone_from(&kept.material);
         self.lists.invalidate();
         Ok(())
     }

@@ -723,6 +723,12 @@ fn scan_lengths(max_cells: usize) -> Vec<u64> {
 }
 
 impl CellList {
+    /// The dispatches [`record`](Self::record) makes for `n` particles: bounding box, geometry,
+    /// assignment, scatter and rank, a scan per level and an add per level but the last.
+    pub fn dispatches(n: usize) -> usize {
+        5 + 2 * scan_lengths(crate::grid::max_cells(n)).len() - 1
+    }
+
     /// The buffers `new` allocates for `n` particles, `(name, bytes)`, for
     /// [`Gpu::estimate_fits`] before a scene is uploaded.
     pub fn planned_buffers(n: usize) -> Vec<(&'static str, u64)> {

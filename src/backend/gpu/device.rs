@@ -7,6 +7,8 @@
 use std::fmt;
 use std::sync::{Arc, Mutex};
 
+use super::timing::Timing;
+
 /// Environment variable: pick the first adapter whose name contains this (case-insensitive).
 pub const ADAPTER_ENV: &str = "PAIRSUM_ADAPTER";
 
@@ -78,6 +80,8 @@ pub struct Gpu {
     pub limits: wgpu::Limits,
     lost: Arc<Mutex<Option<String>>>,
     errors: Arc<Mutex<Vec<String>>>,
+    /// What the run's kernels, submissions and read-backs cost (`pairsum run --timing`).
+    timing: Option<Timing>,
 }
 
 impl fmt::Debug for Gpu {
@@ -150,22 +154,29 @@ impl Gpu {
     /// Opens the preferred adapter (see [`choose_adapter`]; `PAIRSUM_ADAPTER` overrides) and
     /// creates a device with the adapter's own limits and no optional features.
     pub fn new() -> Result<Gpu, GpuError> {
+        Gpu::with_timing(false)
+    }
+
+    /// [`new`](Self::new); with `timing`, the device also keeps a [`Timing`] of the run (with
+    /// each kernel's device time where the adapter has timestamp queries).
+    pub fn with_timing(timing: bool) -> Result<Gpu, GpuError> {
         let wanted = crate::config::env().adapter.clone().filter(|s| !s.trim().is_empty());
         // wgpu may panic inside driver or loader code; a failure to start is never a crash.
-        std::panic::catch_unwind(move || Gpu::open(wanted.as_deref()))
+        std::panic::catch_unwind(move || Gpu::open(wanted.as_deref(), timing))
             .unwrap_or_else(|p| Err(GpuError::Device(format!("wgpu panicked: {}", panic_message(p)))))
     }
 
-    fn open(wanted: Option<&str>) -> Result<Gpu, GpuError> {
+    fn open(wanted: Option<&str>, timing: bool) -> Result<Gpu, GpuError> {
         let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
         let adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
         let infos: Vec<wgpu::AdapterInfo> = adapters.iter().map(|a| a.get_info()).collect();
         let k = choose_adapter(&infos, wanted)?;
         let adapter = &adapters[k];
         let limits = adapter.limits();
+        let timestamps = timing && adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
         let desc = wgpu::DeviceDescriptor {
             label: Some("pairsum"),
-            required_features: wgpu::Features::empty(),
+            required_features: if timestamps { wgpu::Features::TIMESTAMP_QUERY } else { wgpu::Features::empty() },
             required_limits: limits.clone(),
             experimental_features: wgpu::ExperimentalFeatures::disabled(),
             memory_hints: wgpu::MemoryHints::Performance,
@@ -192,7 +203,8 @@ impl Gpu {
             }));
         }
         let limits = device.limits();
-        Ok(Gpu { device, queue, adapter_info: infos[k].clone(), limits, lost, errors })
+        let timing = timing.then(|| Timing::new(&device, &queue, timestamps));
+        Ok(Gpu { device, queue, adapter_info: infos[k].clone(), limits, lost, errors, timing })
     }
 
     /// Whether the adapter is a software rasteriser on the CPU (lavapipe, SwiftShader): right for
@@ -367,6 +379,7 @@ impl Gpu {
             )));
         }
         self.check_lost()?;
+        let started = std::time::Instant::now();
         let staging =
             self.buffer("download staging", size, wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST)?;
         let mut encoder =
@@ -393,13 +406,27 @@ impl Gpu {
             bytemuck::cast_slice_mut::<T, u8>(&mut out).copy_from_slice(&view[..size as usize]);
         }
         staging.unmap();
+        if let Some(t) = &self.timing {
+            t.readback(size, started.elapsed());
+        }
         self.check()?;
         Ok(out)
     }
 
     /// Submits the encoder's commands.
     pub fn submit(&self, encoder: wgpu::CommandEncoder) {
-        self.queue.submit([encoder.finish()]);
+        match &self.timing {
+            Some(t) => t.submit(&self.device, &self.queue, encoder),
+            None => {
+                self.queue.submit([encoder.finish()]);
+            }
+        }
+    }
+
+    /// The timing of the run so far, per step over `steps` (None unless made
+    /// [`with_timing`](Self::with_timing)).
+    pub fn timing_report(&self, steps: u64) -> Option<String> {
+        self.timing.as_ref().map(|t| t.report(steps))
     }
 
     /// Blocks until all submitted work is done.
@@ -430,8 +457,9 @@ impl Gpu {
             return;
         }
         let (x, y) = dispatch_grid(groups, self.limits.max_compute_workgroups_per_dimension);
+        let timestamp_writes = self.timing.as_ref().and_then(|t| t.dispatch(label));
         let mut pass =
-            encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(label), timestamp_writes: None });
+            encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(label), timestamp_writes });
         pass.set_pipeline(pipeline);
         pass.set_bind_group(0, bind_group, &[]);
         pass.dispatch_workgroups(x, y, 1);

@@ -239,6 +239,9 @@ pub struct ListScene<'a> {
     pub stride: u32,
 }
 
+/// The dispatches of [`GpuLists::record`]: drift, decide, build.
+pub const DISPATCHES: usize = 3;
+
 impl GpuLists {
     /// The buffers for `n` particles with `stride` entries each, `(name, bytes)`.
     pub fn planned_buffers(n: usize, stride: u32) -> Vec<(&'static str, u64)> {
@@ -308,7 +311,7 @@ impl GpuLists {
     }
 
     /// Records steps 2–4 (the cell list must be recorded first, with cells of the cut-off plus
-    /// the skin).
+    /// the skin): [`DISPATCHES`] dispatches.
     pub fn record(
         &self,
         gpu: &Gpu,

@@ -2,8 +2,10 @@
 pub mod cells;
 pub mod device;
 pub mod lists;
+pub mod probe;
 pub mod reduce;
 pub mod reorder;
 pub mod runtime;
+pub mod timing;
 
 pub use runtime::GpuBackend;

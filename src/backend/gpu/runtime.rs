@@ -7,6 +7,7 @@
 use super::cells::CellList;
 use super::device::{Gpu, GpuError};
 use super::lists::{GpuLists, ListScene};
+use super::probe::{ProbeKernel, ProbeQuery};
 use super::reduce::{ReduceOp, Reducer, Segment, SegmentList, ALL_FINITE};
 use super::reorder::{Particles, Reorder};
 use crate::backend::wgsl::{self, globals as gl, Binding, Kernel, KernelKind, Layout, ABSENT};
@@ -52,7 +53,17 @@ pub struct GpuBackend {
     group_counts: Vec<(GroupId, usize, usize)>,
     /// Kept neighbour lists, when the plan's search keeps them.
     lists: Option<GpuLists>,
+    /// The state last kept as good ([`Backend::keep`]): copies of `data` (its state part), `ints`
+    /// and `ids` on the device, made at the first keep.
+    kept: Option<[wgpu::Buffer; 3]>,
+    probe: ProbeKernel,
+    /// Probes are reduced on the device from this many particles on ([`PROBES_ON_DEVICE_FROM`]).
+    probes_on_device_from: usize,
 }
+
+/// Below this many particles a probe reads its field back: a read-back of a few hundred kB costs
+/// less than a submission of three kernels and a wait (measured on an H200 and on lavapipe).
+pub const PROBES_ON_DEVICE_FROM: usize = 65_536;
 
 fn err(e: GpuError) -> BackendError {
     BackendError(e.to_string())
@@ -111,13 +122,14 @@ impl GpuBackend {
             return Err(BackendError(format!("{} image planes; at most 6", mirrors.len())));
         }
         let scratch = len;
-        len += n * reductions.len().max(1);
+        len += n * (reductions.len() + wgsl::WATCH_SLOTS);
         let mut planned = vec![
             ("particle data", 4 * len as u64),
             ("groups and materials", 8 * n as u64),
             ("particle ids", 4 * n as u64),
         ];
         planned.extend(CellList::planned_buffers(n));
+        planned.push(("the last good state", 4 * scratch as u64));
         planned.extend(Reorder::planned_buffers(n, scratch as u64));
         // `PAIRSUM_GPU_MEMORY_LIMIT` (bytes) caps what a buffer may use, below the device's limits.
         if let Some(cap) = crate::config::env().gpu_memory_limit {
@@ -257,6 +269,7 @@ impl GpuBackend {
             let bind = gpu.bind_at(&k.name, &pipeline, &entries);
             kernels.push(Compiled { kernel: k, pipeline, bind });
         }
+        let probe = ProbeKernel::new(&gpu).map_err(err)?;
         let mut b = GpuBackend {
             gpu,
             support,
@@ -279,6 +292,9 @@ impl GpuBackend {
             h_offset,
             group_counts,
             lists,
+            kept: None,
+            probe,
+            probes_on_device_from: PROBES_ON_DEVICE_FROM,
         };
         b.upload_data()?;
         Ok(b)
@@ -297,6 +313,33 @@ impl GpuBackend {
             Some(l) => l.invalidate(&self.gpu).map_err(failed("resetting the neighbour lists")),
             None => Ok(()),
         }
+    }
+
+    /// The state held in `[data, ints, ids]` (the live buffers or the kept copies), read back.
+    fn snapshot_of(&self, [data, ints, ids]: [&wgpu::Buffer; 3]) -> Result<Snapshot, BackendError> {
+        let all: Vec<f32> = self.gpu.download(data, 0, self.scratch).map_err(failed("reading the particle state"))?;
+        let n = self.host.n;
+        Ok(Snapshot {
+            columns: self
+                .host
+                .columns
+                .iter()
+                .enumerate()
+                .map(|(f, c)| {
+                    c.as_ref().and_then(|c| {
+                        self.offset[f].map(|o| all[o..o + c.data.len()].iter().map(|v| *v as f64).collect())
+                    })
+                })
+                .collect(),
+            id: self.gpu.download(ids, 0, n).map_err(failed("reading the particle ids"))?,
+            material: self.gpu.download(ints, 4 * n as u64, n).map_err(failed("reading the materials"))?,
+        })
+    }
+
+    /// Reduce probes on the device from `n` particles on (0: always), in place of
+    /// [`PROBES_ON_DEVICE_FROM`].
+    pub fn reduce_probes_on_device_from(&mut self, n: usize) {
+        self.probes_on_device_from = n;
     }
 
     pub fn gpu(&self) -> &Gpu {
@@ -339,7 +382,9 @@ impl GpuBackend {
                 let count = self.group_counts.iter().find(|(g, _, _)| g == group).map(|(_, _, c)| *c).unwrap_or(0);
                 count.div_ceil(wgsl::WORKGROUP as usize) as u32
             }
-            KernelKind::ReductionValues => self.host.n.div_ceil(wgsl::WORKGROUP as usize) as u32,
+            KernelKind::ReductionValues | KernelKind::WatchValues => {
+                self.host.n.div_ceil(wgsl::WORKGROUP as usize) as u32
+            }
             KernelKind::Timestep | KernelKind::Advance => 1,
         };
         self.gpu.dispatch(encoder, &k.kernel.name, &k.pipeline, &k.bind, groups);
@@ -418,19 +463,13 @@ impl GpuBackend {
             (gl::STEP, step as f32),
         ])?;
         let mut encoder = self.gpu.encoder("step");
-        for a in self.plan.actions.clone() {
-            match a {
-                Action::Save => self.dispatch_where(&mut encoder, |k| matches!(k, KernelKind::Save { .. })),
-                Action::Evaluate => self.record_evaluate(&mut encoder),
-                Action::Timestep => {
-                    self.record_reductions(&mut encoder);
-                    self.dispatch_where(&mut encoder, |k| *k == KernelKind::Timestep);
-                }
-                Action::Update { stage, .. } => self
-                    .dispatch_where(&mut encoder, |k| matches!(k, KernelKind::Update { stage: s, .. } if *s == stage)),
+        for part in step_parts(&self.plan) {
+            match part {
+                StepPart::Kernels(pick) => self.dispatch_where(&mut encoder, |k| pick.matches(k)),
+                StepPart::Evaluate => self.record_evaluate(&mut encoder),
+                StepPart::Reductions => self.record_reductions(&mut encoder),
             }
         }
-        self.dispatch_where(&mut encoder, |k| *k == KernelKind::Advance);
         self.submit(encoder, "running a step")?;
         self.check_lists()?;
         let clock: Vec<f32> = self.gpu.download(&self.globals, 0, gl::STEP + 1).map_err(failed("reading the clock"))?;
@@ -522,26 +561,7 @@ impl Backend for GpuBackend {
     }
 
     fn snapshot(&self) -> Result<Snapshot, BackendError> {
-        let all: Vec<f32> =
-            self.gpu.download(&self.data, 0, self.scratch).map_err(failed("reading the particle state"))?;
-        Ok(Snapshot {
-            columns: self
-                .host
-                .columns
-                .iter()
-                .enumerate()
-                .map(|(f, c)| {
-                    c.as_ref().and_then(|c| {
-                        self.offset[f].map(|o| all[o..o + c.data.len()].iter().map(|v| *v as f64).collect())
-                    })
-                })
-                .collect(),
-            id: self.ids()?,
-            material: self
-                .gpu
-                .download(&self.ints, 4 * self.host.n as u64, self.host.n)
-                .map_err(failed("reading the materials"))?,
-        })
+        self.snapshot_of([&self.data, &self.ints, &self.ids])
     }
 
     fn restore(&mut self, s: &Snapshot) -> Result<(), BackendError> {
@@ -558,6 +578,106 @@ impl Backend for GpuBackend {
         self.gpu.upload(&self.ids, 0, &s.id).map_err(failed("restoring the particle ids"))?;
         self.invalidate_lists()?;
         self.upload_data()
+    }
+
+    fn keep(&mut self) -> Result<(), BackendError> {
+        if self.kept.is_none() {
+            let copy = |label: &str, of: &wgpu::Buffer| {
+                let usage = wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST;
+                self.gpu.buffer(label, of.size(), usage).map_err(failed("keeping the last good state"))
+            };
+            self.kept =
+                Some([copy("kept data", &self.data)?, copy("kept ints", &self.ints)?, copy("kept ids", &self.ids)?]);
+        }
+        let Some(kept) = &self.kept else { return Ok(()) };
+        let mut encoder = self.gpu.encoder("keep");
+        encoder.copy_buffer_to_buffer(&self.data, 0, &kept[0], 0, 4 * self.scratch as u64);
+        encoder.copy_buffer_to_buffer(&self.ints, 0, &kept[1], 0, self.ints.size());
+        encoder.copy_buffer_to_buffer(&self.ids, 0, &kept[2], 0, self.ids.size());
+        self.submit(encoder, "keeping the last good state")
+    }
+
+    fn kept(&self) -> Result<Snapshot, BackendError> {
+        let [data, ints, ids] = self.kept.as_ref().ok_or_else(|| BackendError("no state was kept".into()))?;
+        self.snapshot_of([data, ints, ids])
+    }
+
+    fn restore_kept(&mut self) -> Result<(), BackendError> {
+        let [data, ints, ids] = self.kept.as_ref().ok_or_else(|| BackendError("no state was kept".into()))?;
+        let mut encoder = self.gpu.encoder("restore kept");
+        encoder.copy_buffer_to_buffer(data, 0, &self.data, 0, 4 * self.scratch as u64);
+        encoder.copy_buffer_to_buffer(ints, 0, &self.ints, 0, self.ints.size());
+        encoder.copy_buffer_to_buffer(ids, 0, &self.ids, 0, self.ids.size());
+        self.submit(encoder, "restoring the last good state")?;
+        self.invalidate_lists()
+    }
+
+    fn reduce_field(&self, r: &crate::backend::FieldReduction) -> Result<Option<f64>, BackendError> {
+        if self.host.n < self.probes_on_device_from {
+            return Ok(None);
+        }
+        let (Some(offset), Some(col)) = (self.offset[r.field.index()], self.host.column(r.field)) else {
+            return Ok(Some(f64::NAN));
+        };
+        let (op, identity) = match r.reduce {
+            "min" => (ReduceOp::Min, f32::INFINITY),
+            "max" | "abs_max" => (ReduceOp::Max, f32::NEG_INFINITY),
+            _ => (ReduceOp::Sum, 0.0),
+        };
+        let absent = |b: isize| if b == crate::particles::ABSENT { i32::MIN } else { b as i32 };
+        let query = ProbeQuery {
+            offset: offset as u32,
+            comps: col.comps as u32,
+            base: col.base.iter().map(|b| absent(*b)).collect(),
+            component: r.component.map(|c| c as u32),
+            abs: r.reduce == "abs_max",
+            identity,
+            select: r.select,
+        };
+        // The scratch of the watchdog's values, free between its checks.
+        let (n, out) = (self.host.n as u32, (self.scratch + self.reductions.len() * self.host.n) as u32);
+        let mut encoder = self.gpu.encoder("probe");
+        self.probe.record(&self.gpu, &mut encoder, &query, n, out, &self.data, &self.ints, &self.ids);
+        let slot = gl::WATCH as u32;
+        self.reducer.record(&self.gpu, &mut encoder, op, &self.data, out, n, &self.globals, slot);
+        self.reducer.record(&self.gpu, &mut encoder, ReduceOp::Sum, &self.data, out + n, n, &self.globals, slot + 1);
+        self.submit(encoder, "reducing a probe")?;
+        let v: Vec<f32> =
+            self.gpu.download(&self.globals, 4 * gl::WATCH as u64, 2).map_err(failed("reading a probe's value"))?;
+        let (value, count) = (v[0] as f64, v[1] as f64);
+        Ok(Some(match r.reduce {
+            _ if count == 0.0 => f64::NAN,
+            "min" | "max" | "abs_max" | "sum" => value,
+            _ => value / count,
+        }))
+    }
+
+    fn watch_values(&mut self) -> Result<Option<crate::backend::WatchValues>, BackendError> {
+        if !self.kernels.iter().any(|k| k.kernel.kind == KernelKind::WatchValues) {
+            return Ok(None);
+        }
+        let mut encoder = self.gpu.encoder("watchdog bounds");
+        self.dispatch_where(&mut encoder, |k| *k == KernelKind::WatchValues);
+        let n = self.host.n as u32;
+        let first = self.scratch + self.reductions.len() * self.host.n;
+        for (k, op) in [ReduceOp::Max, ReduceOp::Sum, ReduceOp::Sum].into_iter().enumerate() {
+            let src = (first + k * self.host.n) as u32;
+            self.reducer.record(&self.gpu, &mut encoder, op, &self.data, src, n, &self.globals, (gl::WATCH + k) as u32);
+        }
+        self.submit(encoder, "reducing the watchdog's bounds")?;
+        let v: Vec<f32> = self
+            .gpu
+            .download(&self.globals, 4 * gl::WATCH as u64, wgsl::WATCH_SLOTS)
+            .map_err(failed("reading the watchdog's bounds"))?;
+        Ok(Some(crate::backend::WatchValues {
+            max_speed: (v[0] as f64).sqrt(),
+            energy: v[1] as f64,
+            energy_magnitude: v[2] as f64,
+        }))
+    }
+
+    fn timing(&self, steps: u64) -> Option<String> {
+        self.gpu.timing_report(steps)
     }
 
     fn search_stats(&self) -> crate::schedule::SearchStats {
@@ -616,6 +736,90 @@ impl Backend for GpuBackend {
     ) -> Option<Result<(f64, f64, u64), BackendError>> {
         Some(GpuBackend::device_step(self, time, dt_prev, step, end_time, dt_max))
     }
+}
+
+/// What a step records into its one submission, in order: the integrator's actions, the time
+/// step and the clock's advance ([`GpuBackend::device_step`] records them,
+/// [`dispatches_per_step`] counts them).
+enum StepPart {
+    Kernels(Pick),
+    /// The cell list (and kept lists), then every pass.
+    Evaluate,
+    /// The time step's reductions.
+    Reductions,
+}
+
+/// Which generated kernels a [`StepPart::Kernels`] dispatches.
+#[derive(Clone, Copy)]
+enum Pick {
+    Save,
+    Timestep,
+    Update(usize),
+    Advance,
+}
+
+impl Pick {
+    fn matches(self, k: &KernelKind) -> bool {
+        match self {
+            Pick::Save => matches!(k, KernelKind::Save { .. }),
+            Pick::Timestep => *k == KernelKind::Timestep,
+            Pick::Update(stage) => matches!(k, KernelKind::Update { stage: s, .. } if *s == stage),
+            Pick::Advance => *k == KernelKind::Advance,
+        }
+    }
+}
+
+fn step_parts(plan: &Plan) -> Vec<StepPart> {
+    let mut parts = vec![];
+    for a in &plan.actions {
+        match a {
+            Action::Save => parts.push(StepPart::Kernels(Pick::Save)),
+            Action::Evaluate => parts.push(StepPart::Evaluate),
+            Action::Timestep => parts.extend([StepPart::Reductions, StepPart::Kernels(Pick::Timestep)]),
+            Action::Update { stage, .. } => parts.push(StepPart::Kernels(Pick::Update(*stage))),
+        }
+    }
+    parts.push(StepPart::Kernels(Pick::Advance));
+    parts
+}
+
+/// The dispatches of one step of `plan` over `n` particles on the GPU (all in one submission),
+/// for `pairsum plan`: the generated kernels of `kinds`, the cell list's (and kept lists')
+/// kernels and two per time-step reduction.
+pub fn dispatches_per_step(plan: &Plan, kinds: &[KernelKind], n: usize) -> usize {
+    let count = |pick: &dyn Fn(&KernelKind) -> bool| kinds.iter().filter(|k| pick(k)).count();
+    let reductions = crate::backend::timestep::reductions(&plan.model, &plan.timesteps).len();
+    step_parts(plan)
+        .iter()
+        .map(|part| match part {
+            StepPart::Kernels(pick) => count(&|k| pick.matches(k)),
+            StepPart::Evaluate => {
+                let lists = if plan.search.keeps_lists() { super::lists::DISPATCHES } else { 0 };
+                CellList::dispatches(n) + lists + count(&|k| matches!(k, KernelKind::Pass { .. }))
+            }
+            StepPart::Reductions if reductions == 0 => 0,
+            StepPart::Reductions => count(&|k| *k == KernelKind::ReductionValues) + 2 * reductions,
+        })
+        .sum()
+}
+
+/// What a step costs the GPU backend in dispatches and waits, for `pairsum plan`.
+pub fn step_traffic(plan: &Plan, n: usize) -> Result<String, String> {
+    let kinds: Vec<KernelKind> =
+        wgsl::generate(plan, super::cells::wgsl_helpers())?.into_iter().map(|k| k.kind).collect();
+    let probes = if n >= PROBES_ON_DEVICE_FROM {
+        "reduces it on the device and reads back 2 numbers (a field's component or length; an expression, a von Mises \
+         stress, a located extreme or a measure reads its fields)"
+    } else {
+        "reads back the fields it reduces (below 65,536 particles; reduced on the device above)"
+    };
+    Ok(format!(
+        "on the GPU: a step is {} dispatches in one submission and one blocking read-back (the clock, 4 bytes); \
+         the watchdog adds, every 10 steps, 2 submissions and 2 read-backs of at most 3 numbers (the fields only \
+         near a bound); each probe {probes}; outputs read back the fields they write; reordering every 25 steps is \
+         one more submission\n",
+        dispatches_per_step(plan, &kinds, n)
+    ))
 }
 
 /// Entries per particle of the device's lists: twice the most candidates any particle has at the

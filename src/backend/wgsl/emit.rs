@@ -84,6 +84,7 @@ pub fn generate(plan: &Plan, cell_helpers: &str) -> Result<Vec<Kernel>, String> 
         }
     }
     out.push(reduction_kernel(plan, &lay));
+    out.extend(watch_kernel(plan, &lay));
     out.push(timestep_kernel(plan));
     out.push(advance_kernel());
     // A test seam: `PAIRSUM_WGSL_FAULT` breaks the first kernel, so that the path of a module
@@ -1144,6 +1145,76 @@ fn reduction_kernel(plan: &Plan, lay: &Layout) -> Kernel {
         w.out
     );
     Kernel { name: "timestep_values".into(), kind: KernelKind::ReductionValues, wgsl, bindings }
+}
+
+/// Per-particle values of the watchdog's reductions (see [`gl::WATCH`]), into scratch after the
+/// time step's: `|v|²`, the energy `m (½|v|² + e − g·x)` (with `e` where the group stores a
+/// scalar `e`, and the scene's gravity `g`) and its magnitude, on the groups that store `x` and
+/// `v` (the energy where they store `m` too); 0 elsewhere. None when the plan stores no `x` or `v`.
+fn watch_kernel(plan: &Plan, lay: &Layout) -> Option<Kernel> {
+    let model = &plan.model;
+    // Fields the plan stores (a model that never reads `m` stores none: its energy is left 0, as
+    // the watchdog then has no energy bound).
+    let field =
+        |name: &str| model.field_id(name).filter(|f| lay.slot(*f).is_some()).map(|f| Expr::field(f, model.field(f).ty));
+    let (x, v) = (field("x")?, field("v")?);
+    let m = field("m");
+    let e = field("e").filter(|e| e.ty.shape == Shape::Scalar);
+    let mask = |f: Option<&Expr>| -> u32 {
+        let Some(ExprKind::Field(f, _)) = f.map(|f| &f.kind) else { return 0 };
+        let groups = plan.field_layout(*f).map(|l| l.groups);
+        (0..model.groups.len().min(32))
+            .filter(|g| groups.is_some_and(|s| s.contains(GroupId(*g as u32))))
+            .fold(0, |acc, g| acc | (1 << g))
+    };
+    let moving = mask(Some(&x)) & mask(Some(&v));
+    let weighed = moving & mask(m.as_ref());
+    let heated = weighed & mask(e.as_ref());
+    let gravity = plan
+        .scene_params
+        .iter()
+        .find(|p| p.role == crate::schedule::SceneRole::Gravity)
+        .map_or(vec![0.0; plan.dim], |p| p.value.clone());
+    let reductions = crate::backend::timestep::reductions(&plan.model, &plan.timesteps).len();
+    let mut w = Writer::new(plan, lay, Mode::Any);
+    w.line("let n = u32(info[0]);");
+    w.line("let i = k;");
+    w.line("if (i >= n) { return; }");
+    w.line(format!("let scratch = u32(info[{}]) + {reductions}u * n;", lay.meta_len()));
+    w.line("var speed2 = 0.0;");
+    w.line("var energy = 0.0;");
+    w.line(format!("if (in_groups({moving}u, ints[i])) {{"));
+    let (xs, vs) = (w.expr(&x), w.expr(&v));
+    let dot = |a: &str, b: &str| if plan.dim == 1 { format!("({a} * {b})") } else { format!("dot({a}, {b})") };
+    let g = match plan.dim {
+        1 => lit(gravity[0]),
+        d => format!("vec{d}<f32>({})", gravity.iter().map(|c| lit(*c)).collect::<Vec<_>>().join(", ")),
+    };
+    w.line(format!("    let v = {vs};"));
+    w.line(format!("    speed2 = {};", dot("v", "v")));
+    if let Some(m) = &m {
+        let ms = w.expr(m);
+        w.line(format!("    if (in_groups({weighed}u, ints[i])) {{"));
+        w.line(format!("        energy = {ms} * (0.5 * speed2 - {});", dot(&g, &xs)));
+        if let Some(e) = &e {
+            let es = w.expr(e);
+            w.line(format!("        if (in_groups({heated}u, ints[i])) {{ energy = energy + {ms} * {es}; }}"));
+        }
+        w.line("    }");
+    }
+    w.line("}");
+    w.line("data[scratch + i] = speed2;");
+    w.line("data[scratch + n + i] = energy;");
+    w.line("data[scratch + 2u * n + i] = abs(energy);");
+    let bindings = vec![Binding::Data, Binding::Ints, Binding::Meta];
+    let mut wgsl = header(plan, "the per-particle values of the watchdog's reductions", None, &bindings);
+    wgsl.push_str(&w.accessors());
+    let _ = writeln!(
+        wgsl,
+        "@compute @workgroup_size({WORKGROUP})\nfn main({ENTRY_ARGS}) {{\n    let k = {LINEAR};\n{}}}",
+        w.out
+    );
+    Some(Kernel { name: "watch_values".into(), kind: KernelKind::WatchValues, wgsl, bindings })
 }
 
 /// The time step from the reductions: the least positive finite limit, then dt_max and the end.

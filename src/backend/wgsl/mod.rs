@@ -35,6 +35,10 @@ pub mod globals {
     pub const STEP: usize = 5;
     /// Always 0: XOR-ed into bits to hide values from the shader compiler's algebra (Kahan).
     pub const ZERO: usize = 6;
+    /// The watchdog's reductions ([`super::WATCH_SLOTS`] of them): the largest |v|², the energy
+    /// `Σ m (½|v|² + e − g·x)`, and `Σ |m (½|v|² + e − g·x)|`, which bounds the rounding of the
+    /// energy's f32 sum.
+    pub const WATCH: usize = 7;
     /// Values of the time-step reductions (up to `PLANES`).
     pub const REDUCTIONS: usize = 16;
     /// The number of image planes (symmetry planes, periodic sides), then (axis, offset, shift)
@@ -43,6 +47,9 @@ pub mod globals {
     /// The last word is the watchdog scan's.
     pub const SIZE: usize = 96;
 }
+
+/// Per-particle values the watchdog reduces on the device (see [`globals::WATCH`]).
+pub const WATCH_SLOTS: usize = 3;
 
 /// Marks a (field, group) without storage in `meta`.
 pub const ABSENT: i32 = i32::MIN;
@@ -93,6 +100,8 @@ pub enum KernelKind {
     Initialise { group: GroupId },
     /// Per-particle values of the time-step reductions into scratch (all particles).
     ReductionValues,
+    /// Per-particle values of the watchdog's reductions into scratch, after the time step's.
+    WatchValues,
     /// One invocation: the time step from the reductions, written to `globals`.
     Timestep,
     /// One invocation: advance the clock after a step.
