@@ -121,7 +121,7 @@ enum Command {
         /// Dimension, for a model
         #[arg(long, default_value_t = 3)]
         dim: usize,
-        /// Integrator, for a model: euler, predictor_corrector, symplectic
+        /// Integrator, for a model: euler, predictor_corrector, symplectic, pec, symplectic_pec
         #[arg(long, default_value = "predictor_corrector")]
         integrator: String,
         /// Precision of the reals: f32 or f64
@@ -453,7 +453,7 @@ fn run_run(case: &str, a: RunArgs) -> i32 {
 fn run_plan(path: &Path, dim: usize, integrator: &str, precision: Precision, opts: &crate::scene::Options) -> i32 {
     let real = real_bytes(precision);
     let Some(integrator) = crate::schedule::IntegratorKind::parse(integrator) else {
-        eprintln!("error: unknown integrator `{integrator}` (euler, predictor_corrector, symplectic)");
+        eprintln!("error: unknown integrator `{integrator}` ({})", crate::schedule::IntegratorKind::NAMES);
         return 2;
     };
     if !(1..=3).contains(&dim) {

@@ -466,6 +466,11 @@ fn dam_break_with_adami_walls_on_the_gpu_matches_the_cpu() {
     case_matches_cpu("dam_break_2d", &[("boundary", "adami")], 300, &["rho", "p_over_rho2"], 2e-3);
 }
 
+#[test]
+fn dam_break_with_one_evaluation_per_step_on_the_gpu_matches_the_cpu() {
+    case_matches_cpu("dam_break_2d", &[("boundary", "dbc"), ("integrator", "symplectic_pec")], 300, &["rho"], 2e-3);
+}
+
 // The lattice spring model: 1200 steps (0.056 s) of the cantilever as the tip load grows. The
 // springs' forces come from stretches of 1e-7 to 1e-5 m between positions of up to 0.5 m, which
 // f32 resolves to 3e-8 m: the displacements (x − x0) are compared, relative to the largest, and

@@ -19,8 +19,9 @@
 # closest to PySPH's (the case's walls are 3a/20 thick: 3 layers at a/20, 5 at a/30).
 # The compared figure is the time per particle-step over all particles, fluid and wall; the
 # integrators differ in how many force evaluations make a step (PySPH's PEC: one, pairsum's
-# symplectic: two), so the script also prints the time per particle-evaluation, and a pairsum run
-# at PySPH's h = 1.3 Δx (the case's is 1.5 Δx: 1.33× the neighbours) as a third comparison.
+# symplectic: two), so the script also prints the time per particle-evaluation, a pairsum run
+# at PySPH's h = 1.3 Δx (the case's is 1.5 Δx: 1.33× the neighbours) as a third comparison, and
+# pairsum with `integrator = symplectic_pec`, which evaluates once per step as PySPH's PEC does.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 STEPS=${STEPS:-500}
@@ -84,7 +85,7 @@ pysph --max-steps 1 >/dev/null 2>&1
 # REPS rounds, each running every configuration once in turn, so that a slow spell of the machine
 # falls on all of them alike; each configuration keeps its fastest round.
 min() { awk -v a="$1" -v b="$2" 'BEGIN { print (a == "" || b + 0 < a + 0) ? b : a }'; }
-pysph_s="" t64="" t32="" t64h=""
+pysph_s="" t64="" t32="" t64h="" t64p=""
 for r in $(seq 1 "$REPS"); do
     read -r pysph_n pysph_nf s < <(pysph_timed "$r")
     pysph_s=$(min "$pysph_s" "$s")
@@ -92,6 +93,9 @@ for r in $(seq 1 "$REPS"); do
     t64=$(min "$t64" "$s")
     read -r _ _ s < <(pairsum "f32, native pair programs (round $r)" dam_break_2d --precision f32 --set boundary=dbc)
     t32=$(min "$t32" "$s")
+    read -r _ _ s < <(pairsum "f64, one evaluation per step (round $r)" dam_break_2d --precision f64 --set boundary=dbc \
+        --set integrator=symplectic_pec)
+    t64p=$(min "$t64p" "$s")
     if [ -n "$H13" ]; then
         read -r _ _ s < <(pairsum "f64, h = 1.3 dx (round $r)" "$H13" --precision f64 --set boundary=dbc)
         t64h=$(min "$t64h" "$s")
@@ -122,6 +126,7 @@ echo "                                    total  fluid  steps time [s]   µs/p-s
 row "PySPH 1.0b2 WCSPH (OpenMP, f64)" "$pysph_n" "$pysph_nf" "$pysph_s" "$ev_pysph"
 row "pairsum CPU f64, DBC, h = 1.5 dx" "$n64" "$nf64" "$t64" "$ev_pairsum"
 row "pairsum CPU f32, DBC, h = 1.5 dx" "$n64" "$nf64" "$t32" "$ev_pairsum"
+row "pairsum CPU f64, symplectic_pec" "$n64" "$nf64" "$t64p" "$STEPS"
 [ -n "$t64h" ] && row "pairsum CPU f64, DBC, h = 1.3 dx" "$n64" "$nf64" "$t64h" "$ev_pairsum"
 echo
 echo "evaluations timed: PySPH $ev_pysph ($STEPS PEC steps + the initial one), pairsum $ev_pairsum (2 per symplectic step)"
@@ -134,6 +139,7 @@ if [ -n "$t64h" ]; then
     echo "PySPH / pairsum f64 at h = 1.3 Δx, per particle-step:       $(ratio "$p_pysph" "$(per "$t64h" "$n64" "$STEPS")")×"
     echo "PySPH / pairsum f64 at h = 1.3 Δx, per particle-evaluation: $(ratio "$e_pysph" "$(per "$t64h" "$n64" "$ev_pairsum")")×"
 fi
+echo "PySPH / pairsum f64 with one evaluation per step (symplectic_pec), per particle-step: $(ratio "$p_pysph" "$(per "$t64p" "$n64" "$STEPS")")×"
 echo "pairsum f64 / f32:                             $(ratio "$t64" "$t32")×"
 cat <<EOF
 

@@ -981,7 +981,7 @@ fn build(
                 cx.err(
                     i.span(),
                     "C0020",
-                    format!("unknown integrator `{}` (euler, predictor_corrector, symplectic)", i.get_ref()),
+                    format!("unknown integrator `{}` ({})", i.get_ref(), IntegratorKind::NAMES),
                     "here",
                 );
                 return None;

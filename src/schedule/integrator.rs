@@ -7,6 +7,9 @@
 //! - Symplectic (DualSPHysics, Monaghan 2005): the same predictor, then v¹ = v⁰ + Δt v̇(S½),
 //!   x¹ = x⁰ + Δt (v⁰ + v¹)/2 (and so every state whose rate is v), ρ¹ = ρ⁰ (2 − ε)/(2 + ε) with
 //!   ε = −(ρ̇/ρ)½ Δt, others midpoint.
+//! - Their one-evaluation forms, `pec` and `symplectic_pec` (PySPH's PEC): the predictor takes the
+//!   rates of the step before's evaluation (at its half step; at the first step, those at t = 0)
+//!   instead of evaluating at S⁰, so a step costs one evaluation, not two.
 //!
 //! State that corrections change without a rate (plastic strain, damage) restarts every stage from
 //! its value at the start of the step, so a two-stage step counts its increment once.
@@ -24,14 +27,22 @@ pub enum IntegratorKind {
     Euler,
     PredictorCorrector,
     Symplectic,
+    /// The predictor–corrector with the predictor on the last evaluation's rates.
+    Pec,
+    /// The symplectic scheme with the predictor on the last evaluation's rates.
+    SymplecticPec,
 }
 
 impl IntegratorKind {
+    pub const NAMES: &'static str = "euler, predictor_corrector, symplectic, pec, symplectic_pec";
+
     pub fn name(self) -> &'static str {
         match self {
             IntegratorKind::Euler => "euler",
             IntegratorKind::PredictorCorrector => "predictor_corrector",
             IntegratorKind::Symplectic => "symplectic",
+            IntegratorKind::Pec => "pec",
+            IntegratorKind::SymplecticPec => "symplectic_pec",
         }
     }
     pub fn parse(s: &str) -> Option<IntegratorKind> {
@@ -39,7 +50,20 @@ impl IntegratorKind {
             "euler" => Some(IntegratorKind::Euler),
             "predictor_corrector" | "pc" => Some(IntegratorKind::PredictorCorrector),
             "symplectic" => Some(IntegratorKind::Symplectic),
+            "pec" => Some(IntegratorKind::Pec),
+            "symplectic_pec" => Some(IntegratorKind::SymplecticPec),
             _ => None,
+        }
+    }
+    /// Whether the corrector is the symplectic one (velocity-averaged positions, ρ's ratio form).
+    pub fn is_symplectic(self) -> bool {
+        matches!(self, IntegratorKind::Symplectic | IntegratorKind::SymplecticPec)
+    }
+    /// Neighbour evaluations per step.
+    pub fn evaluations(self) -> usize {
+        match self {
+            IntegratorKind::PredictorCorrector | IntegratorKind::Symplectic => 2,
+            _ => 1,
         }
     }
 }
@@ -383,14 +407,18 @@ pub fn build(plan: &mut Plan, scene: &SceneSpec, live: &Live) {
         plan.stages.push(Stage { name, updates, corrections: plan.corrections.clone(), derived: plan.derived.clone() });
     }
     plan.actions = if multi {
-        vec![
-            Action::Save,
-            Action::Evaluate,
+        let mut actions = vec![Action::Save, Action::Evaluate];
+        if scene.integrator.evaluations() == 1 {
+            // The rates of the last evaluation (the engine evaluates once at t = 0) predict.
+            actions.pop();
+        }
+        actions.extend([
             Action::Timestep,
             Action::Update { stage: 0, time_fraction: 0.5 },
             Action::Evaluate,
             Action::Update { stage: 1, time_fraction: 1.0 },
-        ]
+        ]);
+        actions
     } else {
         vec![Action::Evaluate, Action::Timestep, Action::Update { stage: 0, time_fraction: 1.0 }]
     };
@@ -453,7 +481,7 @@ fn stage_blocks(
             let value = match (kind, stage) {
                 (super::IntegratorKind::Euler, _) => base.plus(rate.scaled_by(dt())),
                 (_, 0) => base.plus(half(rate.scaled_by(dt()))),
-                (super::IntegratorKind::Symplectic, _) if is_field(&rate_expr(rates, f), v) => {
+                (k, _) if k.is_symplectic() && is_field(&rate_expr(rates, f), v) => {
                     // x¹ = x⁰ + Δt (v⁰ + v¹)/2, for x and any other state whose rate is v (a total
                     // Lagrangian solid's displacement): advanced another way, its forces would
                     // see an explicit-Euler oscillator, which grows every step.
@@ -462,7 +490,7 @@ fn stage_blocks(
                     let v0 = saved(v).map(|s| Expr::field(s, vty)).unwrap_or_else(|| Expr::field(v, vty));
                     base.plus(half(v0.plus(Expr::field(v, vty)).scaled_by(dt())))
                 }
-                (super::IntegratorKind::Symplectic, _) if Some(f) == rho => {
+                (k, _) if k.is_symplectic() && Some(f) == rho => {
                     // ρ¹ = ρ⁰ (2 − ε)/(2 + ε), ε = −(ρ̇/ρ) Δt at the half step
                     let one = Type::scalar(Unit::ONE);
                     let eps = Expr::new(
