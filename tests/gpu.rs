@@ -743,14 +743,14 @@ fn a_damped_falling_block_on_the_gpu_matches_the_cpu() {
 }
 
 /// The watchdog's reductions on the device (the largest speed; the energy Σ m (½|v|² + e − g·x)
-/// and its magnitude) against the same sums in f64 over the fields the GPU holds, after 20 steps
+/// and its magnitude; the kinetic energy) against the same sums in f64 over the fields the GPU holds, after 20 steps
 /// of a case with gravity and walls (the dam break) and of one with an internal energy (Sod's
 /// tube, 1D).
 #[test]
 fn the_gpu_watchdog_reductions_equal_the_speed_and_energy_of_its_fields() {
     use pairsum::schedule::SceneRole;
     for name in ["dam_break_2d", "sod_shock_tube"] {
-        let (_, mut gpu) = run_both(Path::new(&case(name)), &[], 20);
+        let (_, gpu) = run_both(Path::new(&case(name)), &[], 20);
         let b = &gpu.backend;
         let model = &b.plan().model;
         let read = |f: &str| b.read(model.field_id(f).expect("field")).expect("read").expect("stored");
@@ -758,7 +758,7 @@ fn the_gpu_watchdog_reductions_equal_the_speed_and_energy_of_its_fields() {
         let e = model.field_id("e").map(|_| read("e").1);
         let g = b.plan().scene_params.iter().find(|p| p.role == SceneRole::Gravity).map(|p| p.value.clone());
         let g = g.unwrap_or(vec![0.0; dim]);
-        let (mut fastest, mut energy, mut magnitude) = (0.0f64, 0.0, 0.0);
+        let (mut fastest, mut energy, mut magnitude, mut kinetic) = (0.0f64, 0.0, 0.0, 0.0);
         for i in 0..m.len() {
             let (vi, xi) = (&v[i * dim..(i + 1) * dim], &x[i * dim..(i + 1) * dim]);
             if m[i].is_nan() || vi[0].is_nan() || xi[0].is_nan() {
@@ -769,6 +769,7 @@ fn the_gpu_watchdog_reductions_equal_the_speed_and_energy_of_its_fields() {
             let ei = e.as_ref().map_or(0.0, |e| if e[i].is_nan() { 0.0 } else { e[i] });
             let term = m[i] * (0.5 * v2 + ei - gx);
             fastest = fastest.max(v2.sqrt());
+            kinetic += 0.5 * m[i] * v2;
             energy += term;
             magnitude += term.abs();
         }
@@ -777,6 +778,7 @@ fn the_gpu_watchdog_reductions_equal_the_speed_and_energy_of_its_fields() {
         assert!((w.max_speed - fastest).abs() <= 1e-6 * fastest, "{name}: speed {} vs {fastest}", w.max_speed);
         assert!((w.energy - energy).abs() <= 1e-5 * magnitude, "{name}: energy {} vs {energy}", w.energy);
         assert!((w.energy_magnitude - magnitude).abs() <= 1e-5 * magnitude, "{name}: {}", w.energy_magnitude);
+        assert!((w.kinetic - kinetic).abs() <= 1e-5 * kinetic, "{name}: kinetic {} vs {kinetic}", w.kinetic);
     }
 }
 
@@ -799,18 +801,26 @@ impl pairsum::scene::measure::Reader for HostReads<'_> {
     }
 }
 
-/// Every probe of three cases (the dam break's front: a maximum over one body; Sod's tube:
-/// means over regions and sums of expressions; the colliding bars: means), evaluated with the GPU
+/// Every probe of four cases (the dam break's front: a maximum over one body; Sod's tube:
+/// means over regions and sums of expressions; the colliding bars: means; PySPH's impact3d at
+/// 2 mm: the kinetic energy and largest speed measures), evaluated with the GPU
 /// reducing the field on the device (whatever the particle count) and with the host reducing the
 /// fields it reads back, after 30 steps: equal to the f32 sums' rounding, 1e-5 of the value plus
 /// 1e-6 of the largest magnitude.
 #[test]
 fn probes_reduced_on_the_gpu_equal_the_host_reduction_of_the_same_fields() {
-    use pairsum::scene::measure::evaluate;
+    use pairsum::scene::measure::{evaluate, Measure};
     use pairsum::scene::spec::{ProbeKind, ProbeValue};
-    for name in ["dam_break_2d", "sod_shock_tube", "colliding_bars_1d"] {
+    let cases = [
+        ("dam_break_2d", None),
+        ("sod_shock_tube", None),
+        ("colliding_bars_1d", None),
+        ("pysph_impact3d", Some("2mm")),
+    ];
+    for (name, resolution) in cases {
         let path = case(name);
-        let (scene, plan) = pairsum::runner::prepare(Path::new(&path), &Default::default()).expect("case");
+        let opts = pairsum::scene::Options { resolution: resolution.map(str::to_string), ..Default::default() };
+        let (scene, plan) = pairsum::runner::prepare(Path::new(&path), &opts).expect("case");
         let store = build_store::<f32>(&plan, &scene.particles, &scene.materials).expect("store");
         let mut backend = GpuBackend::new(gpu(), plan, store, &scene.mirrors).expect("gpu");
         backend.reduce_probes_on_device_from(0);
@@ -824,9 +834,13 @@ fn probes_reduced_on_the_gpu_equal_the_host_reduction_of_the_same_fields() {
             let device = evaluate(p, &scene, &engine.backend).expect("device");
             let host = evaluate(p, &scene, &HostReads(&engine.backend)).expect("host");
             let mut largest = p.clone();
-            if let ProbeKind::Field { reduce, value, locate: None, .. } = &mut largest.kind {
-                on_device += matches!(value, ProbeValue::Field(_)) as usize;
-                *reduce = "abs_max".into();
+            match &mut largest.kind {
+                ProbeKind::Field { reduce, value, locate: None, .. } => {
+                    on_device += matches!(value, ProbeValue::Field(_)) as usize;
+                    *reduce = "abs_max".into();
+                }
+                ProbeKind::Measure(Measure::KineticEnergy | Measure::MaxSpeed) => on_device += 1,
+                _ => {}
             }
             let scale = evaluate(&largest, &scene, &HostReads(&engine.backend)).expect("scale").abs();
             let tol = 1e-5 * host.abs() + 1e-6 * scale;

@@ -63,6 +63,8 @@ pub struct WatchValues {
     pub energy: f64,
     /// `Σ |m (½|v|² + e − g·x)|`, the scale of the energy sum's rounding.
     pub energy_magnitude: f64,
+    /// `Σ ½ m |v|²`.
+    pub kinetic: f64,
 }
 
 #[derive(Debug, Clone)]
@@ -112,8 +114,13 @@ pub trait Backend {
     /// The watchdog's reductions computed where the state lives (on the GPU, so that a check
     /// reads back three numbers instead of the particles), or None where the engine reads the
     /// fields itself (the CPU).
-    fn watch_values(&mut self) -> Result<Option<WatchValues>, BackendError> {
+    fn watch_values(&self) -> Result<Option<WatchValues>, BackendError> {
         Ok(None)
+    }
+    /// Whether probes and measures are better reduced by the backend than read back and reduced
+    /// by the caller ([`reduce_field`](Self::reduce_field), [`watch_values`](Self::watch_values)).
+    fn reduces_probes(&self) -> bool {
+        false
     }
     /// A probe's reduction computed where the state lives (on the GPU, so that a probe reads back
     /// two numbers instead of the field and the ids), or None where the caller reduces the

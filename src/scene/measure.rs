@@ -3,7 +3,7 @@
 
 use super::max_keeping_nan;
 use super::spec::{Pick, ProbeKind, ProbeSpec, ProbeValue, ResultSpec, Scene};
-use crate::backend::{Backend, BackendError, FieldReduction};
+use crate::backend::{Backend, BackendError, FieldReduction, WatchValues};
 use crate::ir::FieldId;
 use crate::ir::{component_indices, Shape};
 use crate::schedule::Plan;
@@ -113,6 +113,11 @@ pub trait Reader {
         let _ = r;
         Ok(None)
     }
+    /// The largest speed and the kinetic energy where the backend reduces them itself
+    /// ([`Backend::watch_values`], when [`Backend::reduces_probes`]).
+    fn motion(&self) -> Result<Option<WatchValues>, BackendError> {
+        Ok(None)
+    }
 }
 
 impl<B: Backend> Reader for B {
@@ -128,6 +133,13 @@ impl<B: Backend> Reader for B {
     fn reduce_field(&self, r: &FieldReduction) -> Result<Option<f64>, BackendError> {
         Backend::reduce_field(self, r)
     }
+    fn motion(&self) -> Result<Option<WatchValues>, BackendError> {
+        if self.reduces_probes() {
+            self.watch_values()
+        } else {
+            Ok(None)
+        }
+    }
 }
 
 /// A backend read at one moment: each field and the ids come from the backend once, however many
@@ -136,11 +148,12 @@ pub struct Moment<'a, B: Backend> {
     backend: &'a B,
     fields: RefCell<HashMap<FieldId, Option<Column>>>,
     ids: OnceCell<Rc<Vec<u32>>>,
+    motion: OnceCell<Option<WatchValues>>,
 }
 
 impl<'a, B: Backend> Moment<'a, B> {
     pub fn new(backend: &'a B) -> Self {
-        Moment { backend, fields: RefCell::new(HashMap::new()), ids: OnceCell::new() }
+        Moment { backend, fields: RefCell::new(HashMap::new()), ids: OnceCell::new(), motion: OnceCell::new() }
     }
 }
 
@@ -165,6 +178,13 @@ impl<B: Backend> Reader for Moment<'_, B> {
     }
     fn reduce_field(&self, r: &FieldReduction) -> Result<Option<f64>, BackendError> {
         Backend::reduce_field(self.backend, r)
+    }
+    fn motion(&self) -> Result<Option<WatchValues>, BackendError> {
+        if let Some(m) = self.motion.get() {
+            return Ok(*m);
+        }
+        let m = Reader::motion(self.backend)?;
+        Ok(*self.motion.get_or_init(|| m))
     }
 }
 
@@ -332,9 +352,17 @@ fn reduce_values(reduce: &str, v: impl Iterator<Item = f64>) -> f64 {
 
 fn measure(m: Measure, scene: &Scene, b: &dyn Reader) -> Result<f64, BackendError> {
     // These read only velocities and masses, not where the particles are.
+    // Both are among the watchdog's reductions where the backend reduces them itself.
+    let on_device = || b.motion();
     match m {
-        Measure::KineticEnergy => kinetic_energy(b),
-        Measure::MaxSpeed => Ok(max_keeping_nan(0.0, speeds(b)?)),
+        Measure::KineticEnergy => match on_device()? {
+            Some(w) => Ok(w.kinetic),
+            None => kinetic_energy(b),
+        },
+        Measure::MaxSpeed => match on_device()? {
+            Some(w) => Ok(w.max_speed),
+            None => Ok(max_keeping_nan(0.0, speeds(b)?)),
+        },
         _ => measure_at_positions(m, scene, b),
     }
 }

@@ -75,10 +75,12 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let scratch = u32(info[61]) + 2u * n;
     var speed2 = 0.0;
     var energy = 0.0;
+    var kinetic = 0.0;
     if (in_groups(3u, ints[i])) {
         let v = ld_v(i);
         speed2 = dot(v, v);
         if (in_groups(3u, ints[i])) {
+            kinetic = 0.5 * ld_m(i) * speed2;
             energy = ld_m(i) * (0.5 * speed2 - dot(vec3<f32>(0.0, 0.0, 0.0), ld_x(i)));
             if (in_groups(2u, ints[i])) { energy = energy + ld_m(i) * ld_e(i); }
         }
@@ -86,4 +88,5 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     data[scratch + i] = speed2;
     data[scratch + n + i] = energy;
     data[scratch + 2u * n + i] = abs(energy);
+    data[scratch + 3u * n + i] = kinetic;
 }

@@ -612,8 +612,12 @@ impl Backend for GpuBackend {
         self.invalidate_lists()
     }
 
+    fn reduces_probes(&self) -> bool {
+        self.host.n >= self.probes_on_device_from
+    }
+
     fn reduce_field(&self, r: &crate::backend::FieldReduction) -> Result<Option<f64>, BackendError> {
-        if self.host.n < self.probes_on_device_from {
+        if !self.reduces_probes() {
             return Ok(None);
         }
         let (Some(offset), Some(col)) = (self.offset[r.field.index()], self.host.column(r.field)) else {
@@ -652,7 +656,7 @@ impl Backend for GpuBackend {
         }))
     }
 
-    fn watch_values(&mut self) -> Result<Option<crate::backend::WatchValues>, BackendError> {
+    fn watch_values(&self) -> Result<Option<crate::backend::WatchValues>, BackendError> {
         if !self.kernels.iter().any(|k| k.kernel.kind == KernelKind::WatchValues) {
             return Ok(None);
         }
@@ -660,7 +664,7 @@ impl Backend for GpuBackend {
         self.dispatch_where(&mut encoder, |k| *k == KernelKind::WatchValues);
         let n = self.host.n as u32;
         let first = self.scratch + self.reductions.len() * self.host.n;
-        for (k, op) in [ReduceOp::Max, ReduceOp::Sum, ReduceOp::Sum].into_iter().enumerate() {
+        for (k, op) in [ReduceOp::Max, ReduceOp::Sum, ReduceOp::Sum, ReduceOp::Sum].into_iter().enumerate() {
             let src = (first + k * self.host.n) as u32;
             self.reducer.record(&self.gpu, &mut encoder, op, &self.data, src, n, &self.globals, (gl::WATCH + k) as u32);
         }
@@ -673,6 +677,7 @@ impl Backend for GpuBackend {
             max_speed: (v[0] as f64).sqrt(),
             energy: v[1] as f64,
             energy_magnitude: v[2] as f64,
+            kinetic: v[3] as f64,
         }))
     }
 
@@ -808,8 +813,8 @@ pub fn step_traffic(plan: &Plan, n: usize) -> Result<String, String> {
     let kinds: Vec<KernelKind> =
         wgsl::generate(plan, super::cells::wgsl_helpers())?.into_iter().map(|k| k.kind).collect();
     let probes = if n >= PROBES_ON_DEVICE_FROM {
-        "reduces it on the device and reads back 2 numbers (a field's component or length; an expression, a von Mises \
-         stress, a located extreme or a measure reads its fields)"
+        "reduces it on the device and reads back 2 numbers (a field's component or length, the kinetic energy, the \
+         largest speed; an expression, a von Mises stress, a located extreme or another measure reads its fields)"
     } else {
         "reads back the fields it reduces (below 65,536 particles; reduced on the device above)"
     };

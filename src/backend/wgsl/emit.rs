@@ -1149,7 +1149,7 @@ fn reduction_kernel(plan: &Plan, lay: &Layout) -> Kernel {
 
 /// Per-particle values of the watchdog's reductions (see [`gl::WATCH`]), into scratch after the
 /// time step's: `|v|²`, the energy `m (½|v|² + e − g·x)` (with `e` where the group stores a
-/// scalar `e`, and the scene's gravity `g`) and its magnitude, on the groups that store `x` and
+/// scalar `e`, and the scene's gravity `g`), its magnitude and `½ m |v|²`, on the groups that store `x` and
 /// `v` (the energy where they store `m` too); 0 elsewhere. None when the plan stores no `x` or `v`.
 fn watch_kernel(plan: &Plan, lay: &Layout) -> Option<Kernel> {
     let model = &plan.model;
@@ -1183,6 +1183,7 @@ fn watch_kernel(plan: &Plan, lay: &Layout) -> Option<Kernel> {
     w.line(format!("let scratch = u32(info[{}]) + {reductions}u * n;", lay.meta_len()));
     w.line("var speed2 = 0.0;");
     w.line("var energy = 0.0;");
+    w.line("var kinetic = 0.0;");
     w.line(format!("if (in_groups({moving}u, ints[i])) {{"));
     let (xs, vs) = (w.expr(&x), w.expr(&v));
     let dot = |a: &str, b: &str| if plan.dim == 1 { format!("({a} * {b})") } else { format!("dot({a}, {b})") };
@@ -1195,6 +1196,7 @@ fn watch_kernel(plan: &Plan, lay: &Layout) -> Option<Kernel> {
     if let Some(m) = &m {
         let ms = w.expr(m);
         w.line(format!("    if (in_groups({weighed}u, ints[i])) {{"));
+        w.line(format!("        kinetic = 0.5 * {ms} * speed2;"));
         w.line(format!("        energy = {ms} * (0.5 * speed2 - {});", dot(&g, &xs)));
         if let Some(e) = &e {
             let es = w.expr(e);
@@ -1206,6 +1208,7 @@ fn watch_kernel(plan: &Plan, lay: &Layout) -> Option<Kernel> {
     w.line("data[scratch + i] = speed2;");
     w.line("data[scratch + n + i] = energy;");
     w.line("data[scratch + 2u * n + i] = abs(energy);");
+    w.line("data[scratch + 3u * n + i] = kinetic;");
     let bindings = vec![Binding::Data, Binding::Ints, Binding::Meta];
     let mut wgsl = header(plan, "the per-particle values of the watchdog's reductions", None, &bindings);
     wgsl.push_str(&w.accessors());

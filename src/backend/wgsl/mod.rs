@@ -36,8 +36,8 @@ pub mod globals {
     /// Always 0: XOR-ed into bits to hide values from the shader compiler's algebra (Kahan).
     pub const ZERO: usize = 6;
     /// The watchdog's reductions ([`super::WATCH_SLOTS`] of them): the largest |v|², the energy
-    /// `Σ m (½|v|² + e − g·x)`, and `Σ |m (½|v|² + e − g·x)|`, which bounds the rounding of the
-    /// energy's f32 sum.
+    /// `Σ m (½|v|² + e − g·x)`, `Σ |m (½|v|² + e − g·x)|`, which bounds the rounding of the
+    /// energy's f32 sum, and the kinetic energy `Σ ½ m |v|²` (also the `kinetic_energy` measure's).
     pub const WATCH: usize = 7;
     /// Values of the time-step reductions (up to `PLANES`).
     pub const REDUCTIONS: usize = 16;
@@ -49,7 +49,7 @@ pub mod globals {
 }
 
 /// Per-particle values the watchdog reduces on the device (see [`globals::WATCH`]).
-pub const WATCH_SLOTS: usize = 3;
+pub const WATCH_SLOTS: usize = 4;
 
 /// Marks a (field, group) without storage in `meta`.
 pub const ABSENT: i32 = i32::MIN;
