@@ -110,6 +110,17 @@ impl GroupSet {
     pub fn intersect(self, o: GroupSet) -> GroupSet {
         GroupSet(self.0 & o.0)
     }
+    /// Whether `i in self` is settled for a particle known to be in one of `possible`: `Some(true)`
+    /// when every group of `possible` is in the set, `Some(false)` when none is, `None` otherwise.
+    pub fn decides(self, possible: GroupSet) -> Option<bool> {
+        if possible.intersect(self) == possible {
+            Some(true)
+        } else if possible.intersect(self).is_empty() {
+            Some(false)
+        } else {
+            None
+        }
+    }
     pub fn is_empty(self) -> bool {
         self.0 == 0
     }

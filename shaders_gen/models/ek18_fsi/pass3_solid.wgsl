@@ -501,7 +501,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let W_ij = kernel_w(r_ij, h_ij);
             let gradW_ij = kernel_grad(r_ij, h_ij) * x_ij;
             // pairsum momentum (stdlib/coupling/fluid_solid.sph:84)
-            if (((in_groups(1u, ints[i]) && in_groups(1u, ints[j])) || (in_groups(2u, ints[i]) && in_groups(2u, ints[j])))) {
+            if (((false && in_groups(1u, ints[j])) || (true && in_groups(2u, ints[j])))) {
                 let p1 = ldj_rho(j, sgn);
                 let c_i_2 = c_i;
                 let c_j = ldj_c(j, sgn);
@@ -524,7 +524,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 dv = dv + (((-ldj_m(j, sgn)) * (((p_interface_i + ldj_p_interface(j, sgn)) / (rho_i * ldj_rho(j, sgn))) + select(0.0, (((((-prm_visc_a(i)) * c_bar_2) * phi_2) + (prm_visc_b(i) * (phi_2 * phi_2))) / rho_bar_2), (vr_2 < 0.0)))) * gradW_ij);
             }
             // pairsum energy (stdlib/coupling/fluid_solid.sph:92)
-            if (((in_groups(1u, ints[i]) && in_groups(1u, ints[j])) || (in_groups(2u, ints[i]) && in_groups(2u, ints[j])))) {
+            if (((false && in_groups(1u, ints[j])) || (true && in_groups(2u, ints[j])))) {
                 let p4 = ldj_rho(j, sgn);
                 let c_i_4 = c_i;
                 let c_j_3 = ldj_c(j, sgn);

@@ -475,7 +475,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let rho_h = (prm_rho0(i) * (pow((1.0 + ((prm_rho0(i) * dot(prm_gravity(i), x_ij)) / (((p1 * p1) * prm_rho0(i)) / prm_gamma(i)))), (1.0 / prm_gamma(i))) - 1.0));
             let psi = (((2.0 * ((rho_i - ldj_rho(j, sgn)) - rho_h)) * x_ij) / (r_ij * r_ij));
             let term = (((((prm_delta(i) * h_i) * prm_c0(i)) * ldj_m(j, sgn)) / ldj_rho(j, sgn)) * dot(psi, gradW_ij));
-            diffusion = diffusion + select(0.0, term, (in_groups(1u, ints[i]) && in_groups(1u, ints[j])));
+            diffusion = diffusion + select(0.0, term, (true && in_groups(1u, ints[j])));
             // pairsum viscous_speed (stdlib/timestep/lsr.sph:11)
             mu_max = max(mu_max, abs(((h_ij * dot((v_i - ldj_v(j, sgn)), x_ij)) / (r_ij * r_ij))));
         }

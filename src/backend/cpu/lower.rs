@@ -375,6 +375,10 @@ pub struct Lowerer<'a> {
     current: BTreeMap<FieldId, Val>,
     /// Fields whose writes to keep (stored on the group being compiled).
     stored: Box<dyn Fn(FieldId) -> bool + 'a>,
+    /// The groups particle i and its neighbours j can be in, where the program is compiled for
+    /// them (a pass variant, a group's particle program): `i in S` and `j in S` fold to constants
+    /// where these settle them, so a term selected away on a group is never computed there.
+    groups: (GroupSet, GroupSet),
 }
 
 impl<'a> Lowerer<'a> {
@@ -397,7 +401,14 @@ impl<'a> Lowerer<'a> {
             locals: HashMap::new(),
             current: BTreeMap::new(),
             stored,
+            groups: (GroupSet::ALL, GroupSet::ALL),
         }
+    }
+
+    /// Particle i is in one of `i`, its neighbours in one of `j`: group tests these settle fold.
+    pub fn in_groups(mut self, i: GroupSet, j: GroupSet) -> Self {
+        self.groups = (i, j);
+        self
     }
 
     fn full_len(&self, shape: Shape) -> usize {
@@ -562,7 +573,11 @@ impl<'a> Lowerer<'a> {
             }
             ExprKind::Identity => self.identity(),
             ExprKind::InGroup(side, set) => {
-                let id = self.g.intern(Node::InGroup(*side, set.0));
+                let possible = if *side == Side::I { self.groups.0 } else { self.groups.1 };
+                let id = match set.decides(possible) {
+                    Some(known) => self.g.c(if known { 1.0 } else { 0.0 }),
+                    None => self.g.intern(Node::InGroup(*side, set.0)),
+                };
                 scalar(id)
             }
             ExprKind::Unary(op, a) => {

@@ -235,7 +235,8 @@ fn compile_variant<T: Real>(
     let kernel = &model.kernels[plan.kernel.index()];
     let dim = plan.dim;
     // The neighbour loops of every pair sum of the pass, one graph.
-    let mut lw = Lowerer::new(model, known, kernel, dim, Mode::Pair, Box::new(|_| true));
+    let mut lw = Lowerer::new(model, known, kernel, dim, Mode::Pair, Box::new(|_| true))
+        .in_groups(GroupSet::default().with(v.group), v.sources.intersect(plan.groups));
     let mut init_blocks = vec![];
     let mut slots: Vec<Slot> = vec![];
     let mut temps = vec![];

@@ -4,8 +4,8 @@
 use super::names::{Namer, Names};
 use super::{globals as gl, prelude, validate, Binding, Kernel, KernelKind, Layout};
 use crate::ir::{
-    self, Builtin, EqId, EquationKind, Expr, ExprKind, FieldId, Global, GroupId, LocalId, Op, PairValue, ParamId,
-    Reduce, Shape, Side, Stmt, Storage,
+    self, Builtin, EqId, EquationKind, Expr, ExprKind, FieldId, Global, GroupId, GroupSet, LocalId, Op, PairValue,
+    ParamId, Reduce, Shape, Side, Stmt, Storage,
 };
 use crate::schedule::{Block, PassVariant, Plan, TailItem};
 use std::collections::{BTreeMap, BTreeSet, HashMap};
@@ -193,6 +193,10 @@ struct Writer<'a> {
     reads_pair_kernel: bool,
     reductions: usize,
     tmp: usize,
+    /// The groups particle i and its neighbours j can be in (a pass kernel's destination group
+    /// and sources): `i in S` and `j in S` these settle are written as `true` or `false`, so a
+    /// term selected away on the group is dead code the shader compiler drops.
+    groups: (GroupSet, GroupSet),
 }
 
 impl<'a> Writer<'a> {
@@ -217,6 +221,7 @@ impl<'a> Writer<'a> {
             reads_pair_kernel: false,
             reductions: 0,
             tmp: 0,
+            groups: (GroupSet::ALL, GroupSet::ALL),
         }
     }
 
@@ -308,8 +313,11 @@ impl<'a> Writer<'a> {
                 }
             }
             ExprKind::InGroup(side, set) => {
-                let who = if *side == Side::I { "i" } else { "j" };
-                format!("in_groups({}u, ints[{who}])", set.0 as u32)
+                let (who, possible) = if *side == Side::I { ("i", self.groups.0) } else { ("j", self.groups.1) };
+                match set.decides(possible) {
+                    Some(known) => known.to_string(),
+                    None => format!("in_groups({}u, ints[{who}])", set.0 as u32),
+                }
             }
             ExprKind::Unary(op, a) => {
                 let x = self.expr(a);
@@ -847,6 +855,7 @@ fn pass_kernel(plan: &Plan, lay: &Layout, pass: usize, v: &PassVariant, cell_hel
     let d = plan.dim;
     let model = &plan.model;
     let mut w = Writer::new(plan, lay, Mode::Group);
+    w.groups = (GroupSet::default().with(g), v.sources.intersect(plan.groups));
     let support = lit(model.kernels[plan.kernel.index()].support);
     w.line("let first = u32(info[1 + 2 * G]);");
     w.line("let count = u32(info[2 + 2 * G]);");
