@@ -805,15 +805,19 @@ fn recht_ipson_plot(
 ) -> History {
     let mut series = vec![Curve::new(format!("{y} (pairsum)"), points.to_vec())];
     if let Some(f) = fit {
-        let lo = points.iter().map(|p| p.0).fold(f64::INFINITY, f64::min);
-        let hi = points.iter().map(|p| p.0).fold(0.0, f64::max);
+        // The plotted range of the fit: the speeds that are numbers (a NaN run is left out of
+        // the plot, not of the fit, which keeps it).
+        let speeds = || points.iter().map(|p| p.0).filter(|v| !v.is_nan());
+        let lo = speeds().fold(f64::INFINITY, f64::min);
+        let hi = speeds().fold(0.0, f64::max);
         let curve = (0..=100).map(|k| lo + (hi - lo) * k as f64 / 100.0).map(|v| (v, f.residual(v))).collect();
         series
             .push(Curve::new(format!("Recht–Ipson fit: a = {:.3}, p = {:.2}, v_bl = {:.1}", f.a, f.p, f.v_bl), curve));
     }
     if let Some(v_bl) = reference {
         // The reference limit is an impact speed: a vertical line.
-        let top = points.iter().map(|p| p.1).fold(0.0, f64::max).max(1.0);
+        // The line's height: the largest residual that is a number, at least 1.
+        let top = points.iter().map(|p| p.1).filter(|v| !v.is_nan()).fold(0.0, f64::max).max(1.0);
         series.push(Curve::new(format!("{quantity} (reference): {v_bl}"), vec![(v_bl, 0.0), (v_bl, top)]));
     }
     History {

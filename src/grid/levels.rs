@@ -47,7 +47,9 @@ impl SizeLevels {
     pub fn build<T: Coord>(x: &[T], dim: usize, h: &[T], support: f64, skin: f64) -> SizeLevels {
         let n = check_layout(x, dim);
         assert_eq!(h.len(), n, "levels: {} smoothing lengths for {n} particles", h.len());
-        let h_max = h.iter().map(|v| v.to_f64()).fold(0.0, f64::max);
+        // The largest h that is a number: a NaN h joins the finest level below (the watchdog names
+        // it), it does not size the grid.
+        let h_max = h.iter().map(|v| v.to_f64()).filter(|v| !v.is_nan()).fold(0.0, f64::max);
         let level_of = |v: T| {
             let ratio = h_max / v.to_f64();
             if ratio.is_finite() && ratio >= 1.0 {

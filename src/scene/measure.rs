@@ -350,48 +350,45 @@ fn reduce_values(reduce: &str, v: impl Iterator<Item = f64>) -> f64 {
     }
 }
 
-fn measure(m: Measure, scene: &Scene, b: &dyn Reader) -> Result<f64, BackendError> {
-    // These read only velocities and masses, not where the particles are.
-    // Both are among the watchdog's reductions where the backend reduces them itself.
-    let on_device = || b.motion();
-    match m {
-        Measure::KineticEnergy => match on_device()? {
-            Some(w) => Ok(w.kinetic),
-            None => kinetic_energy(b),
-        },
-        Measure::MaxSpeed => match on_device()? {
-            Some(w) => Ok(w.max_speed),
-            None => Ok(max_keeping_nan(0.0, speeds(b)?)),
-        },
-        _ => measure_at_positions(m, scene, b),
-    }
-}
+/// A measure of the particles' positions (in the backend's order) and each one's body.
+type AtPositions<'a> = dyn Fn(&[[f64; 3]], &[u32]) -> Result<f64, BackendError> + 'a;
 
-/// The measures that read where the particles are and which body each belongs to.
-fn measure_at_positions(m: Measure, scene: &Scene, b: &dyn Reader) -> Result<f64, BackendError> {
-    let Some(x) = positions(b)? else { return Ok(f64::NAN) };
-    let which = bodies_now(scene, &b.ids()?);
-    let dim = b.plan().dim;
+fn measure(m: Measure, scene: &Scene, b: &dyn Reader) -> Result<f64, BackendError> {
+    let (dim, dx) = (b.plan().dim, scene.dx);
+    // Where the particles are and which body each is in, read only by the measures that need them.
+    let placed = |f: &AtPositions| {
+        let Some(x) = positions(b)? else { return Ok(f64::NAN) };
+        f(&x, &bodies_now(scene, &b.ids()?))
+    };
     Ok(match m {
+        // Both are among the watchdog's reductions where the backend reduces them itself.
+        Measure::KineticEnergy => match b.motion()? {
+            Some(w) => w.kinetic,
+            None => kinetic_energy(b)?,
+        },
+        Measure::MaxSpeed => match b.motion()? {
+            Some(w) => w.max_speed,
+            None => max_keeping_nan(0.0, speeds(b)?),
+        },
         // The least distance between a particle of the first body and one of the second, over Δx.
-        Measure::MinInterbodyDistance => interbody(&x, &which, dim, scene.dx).0 / scene.dx,
+        Measure::MinInterbodyDistance => placed(&|x, which| Ok(interbody(x, which, dim, dx).0 / dx))?,
         // Particles of the first two bodies closer than Δx/2 to a particle of the other body.
-        Measure::Interpenetrated => interbody(&x, &which, dim, scene.dx).1 as f64,
+        Measure::Interpenetrated => placed(&|x, which| Ok(interbody(x, which, dim, dx).1 as f64))?,
         // Where a wave front driven by the first moving constraint, or the first body, has got to.
-        Measure::FrontPosition => front_position(&x, &drivers(scene, &which, b)?, b)?,
-        Measure::MinPairDistance => spacing_extremes(&x, b)?.0,
-        Measure::MaxNeighbourGap => spacing_extremes(&x, b)?.1,
-        Measure::KineticEnergy => kinetic_energy(b)?,
-        Measure::MaxSpeed => max_keeping_nan(0.0, speeds(b)?),
-        Measure::CraterDiameter => crater_diameter(&x, &which, scene, None),
-        Measure::IntactCraterDiameter => crater_diameter(&x, &which, scene, damage(b)?.as_deref()),
-        Measure::DebrisLength => debris(&x, scene).0,
-        Measure::DebrisWidth => debris(&x, scene).1,
-        Measure::DebrisLengthToWidth => {
-            let (l, w) = debris(&x, scene);
-            l / w
+        Measure::FrontPosition => placed(&|x, which| front_position(x, &drivers(scene, which, b)?, b))?,
+        Measure::MinPairDistance => placed(&|x, _| Ok(spacing_extremes(x, b)?.0))?,
+        Measure::MaxNeighbourGap => placed(&|x, _| Ok(spacing_extremes(x, b)?.1))?,
+        Measure::CraterDiameter => placed(&|x, which| Ok(crater_diameter(x, which, scene, None)))?,
+        Measure::IntactCraterDiameter => {
+            placed(&|x, which| Ok(crater_diameter(x, which, scene, damage(b)?.as_deref())))?
         }
-        Measure::PlugVelocity => plug_velocity(&x, &which, scene, b)?,
+        Measure::DebrisLength => placed(&|x, _| Ok(debris(x, scene).0))?,
+        Measure::DebrisWidth => placed(&|x, _| Ok(debris(x, scene).1))?,
+        Measure::DebrisLengthToWidth => placed(&|x, _| {
+            let (l, w) = debris(x, scene);
+            Ok(l / w)
+        })?,
+        Measure::PlugVelocity => placed(&|x, which| plug_velocity(x, which, scene, b))?,
     })
 }
 

@@ -407,10 +407,11 @@ pub fn build(plan: &mut Plan, scene: &SceneSpec, live: &Live) {
         plan.stages.push(Stage { name, updates, corrections: plan.corrections.clone(), derived: plan.derived.clone() });
     }
     plan.actions = if multi {
-        let mut actions = vec![Action::Save, Action::Evaluate];
-        if scene.integrator.evaluations() == 1 {
-            // The rates of the last evaluation (the engine evaluates once at t = 0) predict.
-            actions.pop();
+        let mut actions = vec![Action::Save];
+        // With one evaluation a step the rates of the last one (the engine evaluates once at
+        // t = 0) predict.
+        if scene.integrator.evaluations() == 2 {
+            actions.push(Action::Evaluate);
         }
         actions.extend([
             Action::Timestep,

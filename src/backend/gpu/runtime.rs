@@ -62,7 +62,9 @@ pub struct GpuBackend {
 }
 
 /// Below this many particles a probe reads its field back: a read-back of a few hundred kB costs
-/// less than a submission of three kernels and a wait (measured on an H200 and on lavapipe).
+/// less than a submission of three kernels and a wait. On lavapipe, Sod's 450 particles paid 3.2 ms
+/// a step for seven device reductions against 0.6 ms of read-backs; where a GPU crosses over was
+/// not measured, so the bound is a judgement.
 pub const PROBES_ON_DEVICE_FROM: usize = 65_536;
 
 fn err(e: GpuError) -> BackendError {
@@ -336,6 +338,23 @@ impl GpuBackend {
         })
     }
 
+    /// Copies the state part of `data`, and `ints` and `ids`, from one set of buffers to another
+    /// (the live ones and the kept copies), on the device.
+    fn copy_state(&self, from: [&wgpu::Buffer; 3], to: [&wgpu::Buffer; 3], what: &str) -> Result<(), BackendError> {
+        let mut encoder = self.gpu.encoder(what);
+        let state_bytes = 4 * self.scratch as u64;
+        for (k, (from, to)) in from.into_iter().zip(to).enumerate() {
+            encoder.copy_buffer_to_buffer(from, 0, to, 0, if k == 0 { state_bytes } else { from.size() });
+        }
+        self.submit(encoder, what)
+    }
+
+    /// Element offset of the watchdog's scratch in `data`, after the time step's reductions: its
+    /// values, or a probe's between two checks.
+    fn watch_scratch(&self) -> usize {
+        self.scratch + self.reductions.len() * self.host.n
+    }
+
     /// Reduce probes on the device from `n` particles on (0: always), in place of
     /// [`PROBES_ON_DEVICE_FROM`].
     pub fn reduce_probes_on_device_from(&mut self, n: usize) {
@@ -589,12 +608,8 @@ impl Backend for GpuBackend {
             self.kept =
                 Some([copy("kept data", &self.data)?, copy("kept ints", &self.ints)?, copy("kept ids", &self.ids)?]);
         }
-        let Some(kept) = &self.kept else { return Ok(()) };
-        let mut encoder = self.gpu.encoder("keep");
-        encoder.copy_buffer_to_buffer(&self.data, 0, &kept[0], 0, 4 * self.scratch as u64);
-        encoder.copy_buffer_to_buffer(&self.ints, 0, &kept[1], 0, self.ints.size());
-        encoder.copy_buffer_to_buffer(&self.ids, 0, &kept[2], 0, self.ids.size());
-        self.submit(encoder, "keeping the last good state")
+        let Some([data, ints, ids]) = &self.kept else { return Ok(()) };
+        self.copy_state([&self.data, &self.ints, &self.ids], [data, ints, ids], "keeping the last good state")
     }
 
     fn kept(&self) -> Result<Snapshot, BackendError> {
@@ -604,11 +619,7 @@ impl Backend for GpuBackend {
 
     fn restore_kept(&mut self) -> Result<(), BackendError> {
         let [data, ints, ids] = self.kept.as_ref().ok_or_else(|| BackendError("no state was kept".into()))?;
-        let mut encoder = self.gpu.encoder("restore kept");
-        encoder.copy_buffer_to_buffer(data, 0, &self.data, 0, 4 * self.scratch as u64);
-        encoder.copy_buffer_to_buffer(ints, 0, &self.ints, 0, self.ints.size());
-        encoder.copy_buffer_to_buffer(ids, 0, &self.ids, 0, self.ids.size());
-        self.submit(encoder, "restoring the last good state")?;
+        self.copy_state([data, ints, ids], [&self.data, &self.ints, &self.ids], "restoring the last good state")?;
         self.invalidate_lists()
     }
 
@@ -639,7 +650,7 @@ impl Backend for GpuBackend {
             select: r.select,
         };
         // The scratch of the watchdog's values, free between its checks.
-        let (n, out) = (self.host.n as u32, (self.scratch + self.reductions.len() * self.host.n) as u32);
+        let (n, out) = (self.host.n as u32, self.watch_scratch() as u32);
         let mut encoder = self.gpu.encoder("probe");
         self.probe.record(&self.gpu, &mut encoder, &query, n, out, &self.data, &self.ints, &self.ids);
         let slot = gl::WATCH as u32;
@@ -663,7 +674,7 @@ impl Backend for GpuBackend {
         let mut encoder = self.gpu.encoder("watchdog bounds");
         self.dispatch_where(&mut encoder, |k| *k == KernelKind::WatchValues);
         let n = self.host.n as u32;
-        let first = self.scratch + self.reductions.len() * self.host.n;
+        let first = self.watch_scratch();
         for (k, op) in [ReduceOp::Max, ReduceOp::Sum, ReduceOp::Sum, ReduceOp::Sum].into_iter().enumerate() {
             let src = (first + k * self.host.n) as u32;
             self.reducer.record(&self.gpu, &mut encoder, op, &self.data, src, n, &self.globals, (gl::WATCH + k) as u32);
@@ -813,17 +824,27 @@ pub fn step_traffic(plan: &Plan, n: usize) -> Result<String, String> {
     let kinds: Vec<KernelKind> =
         wgsl::generate(plan, super::cells::wgsl_helpers())?.into_iter().map(|k| k.kind).collect();
     let probes = if n >= PROBES_ON_DEVICE_FROM {
-        "reduces it on the device and reads back 2 numbers (a field's component or length, the kinetic energy, the \
-         largest speed; an expression, a von Mises stress, a located extreme or another measure reads its fields)"
+        "reduces it on the device and reads back at most 4 numbers (a field's component or length, the kinetic \
+         energy, the largest speed; an expression, a von Mises stress, a located extreme or another measure reads \
+         its fields)"
+            .to_string()
     } else {
-        "reads back the fields it reduces (below 65,536 particles; reduced on the device above)"
+        format!(
+            "reads back the fields it reduces (below {PROBES_ON_DEVICE_FROM} particles; reduced on the device above)"
+        )
+    };
+    let readbacks = if plan.search.keeps_lists() {
+        format!("two blocking read-backs (the clock, {} bytes, and the lists' overflow check)", 4 * (gl::STEP + 1))
+    } else {
+        format!("one blocking read-back (the clock, {} bytes)", 4 * (gl::STEP + 1))
     };
     Ok(format!(
-        "on the GPU: a step is {} dispatches in one submission and one blocking read-back (the clock, 4 bytes); \
-         the watchdog adds, every 10 steps, 2 submissions and 2 read-backs of at most 3 numbers (the fields only \
-         near a bound); each probe {probes}; outputs read back the fields they write; reordering every 25 steps is \
-         one more submission\n",
-        dispatches_per_step(plan, &kinds, n)
+        "on the GPU: a step is {} dispatches in one submission and {readbacks}; the watchdog adds, every 10 \
+         steps, 3 submissions (the NaN scan, the bounds' reductions, the copy of the last good state) and 2 read-backs of at \
+         most {} numbers (the fields only near a bound); each probe \
+         {probes}; outputs read back the fields they write; reordering every 25 steps is one more submission\n",
+        dispatches_per_step(plan, &kinds, n),
+        wgsl::WATCH_SLOTS
     ))
 }
 

@@ -1169,12 +1169,10 @@ fn watch_kernel(plan: &Plan, lay: &Layout) -> Option<Kernel> {
     let (x, v) = (field("x")?, field("v")?);
     let m = field("m");
     let e = field("e").filter(|e| e.ty.shape == Shape::Scalar);
+    // The groups that store a field, as `in_groups` masks (as `i in S` is written).
     let mask = |f: Option<&Expr>| -> u32 {
         let Some(ExprKind::Field(f, _)) = f.map(|f| &f.kind) else { return 0 };
-        let groups = plan.field_layout(*f).map(|l| l.groups);
-        (0..model.groups.len().min(32))
-            .filter(|g| groups.is_some_and(|s| s.contains(GroupId(*g as u32))))
-            .fold(0, |acc, g| acc | (1 << g))
+        plan.field_layout(*f).map_or(0, |l| l.groups.0 as u32)
     };
     let moving = mask(Some(&x)) & mask(Some(&v));
     let weighed = moving & mask(m.as_ref());
