@@ -40,6 +40,7 @@ RUNS = [
     ("beam_vibration_2d", {}),
     ("dam_break_2d", {"boundary": "dbc"}),
     ("dam_break_2d", {"boundary": "adami"}),
+    ("dam_break_3d", {}),
     ("hydrostatic_tank", {"boundary": "dbc"}),
     ("hydrostatic_tank", {"boundary": "adami"}),
     ("piston_2d", {"boundary": "dbc"}),

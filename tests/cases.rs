@@ -139,6 +139,11 @@ fn dam_break_front_follows_the_experiment_with_adami_walls() {
 }
 
 #[test]
+fn dam_break_in_3d_periodic_across_its_depth_follows_the_experiment() {
+    run_and_check("dam_break_3d", Precision::F64);
+}
+
+#[test]
 fn a_tank_at_rest_holds_the_hydrostatic_pressure_with_dynamic_boundary_particles() {
     run_and_check_with("hydrostatic_tank", &[("boundary", "dbc")], Precision::F64);
 }

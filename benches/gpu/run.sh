@@ -24,6 +24,7 @@ runs=(
   "pysph_impact3d 0.25mm 40 120 1e-6 cpu"
   "pysph_impact3d 0.125mm 20 60 1e-6"
   "dam_break_2d 0.1mm 100 300 0.28 cpu"
+  "dam_break_3d gpu 30 90 0.11 cpu"
 )
 
 one() { # case resolution backend steps name end_time
