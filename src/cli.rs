@@ -195,7 +195,7 @@ pub fn main() -> i32 {
         }
         Command::Bench { particles, reps } => match crate::bench::run(&particles, reps.max(1)) {
             Ok(table) => {
-                print!("{table}");
+                say(&table);
                 0
             }
             Err(e) => {
@@ -354,7 +354,7 @@ fn run_cases() -> i32 {
         let table: toml::Table = toml::from_str(&text).unwrap_or_default();
         let name = table.get("name").and_then(|v| v.as_str()).unwrap_or("?").to_string();
         let title = table.get("title").and_then(|v| v.as_str()).unwrap_or("").to_string();
-        println!("{name:<28} {title}\n{:<28} {}", "", p.display());
+        say(&format!("{name:<28} {title}\n{:<28} {}\n", "", p.display()));
     }
     0
 }
@@ -436,7 +436,7 @@ fn run_run(case: &str, a: RunArgs) -> i32 {
                     row.quantity, row.value, row.unit, reference, err
                 );
             }
-            println!("report: {}", o.out.join("report.md").display());
+            say(&format!("report: {}\n", o.out.join("report.md").display()));
             0
         }
         Err(RunFailure::Input(msg)) => {
@@ -464,10 +464,10 @@ fn run_plan(path: &Path, dim: usize, integrator: &str, precision: Precision, opt
         return match crate::runner::prepare(path, opts) {
             Ok((scene, plan)) => {
                 eprint!("{}", scene.warnings.concat());
-                print!("{}", plan.describe(real));
+                say(&plan.describe(real));
                 match crate::runner::cost_estimate(&scene, &plan, precision) {
                     Ok(text) => {
-                        print!("cost:\n{}", text.lines().map(|l| format!("  {l}\n")).collect::<String>());
+                        say(&format!("cost:\n{}", text.lines().map(|l| format!("  {l}\n")).collect::<String>()));
                         0
                     }
                     Err(e) => {
@@ -498,7 +498,7 @@ fn run_plan(path: &Path, dim: usize, integrator: &str, precision: Precision, opt
     };
     match crate::schedule::Plan::build(&model, &scene, None) {
         Ok(plan) => {
-            print!("{}", plan.describe(real));
+            say(&plan.describe(real));
             0
         }
         Err(e) => {
@@ -598,7 +598,7 @@ fn run_emit(path: Option<&Path>, target: &str, out: Option<&Path>, dim: usize, a
         None => match plan_of(path, dim).and_then(|p| crate::backend::wgsl::files(&p)) {
             Ok(files) => {
                 for (name, text) in files {
-                    println!("// ===== {name}\n{text}");
+                    say(&format!("// ===== {name}\n{text}\n"));
                 }
                 0
             }
@@ -607,5 +607,19 @@ fn run_emit(path: Option<&Path>, target: &str, out: Option<&Path>, dim: usize, a
                 1
             }
         },
+    }
+}
+
+/// Writes to standard output. A reader that went away (`pairsum cases | head`) ends the command
+/// quietly, as other command-line tools do, where `print!` would panic.
+fn say(text: &str) {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    if let Err(e) = out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
+        if e.kind() == std::io::ErrorKind::BrokenPipe {
+            std::process::exit(0);
+        }
+        eprintln!("error: cannot write to standard output: {e}");
+        std::process::exit(1);
     }
 }
