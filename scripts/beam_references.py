@@ -7,6 +7,8 @@
   cases/clamped_plate_2d.toml: the mean vertical displacement of the middle 20 mm of a 0.4 × 0.04 m
                              strip clamped at both ends (a plate in cylindrical bending) under a
                              uniform load of 100 Pa × 0.4 m spread by volume (a body force).
+  cases/water_on_plate_tl_2d.toml: the same strip under 0.1 m of water at rest (its pressure
+                             ρ g H = 981 Pa on the top face) and its own weight (ρ g t by volume).
 
   cases/cantilever.toml's probe: the same for the 0.5 × 0.1 × 0.1 m LSR beam in 3D under 10 N (Q27
                              elements to 8 deep; the clamp's edges and corners make them converge
@@ -100,6 +102,25 @@ def clamped_plate_mean_deflection(ny, length=0.4, depth=0.04, load=40.0, strip=(
     f = np.zeros(k.shape[0])
     for _, ids in elements:
         f[2 * ids + 1] -= load / (length * depth) * ne
+    u = np.zeros(k.shape[0])
+    u[free] = spl.spsolve(k[free][:, free].tocsc(), f[free])
+    inside = [ids for xc, ids in elements if strip[0] < xc < strip[1]]
+    return -sum(ne @ u[2 * ids + 1] for ids in inside) / (len(inside) * ne.sum())
+
+
+def clamped_plate_under_water_mean_deflection(ny, length=0.4, depth=0.04, water=981.0, weight=392.4, strip=(0.19, 0.21)):
+    """The strip of `clamped_plate_mean_deflection` under a pressure `water` (Pa) on its top face
+    (consistent nodal loads of each element's top edge) and its own weight `weight` (Pa, by
+    volume); the area mean of u_y over the strip."""
+    nx = 10 * ny
+    k, _, free, elements, ne = assemble(length, depth, nx, ny, clamped_ends=2)
+    n_y, hx = 2 * ny + 1, length / nx
+    f = np.zeros(k.shape[0])
+    for _, ids in elements:
+        f[2 * ids + 1] -= weight / depth * ne
+    for ex in range(nx):
+        for i, share in enumerate((1 / 6, 4 / 6, 1 / 6)):
+            f[2 * ((2 * ex + i) * n_y + 2 * ny) + 1] -= water * hx * share
     u = np.zeros(k.shape[0])
     u[free] = spl.spsolve(k[free][:, free].tocsc(), f[free])
     inside = [ids for xc, ids in elements if strip[0] < xc < strip[1]]
@@ -210,6 +231,15 @@ def main():
     q, span, thick = 100.0, 0.4, 0.04
     plate = q * span**4 / (384 * ep * thick**3 / 12) + q * span**2 / (8 * 5 / 6 * g * thick)
     print(f"  plate theory at mid-span (with shear): {plate:.5e} m")
+    print_refinement(
+        "water_on_plate_tl_2d: mean deflection of the middle 20 mm under 0.1 m of water and its own weight",
+        meshes,
+        clamped_plate_under_water_mean_deflection,
+        "m",
+    )
+    q = 1000 * 9.81 * (0.1 + 0.04)
+    plate = q * span**4 / (384 * ep * thick**3 / 12) + q * span**2 / (8 * 5 / 6 * g * thick)
+    print(f"  plate theory at mid-span (with shear), {q:.1f} Pa: {plate:.5e} m")
     d3 = [cantilever_3d_mean_deflection(n) for n in (2, 4, 8)]
     print("cantilever (3D, 10 N): mean deflection of the last 25 mm")
     for n, v in zip((2, 4, 8), d3):

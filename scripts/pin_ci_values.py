@@ -47,6 +47,7 @@ RUNS = [
     ("piston_2d", {"boundary": "adami"}),
     ("body_in_water_2d", {}),
     ("water_jet_plate_2d", {}),
+    ("water_on_plate_tl_2d", {}),
     ("rings_2d", {}),
     ("hypervelocity_impact", {}),
     ("borvik_8mm", {}),

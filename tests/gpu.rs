@@ -426,11 +426,28 @@ fn total_lagrangian_beam_vibrating_on_the_gpu_matches_the_cpu() {
     case_matches_cpu("beam_vibration_2d", &[], 400, &["H", "P"], 2e-3);
 }
 
+// Water at rest on a total Lagrangian plate (models::wcsph_tlsph: the body's sums over its own
+// particles, the fluid's pressure extrapolated to it, the pressure coupling): 400 steps at its CI
+// resolution (12 ms, the plate bending under the water's weight), with the plate's displacement
+// and the water's density.
+#[test]
+fn water_on_a_total_lagrangian_plate_on_the_gpu_matches_the_cpu() {
+    case_matches_cpu("water_on_plate_tl_2d", &[], 400, &["u", "rho"], 2e-3);
+}
+
 // Two bars meeting through penalty contact (`from own body` sums, `contact::penalty`): 200 steps
 // (about 0.42 ms), through the impact and the rebound.
 #[test]
 fn colliding_bars_through_penalty_contact_on_the_gpu_match_the_cpu() {
     case_matches_cpu("colliding_bars_1d", &[], 200, &["v", "p"], 2e-3);
+}
+
+// The same bars in total Lagrangian SPH (`colliding_bars_1d_tlsph.sph`: reference-configuration
+// sums over each bar's own particles, contact found by the cell list).
+#[test]
+fn total_lagrangian_bars_through_penalty_contact_on_the_gpu_match_the_cpu() {
+    let set = [("model", "colliding_bars_1d_tlsph.sph"), ("integrator", "symplectic")];
+    case_matches_cpu("colliding_bars_1d", &set, 200, &["u", "p"], 2e-3);
 }
 
 // The tank at rest with each kind of wall: 300 steps (the pressure settling under gravity).

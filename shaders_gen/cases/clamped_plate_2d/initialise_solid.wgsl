@@ -27,23 +27,23 @@ fn div_m(a: mat2x2<f32>, s: f32) -> mat2x2<f32> { return (1.0 / s) * a; }
 fn flip_m(a: mat2x2<f32>, s: vec2<f32>) -> mat2x2<f32> { return mat2x2<f32>(a[0] * s * s[0], a[1] * s * s[1]); }
 fn inv(a: mat2x2<f32>) -> mat2x2<f32> { return (1.0 / determinant(a)) * mat2x2<f32>(a[1][1], -a[0][1], -a[1][0], a[0][0]); }
 fn ld_c(i: u32) -> f32 {
-    let b = u32(info[12 + G] + i32(i) * 1);
+    let b = u32(info[14 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_c(i: u32, v: f32) {
-    let b = u32(info[12 + G] + i32(i) * 1);
+    let b = u32(info[14 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 0u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 6u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 7u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -47,7 +47,7 @@ fn pos3(p: u32) -> vec3<f32> {
     let b = u32(info[3u + ints[p]] + i32(p) * 2);
     return vec3<f32>(data[b + 0u], data[b + 1u], 0.0);
 }
-fn h_of(p: u32) -> f32 { return data[u32(info[9u + ints[p]] + i32(p))]; }
+fn h_of(p: u32) -> f32 { return data[u32(info[11u + ints[p]] + i32(p))]; }
 fn ld_v(i: u32) -> vec2<f32> {
     let b = u32(info[4 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
@@ -64,137 +64,137 @@ fn ldj_vol(j: u32, sgn: vec3<f32>) -> f32 {
     return data[b];
 }
 fn ld_body(i: u32) -> f32 {
-    let b = u32(info[6 + G] + i32(i) * 1);
+    let b = u32(info[7 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_body(i: u32, v: f32) {
-    let b = u32(info[6 + G] + i32(i) * 1);
+    let b = u32(info[7 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_body(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[6 + ints[j]];
+    let base = info[7 + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
 fn ldj_m(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[8 + ints[j]];
+    let base = info[9 + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
 fn ld_X(i: u32) -> vec2<f32> {
-    let b = u32(info[10 + G] + i32(i) * 2);
+    let b = u32(info[12 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_X(i: u32, v: vec2<f32>) {
-    let b = u32(info[10 + G] + i32(i) * 2);
+    let b = u32(info[12 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ldj_X(j: u32, sgn: vec3<f32>) -> vec2<f32> {
-    let base = info[10 + ints[j]];
+    let base = info[12 + ints[j]];
     if (base == -2147483648) { return vec2<f32>(0.0); }
     let b = u32(base + i32(j) * 2);
     return (vec2<f32>(data[b], data[b + 1u]) * sgn.xy);
 }
 fn ld_u(i: u32) -> vec2<f32> {
-    let b = u32(info[11 + G] + i32(i) * 2);
+    let b = u32(info[13 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_u(i: u32, v: vec2<f32>) {
-    let b = u32(info[11 + G] + i32(i) * 2);
+    let b = u32(info[13 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ldj_u(j: u32, sgn: vec3<f32>) -> vec2<f32> {
-    let base = info[11 + ints[j]];
+    let base = info[13 + ints[j]];
     if (base == -2147483648) { return vec2<f32>(0.0); }
     let b = u32(base + i32(j) * 2);
     return (vec2<f32>(data[b], data[b + 1u]) * sgn.xy);
 }
 fn ld_L0_inv(i: u32) -> mat2x2<f32> {
-    let b = u32(info[13 + G] + i32(i) * 4);
+    let b = u32(info[15 + G] + i32(i) * 4);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u]));
 }
 fn st_L0_inv(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[13 + G] + i32(i) * 4);
+    let b = u32(info[15 + G] + i32(i) * 4);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[0][1];
     data[b + 3u] = v[1][1];
 }
 fn ldj_L0_inv(j: u32, sgn: vec3<f32>) -> mat2x2<f32> {
-    let base = info[13 + ints[j]];
+    let base = info[15 + ints[j]];
     if (base == -2147483648) { return mat2x2<f32>(); }
     let b = u32(base + i32(j) * 4);
     return flip_m(mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u])), sgn.xy);
 }
 fn ld_H(i: u32) -> mat2x2<f32> {
-    let b = u32(info[14 + G] + i32(i) * 4);
+    let b = u32(info[16 + G] + i32(i) * 4);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u]));
 }
 fn st_H(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[14 + G] + i32(i) * 4);
+    let b = u32(info[16 + G] + i32(i) * 4);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[0][1];
     data[b + 3u] = v[1][1];
 }
 fn ldj_H(j: u32, sgn: vec3<f32>) -> mat2x2<f32> {
-    let base = info[14 + ints[j]];
+    let base = info[16 + ints[j]];
     if (base == -2147483648) { return mat2x2<f32>(); }
     let b = u32(base + i32(j) * 4);
     return flip_m(mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u])), sgn.xy);
 }
 fn ld_P(i: u32) -> mat2x2<f32> {
-    let b = u32(info[15 + G] + i32(i) * 4);
+    let b = u32(info[17 + G] + i32(i) * 4);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u]));
 }
 fn st_P(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[15 + G] + i32(i) * 4);
+    let b = u32(info[17 + G] + i32(i) * 4);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[0][1];
     data[b + 3u] = v[1][1];
 }
 fn ldj_P(j: u32, sgn: vec3<f32>) -> mat2x2<f32> {
-    let base = info[15 + ints[j]];
+    let base = info[17 + ints[j]];
     if (base == -2147483648) { return mat2x2<f32>(); }
     let b = u32(base + i32(j) * 4);
     return flip_m(mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u])), sgn.xy);
 }
 fn ld_dv(i: u32) -> vec2<f32> {
-    let b = u32(info[16 + G] + i32(i) * 2);
+    let b = u32(info[18 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_dv(i: u32, v: vec2<f32>) {
-    let b = u32(info[16 + G] + i32(i) * 2);
+    let b = u32(info[18 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_hourglass_rate2(i: u32) -> f32 {
-    let b = u32(info[17 + G] + i32(i) * 1);
+    let b = u32(info[19 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_hourglass_rate2(i: u32, v: f32) {
-    let b = u32(info[17 + G] + i32(i) * 1);
+    let b = u32(info[19 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 0u;
     return params[b];
 }
 fn prm_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 4u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 4u;
     return params[b];
 }
 fn prm_hourglass_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 8u;
     return params[b];
 }
 fn prm_damping(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 10u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -248,7 +248,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         if (r2 >= rc * rc || r2 == 0.0) { continue; }
         let x_ij = (dxv * sgn).xy;
         let r_ij = sqrt(r2);
-        // pairsum tl_momentum (stdlib/solid/total_lagrangian.sph:77)
+        // pairsum tl_momentum (stdlib/solid/total_lagrangian.sph:75)
         if ((body_i == ldj_body(j, sgn))) {
             let X_ij = (X_i - ldj_X(j, sgn));
             let g0 = kernel_grad_at(X_ij, h_ij);
