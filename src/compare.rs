@@ -5,6 +5,10 @@
 //! a run that produced NaN at every particle; and `zip` stops at the shorter side, so a field read
 //! back short passes too. Every test that compares numbers, and `pairsum bench`'s check of the
 //! generated code against the hand-written step, goes through these functions.
+//!
+//! Sizing and plotting are not checks: a grid sized by the particles whose h is a number, or a
+//! plot's range over the points that are numbers, leaves a NaN out on purpose. They use
+//! [`largest_number`] and [`least_number`], which say so, and never `f64::max`.
 
 /// Why two sets of values could not be compared.
 #[derive(Clone, Debug, PartialEq)]
@@ -93,6 +97,17 @@ pub fn max_pointwise_rel_diff(a: &[f64], b: &[f64]) -> Result<f64, CompareError>
     // A zero reference makes a ratio infinite (or NaN for 0/0): that fails too.
     finite(Side::A, &ratios)?;
     max_abs(&ratios)
+}
+
+/// The largest of `start` and those `values` that are numbers: a NaN is left out on purpose (for
+/// sizing and plotting; a check must see it, as [`extremes`] does).
+pub fn largest_number(start: f64, values: impl IntoIterator<Item = f64>) -> f64 {
+    values.into_iter().fold(start, |m, v| if v > m { v } else { m })
+}
+
+/// The least of `start` and those `values` that are numbers (as [`largest_number`]).
+pub fn least_number(start: f64, values: impl IntoIterator<Item = f64>) -> f64 {
+    values.into_iter().fold(start, |m, v| if v < m { v } else { m })
 }
 
 #[cfg(test)]

@@ -807,9 +807,9 @@ fn recht_ipson_plot(
     if let Some(f) = fit {
         // The plotted range of the fit: the speeds that are numbers (a NaN run is left out of
         // the plot, not of the fit, which keeps it).
-        let speeds = || points.iter().map(|p| p.0).filter(|v| !v.is_nan());
-        let lo = speeds().fold(f64::INFINITY, f64::min);
-        let hi = speeds().fold(0.0, f64::max);
+        let speeds = || points.iter().map(|p| p.0);
+        let lo = crate::compare::least_number(f64::INFINITY, speeds());
+        let hi = crate::compare::largest_number(0.0, speeds());
         let curve = (0..=100).map(|k| lo + (hi - lo) * k as f64 / 100.0).map(|v| (v, f.residual(v))).collect();
         series
             .push(Curve::new(format!("Recht–Ipson fit: a = {:.3}, p = {:.2}, v_bl = {:.1}", f.a, f.p, f.v_bl), curve));
@@ -817,7 +817,7 @@ fn recht_ipson_plot(
     if let Some(v_bl) = reference {
         // The reference limit is an impact speed: a vertical line.
         // The line's height: the largest residual that is a number, at least 1.
-        let top = points.iter().map(|p| p.1).filter(|v| !v.is_nan()).fold(0.0, f64::max).max(1.0);
+        let top = crate::compare::largest_number(1.0, points.iter().map(|p| p.1));
         series.push(Curve::new(format!("{quantity} (reference): {v_bl}"), vec![(v_bl, 0.0), (v_bl, top)]));
     }
     History {

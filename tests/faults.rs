@@ -455,14 +455,11 @@ fn a_restart_from_a_device_or_a_missing_file_is_a_clear_error() {
 
 #[test]
 fn a_reader_that_closes_the_pipe_ends_pairsum_cases_with_status_0_and_no_panic() {
-    let mut child = pairsum()
-        .arg("cases")
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .expect("pairsum runs");
-    drop(child.stdout.take()); // the reader goes away before pairsum writes (`pairsum cases | head -0`)
-    let out = child.wait_with_output().expect("pairsum ends");
+    // The reader is gone before pairsum starts (`pairsum cases | head -0`), so its first write
+    // meets a closed pipe whatever the timing.
+    let (reader, writer) = std::io::pipe().expect("a pipe");
+    drop(reader);
+    let out = pairsum().arg("cases").stdout(writer).output().expect("pairsum ends");
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!stderr.contains("panicked"), "{stderr}");
     assert_eq!(out.status.code(), Some(0), "{stderr}");

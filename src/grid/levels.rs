@@ -49,7 +49,7 @@ impl SizeLevels {
         assert_eq!(h.len(), n, "levels: {} smoothing lengths for {n} particles", h.len());
         // The largest h that is a number: a NaN h joins the finest level below (the watchdog names
         // it), it does not size the grid.
-        let h_max = h.iter().map(|v| v.to_f64()).filter(|v| !v.is_nan()).fold(0.0, f64::max);
+        let h_max = crate::compare::largest_number(0.0, h.iter().map(|v| v.to_f64()));
         let level_of = |v: T| {
             let ratio = h_max / v.to_f64();
             if ratio.is_finite() && ratio >= 1.0 {

@@ -274,7 +274,8 @@ fn push_range(out: &mut Vec<(u32, u32)>, a: u32, b: u32) {
     }
 }
 
-/// The largest value of each block and of the blocks up to `w` away from it along `axis`.
+/// The largest value of each block and of the blocks up to `w` away from it along `axis` (a size:
+/// NaN is left out).
 fn max_within_along(g: &Geometry, v: &[f64], axis: usize, w: usize) -> Vec<f64> {
     let stride = match axis {
         0 => 1,
@@ -288,7 +289,7 @@ fn max_within_along(g: &Geometry, v: &[f64], axis: usize, w: usize) -> Vec<f64> 
             let along = (k / stride) % count;
             let first = k - along.min(w) * stride;
             let last = k + (count - 1 - along).min(w) * stride;
-            (first..=last).step_by(stride).map(|j| v[j]).fold(f64::NEG_INFINITY, f64::max)
+            crate::compare::largest_number(f64::NEG_INFINITY, (first..=last).step_by(stride).map(|j| v[j]))
         })
         .collect()
 }

@@ -402,7 +402,7 @@ fn plug_velocity(x: &[[f64; 3]], body: &[u32], scene: &Scene, b: &dyn Reader) ->
     let Some(vf) = b.plan().model.field_id("v") else { return Ok(f64::NAN) };
     let Some(column) = b.read(vf)? else { return Ok(f64::NAN) };
     let (c, v) = (column.0, &column.1);
-    let rear = plate.particles.clone().map(|k| axis.coords(scene.particles.x[k]).0).fold(f64::NEG_INFINITY, f64::max);
+    let rear = max_keeping_nan(f64::NEG_INFINITY, plate.particles.clone().map(|k| axis.coords(scene.particles.x[k]).0));
     let nose = max_keeping_nan(f64::NEG_INFINITY, (0..x.len()).filter(|k| body[*k] == 0).map(|k| axis.coords(x[k]).0));
     if nose.is_nan() {
         return Ok(f64::NAN);
@@ -561,7 +561,7 @@ fn hole_diameter(axis: &Axis, initial: &[[f64; 3]], now: impl Iterator<Item = [f
 /// particles so that a few stray particles do not set them.
 fn debris(x: &[[f64; 3]], scene: &Scene) -> (f64, f64) {
     let (Some(axis), Some(plate)) = (Axis::of(scene), scene.bodies.get(1)) else { return (f64::NAN, f64::NAN) };
-    let rear = plate.particles.clone().map(|k| axis.coords(scene.particles.x[k]).0).fold(f64::NEG_INFINITY, f64::max);
+    let rear = max_keeping_nan(f64::NEG_INFINITY, plate.particles.clone().map(|k| axis.coords(scene.particles.x[k]).0));
     let (mut along, mut across): (Vec<f64>, Vec<f64>) =
         x.iter().map(|p| axis.coords(*p)).filter(|(s, _)| *s > rear + scene.dx).map(|(s, r)| (s - rear, r)).unzip();
     if along.len() < 10 {

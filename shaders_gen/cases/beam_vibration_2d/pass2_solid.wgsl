@@ -114,71 +114,71 @@ fn ldj_u(j: u32, sgn: vec3<f32>) -> vec2<f32> {
     return (vec2<f32>(data[b], data[b + 1u]) * sgn.xy);
 }
 fn ld_L0_inv(i: u32) -> mat2x2<f32> {
-    let b = u32(info[15 + G] + i32(i) * 4);
+    let b = u32(info[14 + G] + i32(i) * 4);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u]));
 }
 fn st_L0_inv(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[15 + G] + i32(i) * 4);
+    let b = u32(info[14 + G] + i32(i) * 4);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[0][1];
     data[b + 3u] = v[1][1];
 }
 fn ldj_L0_inv(j: u32, sgn: vec3<f32>) -> mat2x2<f32> {
-    let base = info[15 + ints[j]];
+    let base = info[14 + ints[j]];
     if (base == -2147483648) { return mat2x2<f32>(); }
     let b = u32(base + i32(j) * 4);
     return flip_m(mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u])), sgn.xy);
 }
 fn ld_H(i: u32) -> mat2x2<f32> {
-    let b = u32(info[16 + G] + i32(i) * 4);
+    let b = u32(info[15 + G] + i32(i) * 4);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u]));
 }
 fn st_H(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[16 + G] + i32(i) * 4);
+    let b = u32(info[15 + G] + i32(i) * 4);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[0][1];
     data[b + 3u] = v[1][1];
 }
 fn ldj_H(j: u32, sgn: vec3<f32>) -> mat2x2<f32> {
-    let base = info[16 + ints[j]];
+    let base = info[15 + ints[j]];
     if (base == -2147483648) { return mat2x2<f32>(); }
     let b = u32(base + i32(j) * 4);
     return flip_m(mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u])), sgn.xy);
 }
 fn ld_P(i: u32) -> mat2x2<f32> {
-    let b = u32(info[17 + G] + i32(i) * 4);
+    let b = u32(info[16 + G] + i32(i) * 4);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u]));
 }
 fn st_P(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[17 + G] + i32(i) * 4);
+    let b = u32(info[16 + G] + i32(i) * 4);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[0][1];
     data[b + 3u] = v[1][1];
 }
 fn ldj_P(j: u32, sgn: vec3<f32>) -> mat2x2<f32> {
-    let base = info[17 + ints[j]];
+    let base = info[16 + ints[j]];
     if (base == -2147483648) { return mat2x2<f32>(); }
     let b = u32(base + i32(j) * 4);
     return flip_m(mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u])), sgn.xy);
 }
 fn ld_dv(i: u32) -> vec2<f32> {
-    let b = u32(info[18 + G] + i32(i) * 2);
+    let b = u32(info[17 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_dv(i: u32, v: vec2<f32>) {
-    let b = u32(info[18 + G] + i32(i) * 2);
+    let b = u32(info[17 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_hourglass_rate2(i: u32) -> f32 {
-    let b = u32(info[19 + G] + i32(i) * 1);
+    let b = u32(info[18 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_hourglass_rate2(i: u32, v: f32) {
-    let b = u32(info[19 + G] + i32(i) * 1);
+    let b = u32(info[18 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {

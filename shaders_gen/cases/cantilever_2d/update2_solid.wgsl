@@ -61,70 +61,50 @@ fn st_u(i: u32, v: vec2<f32>) {
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
-fn ld_c(i: u32) -> f32 {
-    let b = u32(info[14 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_c(i: u32, v: f32) {
-    let b = u32(info[14 + G] + i32(i) * 1);
-    data[b] = v;
-}
 fn ld_dv(i: u32) -> vec2<f32> {
-    let b = u32(info[18 + G] + i32(i) * 2);
+    let b = u32(info[17 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_dv(i: u32, v: vec2<f32>) {
-    let b = u32(info[18 + G] + i32(i) * 2);
+    let b = u32(info[17 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_a_contact(i: u32) -> vec2<f32> {
-    let b = u32(info[20 + G] + i32(i) * 2);
+    let b = u32(info[19 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_a_contact(i: u32, v: vec2<f32>) {
-    let b = u32(info[20 + G] + i32(i) * 2);
+    let b = u32(info[19 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_x_0(i: u32) -> vec2<f32> {
-    let b = u32(info[21 + G] + i32(i) * 2);
+    let b = u32(info[20 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_x_0(i: u32, v: vec2<f32>) {
-    let b = u32(info[21 + G] + i32(i) * 2);
+    let b = u32(info[20 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_v_0(i: u32) -> vec2<f32> {
-    let b = u32(info[22 + G] + i32(i) * 2);
+    let b = u32(info[21 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_v_0(i: u32, v: vec2<f32>) {
-    let b = u32(info[22 + G] + i32(i) * 2);
+    let b = u32(info[21 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_u_0(i: u32) -> vec2<f32> {
-    let b = u32(info[23 + G] + i32(i) * 2);
+    let b = u32(info[22 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_u_0(i: u32, v: vec2<f32>) {
-    let b = u32(info[23 + G] + i32(i) * 2);
+    let b = u32(info[22 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
-}
-fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 0u;
-    return params[b];
-}
-fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 6u;
-    return params[b];
-}
-fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 7u;
-    return params[b];
 }
 fn prm__load0(i: u32) -> vec2<f32> {
     let b = ints[arrayLength(&ints) / 2u + i] * 17u + 13u;
@@ -154,11 +134,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     v_i = select(v_i, (1.0 * prm__constraint0(i)), (ld_part(i) == 1.0));
     x_i = (ld_x_0(i) + (0.5 * (dt * (ld_v_0(i) + v_i))));
     u_i = (ld_u_0(i) + (0.5 * (dt * (ld_v_0(i) + v_i))));
-    // p_wave_speed
-    var c_i: f32 = ld_c(i);
-    c_i = sqrt(((prm_bulk(i) + ((4.0 * prm_G(i)) / 3.0)) / prm_rho0(i)));
     st_x(i, x_i);
     st_v(i, v_i);
     st_u(i, u_i);
-    st_c(i, c_i);
 }

@@ -29,9 +29,9 @@ fn main() {
     // timestep hourglass
     let limit_hourglass = globals[16u];
     if (limit_hourglass > 0.0 && limit_hourglass < pinf()) { best = min(best, limit_hourglass); }
-    // timestep cfl
-    let limit_cfl = (globals[17u] / globals[18u]);
-    if (limit_cfl > 0.0 && limit_cfl < pinf()) { best = min(best, limit_cfl); }
+    // timestep p_wave
+    let limit_p_wave = (globals[17u] / globals[18u]);
+    if (limit_p_wave > 0.0 && limit_p_wave < pinf()) { best = min(best, limit_p_wave); }
     let remaining = globals[3u] - t;
     if (remaining > 0.0 && remaining < best * 1.000001) { best = remaining; }
     globals[2u] = best;

@@ -455,11 +455,11 @@ fn ldj_u(j: u32, sgn: vec3<f32>) -> vec3<f32> {
     return (vec3<f32>(data[b], data[b + 1u], data[b + 2u]) * sgn);
 }
 fn ld_L0_inv(i: u32) -> mat3x3<f32> {
-    let b = u32(info[14 + G] + i32(i) * 9);
+    let b = u32(info[13 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_L0_inv(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[14 + G] + i32(i) * 9);
+    let b = u32(info[13 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -471,11 +471,11 @@ fn st_L0_inv(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ld_H(i: u32) -> mat3x3<f32> {
-    let b = u32(info[15 + G] + i32(i) * 9);
+    let b = u32(info[14 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_H(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[15 + G] + i32(i) * 9);
+    let b = u32(info[14 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -487,11 +487,11 @@ fn st_H(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ld_P(i: u32) -> mat3x3<f32> {
-    let b = u32(info[16 + G] + i32(i) * 9);
+    let b = u32(info[15 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_P(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[16 + G] + i32(i) * 9);
+    let b = u32(info[15 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -503,11 +503,11 @@ fn st_P(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ld_a_contact(i: u32) -> vec3<f32> {
-    let b = u32(info[19 + G] + i32(i) * 3);
+    let b = u32(info[18 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_a_contact(i: u32, v: vec3<f32>) {
-    let b = u32(info[19 + G] + i32(i) * 3);
+    let b = u32(info[18 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];

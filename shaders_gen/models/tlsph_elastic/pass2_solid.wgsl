@@ -399,11 +399,11 @@ fn ldj_u(j: u32, sgn: vec3<f32>) -> vec3<f32> {
     return (vec3<f32>(data[b], data[b + 1u], data[b + 2u]) * sgn);
 }
 fn ld_L0_inv(i: u32) -> mat3x3<f32> {
-    let b = u32(info[14 + G] + i32(i) * 9);
+    let b = u32(info[13 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_L0_inv(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[14 + G] + i32(i) * 9);
+    let b = u32(info[13 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -415,17 +415,17 @@ fn st_L0_inv(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ldj_L0_inv(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
-    let base = info[14 + ints[j]];
+    let base = info[13 + ints[j]];
     if (base == -2147483648) { return mat3x3<f32>(); }
     let b = u32(base + i32(j) * 9);
     return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u])), sgn);
 }
 fn ld_H(i: u32) -> mat3x3<f32> {
-    let b = u32(info[15 + G] + i32(i) * 9);
+    let b = u32(info[14 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_H(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[15 + G] + i32(i) * 9);
+    let b = u32(info[14 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -437,17 +437,17 @@ fn st_H(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ldj_H(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
-    let base = info[15 + ints[j]];
+    let base = info[14 + ints[j]];
     if (base == -2147483648) { return mat3x3<f32>(); }
     let b = u32(base + i32(j) * 9);
     return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u])), sgn);
 }
 fn ld_P(i: u32) -> mat3x3<f32> {
-    let b = u32(info[16 + G] + i32(i) * 9);
+    let b = u32(info[15 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_P(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[16 + G] + i32(i) * 9);
+    let b = u32(info[15 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -459,27 +459,27 @@ fn st_P(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ldj_P(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
-    let base = info[16 + ints[j]];
+    let base = info[15 + ints[j]];
     if (base == -2147483648) { return mat3x3<f32>(); }
     let b = u32(base + i32(j) * 9);
     return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u])), sgn);
 }
 fn ld_dv(i: u32) -> vec3<f32> {
-    let b = u32(info[17 + G] + i32(i) * 3);
+    let b = u32(info[16 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_dv(i: u32, v: vec3<f32>) {
-    let b = u32(info[17 + G] + i32(i) * 3);
+    let b = u32(info[16 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_hourglass_rate2(i: u32) -> f32 {
-    let b = u32(info[18 + G] + i32(i) * 1);
+    let b = u32(info[17 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_hourglass_rate2(i: u32, v: f32) {
-    let b = u32(info[18 + G] + i32(i) * 1);
+    let b = u32(info[17 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {

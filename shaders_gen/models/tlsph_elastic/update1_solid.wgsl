@@ -63,75 +63,55 @@ fn st_u(i: u32, v: vec3<f32>) {
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
-fn ld_c(i: u32) -> f32 {
-    let b = u32(info[13 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_c(i: u32, v: f32) {
-    let b = u32(info[13 + G] + i32(i) * 1);
-    data[b] = v;
-}
 fn ld_dv(i: u32) -> vec3<f32> {
-    let b = u32(info[17 + G] + i32(i) * 3);
+    let b = u32(info[16 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_dv(i: u32, v: vec3<f32>) {
-    let b = u32(info[17 + G] + i32(i) * 3);
+    let b = u32(info[16 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_a_contact(i: u32) -> vec3<f32> {
-    let b = u32(info[19 + G] + i32(i) * 3);
+    let b = u32(info[18 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_a_contact(i: u32, v: vec3<f32>) {
-    let b = u32(info[19 + G] + i32(i) * 3);
+    let b = u32(info[18 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_x_0(i: u32) -> vec3<f32> {
-    let b = u32(info[20 + G] + i32(i) * 3);
+    let b = u32(info[19 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_x_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[20 + G] + i32(i) * 3);
+    let b = u32(info[19 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_v_0(i: u32) -> vec3<f32> {
-    let b = u32(info[21 + G] + i32(i) * 3);
+    let b = u32(info[20 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_v_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[21 + G] + i32(i) * 3);
+    let b = u32(info[20 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_u_0(i: u32) -> vec3<f32> {
-    let b = u32(info[22 + G] + i32(i) * 3);
+    let b = u32(info[21 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_u_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[22 + G] + i32(i) * 3);
+    let b = u32(info[21 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
-}
-fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 0u;
-    return params[b];
-}
-fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 7u;
-    return params[b];
-}
-fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 8u;
-    return params[b];
 }
 @compute @workgroup_size(64)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) li: u32) {
@@ -152,11 +132,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     v_i = (ld_v_0(i) + (0.5 * (dt * rate_of_v)));
     x_i = (ld_x_0(i) + (0.5 * (dt * rate_of_x)));
     u_i = (ld_u_0(i) + (0.5 * (dt * rate_of_u)));
-    // p_wave_speed
-    var c_i: f32 = ld_c(i);
-    c_i = sqrt(((prm_bulk(i) + ((4.0 * prm_G(i)) / 3.0)) / prm_rho0(i)));
     st_x(i, x_i);
     st_v(i, v_i);
     st_u(i, u_i);
-    st_c(i, c_i);
 }

@@ -557,9 +557,11 @@ impl<T: Real> CpuBackend<T> {
         });
     }
 
+    /// The largest smoothing length that is a number: it sizes the search, and a NaN h is left
+    /// to the watchdog, which names its particle.
     fn h_max(&self) -> f64 {
         let Some(c) = self.store.column(self.h) else { return 0.0 };
-        c.data.par_iter().map(|v| v.to_f64()).reduce(|| 0.0, f64::max)
+        c.data.par_iter().map(|v| v.to_f64()).reduce(|| 0.0, |a, b| crate::compare::largest_number(a, [b]))
     }
 
     fn positions(&self) -> &[T] {
@@ -609,7 +611,7 @@ impl<T: Real> Backend for CpuBackend<T> {
     fn evaluate(&mut self, g: Globals) -> Result<(), BackendError> {
         let dim = self.plan.dim;
         let h_max = self.h_max();
-        if h_max.is_nan() || h_max <= 0.0 || !h_max.is_finite() {
+        if h_max <= 0.0 || !h_max.is_finite() {
             return Err(BackendError(format!(
                 "the largest smoothing length is {h_max}: no neighbour search is possible"
             )));
@@ -722,7 +724,7 @@ impl<T: Real> Backend for CpuBackend<T> {
     fn reorder(&mut self) -> Result<(), BackendError> {
         let dim = self.plan.dim;
         let h_max = self.h_max();
-        if h_max.is_nan() || h_max <= 0.0 {
+        if h_max <= 0.0 {
             return Ok(());
         }
         let cell = self.support * h_max;
