@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
-"""Linear static total Lagrangian SPH in plane strain: where models::tlsph_elastic's bending
-error comes from (issue 37; docs/results/cantilever_2d_convergence/README.md).
+"""Total Lagrangian SPH in plane strain, linearised: where models::tlsph_elastic's bending error
+and its growing modes come from (issue 37; docs/results/cantilever_2d_convergence/report.md).
 
 The stiffness is that of stdlib/solid/total_lagrangian.sph linearised about the reference
 configuration (Wendland C2, h = 1.3 Δx): strains from the corrected gradient
@@ -8,19 +8,27 @@ configuration (Wendland C2, h = 1.3 Δx): strains from the corrected gradient
 or from a moving-least-squares gradient exact for quadratic fields (order 2: weights V_j W_ij,
 basis ΔX, ΔY, ΔX², ΔX ΔY, ΔY²), the strain energy Σ_i V_i ½ ε_i : C : ε_i, and Ganzenmüller's
 hourglass force linearised (α). Solving K u = f gives what the dynamic model settles to: the
-cantilever at 8 particles across is +6.8 % with order 1 and α = 10 here and in
-cases/cantilever_2d.toml.
+cantilever at 8 particles across is +3.30 % with order 1, α = 10 and the odd clamp here and in
+cases/cantilever_2d.toml, and the vibrating beam's period 0.120788 s against the run's 0.120785 s.
 
-Two experiments, each at 4, 8 and 16 particles across a 0.1 m depth (E = 10 MPa, ν = 0.3):
-  cantilever    cases/cantilever_2d.toml's beam (0.5 m, 75 mm of fixed particles behind x = 0,
-                100 N on the last 25 mm), the mean deflection there against plane-strain finite
-                elements (scripts/beam_references.py: 4.33721 mm);
+Three experiments:
+  cantilever    cases/cantilever_2d.toml's beam (0.5 × 0.1 m, 100 N on the last 25 mm) at 4, 8 and
+                16 particles across, the mean deflection there against plane-strain finite
+                elements (scripts/beam_references.py: 4.33721 mm). The clamp is 75 mm of fixed
+                particles behind x = 0 ("fixed"), or odd images of the beam across x = 0 (u(−X, Y)
+                = −u(X, Y)) with no strain energy of their own, the model's clamp ("odd"), or odd
+                images that carry the stress of the odd field ("odd, own stress", tried before:
+                its stiffness is unsymmetric).
   pure bending  a free 0.5 m beam under end couples: the curvature in its middle against
                 M / (E' I) (no clamp, no shear).
-The odd clamp rows show what clamping by odd images would give; in the dynamic model such a clamp
-(a symmetry plane whose images move as −u and carry the stress of that field) grew unstable in the
-vibrating beam, so models::tlsph_elastic keeps the fixed particles.
-Needs numpy and scipy. Takes a few seconds.
+  growth        the vibrating beam of cases/beam_vibration_2d.toml (0.2 × 0.02 m) at 4 and 8
+                across, undamped: the fastest growth rate among its modes (the real part of the
+                eigenvalues of the first-order system), with and without the pair viscosity
+                (viscosity_alpha), and the first bending mode's period.
+The hourglass control is Ganzenmüller's force ("G", the model's), or its variational form
+("var": the energy ¼ Σ_ij k_ij (ε_ij · x̂_ij)², whose force adds the transpose of G's part through
+H_i and H_j), which is symmetric but much less stiffening.
+Needs numpy and scipy. Takes about two minutes.
 """
 import numpy as np
 import scipy.sparse as sp
@@ -67,77 +75,136 @@ def gradient_weights(pos, dx, order):
     return i, j, weights, d[i, j], r[i, j], w
 
 
-def stiffness(pos, dx, order, alpha):
+RHO = 1000.0
+P_WAVE = np.sqrt((E / (3 * (1 - 2 * NU)) + 4 * E / (2 * (1 + NU)) / 3) / RHO)
+
+
+def gradients(pos, dx, order):
+    """G[l]: (∂φ/∂X_l)_i = Σ_j w_ij,l (φ_j − φ_i), as n × n matrices, and the pairs."""
     n = len(pos)
     i, j, wt, d, r, w = gradient_weights(pos, dx, order)
-    # G[l]: (∂φ/∂X_l)_i = Σ_j w_ij,l (φ_j − φ_i), as an n × n matrix
     grad = []
     for comp in range(2):
         m = sp.coo_matrix((wt[:, comp], (i, j)), shape=(n, n)).tocsr()
         grad.append(m - sp.diags(np.asarray(m.sum(axis=1)).ravel()))
+    return grad, (i, j, d, r, w)
+
+
+def stress_stiffness(grad, dx, energy):
+    """Σ_i V_i ½ ε_i : C : ε_i over the particles in `energy`, as a matrix on u = [u_x; u_y]."""
+    n = grad[0].shape[0]
     zero = sp.csr_matrix((n, n))
     ux = lambda m: sp.hstack([m, zero])  # noqa: E731  (acts on u_x of u = [u_x; u_y])
     uy = lambda m: sp.hstack([zero, m])  # noqa: E731
     exx, eyy, gxy = ux(grad[0]), uy(grad[1]), ux(grad[1]) + uy(grad[0])
     lam = E * NU / ((1 + NU) * (1 - 2 * NU))
     mu = E / (2 * (1 + NU))
-    vol = sp.diags(np.full(n, dx * dx))
+    vol = sp.diags(np.where(energy, dx * dx, 0.0))
     k = (lam + 2 * mu) * (exx.T @ vol @ exx + eyy.T @ vol @ eyy) + lam * (exx.T @ vol @ eyy + eyy.T @ vol @ exx)
-    k = k + mu * gxy.T @ vol @ gxy
-    if alpha > 0:
-        # the hourglass force on i: α V_i V_j W E / r² · (e · (½(∇u_i + ∇u_j) X_ij − (u_i − u_j))) e
-        e = d / r[:, None]
-        rows = []
-        for comp_u, parts in ((0, (exx, ux(grad[1]))), (1, (uy(grad[0]), eyy))):
-            rows.append(
-                sum(
-                    sp.diags(0.5 * e[:, comp_u] * d[:, l]) @ (part[i] + part[j])
-                    for l, part in enumerate(parts)
-                )
-            )
-        sel_i = sp.coo_matrix((np.ones(len(i)), (np.arange(len(i)), i)), shape=(len(i), n))
-        sel_j = sp.coo_matrix((np.ones(len(i)), (np.arange(len(i)), j)), shape=(len(i), n))
-        diff = sp.hstack([sp.diags(e[:, 0]) @ (sel_i - sel_j), sp.diags(e[:, 1]) @ (sel_i - sel_j)])
-        miss = rows[0] + rows[1] - diff
-        c = alpha * (dx * dx) ** 2 * w * E / r**2
-        force = [sel_i.T @ sp.diags(c * e[:, comp]) @ miss for comp in range(2)]
-        k = k - sp.vstack(force)
-    return k.tocsc()
+    return k + mu * gxy.T @ vol @ gxy
 
 
-def cantilever(across, order, alpha, odd_clamp=False):
-    """The mean deflection of the loaded end. The particles behind x = 0 are fixed, or, with
-    `odd_clamp`, move as the odd image of the beam (u(−X, Y) = −u(X, Y)): u = 0 at x = 0 with
-    no kink in the displacement field at the clamp's face."""
-    dx = DEPTH / across
-    pos = lattice(-0.075, 0.5, dx)
+def pair_misses(grad, pairs):
+    """ε_ij · x̂_ij = x̂_ij · (½ (H_i + H_j) X_ij − u_ij) for each pair, a row on u."""
+    i, j, d, r, _ = pairs
+    n = grad[0].shape[0]
+    sel_i = sp.coo_matrix((np.ones(len(i)), (np.arange(len(i)), i)), shape=(len(i), n)).tocsr()
+    sel_j = sp.coo_matrix((np.ones(len(i)), (np.arange(len(i)), j)), shape=(len(i), n)).tocsr()
+    core = sum(sp.diags(0.5 * d[:, l]) @ (sel_i @ grad[l] + sel_j @ grad[l]) for l in range(2)) - (sel_i - sel_j)
+    e = d / r[:, None]
+    return sp.hstack([sp.diags(e[:, 0]) @ core, sp.diags(e[:, 1]) @ core]), sel_i, e
+
+
+def hourglass_stiffness(grad, pairs, dx, alpha, form, rows):
+    """−(the hourglass force) as a matrix on u, for the pairs whose i is in `rows`."""
+    keep = rows[pairs[0]]
+    pairs = tuple(a[keep] for a in pairs)
+    i, j, d, r, w = pairs
+    miss, sel_i, e = pair_misses(grad, pairs)
+    k = alpha * (dx * dx) ** 2 * w * E / r**2
+    if form == "var":  # the energy ¼ Σ k miss², both sides of each pair counted
+        return miss.T @ sp.diags(0.5 * k) @ miss
+    # Ganzenmüller: f_i = Σ_j k miss e on i only
+    return -sp.vstack([sel_i.T @ sp.diags(k * e[:, comp]) @ miss for comp in range(2)])
+
+
+def pair_viscosity(pos, pairs, dx, viscosity_alpha):
+    """The damping matrix of the pair viscosity (reference configuration): force −c (e·v_ij) e."""
+    i, j, d, r, _ = pairs
     n = len(pos)
-    k = stiffness(pos, dx, order, alpha)
-    loaded = pos[:, 0] > 0.475
-    f = np.zeros(2 * n)
-    f[n + np.nonzero(loaded)[0]] = -100.0 / loaded.sum()
+    h = H_RATIO * dx
+    _, dw = kernel(r, h)
+    mass = RHO * dx * dx
+    c = mass * mass * viscosity_alpha * P_WAVE * h * (-dw) * r / (RHO * (r**2 + 0.01 * h * h))
+    e = d / r[:, None]
+    blocks = []
+    for a in range(2):
+        row = []
+        for b in range(2):
+            pair = sp.coo_matrix((c * e[:, a] * e[:, b], (i, j)), shape=(n, n)).tocsr()
+            row.append(sp.diags(np.asarray(pair.sum(axis=1)).ravel()) - pair)
+        blocks.append(row)
+    return sp.bmat(blocks).tocsr()
+
+
+def clamped_beam(length, depth, behind, dx, clamp):
+    """The lattice with `behind` of clamp particles behind x = 0, the beam's particles, and T
+    with u (every particle) = T u_beam: the clamp's particles fixed, or the odd images."""
+    pos = lattice_of(-behind, length, depth, dx)
+    n = len(pos)
     beam = np.nonzero(pos[:, 0] > 0)[0]
-    # u (all particles, both components) = T u_beam
-    rows, cols, vals = [], [], []
     index = {tuple(np.round(pos[b] / dx, 3)): col for col, b in enumerate(beam)}
+    rows, cols, vals = [], [], []
     for p in range(n):
         if pos[p, 0] > 0:
             rows.append(p), cols.append(index[tuple(np.round(pos[p] / dx, 3))]), vals.append(1.0)
-        elif odd_clamp:
+        elif clamp != "fixed":
             rows.append(p), cols.append(index[tuple(np.round((-pos[p, 0] / dx, pos[p, 1] / dx), 3))]), vals.append(-1.0)
     t1 = sp.coo_matrix((vals, (rows, cols)), shape=(n, len(beam)))
-    t = sp.block_diag([t1, t1]).tocsc()
-    # the beam particles' equations of motion at rest, with the clamp's particles as T says
+    return pos, beam, sp.block_diag([t1, t1]).tocsc()
+
+
+def beam_stiffness(pos, beam, t, dx, order, alpha, clamp, form="G"):
+    """The beam particles' stiffness K (K u_beam = the forces on them at rest)."""
+    n = len(pos)
+    grad, pairs = gradients(pos, dx, order)
     rows = np.concatenate([beam, n + beam])
-    u = t @ spl.spsolve((k[rows] @ t).tocsc(), f[rows])
-    return -u[n + np.nonzero(loaded)[0]].mean()
+    in_beam = pos[:, 0] > 0
+    if clamp == "odd":  # the images have no energy: K = Tᵀ (∂² energy of the beam) T
+        k = t.T @ stress_stiffness(grad, dx, in_beam) @ t
+    else:  # fixed particles, or images with the odd field's stress: the beam's rows of the whole
+        k = stress_stiffness(grad, dx, np.ones(n, bool))[rows] @ t
+    if alpha > 0:
+        hg = hourglass_stiffness(grad, pairs, dx, alpha, form, in_beam if form == "var" and clamp == "odd" else np.ones(n, bool))
+        k = k + (t.T @ hg @ t if form == "var" else hg[rows] @ t)
+    return k.tocsc(), pairs
 
 
-def pure_bending(across, order, alpha):
+def lattice_of(x0, x1, depth, dx):
+    xs = np.arange(x0 + dx / 2, x1 - 1e-12, dx)
+    ys = np.arange(dx / 2, depth - 1e-12, dx)
+    return np.array([(x, y) for x in xs for y in ys])
+
+
+def cantilever(across, order, alpha, clamp="fixed", form="G"):
+    """The mean deflection of the loaded end, relative to the finite-element reference."""
+    dx = DEPTH / across
+    pos, beam, t = clamped_beam(0.5, DEPTH, 0.075, dx, clamp)
+    n = len(pos)
+    k, _ = beam_stiffness(pos, beam, t, dx, order, alpha, clamp, form)
+    loaded = pos[:, 0] > 0.475
+    f = np.zeros(2 * n)
+    f[n + np.nonzero(loaded)[0]] = -100.0 / loaded.sum()
+    u = t @ spl.spsolve(k, f[np.concatenate([beam, n + beam])])
+    return -u[n + np.nonzero(loaded)[0]].mean() / REFERENCE - 1
+
+
+def pure_bending(across, order, alpha, form="G"):
     dx = DEPTH / across
     pos = lattice(0.0, 0.5, dx)
     n = len(pos)
-    k = stiffness(pos, dx, order, alpha)
+    everyone = np.arange(n)
+    k, _ = beam_stiffness(pos, everyone, sp.identity(2 * n, format="csc"), dx, order, alpha, "free", form)
     inertia, c = DEPTH**3 / 12, DEPTH / 2
     ends = (pos[:, 0] == pos[:, 0].max(), pos[:, 0] == pos[:, 0].min())
     f = np.zeros(2 * n)
@@ -156,18 +223,51 @@ def pure_bending(across, order, alpha):
     return fit[3] / (couple / (E / (1 - NU**2) * inertia))
 
 
+def growth(across, clamp, viscosity_alpha, alpha=10.0):
+    """The vibrating beam, undamped: the largest growth rate of any mode (1/s, > 0 grows) and the
+    first bending mode's period."""
+    dx = 0.02 / across
+    pos, beam, t = clamped_beam(0.2, 0.02, 0.015, dx, clamp)
+    k, pairs = beam_stiffness(pos, beam, t, dx, 1, alpha, clamp)
+    n = len(pos)
+    rows = np.concatenate([beam, n + beam])
+    c = (pair_viscosity(pos, pairs, dx, viscosity_alpha)[rows] @ t).toarray()
+    m = len(rows)
+    mass = RHO * dx * dx
+    system = np.block([[np.zeros((m, m)), np.eye(m)], [-k.toarray() / mass, -c / mass]])
+    ev = np.linalg.eigvals(system)
+    oscillating = ev[ev.imag > 1]
+    first = oscillating[np.argmin(oscillating.imag)]
+    return ev.real.max(), 2 * np.pi / first.imag
+
+
 def main():
-    print("variant                                 | cantilever, 4 / 8 / 16 across     | pure bending κ / κ_exact")
-    for order, alpha, odd in ((1, 0.0, False), (1, 10.0, False), (2, 0.0, False), (2, 10.0, False), (1, 0.0, True), (1, 10.0, True), (2, 0.0, True), (2, 10.0, True)):
-        cant = [cantilever(a, order, alpha, odd) / REFERENCE - 1 for a in (4, 8, 16)]
-        bend = [pure_bending(a, order, alpha) for a in (4, 8, 16)]
-        name = f"order {order}, alpha = {alpha:g}, " + ("odd clamp" if odd else "fixed clamp")
-        print(
-            f"{name:39s} | "
-            + " / ".join(f"{100 * e:+6.2f} %" for e in cant)
-            + " | "
-            + " / ".join(f"{b:.4f}" for b in bend)
-        )
+    print("cantilever (mean deflection against FE), 4 / 8 / 16 across; pure bending κ / κ_exact")
+    for order, alpha, form, clamp in (
+        (1, 0.0, "G", "fixed"),
+        (1, 10.0, "G", "fixed"),
+        (1, 10.0, "var", "fixed"),
+        (2, 0.0, "G", "fixed"),
+        (2, 10.0, "G", "fixed"),
+        (1, 0.0, "G", "odd"),
+        (1, 10.0, "G", "odd"),
+        (1, 10.0, "G", "odd, own stress"),
+        (1, 10.0, "var", "odd"),
+        (2, 0.0, "G", "odd"),
+        (2, 10.0, "G", "odd"),
+    ):
+        cant = [cantilever(a, order, alpha, clamp, form) for a in (4, 8, 16)]
+        name = f"order {order}, alpha = {alpha:g} ({form}), {clamp} clamp"
+        bend = ""
+        if clamp == "fixed":
+            bend = " | " + " / ".join(f"{pure_bending(a, order, alpha, form):.4f}" for a in (4, 8, 16))
+        print(f"{name:47s} | " + " / ".join(f"{100 * e:+6.2f} %" for e in cant) + bend)
+    print("\nvibrating beam (undamped, alpha = 10): fastest growth [1/s] and first period [s]")
+    for across in (4, 8):
+        for clamp in ("fixed", "odd", "odd, own stress"):
+            for viscosity_alpha in (0.0, 0.01, 0.1):
+                rate, period = growth(across, clamp, viscosity_alpha)
+                print(f"{across} across, {clamp:16s} clamp, viscosity_alpha = {viscosity_alpha:4g}: growth {rate:+10.4g}, period {period:.6f}")
 
 
 if __name__ == "__main__":

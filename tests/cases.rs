@@ -144,14 +144,15 @@ fn total_lagrangian_bars(spacing: &str) -> [f64; 3] {
     })
 }
 
-/// Measured: −1.01 / −0.40 % (L/c), +5.65 / +3.73 % (ρ c v0 / 3, the peak of an undamped front),
-/// −3.85 / −2.23 % (rebound) at 1 / 0.5 mm (README, "When bodies meet").
+/// Measured: −1.19 / −0.48 % (L/c), +3.18 / +1.72 % (ρ c v0 / 3), −5.43 / −3.57 % (rebound) at
+/// 1 / 0.5 mm, with the model's pair viscosity (before it: +5.65 / +3.73 % and −3.85 / −2.23 %;
+/// README, "When bodies meet").
 #[test]
-fn total_lagrangian_bars_meet_within_1_5_percent_of_l_over_c_7_percent_of_rho_c_v0_and_rebound_within_5_percent_all_closer_at_half_the_spacing(
+fn total_lagrangian_bars_meet_within_1_5_percent_of_l_over_c_4_percent_of_rho_c_v0_and_rebound_within_6_percent_all_closer_at_half_the_spacing(
 ) {
     let coarse = total_lagrangian_bars("1 mm");
     let fine = total_lagrangian_bars("0.5 mm");
-    for (k, (limit, what)) in [(0.015, "L/c"), (0.07, "ρ c v0 / 3"), (0.05, "the rebound")].iter().enumerate() {
+    for (k, (limit, what)) in [(0.015, "L/c"), (0.04, "ρ c v0 / 3"), (0.06, "the rebound")].iter().enumerate() {
         assert!(coarse[k].abs() <= *limit, "{what}: {:+.2} % at 1 mm", 100.0 * coarse[k]);
         assert!(
             fine[k].abs() < coarse[k].abs(),
@@ -992,6 +993,38 @@ fn total_lagrangian_beam_vibration_2d_period_is_within_its_tolerance_at_8_partic
 #[test]
 fn total_lagrangian_beam_vibration_2d_period_error_halves_from_4_to_8_particles_across() {
     assert_error_halves("beam_vibration_2d", "ci@5mm", "ci");
+}
+
+/// The vibrating beam at 4 particles across, undamped, for 1.5 s (twelve periods): the run ends
+/// without the watchdog stopping it, and the tip's largest displacement in the last period is
+/// within 1 % of the first's. Ganzenmüller's hourglass force alone makes the stiffness unsymmetric
+/// and its fastest modes grow (scripts/tlsph_static.py): without the pair viscosity this run went
+/// unstable at 0.73 s (1.33 s with fixed particles as the clamp; 0.25 s at 8 across).
+#[test]
+fn total_lagrangian_beam_vibration_2d_keeps_its_amplitude_within_1_percent_over_twelve_periods() {
+    let mut opts = RunOptions {
+        backend: BackendChoice::Cpu,
+        out: out_dir("beam_vibration_2d-long"),
+        vtk: false,
+        ..RunOptions::default()
+    };
+    opts.scene.resolution = Some("ci@5mm".to_string());
+    opts.scene.end_time = Some(1.5);
+    let outcome =
+        run_case(&case("beam_vibration_2d"), &opts).unwrap_or_else(|e| panic!("beam_vibration_2d over 1.5 s: {e}"));
+    let _ = std::fs::remove_dir_all(&opts.out);
+    let tip = history(&outcome.histories, "tip_displacement");
+    let largest = |from: f64, to: f64| {
+        let values: Vec<f64> = tip.iter().filter(|(t, _)| *t >= from && *t < to).map(|(_, y)| y.abs()).collect();
+        assert!(
+            values.len() > 10 && values.iter().all(|y| y.is_finite()),
+            "tip history over [{from}, {to}) s: {values:?}"
+        );
+        values.into_iter().fold(0.0, f64::max)
+    };
+    let (first, last) = (largest(0.0, 0.125), largest(1.375, 1.5));
+    assert!(first > 9e-4, "the first period's amplitude {first:e} m, the case releases the beam at 1 mm");
+    assert!((last / first - 1.0).abs() < 0.01, "amplitude {first:e} m in the first period, {last:e} m in the last");
 }
 
 /// A material no body uses is not checked against the model (a case that switches models keeps

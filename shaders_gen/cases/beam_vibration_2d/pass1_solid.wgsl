@@ -47,7 +47,7 @@ fn pos3(p: u32) -> vec3<f32> {
     let b = u32(info[3u + ints[p]] + i32(p) * 2);
     return vec3<f32>(data[b + 0u], data[b + 1u], 0.0);
 }
-fn h_of(p: u32) -> f32 { return data[u32(info[11u + ints[p]] + i32(p))]; }
+fn h_of(p: u32) -> f32 { return data[u32(info[10u + ints[p]] + i32(p))]; }
 fn ld_v(i: u32) -> vec2<f32> {
     let b = u32(info[4 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
@@ -98,133 +98,141 @@ fn ldj_body(j: u32, sgn: vec3<f32>) -> f32 {
     return data[b];
 }
 fn ld_m(i: u32) -> f32 {
-    let b = u32(info[9 + G] + i32(i) * 1);
+    let b = u32(info[8 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_m(i: u32, v: f32) {
-    let b = u32(info[9 + G] + i32(i) * 1);
+    let b = u32(info[8 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_m(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[9 + ints[j]];
+    let base = info[8 + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
 fn ld_rho(i: u32) -> f32 {
-    let b = u32(info[10 + G] + i32(i) * 1);
+    let b = u32(info[9 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho(i: u32, v: f32) {
-    let b = u32(info[10 + G] + i32(i) * 1);
+    let b = u32(info[9 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_rho(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[10 + ints[j]];
+    let base = info[9 + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
 fn ld_h(i: u32) -> f32 {
-    let b = u32(info[11 + G] + i32(i) * 1);
+    let b = u32(info[10 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_h(i: u32, v: f32) {
-    let b = u32(info[11 + G] + i32(i) * 1);
+    let b = u32(info[10 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_h(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[11 + ints[j]];
+    let base = info[10 + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
 fn ld_X(i: u32) -> vec2<f32> {
-    let b = u32(info[12 + G] + i32(i) * 2);
+    let b = u32(info[11 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_X(i: u32, v: vec2<f32>) {
-    let b = u32(info[12 + G] + i32(i) * 2);
+    let b = u32(info[11 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ldj_X(j: u32, sgn: vec3<f32>) -> vec2<f32> {
-    let base = info[12 + ints[j]];
+    let base = info[11 + ints[j]];
     if (base == -2147483648) { return vec2<f32>(0.0); }
     let b = u32(base + i32(j) * 2);
     return (vec2<f32>(data[b], data[b + 1u]) * sgn.xy);
 }
 fn ld_u(i: u32) -> vec2<f32> {
-    let b = u32(info[13 + G] + i32(i) * 2);
+    let b = u32(info[12 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_u(i: u32, v: vec2<f32>) {
-    let b = u32(info[13 + G] + i32(i) * 2);
+    let b = u32(info[12 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ldj_u(j: u32, sgn: vec3<f32>) -> vec2<f32> {
-    let base = info[13 + ints[j]];
+    let base = info[12 + ints[j]];
     if (base == -2147483648) { return vec2<f32>(0.0); }
     let b = u32(base + i32(j) * 2);
     return (vec2<f32>(data[b], data[b + 1u]) * sgn.xy);
 }
 fn ld_L0_inv(i: u32) -> mat2x2<f32> {
-    let b = u32(info[14 + G] + i32(i) * 4);
+    let b = u32(info[13 + G] + i32(i) * 4);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u]));
 }
 fn st_L0_inv(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[14 + G] + i32(i) * 4);
+    let b = u32(info[13 + G] + i32(i) * 4);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[0][1];
     data[b + 3u] = v[1][1];
 }
 fn ld_H(i: u32) -> mat2x2<f32> {
-    let b = u32(info[15 + G] + i32(i) * 4);
+    let b = u32(info[14 + G] + i32(i) * 4);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u]));
 }
 fn st_H(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[15 + G] + i32(i) * 4);
+    let b = u32(info[14 + G] + i32(i) * 4);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[0][1];
     data[b + 3u] = v[1][1];
 }
 fn ld_P(i: u32) -> mat2x2<f32> {
-    let b = u32(info[16 + G] + i32(i) * 4);
+    let b = u32(info[15 + G] + i32(i) * 4);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u]));
 }
 fn st_P(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[16 + G] + i32(i) * 4);
+    let b = u32(info[15 + G] + i32(i) * 4);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[0][1];
     data[b + 3u] = v[1][1];
 }
 fn ld_a_contact(i: u32) -> vec2<f32> {
-    let b = u32(info[19 + G] + i32(i) * 2);
+    let b = u32(info[18 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_a_contact(i: u32, v: vec2<f32>) {
-    let b = u32(info[19 + G] + i32(i) * 2);
+    let b = u32(info[18 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 6u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 7u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 9u;
+    return params[b];
+}
+fn prm_clamp_normal(i: u32) -> vec2<f32> {
+    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 13u;
+    return vec2<f32>(params[b], params[b + 1u]);
+}
+fn prm_clamp_at(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 15u;
     return params[b];
 }
 fn prm_K_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 16u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -283,17 +291,24 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         if (r2 >= rc * rc || r2 == 0.0) { continue; }
         let x_ij = (dxv * sgn).xy;
         let r_ij = sqrt(r2);
-        // pairsum deformation_gradient (stdlib/solid/total_lagrangian.sph:56)
+        // pairsum deformation_gradient (stdlib/solid/total_lagrangian.sph:90)
         if ((body_i == ldj_body(j, sgn))) {
             let X_ij = (X_i - ldj_X(j, sgn));
             let g0 = (ldj_vol(j, sgn) * kernel_grad_at(X_ij, h_ij));
+            let a = ldj_u(j, sgn);
+            let n_2 = prm_clamp_normal(i);
+            let X_j = ldj_X(j, sgn);
+            let n_3 = prm_clamp_normal(i);
+            let at_2 = prm_clamp_at(i);
+            let clamped = (dot(X_j, n_3) < at_2);
+            let u_j = select(a, (((2.0 * dot(a, n_2)) * n_2) - a), clamped);
             L0 = L0 + neg_m(outer(g0, X_ij));
-            H0 = H0 + outer((ldj_u(j, sgn) - u_i), g0);
+            H0 = H0 + outer((u_j - u_i), g0);
         }
         // pairsum contact (stdlib/contact/penalty.sph:26)
         let pen = (((dx_i + ldj_dx(j, sgn)) / 2.0) - r_ij);
         if ((((body_i != ldj_body(j, sgn)) && (pen > 0.0)) && (r_ij > 0.0))) {
-            let n_2 = (x_ij / r_ij);
+            let n_4 = (x_ij / r_ij);
             let f1 = (((((2.0 * m_i) * ldj_m(j, sgn)) / (m_i + ldj_m(j, sgn))) * pen) / (dt * dt));
             let f2 = ((sqrt(((h_i * ldj_h(j, sgn)) / (h_i + ldj_h(j, sgn)))) * ((prm_G(i) * prm_G(j)) / (prm_G(i) + prm_G(j)))) * (pen * sqrt(pen)));
             let pen_rate = ((-dot(x_ij, (v_i - ldj_v(j, sgn)))) / r_ij);
@@ -301,7 +316,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let p2 = ldj_h(j, sgn);
             let mass = ((((rho_i * ldj_rho(j, sgn)) * (h_i * h_i * h_i)) * (p1 * p1 * p1)) / ((rho_i * (h_i * h_i * h_i)) + (ldj_rho(j, sgn) * (p2 * p2 * p2))));
             let f3 = select(0.0, ((mass * pen_rate) / dt), (pen_rate > 0.0));
-            a_contact = a_contact + (((prm_K_p(i) * max(max(f1, f2), f3)) / m_i) * n_2);
+            a_contact = a_contact + (((prm_K_p(i) * max(max(f1, f2), f3)) / m_i) * n_4);
         }
     }
     // then deformation_gradient

@@ -107,11 +107,7 @@ fn st_u_0(i: u32, v: vec2<f32>) {
     data[b + 1u] = v[1];
 }
 fn prm__load0(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 13u;
-    return vec2<f32>(params[b], params[b + 1u]);
-}
-fn prm__constraint0(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 17u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 @compute @workgroup_size(64)
@@ -131,7 +127,6 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let rate_of_v = ((ld_dv(i) + ld_a_contact(i)) + select(vec2<f32>(0.0), (min((t / 0.5), 1.0) * prm__load0(i)), (ld_part(i) == 0.0)));
     let rate_of_u = v_i;
     v_i = (ld_v_0(i) + (0.5 * (dt * rate_of_v)));
-    v_i = select(v_i, (1.0 * prm__constraint0(i)), (ld_part(i) == 1.0));
     x_i = (ld_x_0(i) + (0.5 * (dt * rate_of_x)));
     u_i = (ld_u_0(i) + (0.5 * (dt * rate_of_u)));
     st_x(i, x_i);

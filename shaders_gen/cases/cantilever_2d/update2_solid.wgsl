@@ -107,11 +107,11 @@ fn st_u_0(i: u32, v: vec2<f32>) {
     data[b + 1u] = v[1];
 }
 fn prm__load0(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 17u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
-fn prm__constraint0(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 15u;
+fn prm__symmetry0(i: u32) -> vec2<f32> {
+    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 19u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 @compute @workgroup_size(64)
@@ -131,9 +131,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let rate_of_v = ((ld_dv(i) + ld_a_contact(i)) + select(vec2<f32>(0.0), (min((t / 0.5), 1.0) * prm__load0(i)), (ld_part(i) == 0.0)));
     let rate_of_u = v_i;
     v_i = (ld_v_0(i) + (dt * rate_of_v));
-    v_i = select(v_i, (1.0 * prm__constraint0(i)), (ld_part(i) == 1.0));
     x_i = (ld_x_0(i) + (0.5 * (dt * (ld_v_0(i) + v_i))));
     u_i = (ld_u_0(i) + (0.5 * (dt * (ld_v_0(i) + v_i))));
+    v_i = select(v_i, (v_i - ((2.0 * v_i[0]) * prm__symmetry0(i))), ((0.0 - x_i[0]) > 0.0));
+    x_i = select(x_i, (x_i + ((2.0 * (0.0 - x_i[0])) * prm__symmetry0(i))), ((0.0 - x_i[0]) > 0.0));
     st_x(i, x_i);
     st_v(i, v_i);
     st_u(i, u_i);

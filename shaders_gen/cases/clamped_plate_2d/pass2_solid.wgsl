@@ -57,6 +57,12 @@ fn st_v(i: u32, v: vec2<f32>) {
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
+fn ldj_v(j: u32, sgn: vec3<f32>) -> vec2<f32> {
+    let base = info[4 + ints[j]];
+    if (base == -2147483648) { return vec2<f32>(0.0); }
+    let b = u32(base + i32(j) * 2);
+    return (vec2<f32>(data[b], data[b + 1u]) * sgn.xy);
+}
 fn ldj_vol(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[5 + ints[j]];
     if (base == -2147483648) { return 0.0; }
@@ -182,19 +188,39 @@ fn st_hourglass_rate2(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 0u;
     return params[b];
 }
 fn prm_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 4u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 4u;
+    return params[b];
+}
+fn prm_G(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 6u;
+    return params[b];
+}
+fn prm_bulk(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 7u;
     return params[b];
 }
 fn prm_hourglass_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 8u;
+    return params[b];
+}
+fn prm_viscosity_alpha(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 10u;
     return params[b];
 }
 fn prm_damping(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 11u;
+    return params[b];
+}
+fn prm_clamp_normal(i: u32) -> vec2<f32> {
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 13u;
+    return vec2<f32>(params[b], params[b + 1u]);
+}
+fn prm_clamp_at(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 15u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -210,6 +236,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var dv: vec2<f32> = vec2<f32>(0.0);
     var hourglass_rate2: f32 = 0.0;
     var a: vec2<f32> = vec2<f32>(0.0);
+    let v_i = ld_v(i);
     let body_i = ld_body(i);
     let X_i = ld_X(i);
     let u_i = ld_u(i);
@@ -248,24 +275,44 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         if (r2 >= rc * rc || r2 == 0.0) { continue; }
         let x_ij = (dxv * sgn).xy;
         let r_ij = sqrt(r2);
-        // pairsum tl_momentum (stdlib/solid/total_lagrangian.sph:75)
+        // pairsum tl_momentum (stdlib/solid/total_lagrangian.sph:110)
         if ((body_i == ldj_body(j, sgn))) {
             let X_ij = (X_i - ldj_X(j, sgn));
             let g0 = kernel_grad_at(X_ij, h_ij);
-            let u_ij = (u_i - ldj_u(j, sgn));
-            let p1 = prm_rho0(i);
-            let p2 = prm_rho0(j);
-            a = a + (ldj_m(j, sgn) * (((P_i * (L0_inv_i * g0)) / (p1 * p1)) + ((ldj_P(j, sgn) * (ldj_L0_inv(j, sgn) * g0)) / (p2 * p2))));
+            let X_j = ldj_X(j, sgn);
+            let n_2 = prm_clamp_normal(i);
+            let at_2 = prm_clamp_at(i);
+            let clamped = (dot(X_j, n_2) < at_2);
+            let a_2 = ldj_u(j, sgn);
+            let n_3 = prm_clamp_normal(i);
+            let clamped_2 = clamped;
+            let u_ij = (u_i - select(a_2, (((2.0 * dot(a_2, n_3)) * n_3) - a_2), clamped_2));
+            let a_3 = (ldj_P(j, sgn) * (ldj_L0_inv(j, sgn) * g0));
+            let n_4 = prm_clamp_normal(i);
+            let clamped_3 = clamped;
+            let p1 = prm_rho0(j);
+            let side_j = (select(a_3, (((2.0 * dot(a_3, n_4)) * n_4) - a_3), clamped_3) / (p1 * p1));
+            let p2 = prm_rho0(i);
+            a = a + (ldj_m(j, sgn) * (((P_i * (L0_inv_i * g0)) / (p2 * p2)) + side_j));
             let r0 = length(X_ij);
-            let e = ((X_ij + u_ij) / length((X_ij + u_ij)));
-            let miss = dot((((0.5 * (H_i + ldj_H(j, sgn))) * X_ij) - u_ij), e);
+            let d = (X_ij + u_ij);
+            let e = (d / length(d));
+            let H_j = sel_m(ldj_H(j, sgn), ((2.0 * outer(prm_clamp_normal(i), (transpose(ldj_H(j, sgn)) * prm_clamp_normal(i)))) - ldj_H(j, sgn)), clamped);
+            let miss = dot((((0.5 * (H_i + H_j)) * X_ij) - u_ij), e);
             let k_2 = ((((prm_hourglass_alpha(i) * ldj_vol(j, sgn)) * kernel_w_at(r0, h_ij)) * prm_E(i)) / (prm_rho0(i) * (r0 * r0)));
             a = a + ((k_2 * miss) * e);
+            let a_4 = ldj_v(j, sgn);
+            let n_5 = prm_clamp_normal(i);
+            let clamped_4 = clamped;
+            let v_ij = (v_i - select(a_4, (((2.0 * dot(a_4, n_5)) * n_5) - a_4), clamped_4));
+            let c_body = sqrt(((prm_bulk(i) + ((4.0 * prm_G(i)) / 3.0)) / prm_rho0(i)));
+            let approach = (dot(v_ij, d) / (dot(d, d) + (0.01 * (h_ij * h_ij))));
+            a = a + (-(((((((ldj_m(j, sgn) * prm_viscosity_alpha(i)) * c_body) * h_ij) * approach) / prm_rho0(i)) * length(g0)) * e));
             hourglass_rate2 = hourglass_rate2 + k_2;
         }
     }
     // then tl_momentum
-    dv = (a - (prm_damping(i) * ld_v(i)));
+    dv = (a - (prm_damping(i) * v_i));
     st_dv(i, dv);
     st_hourglass_rate2(i, hourglass_rate2);
 }

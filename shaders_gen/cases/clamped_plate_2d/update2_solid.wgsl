@@ -107,15 +107,15 @@ fn st_u_0(i: u32, v: vec2<f32>) {
     data[b + 1u] = v[1];
 }
 fn prm__load0(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 17u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 fn prm__constraint0(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 19u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 fn prm__constraint1(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 21u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 @compute @workgroup_size(64)

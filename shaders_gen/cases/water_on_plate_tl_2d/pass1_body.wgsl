@@ -451,31 +451,39 @@ fn st_P(i: u32, v: mat2x2<f32>) {
     data[b + 3u] = v[1][1];
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 0u;
     return params[b];
 }
 fn prm_gravity(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 2u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 2u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 5u;
     return params[b];
 }
 fn prm_gamma(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 6u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 13u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 14u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 16u;
+    return params[b];
+}
+fn prm_clamp_normal(i: u32) -> vec2<f32> {
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 20u;
+    return vec2<f32>(params[b], params[b + 1u]);
+}
+fn prm_clamp_at(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 22u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -552,13 +560,20 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 weighted = weighted + ((ldj_p(j, sgn) + (ldj_rho(j, sgn) * dot(prm_gravity(i), x_ij))) * W_ij);
                 weight = weight + W_ij;
             }
-            // pairsum deformation_gradient (stdlib/solid/total_lagrangian.sph:56)
+            // pairsum deformation_gradient (stdlib/solid/total_lagrangian.sph:90)
             if (in_groups(4u, ints[j])) {
                 if ((body_i == ldj_body(j, sgn))) {
                     let X_ij = (X_i - ldj_X(j, sgn));
                     let g0 = (ldj_vol(j, sgn) * kernel_grad_at(X_ij, h_ij));
+                    let a = ldj_u(j, sgn);
+                    let n_2 = prm_clamp_normal(i);
+                    let X_j = ldj_X(j, sgn);
+                    let n_3 = prm_clamp_normal(i);
+                    let at_2 = prm_clamp_at(i);
+                    let clamped = (dot(X_j, n_3) < at_2);
+                    let u_j = select(a, (((2.0 * dot(a, n_2)) * n_2) - a), clamped);
                     L0 = L0 + neg_m(outer(g0, X_ij));
-                    H0 = H0 + outer((ldj_u(j, sgn) - u_i), g0);
+                    H0 = H0 + outer((u_j - u_i), g0);
                 }
             }
         }

@@ -513,19 +513,27 @@ fn st_a_contact(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 7u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 8u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 10u;
+    return params[b];
+}
+fn prm_clamp_normal(i: u32) -> vec3<f32> {
+    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 14u;
+    return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
+}
+fn prm_clamp_at(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 17u;
     return params[b];
 }
 fn prm_K_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 18u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -595,17 +603,24 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             if (r2 >= rc * rc || r2 == 0.0) { continue; }
             let x_ij = (dxv * sgn);
             let r_ij = sqrt(r2);
-            // pairsum deformation_gradient (stdlib/solid/total_lagrangian.sph:56)
+            // pairsum deformation_gradient (stdlib/solid/total_lagrangian.sph:90)
             if ((body_i == ldj_body(j, sgn))) {
                 let X_ij = (X_i - ldj_X(j, sgn));
                 let g0 = (ldj_vol(j, sgn) * kernel_grad_at(X_ij, h_ij));
+                let a = ldj_u(j, sgn);
+                let n_2 = prm_clamp_normal(i);
+                let X_j = ldj_X(j, sgn);
+                let n_3 = prm_clamp_normal(i);
+                let at_2 = prm_clamp_at(i);
+                let clamped = (dot(X_j, n_3) < at_2);
+                let u_j = select(a, (((2.0 * dot(a, n_2)) * n_2) - a), clamped);
                 L0 = L0 + neg_m(outer(g0, X_ij));
-                H0 = H0 + outer((ldj_u(j, sgn) - u_i), g0);
+                H0 = H0 + outer((u_j - u_i), g0);
             }
             // pairsum contact (stdlib/contact/penalty.sph:26)
             let pen = (((dx_i + ldj_dx(j, sgn)) / 2.0) - r_ij);
             if ((((body_i != ldj_body(j, sgn)) && (pen > 0.0)) && (r_ij > 0.0))) {
-                let n_2 = (x_ij / r_ij);
+                let n_4 = (x_ij / r_ij);
                 let f1 = (((((2.0 * m_i) * ldj_m(j, sgn)) / (m_i + ldj_m(j, sgn))) * pen) / (dt * dt));
                 let f2 = ((sqrt(((h_i * ldj_h(j, sgn)) / (h_i + ldj_h(j, sgn)))) * ((prm_G(i) * prm_G(j)) / (prm_G(i) + prm_G(j)))) * (pen * sqrt(pen)));
                 let pen_rate = ((-dot(x_ij, (v_i - ldj_v(j, sgn)))) / r_ij);
@@ -613,7 +628,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 let p2 = ldj_h(j, sgn);
                 let mass = ((((rho_i * ldj_rho(j, sgn)) * (h_i * h_i * h_i)) * (p1 * p1 * p1)) / ((rho_i * (h_i * h_i * h_i)) + (ldj_rho(j, sgn) * (p2 * p2 * p2))));
                 let f3 = select(0.0, ((mass * pen_rate) / dt), (pen_rate > 0.0));
-                a_contact = a_contact + (((prm_K_p(i) * max(max(f1, f2), f3)) / m_i) * n_2);
+                a_contact = a_contact + (((prm_K_p(i) * max(max(f1, f2), f3)) / m_i) * n_4);
             }
         }
         }}}
