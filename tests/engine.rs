@@ -282,33 +282,35 @@ fn a_collapsing_time_step_stops_the_run_naming_the_fastest_particle() {
 
 /// A particle that crosses a symmetry plane comes back on the model's side with its normal
 /// velocity reversed, as its mirror image would have: |x₀ − v t| along the normal, the tangential
-/// motion untouched.
+/// motion untouched. The same at a plane whose scene lies below it (the upper of two planes on one
+/// axis), where the particle moving up comes back down.
 #[test]
-fn a_particle_crossing_a_symmetry_plane_is_reflected_back() {
+fn a_particle_crossing_a_symmetry_plane_is_reflected_back_whichever_side_the_scene_keeps() {
     for rates in ["x' = v", "x' = v  v' = 0"] {
-        reflected_at_a_plane(&model(&format!(
-            "use kernels\ngroup metal\nkernel = wendland_c2\nintegrate {{ {rates} }}\n"
-        )));
+        let m = model(&format!("use kernels\ngroup metal\nkernel = wendland_c2\nintegrate {{ {rates} }}\n"));
+        // plane x = 0 keeping above: from 5 mm at −1 m/s, back at 15 mm after 20 ms
+        reflected_at_a_plane(&m, Mirror::symmetry(0, 0.0), [0.005, 0.03], -1.0, [0.015, 0.01]);
+        // plane x = 40 mm keeping below: from 35 mm at +1 m/s, back at 25 mm
+        reflected_at_a_plane(&m, Mirror::symmetry_below(0, 0.04), [0.035, 0.01], 1.0, [0.025, 0.03]);
     }
 }
 
-fn reflected_at_a_plane(m: &pairsum::ir::Model) {
+/// Two particles at x = `starts` moving at `speed` along x (and 0.5 m/s along y) for 20 ms: they
+/// end at x = `ends`, the first with its x-velocity reversed, and no particle is ever behind the
+/// plane.
+fn reflected_at_a_plane(m: &pairsum::ir::Model, plane: Mirror, starts: [f64; 2], speed: f64, ends: [f64; 2]) {
     let m = m.clone();
-    let mut inp = input(2, vec![[0.005, 0.02, 0.0], [0.03, 0.02, 0.0]], 0.01);
-    inp.v = vec![[-1.0, 0.5, 0.0], [-1.0, 0.5, 0.0]];
+    let mut inp = input(2, vec![[starts[0], 0.02, 0.0], [starts[1], 0.02, 0.0]], 0.01);
+    inp.v = vec![[speed, 0.5, 0.0], [speed, 0.5, 0.0]];
     let mat = material(&m, &[("rho0", vec![1000.0])]);
     for integrator in [IntegratorKind::Euler, IntegratorKind::PredictorCorrector, IntegratorKind::Symplectic] {
-        let spec = pairsum::schedule::SceneSpec {
-            planes: vec![pairsum::backend::Mirror::symmetry(0, 0.0)],
-            ..scene(&m, 2, &["v"], integrator)
-        };
-        let mirrors = vec![Mirror::symmetry(0, 0.0)];
-        let b = backend::<f64>(&m, &spec, &inp, std::slice::from_ref(&mat), mirrors);
+        let spec = pairsum::schedule::SceneSpec { planes: vec![plane], ..scene(&m, 2, &["v"], integrator) };
+        let b = backend::<f64>(&m, &spec, &inp, std::slice::from_ref(&mat), vec![plane]);
         let mut e = Engine::new(b, RunConfig { end_time: 0.02, dt_max: 1e-3, ..RunConfig::default() });
         e.initialise().expect("initialise");
         e.run(&mut |e| {
             let (_, x) = field_by_id(&e.backend, "x");
-            if x.iter().step_by(2).all(|c| *c >= 0.0) {
+            if x.iter().step_by(2).all(|c| plane.side * (c - plane.offset) >= 0.0) {
                 Ok(())
             } else {
                 Err(format!("a particle is behind the plane at t = {}: {x:?}", e.time))
@@ -317,8 +319,8 @@ fn reflected_at_a_plane(m: &pairsum::ir::Model) {
         .unwrap_or_else(|err| panic!("{integrator:?}: {err}"));
         let (_, x) = field_by_id(&e.backend, "x");
         let (_, v) = field_by_id(&e.backend, "v");
-        let want_x = [0.015, 0.02 + 0.5 * 0.02, 0.01, 0.02 + 0.5 * 0.02];
-        let want_v = [1.0, 0.5, -1.0, 0.5];
+        let want_x = [ends[0], 0.02 + 0.5 * 0.02, ends[1], 0.02 + 0.5 * 0.02];
+        let want_v = [-speed, 0.5, speed, 0.5];
         for k in 0..4 {
             assert!((x[k] - want_x[k]).abs() < 1e-12, "{integrator:?}: x = {x:?}, want {want_x:?}");
             assert!((v[k] - want_v[k]).abs() < 1e-12, "{integrator:?}: v = {v:?}, want {want_v:?}");

@@ -538,7 +538,8 @@ fn build(
         }
         materials.push(mi);
     }
-    // Symmetry planes: the scene is the part of space on their positive side.
+    // Symmetry planes: the scene is the part of space on the side each keeps (above, by default;
+    // an axis may have two planes, the lower keeping above and the upper below).
     let mut mirrors = vec![];
     for sym in &case.symmetry {
         let axis = match sym.axis.get_ref().as_str() {
@@ -550,20 +551,45 @@ fn build(
                 continue;
             }
         };
-        if axis >= dim || mirrors.iter().any(|m: &Mirror| m.axis == axis) {
-            cx.err(
-                sym.axis.span(),
-                "C0014",
-                format!("a {dim}D case has one symmetry plane per axis among the first {dim}"),
-                "here",
-            );
+        if axis >= dim {
+            cx.err(sym.axis.span(), "C0014", format!("a {dim}D case has no axis {}", ir::AXIS_NAMES[axis]), "here");
             continue;
         }
         let at = match &sym.at {
             Some(v) => cx.scalar(v, m, "symmetry plane position")?,
             None => 0.0,
         };
-        mirrors.push(Mirror::symmetry(axis, at));
+        let plane = match sym.keep.as_ref().map(|k| k.get_ref().as_str()) {
+            None | Some("above") => Mirror::symmetry(axis, at),
+            Some("below") => Mirror::symmetry_below(axis, at),
+            Some(other) => {
+                let span = sym.keep.as_ref().map(|k| k.span()).unwrap_or_else(|| sym.axis.span());
+                cx.err(span, "C0014", format!("`keep` is \"above\" or \"below\", found `{other}`"), "here");
+                continue;
+            }
+        };
+        let same_axis: Vec<&Mirror> = mirrors.iter().filter(|m: &&Mirror| m.axis == axis).collect();
+        let pair_ok = match same_axis.as_slice() {
+            [] => true,
+            [other] => {
+                let (lower, upper) = if plane.side > 0.0 { (&plane, *other) } else { (*other, &plane) };
+                lower.side > 0.0 && upper.side < 0.0 && lower.offset < upper.offset
+            }
+            _ => false,
+        };
+        if !pair_ok {
+            cx.err(
+                sym.axis.span(),
+                "C0014",
+                format!(
+                    "axis {} has at most two symmetry planes: the lower keeping \"above\", the upper keeping \"below\"",
+                    ir::AXIS_NAMES[axis]
+                ),
+                "here",
+            );
+            continue;
+        }
+        mirrors.push(plane);
     }
     let mut periodic_spans = vec![];
     if let Some(periodic) = &case.periodic {
@@ -1261,7 +1287,7 @@ fn place(
         return Some(placed);
     }
     let keep: Vec<usize> =
-        (0..placed.len()).filter(|k| mirrors.iter().all(|m| placed.positions[*k][m.axis] > m.offset)).collect();
+        (0..placed.len()).filter(|k| mirrors.iter().all(|m| m.keeps(placed.positions[*k][m.axis]))).collect();
     let name = body.name.get_ref();
     if keep.is_empty() {
         cx.err(body.shape.span(), "C0025", format!("body `{name}` lies behind a symmetry plane"), "no particle kept");
@@ -1374,8 +1400,14 @@ fn place_whole(
     } else {
         match shape.bbox(cx.dim) {
             Ok((mut min, _)) => {
-                for m in mirrors {
+                for m in mirrors.iter().filter(|m| m.side > 0.0) {
                     min[m.axis] = m.offset;
+                }
+                // an upper plane alone on its axis: the corner a whole number of spacings below it
+                for m in
+                    mirrors.iter().filter(|m| m.side < 0.0 && !mirrors.iter().any(|o| o.axis == m.axis && o.side > 0.0))
+                {
+                    min[m.axis] = m.offset - ((m.offset - min[m.axis]) / spacing).ceil() * spacing;
                 }
                 Some(min)
             }
@@ -1621,7 +1653,7 @@ fn warn_gap_at_planes(
     cx: &mut Ctx,
 ) {
     for m in mirrors {
-        let off = |k: &usize| (placed.positions[*k][m.axis] - m.offset) / placed.spacing[*k];
+        let off = |k: &usize| m.side * (placed.positions[*k][m.axis] - m.offset) / placed.spacing[*k];
         let nearest = keep.iter().map(off).fold(f64::INFINITY, f64::min);
         if !(0.75..=1.5).contains(&nearest) {
             continue;

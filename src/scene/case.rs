@@ -281,6 +281,9 @@ pub struct Symmetry {
     pub axis: Spanned<String>,
     #[serde(default)]
     pub at: Option<Value>,
+    /// `"above"` (the default) or `"below"`: the side of the plane the scene keeps.
+    #[serde(default)]
+    pub keep: Option<Spanned<String>>,
 }
 
 /// `[neighbours]`: `search = "cells" | "verlet" | "adaptive"`, the skin (a fraction of the

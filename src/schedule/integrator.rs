@@ -105,7 +105,7 @@ pub fn scene_params(model: &mut Model, scene: &SceneSpec) -> Vec<SceneParam> {
         let along = |length: f64| (0..scene.dim).map(|c| if c == plane.axis { length } else { 0.0 }).collect();
         if plane.shift == 0.0 {
             let p = synthetic_param(model, &format!("@symmetry{k}"), Shape::Vec, Unit::ONE);
-            out.push(SceneParam { param: p, value: along(1.0), role: SceneRole::Symmetry(k) });
+            out.push(SceneParam { param: p, value: along(plane.side), role: SceneRole::Symmetry(k) });
         } else if plane.shift > 0.0 {
             let p = synthetic_param(model, &format!("@period{k}"), Shape::Vec, Unit::M);
             out.push(SceneParam { param: p, value: along(plane.shift), role: SceneRole::Period(k) });
@@ -327,27 +327,32 @@ fn wrap(plan: &Plan, scene: &SceneSpec, x: FieldId) -> Vec<Stmt> {
 }
 
 /// Reflection at the symmetry planes, after `x` and `v` are updated in the step's last stage
-/// (a predictor may leave a particle behind a plane for half a step): where `x[axis] < offset`,
-/// `v[axis]` changes sign and `x[axis]` becomes `2 offset − x[axis]` (`n` is the plane's unit
-/// normal, the parameter `@symmetry{k}`).
+/// (a predictor may leave a particle behind a plane for half a step): where `x` lies behind the
+/// plane (`x[axis] < offset` for a plane whose particles live above it, `>` below), `v[axis]`
+/// changes sign and `x[axis]` becomes `2 offset − x[axis]` (`n` is the plane's unit normal into
+/// the particles' side, the parameter `@symmetry{k}`).
 fn reflect(plan: &Plan, scene: &SceneSpec, x: FieldId, v: Option<FieldId>) -> Vec<Stmt> {
     let model = &plan.model;
     let mut out = wrap(plan, scene, x);
     for sp in &plan.scene_params {
         let SceneRole::Symmetry(k) = sp.role else { continue };
-        let (axis, offset) = (scene.planes[k].axis, scene.planes[k].offset);
+        let (axis, offset, side) = (scene.planes[k].axis, scene.planes[k].offset, scene.planes[k].side);
         let n = Expr::param(sp.param, model.params[sp.param.index()].ty);
         let component = |f: FieldId| {
             let ty = model.field(f).ty;
             Expr::new(ExprKind::Component(Box::new(Expr::field(f, ty)), axis as u8, 0), Type::scalar(ty.unit))
         };
         let x_ty = model.field(x).ty;
-        let depth = Expr::constant(offset, Type::scalar(x_ty.unit)).minus(component(x));
+        // how far behind the plane, along n
+        let plane = Expr::constant(offset, Type::scalar(x_ty.unit));
+        let depth = if side > 0.0 { plane.minus(component(x)) } else { component(x).minus(plane) };
         let crossed = || Expr::binary(Op::Gt, depth.clone(), Expr::constant(0.0, depth.ty), Type::BOOL);
         let two = || Expr::constant(2.0, Type::scalar(Unit::ONE));
         if let Some(v) = v {
             let ty = model.field(v).ty;
-            let flipped = Expr::field(v, ty).minus(n.clone().scaled_by(component(v).scaled_by(two())));
+            // 2 (v · n), with n = ±e_axis
+            let twice_normal = component(v).scaled_by(Expr::constant(2.0 * side, Type::scalar(Unit::ONE)));
+            let flipped = Expr::field(v, ty).minus(n.clone().scaled_by(twice_normal));
             out.push(Stmt::Set(v, Expr::select(crossed(), flipped, Expr::field(v, ty))));
         }
         let back = Expr::field(x, x_ty).plus(n.scaled_by(depth.clone().scaled_by(two())));

@@ -26,25 +26,41 @@ use crate::ir::{self, EqId, FieldId, GroupId, GroupSet, Model, ParamId, Storage}
 use crate::units::Unit;
 
 /// A plane `x[axis] = offset` that gives the particles within reach of it an image their
-/// neighbours see: a symmetry plane (`shift` 0) reflects them across it; a side of a periodic
-/// domain (`shift` ±L, the domain's length) moves them by `shift` along the axis, the lower side
-/// by +L, the upper by −L.
+/// neighbours see: a symmetry plane (`shift` 0) reflects them across it, and the particles live
+/// on its `side` (+1: `x[axis] > offset`, −1: below); a side of a periodic domain (`shift` ±L,
+/// the domain's length) moves them by `shift` along the axis, the lower side by +L, the upper by
+/// −L (`side` +1 and −1, the domain's side).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Mirror {
     pub axis: usize,
     pub offset: f64,
     pub shift: f64,
+    pub side: f64,
 }
 
 impl Mirror {
-    /// A symmetry plane.
+    /// A symmetry plane whose particles live above it (`x[axis] > offset`).
     pub fn symmetry(axis: usize, offset: f64) -> Mirror {
-        Mirror { axis, offset, shift: 0.0 }
+        Mirror { axis, offset, shift: 0.0, side: 1.0 }
+    }
+
+    /// A symmetry plane whose particles live below it (`x[axis] < offset`): the upper of two
+    /// planes on one axis.
+    pub fn symmetry_below(axis: usize, offset: f64) -> Mirror {
+        Mirror { axis, offset, shift: 0.0, side: -1.0 }
     }
 
     /// The two sides of a periodic domain `[lo, hi)` along `axis`.
     pub fn periodic(axis: usize, lo: f64, hi: f64) -> [Mirror; 2] {
-        [Mirror { axis, offset: lo, shift: hi - lo }, Mirror { axis, offset: hi, shift: lo - hi }]
+        [
+            Mirror { axis, offset: lo, shift: hi - lo, side: 1.0 },
+            Mirror { axis, offset: hi, shift: lo - hi, side: -1.0 },
+        ]
+    }
+
+    /// Whether a position along the plane's axis lies on the particles' side of it.
+    pub fn keeps(&self, along: f64) -> bool {
+        self.side * (along - self.offset) > 0.0
     }
 }
 

@@ -39,7 +39,8 @@ pub fn describe(plan: &Plan, real: usize) -> String {
     for p in &plan.planes {
         let axis = crate::ir::AXIS_NAMES[p.axis];
         if p.shift == 0.0 {
-            let _ = writeln!(s, "symmetry plane: {axis} = {} m", p.offset);
+            let keeps = if p.side > 0.0 { "" } else { " (the scene below it)" };
+            let _ = writeln!(s, "symmetry plane: {axis} = {} m{keeps}", p.offset);
         } else if p.shift > 0.0 {
             let _ = writeln!(s, "periodic: {axis} in [{}, {}) m", p.offset, p.offset + p.shift);
         }

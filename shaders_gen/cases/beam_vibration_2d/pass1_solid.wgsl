@@ -48,6 +48,15 @@ fn pos3(p: u32) -> vec3<f32> {
     return vec3<f32>(data[b + 0u], data[b + 1u], 0.0);
 }
 fn h_of(p: u32) -> f32 { return data[u32(info[10u + ints[p]] + i32(p))]; }
+fn ld_x(i: u32) -> vec2<f32> {
+    let b = u32(info[3 + G] + i32(i) * 2);
+    return vec2<f32>(data[b], data[b + 1u]);
+}
+fn st_x(i: u32, v: vec2<f32>) {
+    let b = u32(info[3 + G] + i32(i) * 2);
+    data[b] = v[0];
+    data[b + 1u] = v[1];
+}
 fn ld_v(i: u32) -> vec2<f32> {
     let b = u32(info[4 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
@@ -139,75 +148,60 @@ fn ldj_h(j: u32, sgn: vec3<f32>) -> f32 {
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
-fn ld_X(i: u32) -> vec2<f32> {
+fn ld_u(i: u32) -> vec2<f32> {
     let b = u32(info[11 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
-fn st_X(i: u32, v: vec2<f32>) {
+fn st_u(i: u32, v: vec2<f32>) {
     let b = u32(info[11 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
-fn ldj_X(j: u32, sgn: vec3<f32>) -> vec2<f32> {
+fn ldj_u(j: u32, sgn: vec3<f32>) -> vec2<f32> {
     let base = info[11 + ints[j]];
     if (base == -2147483648) { return vec2<f32>(0.0); }
     let b = u32(base + i32(j) * 2);
     return (vec2<f32>(data[b], data[b + 1u]) * sgn.xy);
 }
-fn ld_u(i: u32) -> vec2<f32> {
-    let b = u32(info[12 + G] + i32(i) * 2);
-    return vec2<f32>(data[b], data[b + 1u]);
-}
-fn st_u(i: u32, v: vec2<f32>) {
-    let b = u32(info[12 + G] + i32(i) * 2);
-    data[b] = v[0];
-    data[b + 1u] = v[1];
-}
-fn ldj_u(j: u32, sgn: vec3<f32>) -> vec2<f32> {
-    let base = info[12 + ints[j]];
-    if (base == -2147483648) { return vec2<f32>(0.0); }
-    let b = u32(base + i32(j) * 2);
-    return (vec2<f32>(data[b], data[b + 1u]) * sgn.xy);
-}
 fn ld_L0_inv(i: u32) -> mat2x2<f32> {
-    let b = u32(info[13 + G] + i32(i) * 4);
+    let b = u32(info[12 + G] + i32(i) * 4);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u]));
 }
 fn st_L0_inv(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[13 + G] + i32(i) * 4);
+    let b = u32(info[12 + G] + i32(i) * 4);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[0][1];
     data[b + 3u] = v[1][1];
 }
 fn ld_H(i: u32) -> mat2x2<f32> {
-    let b = u32(info[14 + G] + i32(i) * 4);
+    let b = u32(info[13 + G] + i32(i) * 4);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u]));
 }
 fn st_H(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[14 + G] + i32(i) * 4);
+    let b = u32(info[13 + G] + i32(i) * 4);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[0][1];
     data[b + 3u] = v[1][1];
 }
 fn ld_P(i: u32) -> mat2x2<f32> {
-    let b = u32(info[15 + G] + i32(i) * 4);
+    let b = u32(info[14 + G] + i32(i) * 4);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u]));
 }
 fn st_P(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[15 + G] + i32(i) * 4);
+    let b = u32(info[14 + G] + i32(i) * 4);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[0][1];
     data[b + 3u] = v[1][1];
 }
 fn ld_a_contact(i: u32) -> vec2<f32> {
-    let b = u32(info[18 + G] + i32(i) * 2);
+    let b = u32(info[17 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_a_contact(i: u32, v: vec2<f32>) {
-    let b = u32(info[18 + G] + i32(i) * 2);
+    let b = u32(info[17 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
@@ -251,13 +245,13 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var H0: mat2x2<f32> = mat2x2<f32>();
     // pairsum contact: accumulators
     var a_contact: vec2<f32> = vec2<f32>(0.0);
+    let x_i = ld_x(i);
     let v_i = ld_v(i);
     let dx_i = ld_dx(i);
     let body_i = ld_body(i);
     let m_i = ld_m(i);
     let rho_i = ld_rho(i);
     let h_i = ld_h(i);
-    let X_i = ld_X(i);
     let u_i = ld_u(i);
     let xi = pos3(i);
     let hi = h_of(i);
@@ -291,17 +285,17 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         if (r2 >= rc * rc || r2 == 0.0) { continue; }
         let x_ij = (dxv * sgn).xy;
         let r_ij = sqrt(r2);
-        // pairsum deformation_gradient (stdlib/solid/total_lagrangian.sph:90)
+        // pairsum deformation_gradient (stdlib/solid/total_lagrangian.sph:92)
         if ((body_i == ldj_body(j, sgn))) {
-            let X_ij = (X_i - ldj_X(j, sgn));
-            let g0 = (ldj_vol(j, sgn) * kernel_grad_at(X_ij, h_ij));
             let a = ldj_u(j, sgn);
             let n_2 = prm_clamp_normal(i);
-            let X_j = ldj_X(j, sgn);
+            let X_j = (x_i - x_ij);
             let n_3 = prm_clamp_normal(i);
             let at_2 = prm_clamp_at(i);
             let clamped = (dot(X_j, n_3) < at_2);
             let u_j = select(a, (((2.0 * dot(a, n_2)) * n_2) - a), clamped);
+            let X_ij = (x_ij - (u_i - u_j));
+            let g0 = (ldj_vol(j, sgn) * kernel_grad_at(X_ij, h_ij));
             L0 = L0 + neg_m(outer(g0, X_ij));
             H0 = H0 + outer((u_j - u_i), g0);
         }

@@ -53,69 +53,61 @@ fn st_part(i: u32, v: f32) {
     data[b] = v;
 }
 fn ld_u(i: u32) -> vec2<f32> {
-    let b = u32(info[13 + G] + i32(i) * 2);
+    let b = u32(info[12 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_u(i: u32, v: vec2<f32>) {
-    let b = u32(info[13 + G] + i32(i) * 2);
+    let b = u32(info[12 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_dv(i: u32) -> vec2<f32> {
-    let b = u32(info[17 + G] + i32(i) * 2);
+    let b = u32(info[16 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_dv(i: u32, v: vec2<f32>) {
-    let b = u32(info[17 + G] + i32(i) * 2);
+    let b = u32(info[16 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_a_contact(i: u32) -> vec2<f32> {
-    let b = u32(info[19 + G] + i32(i) * 2);
+    let b = u32(info[18 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_a_contact(i: u32, v: vec2<f32>) {
-    let b = u32(info[19 + G] + i32(i) * 2);
+    let b = u32(info[18 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_x_0(i: u32) -> vec2<f32> {
-    let b = u32(info[20 + G] + i32(i) * 2);
+    let b = u32(info[19 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_x_0(i: u32, v: vec2<f32>) {
-    let b = u32(info[20 + G] + i32(i) * 2);
+    let b = u32(info[19 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_v_0(i: u32) -> vec2<f32> {
-    let b = u32(info[21 + G] + i32(i) * 2);
+    let b = u32(info[20 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_v_0(i: u32, v: vec2<f32>) {
-    let b = u32(info[21 + G] + i32(i) * 2);
+    let b = u32(info[20 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_u_0(i: u32) -> vec2<f32> {
-    let b = u32(info[22 + G] + i32(i) * 2);
+    let b = u32(info[21 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_u_0(i: u32, v: vec2<f32>) {
-    let b = u32(info[22 + G] + i32(i) * 2);
+    let b = u32(info[21 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn prm__load0(i: u32) -> vec2<f32> {
     let b = ints[arrayLength(&ints) / 2u + i] * 23u + 17u;
-    return vec2<f32>(params[b], params[b + 1u]);
-}
-fn prm__constraint0(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 19u;
-    return vec2<f32>(params[b], params[b + 1u]);
-}
-fn prm__constraint1(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 21u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 @compute @workgroup_size(64)
@@ -135,8 +127,6 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let rate_of_v = ((ld_dv(i) + ld_a_contact(i)) + select(vec2<f32>(0.0), (min((t / 0.04), 1.0) * prm__load0(i)), (ld_part(i) == 0.0)));
     let rate_of_u = v_i;
     v_i = (ld_v_0(i) + (0.5 * (dt * rate_of_v)));
-    v_i = select(v_i, (1.0 * prm__constraint0(i)), (ld_part(i) == 1.0));
-    v_i = select(v_i, (1.0 * prm__constraint1(i)), (ld_part(i) == 2.0));
     x_i = (ld_x_0(i) + (0.5 * (dt * rate_of_x)));
     u_i = (ld_u_0(i) + (0.5 * (dt * rate_of_u)));
     st_x(i, x_i);

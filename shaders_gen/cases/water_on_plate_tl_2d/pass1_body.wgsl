@@ -322,7 +322,16 @@ fn pos3(p: u32) -> vec3<f32> {
     let b = u32(info[7u + ints[p]] + i32(p) * 2);
     return vec3<f32>(data[b + 0u], data[b + 1u], 0.0);
 }
-fn h_of(p: u32) -> f32 { return data[u32(info[28u + ints[p]] + i32(p))]; }
+fn h_of(p: u32) -> f32 { return data[u32(info[25u + ints[p]] + i32(p))]; }
+fn ld_x(i: u32) -> vec2<f32> {
+    let b = u32(info[7 + G] + i32(i) * 2);
+    return vec2<f32>(data[b], data[b + 1u]);
+}
+fn st_x(i: u32, v: vec2<f32>) {
+    let b = u32(info[7 + G] + i32(i) * 2);
+    data[b] = v[0];
+    data[b + 1u] = v[1];
+}
 fn ldj_vol(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[13 + ints[j]];
     if (base == -2147483648) { return 0.0; }
@@ -344,107 +353,84 @@ fn ldj_body(j: u32, sgn: vec3<f32>) -> f32 {
     return data[b];
 }
 fn ldj_rho(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[25 + ints[j]];
+    let base = info[22 + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
 fn ld_p(i: u32) -> f32 {
-    let b = u32(info[31 + G] + i32(i) * 1);
+    let b = u32(info[28 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p(i: u32, v: f32) {
-    let b = u32(info[31 + G] + i32(i) * 1);
+    let b = u32(info[28 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_p(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[31 + ints[j]];
+    let base = info[28 + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
-fn ld_p_over_rho2(i: u32) -> f32 {
-    let b = u32(info[34 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_p_over_rho2(i: u32, v: f32) {
-    let b = u32(info[34 + G] + i32(i) * 1);
-    data[b] = v;
-}
 fn ld_c(i: u32) -> f32 {
-    let b = u32(info[37 + G] + i32(i) * 1);
+    let b = u32(info[34 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_c(i: u32, v: f32) {
-    let b = u32(info[37 + G] + i32(i) * 1);
+    let b = u32(info[34 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_p_wall(i: u32) -> f32 {
-    let b = u32(info[43 + G] + i32(i) * 1);
+    let b = u32(info[40 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p_wall(i: u32, v: f32) {
-    let b = u32(info[43 + G] + i32(i) * 1);
+    let b = u32(info[40 + G] + i32(i) * 1);
     data[b] = v;
 }
-fn ld_X(i: u32) -> vec2<f32> {
-    let b = u32(info[46 + G] + i32(i) * 2);
-    return vec2<f32>(data[b], data[b + 1u]);
-}
-fn st_X(i: u32, v: vec2<f32>) {
-    let b = u32(info[46 + G] + i32(i) * 2);
-    data[b] = v[0];
-    data[b + 1u] = v[1];
-}
-fn ldj_X(j: u32, sgn: vec3<f32>) -> vec2<f32> {
-    let base = info[46 + ints[j]];
-    if (base == -2147483648) { return vec2<f32>(0.0); }
-    let b = u32(base + i32(j) * 2);
-    return (vec2<f32>(data[b], data[b + 1u]) * sgn.xy);
-}
 fn ld_u(i: u32) -> vec2<f32> {
-    let b = u32(info[49 + G] + i32(i) * 2);
+    let b = u32(info[43 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_u(i: u32, v: vec2<f32>) {
-    let b = u32(info[49 + G] + i32(i) * 2);
+    let b = u32(info[43 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ldj_u(j: u32, sgn: vec3<f32>) -> vec2<f32> {
-    let base = info[49 + ints[j]];
+    let base = info[43 + ints[j]];
     if (base == -2147483648) { return vec2<f32>(0.0); }
     let b = u32(base + i32(j) * 2);
     return (vec2<f32>(data[b], data[b + 1u]) * sgn.xy);
 }
 fn ld_L0_inv(i: u32) -> mat2x2<f32> {
-    let b = u32(info[61 + G] + i32(i) * 4);
+    let b = u32(info[55 + G] + i32(i) * 4);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u]));
 }
 fn st_L0_inv(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[61 + G] + i32(i) * 4);
+    let b = u32(info[55 + G] + i32(i) * 4);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[0][1];
     data[b + 3u] = v[1][1];
 }
 fn ld_H(i: u32) -> mat2x2<f32> {
-    let b = u32(info[64 + G] + i32(i) * 4);
+    let b = u32(info[58 + G] + i32(i) * 4);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u]));
 }
 fn st_H(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[64 + G] + i32(i) * 4);
+    let b = u32(info[58 + G] + i32(i) * 4);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[0][1];
     data[b + 3u] = v[1][1];
 }
 fn ld_P(i: u32) -> mat2x2<f32> {
-    let b = u32(info[67 + G] + i32(i) * 4);
+    let b = u32(info[61 + G] + i32(i) * 4);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u]));
 }
 fn st_P(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[67 + G] + i32(i) * 4);
+    let b = u32(info[61 + G] + i32(i) * 4);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[0][1];
@@ -506,8 +492,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var H: mat2x2<f32> = mat2x2<f32>();
     var L0: mat2x2<f32> = mat2x2<f32>();
     var H0: mat2x2<f32> = mat2x2<f32>();
+    let x_i = ld_x(i);
     let body_i = ld_body(i);
-    let X_i = ld_X(i);
     let u_i = ld_u(i);
     let xi = pos3(i);
     let hi = h_of(i);
@@ -545,7 +531,6 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         for (var s = cell_start(cell); s < cell_start(cell + 1u); s++) {
             let j = sorted_particle(s);
             if (tr == 0u && j == i) { continue; }
-            if (!in_groups(5u, ints[j])) { continue; }
             let dxv = yi - pos3(j);
             let r2 = dot(dxv, dxv);
             let h_ij = 0.5 * (hi + h_of(j));
@@ -560,18 +545,18 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 weighted = weighted + ((ldj_p(j, sgn) + (ldj_rho(j, sgn) * dot(prm_gravity(i), x_ij))) * W_ij);
                 weight = weight + W_ij;
             }
-            // pairsum deformation_gradient (stdlib/solid/total_lagrangian.sph:90)
+            // pairsum deformation_gradient (stdlib/solid/total_lagrangian.sph:92)
             if (in_groups(4u, ints[j])) {
                 if ((body_i == ldj_body(j, sgn))) {
-                    let X_ij = (X_i - ldj_X(j, sgn));
-                    let g0 = (ldj_vol(j, sgn) * kernel_grad_at(X_ij, h_ij));
                     let a = ldj_u(j, sgn);
                     let n_2 = prm_clamp_normal(i);
-                    let X_j = ldj_X(j, sgn);
+                    let X_j = (x_i - x_ij);
                     let n_3 = prm_clamp_normal(i);
                     let at_2 = prm_clamp_at(i);
                     let clamped = (dot(X_j, n_3) < at_2);
                     let u_j = select(a, (((2.0 * dot(a, n_2)) * n_2) - a), clamped);
+                    let X_ij = (x_ij - (u_i - u_j));
+                    let g0 = (ldj_vol(j, sgn) * kernel_grad_at(X_ij, h_ij));
                     L0 = L0 + neg_m(outer(g0, X_ij));
                     H0 = H0 + outer((u_j - u_i), g0);
                 }
@@ -584,8 +569,6 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let p1 = prm_c0(i);
     let ratio = pow(((p_wall / (((p1 * p1) * prm_rho0(i)) / prm_gamma(i))) + 1.0), (1.0 / prm_gamma(i)));
     c_2 = (prm_c0(i) * pow(ratio, ((prm_gamma(i) - 1.0) / 2.0)));
-    let p2 = (prm_rho0(i) * ratio);
-    p_over_rho2 = (p_wall / (p2 * p2));
     // then body_pressure
     var p_i: f32 = ld_p(i);
     p_i = p_wall;
@@ -600,7 +583,6 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let strain = (sym(H_2) + (0.5 * sym((transpose(H_2) * H_2))));
     P_i = ((eye() + H_2) * ((((bulk - ((2.0 * G_2) / 3.0)) * trace(strain)) * eye()) + ((2.0 * G_2) * strain)));
     st_p(i, p_i);
-    st_p_over_rho2(i, p_over_rho2);
     st_c(i, c_2);
     st_p_wall(i, p_wall);
     st_L0_inv(i, L0_inv);

@@ -322,7 +322,16 @@ fn pos3(p: u32) -> vec3<f32> {
     let b = u32(info[7u + ints[p]] + i32(p) * 2);
     return vec3<f32>(data[b + 0u], data[b + 1u], 0.0);
 }
-fn h_of(p: u32) -> f32 { return data[u32(info[28u + ints[p]] + i32(p))]; }
+fn h_of(p: u32) -> f32 { return data[u32(info[25u + ints[p]] + i32(p))]; }
+fn ld_x(i: u32) -> vec2<f32> {
+    let b = u32(info[7 + G] + i32(i) * 2);
+    return vec2<f32>(data[b], data[b + 1u]);
+}
+fn st_x(i: u32, v: vec2<f32>) {
+    let b = u32(info[7 + G] + i32(i) * 2);
+    data[b] = v[0];
+    data[b + 1u] = v[1];
+}
 fn ld_v(i: u32) -> vec2<f32> {
     let b = u32(info[10 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
@@ -359,174 +368,159 @@ fn ldj_body(j: u32, sgn: vec3<f32>) -> f32 {
     return data[b];
 }
 fn ld_m(i: u32) -> f32 {
-    let b = u32(info[22 + G] + i32(i) * 1);
+    let b = u32(info[19 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_m(i: u32, v: f32) {
-    let b = u32(info[22 + G] + i32(i) * 1);
+    let b = u32(info[19 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_m(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[22 + ints[j]];
+    let base = info[19 + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
 fn ld_rho(i: u32) -> f32 {
-    let b = u32(info[25 + G] + i32(i) * 1);
+    let b = u32(info[22 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho(i: u32, v: f32) {
-    let b = u32(info[25 + G] + i32(i) * 1);
+    let b = u32(info[22 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_rho(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[25 + ints[j]];
+    let base = info[22 + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
 fn ld_p(i: u32) -> f32 {
-    let b = u32(info[31 + G] + i32(i) * 1);
+    let b = u32(info[28 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p(i: u32, v: f32) {
-    let b = u32(info[31 + G] + i32(i) * 1);
+    let b = u32(info[28 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_p(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[31 + ints[j]];
+    let base = info[28 + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
 fn ld_c(i: u32) -> f32 {
-    let b = u32(info[37 + G] + i32(i) * 1);
+    let b = u32(info[34 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_c(i: u32, v: f32) {
-    let b = u32(info[37 + G] + i32(i) * 1);
+    let b = u32(info[34 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_c(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[37 + ints[j]];
+    let base = info[34 + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
 fn ld_dv(i: u32) -> vec2<f32> {
-    let b = u32(info[40 + G] + i32(i) * 2);
+    let b = u32(info[37 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_dv(i: u32, v: vec2<f32>) {
-    let b = u32(info[40 + G] + i32(i) * 2);
+    let b = u32(info[37 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
-}
-fn ld_X(i: u32) -> vec2<f32> {
-    let b = u32(info[46 + G] + i32(i) * 2);
-    return vec2<f32>(data[b], data[b + 1u]);
-}
-fn st_X(i: u32, v: vec2<f32>) {
-    let b = u32(info[46 + G] + i32(i) * 2);
-    data[b] = v[0];
-    data[b + 1u] = v[1];
-}
-fn ldj_X(j: u32, sgn: vec3<f32>) -> vec2<f32> {
-    let base = info[46 + ints[j]];
-    if (base == -2147483648) { return vec2<f32>(0.0); }
-    let b = u32(base + i32(j) * 2);
-    return (vec2<f32>(data[b], data[b + 1u]) * sgn.xy);
 }
 fn ld_u(i: u32) -> vec2<f32> {
-    let b = u32(info[49 + G] + i32(i) * 2);
+    let b = u32(info[43 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_u(i: u32, v: vec2<f32>) {
-    let b = u32(info[49 + G] + i32(i) * 2);
+    let b = u32(info[43 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ldj_u(j: u32, sgn: vec3<f32>) -> vec2<f32> {
-    let base = info[49 + ints[j]];
+    let base = info[43 + ints[j]];
     if (base == -2147483648) { return vec2<f32>(0.0); }
     let b = u32(base + i32(j) * 2);
     return (vec2<f32>(data[b], data[b + 1u]) * sgn.xy);
 }
 fn ld_a_interface(i: u32) -> vec2<f32> {
-    let b = u32(info[55 + G] + i32(i) * 2);
+    let b = u32(info[49 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_a_interface(i: u32, v: vec2<f32>) {
-    let b = u32(info[55 + G] + i32(i) * 2);
+    let b = u32(info[49 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_drho_interface(i: u32) -> f32 {
-    let b = u32(info[58 + G] + i32(i) * 1);
+    let b = u32(info[52 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho_interface(i: u32, v: f32) {
-    let b = u32(info[58 + G] + i32(i) * 1);
+    let b = u32(info[52 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_L0_inv(i: u32) -> mat2x2<f32> {
-    let b = u32(info[61 + G] + i32(i) * 4);
+    let b = u32(info[55 + G] + i32(i) * 4);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u]));
 }
 fn st_L0_inv(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[61 + G] + i32(i) * 4);
+    let b = u32(info[55 + G] + i32(i) * 4);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[0][1];
     data[b + 3u] = v[1][1];
 }
 fn ldj_L0_inv(j: u32, sgn: vec3<f32>) -> mat2x2<f32> {
-    let base = info[61 + ints[j]];
+    let base = info[55 + ints[j]];
     if (base == -2147483648) { return mat2x2<f32>(); }
     let b = u32(base + i32(j) * 4);
     return flip_m(mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u])), sgn.xy);
 }
 fn ld_H(i: u32) -> mat2x2<f32> {
-    let b = u32(info[64 + G] + i32(i) * 4);
+    let b = u32(info[58 + G] + i32(i) * 4);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u]));
 }
 fn st_H(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[64 + G] + i32(i) * 4);
+    let b = u32(info[58 + G] + i32(i) * 4);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[0][1];
     data[b + 3u] = v[1][1];
 }
 fn ldj_H(j: u32, sgn: vec3<f32>) -> mat2x2<f32> {
-    let base = info[64 + ints[j]];
+    let base = info[58 + ints[j]];
     if (base == -2147483648) { return mat2x2<f32>(); }
     let b = u32(base + i32(j) * 4);
     return flip_m(mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u])), sgn.xy);
 }
 fn ld_P(i: u32) -> mat2x2<f32> {
-    let b = u32(info[67 + G] + i32(i) * 4);
+    let b = u32(info[61 + G] + i32(i) * 4);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u]));
 }
 fn st_P(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[67 + G] + i32(i) * 4);
+    let b = u32(info[61 + G] + i32(i) * 4);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[0][1];
     data[b + 3u] = v[1][1];
 }
 fn ldj_P(j: u32, sgn: vec3<f32>) -> mat2x2<f32> {
-    let base = info[67 + ints[j]];
+    let base = info[61 + ints[j]];
     if (base == -2147483648) { return mat2x2<f32>(); }
     let b = u32(base + i32(j) * 4);
     return flip_m(mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u])), sgn.xy);
 }
 fn ld_hourglass_rate2(i: u32) -> f32 {
-    let b = u32(info[70 + G] + i32(i) * 1);
+    let b = u32(info[64 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_hourglass_rate2(i: u32, v: f32) {
-    let b = u32(info[70 + G] + i32(i) * 1);
+    let b = u32(info[64 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
@@ -597,13 +591,13 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var dv: vec2<f32> = vec2<f32>(0.0);
     var hourglass_rate2: f32 = 0.0;
     var a: vec2<f32> = vec2<f32>(0.0);
+    let x_i = ld_x(i);
     let v_i = ld_v(i);
     let body_i = ld_body(i);
     let m_i = ld_m(i);
     let rho_i = ld_rho(i);
     let p_i = ld_p(i);
     let c_i = ld_c(i);
-    let X_i = ld_X(i);
     let u_i = ld_u(i);
     let L0_inv_i = ld_L0_inv(i);
     let H_i = ld_H(i);
@@ -644,7 +638,6 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         for (var s = cell_start(cell); s < cell_start(cell + 1u); s++) {
             let j = sorted_particle(s);
             if (tr == 0u && j == i) { continue; }
-            if (!in_groups(5u, ints[j])) { continue; }
             let dxv = yi - pos3(j);
             let r2 = dot(dxv, dxv);
             let h_ij = 0.5 * (hi + h_of(j));
@@ -672,12 +665,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 a_interface = a_interface + ((pressure + artificial) + laminar);
                 drho_interface = drho_interface + ((rho_i * volume_j) * dot((v_i - ldj_v(j, sgn)), gradW_ij));
             }
-            // pairsum tl_momentum (stdlib/solid/total_lagrangian.sph:110)
+            // pairsum tl_momentum (stdlib/solid/total_lagrangian.sph:112)
             if (in_groups(4u, ints[j])) {
                 if ((body_i == ldj_body(j, sgn))) {
-                    let X_ij = (X_i - ldj_X(j, sgn));
-                    let g0 = kernel_grad_at(X_ij, h_ij);
-                    let X_j = ldj_X(j, sgn);
+                    let X_j = (x_i - x_ij);
                     let n_2 = prm_clamp_normal(i);
                     let at_2 = prm_clamp_at(i);
                     let clamped = (dot(X_j, n_2) < at_2);
@@ -685,6 +676,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                     let n_3 = prm_clamp_normal(i);
                     let clamped_2 = clamped;
                     let u_ij = (u_i - select(a_2, (((2.0 * dot(a_2, n_3)) * n_3) - a_2), clamped_2));
+                    let X_ij = (x_ij - u_ij);
+                    let g0 = kernel_grad_at(X_ij, h_ij);
                     let a_3 = (ldj_P(j, sgn) * (ldj_L0_inv(j, sgn) * g0));
                     let n_4 = prm_clamp_normal(i);
                     let clamped_3 = clamped;
@@ -693,8 +686,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                     let p3 = prm_rho0(i);
                     a = a + (ldj_m(j, sgn) * (((P_i * (L0_inv_i * g0)) / (p3 * p3)) + side_j));
                     let r0 = length(X_ij);
-                    let d = (X_ij + u_ij);
-                    let e = (d / length(d));
+                    let e = (x_ij / r_ij);
                     let H_j = sel_m(ldj_H(j, sgn), ((2.0 * outer(prm_clamp_normal(i), (transpose(ldj_H(j, sgn)) * prm_clamp_normal(i)))) - ldj_H(j, sgn)), clamped);
                     let miss = dot((((0.5 * (H_i + H_j)) * X_ij) - u_ij), e);
                     let k_2 = ((((prm_hourglass_alpha(i) * ldj_vol(j, sgn)) * kernel_w_at(r0, h_ij)) * prm_E(i)) / (prm_rho0(i) * (r0 * r0)));
@@ -704,7 +696,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                     let clamped_4 = clamped;
                     let v_ij = (v_i - select(a_4, (((2.0 * dot(a_4, n_5)) * n_5) - a_4), clamped_4));
                     let c_body = sqrt(((prm_bulk(i) + ((4.0 * prm_G(i)) / 3.0)) / prm_rho0(i)));
-                    let approach = (dot(v_ij, d) / (dot(d, d) + (0.01 * (h_ij * h_ij))));
+                    let approach = (dot(v_ij, x_ij) / ((r_ij * r_ij) + (0.01 * (h_ij * h_ij))));
                     a = a + (-(((((((ldj_m(j, sgn) * prm_viscosity_alpha(i)) * c_body) * h_ij) * approach) / prm_rho0(i)) * length(g0)) * e));
                     hourglass_rate2 = hourglass_rate2 + k_2;
                 }

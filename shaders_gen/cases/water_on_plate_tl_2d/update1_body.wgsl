@@ -44,65 +44,57 @@ fn st_v(i: u32, v: vec2<f32>) {
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
-fn ld_part(i: u32) -> f32 {
-    let b = u32(info[19 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_part(i: u32, v: f32) {
-    let b = u32(info[19 + G] + i32(i) * 1);
-    data[b] = v;
-}
 fn ld_dv(i: u32) -> vec2<f32> {
-    let b = u32(info[40 + G] + i32(i) * 2);
+    let b = u32(info[37 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_dv(i: u32, v: vec2<f32>) {
-    let b = u32(info[40 + G] + i32(i) * 2);
+    let b = u32(info[37 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_u(i: u32) -> vec2<f32> {
-    let b = u32(info[49 + G] + i32(i) * 2);
+    let b = u32(info[43 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_u(i: u32, v: vec2<f32>) {
-    let b = u32(info[49 + G] + i32(i) * 2);
+    let b = u32(info[43 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_a_interface(i: u32) -> vec2<f32> {
-    let b = u32(info[55 + G] + i32(i) * 2);
+    let b = u32(info[49 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_a_interface(i: u32, v: vec2<f32>) {
-    let b = u32(info[55 + G] + i32(i) * 2);
+    let b = u32(info[49 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_x_0(i: u32) -> vec2<f32> {
-    let b = u32(info[76 + G] + i32(i) * 2);
+    let b = u32(info[70 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_x_0(i: u32, v: vec2<f32>) {
-    let b = u32(info[76 + G] + i32(i) * 2);
+    let b = u32(info[70 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_v_0(i: u32) -> vec2<f32> {
-    let b = u32(info[79 + G] + i32(i) * 2);
+    let b = u32(info[73 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_v_0(i: u32, v: vec2<f32>) {
-    let b = u32(info[79 + G] + i32(i) * 2);
+    let b = u32(info[73 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_u_0(i: u32) -> vec2<f32> {
-    let b = u32(info[85 + G] + i32(i) * 2);
+    let b = u32(info[79 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_u_0(i: u32, v: vec2<f32>) {
-    let b = u32(info[85 + G] + i32(i) * 2);
+    let b = u32(info[79 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
@@ -110,12 +102,8 @@ fn prm_gravity(i: u32) -> vec2<f32> {
     let b = ints[arrayLength(&ints) / 2u + i] * 29u + 2u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
-fn prm__constraint0(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 24u;
-    return vec2<f32>(params[b], params[b + 1u]);
-}
 fn prm__damping(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 24u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -135,7 +123,6 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let rate_of_v = (((ld_dv(i) + ld_a_interface(i)) + prm_gravity(i)) - (prm__damping(i) * v_i));
     let rate_of_u = v_i;
     v_i = (ld_v_0(i) + (0.5 * (dt * rate_of_v)));
-    v_i = select(v_i, (1.0 * prm__constraint0(i)), (ld_part(i) == 0.0));
     x_i = (ld_x_0(i) + (0.5 * (dt * rate_of_x)));
     u_i = (ld_u_0(i) + (0.5 * (dt * rate_of_u)));
     st_x(i, x_i);

@@ -44,104 +44,96 @@ fn st_v(i: u32, v: vec2<f32>) {
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
-fn ld_part(i: u32) -> f32 {
-    let b = u32(info[19 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_part(i: u32, v: f32) {
-    let b = u32(info[19 + G] + i32(i) * 1);
-    data[b] = v;
-}
 fn ld_rho(i: u32) -> f32 {
-    let b = u32(info[25 + G] + i32(i) * 1);
+    let b = u32(info[22 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho(i: u32, v: f32) {
-    let b = u32(info[25 + G] + i32(i) * 1);
+    let b = u32(info[22 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_p(i: u32) -> f32 {
-    let b = u32(info[31 + G] + i32(i) * 1);
+    let b = u32(info[28 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p(i: u32, v: f32) {
-    let b = u32(info[31 + G] + i32(i) * 1);
+    let b = u32(info[28 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_p_over_rho2(i: u32) -> f32 {
-    let b = u32(info[34 + G] + i32(i) * 1);
+    let b = u32(info[31 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p_over_rho2(i: u32, v: f32) {
-    let b = u32(info[34 + G] + i32(i) * 1);
+    let b = u32(info[31 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_c(i: u32) -> f32 {
-    let b = u32(info[37 + G] + i32(i) * 1);
+    let b = u32(info[34 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_c(i: u32, v: f32) {
-    let b = u32(info[37 + G] + i32(i) * 1);
+    let b = u32(info[34 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_dv(i: u32) -> vec2<f32> {
-    let b = u32(info[40 + G] + i32(i) * 2);
+    let b = u32(info[37 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_dv(i: u32, v: vec2<f32>) {
-    let b = u32(info[40 + G] + i32(i) * 2);
+    let b = u32(info[37 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_drho(i: u32) -> f32 {
-    let b = u32(info[52 + G] + i32(i) * 1);
+    let b = u32(info[46 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho(i: u32, v: f32) {
-    let b = u32(info[52 + G] + i32(i) * 1);
+    let b = u32(info[46 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_a_interface(i: u32) -> vec2<f32> {
-    let b = u32(info[55 + G] + i32(i) * 2);
+    let b = u32(info[49 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_a_interface(i: u32, v: vec2<f32>) {
-    let b = u32(info[55 + G] + i32(i) * 2);
+    let b = u32(info[49 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_drho_interface(i: u32) -> f32 {
-    let b = u32(info[58 + G] + i32(i) * 1);
+    let b = u32(info[52 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho_interface(i: u32, v: f32) {
-    let b = u32(info[58 + G] + i32(i) * 1);
+    let b = u32(info[52 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_x_0(i: u32) -> vec2<f32> {
-    let b = u32(info[76 + G] + i32(i) * 2);
+    let b = u32(info[70 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_x_0(i: u32, v: vec2<f32>) {
-    let b = u32(info[76 + G] + i32(i) * 2);
+    let b = u32(info[70 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_v_0(i: u32) -> vec2<f32> {
-    let b = u32(info[79 + G] + i32(i) * 2);
+    let b = u32(info[73 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_v_0(i: u32, v: vec2<f32>) {
-    let b = u32(info[79 + G] + i32(i) * 2);
+    let b = u32(info[73 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_rho_0(i: u32) -> f32 {
-    let b = u32(info[82 + G] + i32(i) * 1);
+    let b = u32(info[76 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho_0(i: u32, v: f32) {
-    let b = u32(info[82 + G] + i32(i) * 1);
+    let b = u32(info[76 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
@@ -160,15 +152,15 @@ fn prm_gamma(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 29u + 6u;
     return params[b];
 }
-fn prm__constraint0(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 24u;
-    return vec2<f32>(params[b], params[b + 1u]);
-}
 fn prm__damping(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 24u;
     return params[b];
 }
 fn prm__symmetry0(i: u32) -> vec2<f32> {
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 25u;
+    return vec2<f32>(params[b], params[b + 1u]);
+}
+fn prm__symmetry1(i: u32) -> vec2<f32> {
     let b = ints[arrayLength(&ints) / 2u + i] * 29u + 27u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
@@ -189,11 +181,12 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let rate_of_v = (((ld_dv(i) + ld_a_interface(i)) + prm_gravity(i)) - (prm__damping(i) * v_i));
     let rate_of_rho = (ld_drho(i) + ld_drho_interface(i));
     v_i = (ld_v_0(i) + (dt * rate_of_v));
-    v_i = select(v_i, (1.0 * prm__constraint0(i)), (ld_part(i) == 0.0));
     x_i = (ld_x_0(i) + (0.5 * (dt * (ld_v_0(i) + v_i))));
     rho_i = (((2.0 - (-(dt * (rate_of_rho / rho_i)))) / (2.0 + (-(dt * (rate_of_rho / rho_i))))) * ld_rho_0(i));
     v_i = select(v_i, (v_i - ((2.0 * v_i[0]) * prm__symmetry0(i))), ((0.0 - x_i[0]) > 0.0));
     x_i = select(x_i, (x_i + ((2.0 * (0.0 - x_i[0])) * prm__symmetry0(i))), ((0.0 - x_i[0]) > 0.0));
+    v_i = select(v_i, (v_i - ((-2.0 * v_i[0]) * prm__symmetry1(i))), ((x_i[0] - 0.2) > 0.0));
+    x_i = select(x_i, (x_i + ((2.0 * (x_i[0] - 0.2)) * prm__symmetry1(i))), ((x_i[0] - 0.2) > 0.0));
     // eos
     var p_i: f32 = ld_p(i);
     var c_i: f32 = ld_c(i);

@@ -330,6 +330,16 @@ fn pos3(p: u32) -> vec3<f32> {
     return vec3<f32>(data[b + 0u], data[b + 1u], data[b + 2u]);
 }
 fn h_of(p: u32) -> f32 { return data[u32(info[10u + ints[p]] + i32(p))]; }
+fn ld_x(i: u32) -> vec3<f32> {
+    let b = u32(info[3 + G] + i32(i) * 3);
+    return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
+}
+fn st_x(i: u32, v: vec3<f32>) {
+    let b = u32(info[3 + G] + i32(i) * 3);
+    data[b] = v[0];
+    data[b + 1u] = v[1];
+    data[b + 2u] = v[2];
+}
 fn ld_v(i: u32) -> vec3<f32> {
     let b = u32(info[4 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
@@ -372,44 +382,28 @@ fn ldj_m(j: u32, sgn: vec3<f32>) -> f32 {
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
-fn ld_X(i: u32) -> vec3<f32> {
-    let b = u32(info[11 + G] + i32(i) * 3);
-    return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
-}
-fn st_X(i: u32, v: vec3<f32>) {
-    let b = u32(info[11 + G] + i32(i) * 3);
-    data[b] = v[0];
-    data[b + 1u] = v[1];
-    data[b + 2u] = v[2];
-}
-fn ldj_X(j: u32, sgn: vec3<f32>) -> vec3<f32> {
-    let base = info[11 + ints[j]];
-    if (base == -2147483648) { return vec3<f32>(0.0); }
-    let b = u32(base + i32(j) * 3);
-    return (vec3<f32>(data[b], data[b + 1u], data[b + 2u]) * sgn);
-}
 fn ld_u(i: u32) -> vec3<f32> {
-    let b = u32(info[12 + G] + i32(i) * 3);
+    let b = u32(info[11 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_u(i: u32, v: vec3<f32>) {
-    let b = u32(info[12 + G] + i32(i) * 3);
+    let b = u32(info[11 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ldj_u(j: u32, sgn: vec3<f32>) -> vec3<f32> {
-    let base = info[12 + ints[j]];
+    let base = info[11 + ints[j]];
     if (base == -2147483648) { return vec3<f32>(0.0); }
     let b = u32(base + i32(j) * 3);
     return (vec3<f32>(data[b], data[b + 1u], data[b + 2u]) * sgn);
 }
 fn ld_L0_inv(i: u32) -> mat3x3<f32> {
-    let b = u32(info[13 + G] + i32(i) * 9);
+    let b = u32(info[12 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_L0_inv(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[13 + G] + i32(i) * 9);
+    let b = u32(info[12 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -421,17 +415,17 @@ fn st_L0_inv(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ldj_L0_inv(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
-    let base = info[13 + ints[j]];
+    let base = info[12 + ints[j]];
     if (base == -2147483648) { return mat3x3<f32>(); }
     let b = u32(base + i32(j) * 9);
     return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u])), sgn);
 }
 fn ld_H(i: u32) -> mat3x3<f32> {
-    let b = u32(info[14 + G] + i32(i) * 9);
+    let b = u32(info[13 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_H(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[14 + G] + i32(i) * 9);
+    let b = u32(info[13 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -443,17 +437,17 @@ fn st_H(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ldj_H(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
-    let base = info[14 + ints[j]];
+    let base = info[13 + ints[j]];
     if (base == -2147483648) { return mat3x3<f32>(); }
     let b = u32(base + i32(j) * 9);
     return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u])), sgn);
 }
 fn ld_P(i: u32) -> mat3x3<f32> {
-    let b = u32(info[15 + G] + i32(i) * 9);
+    let b = u32(info[14 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_P(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[15 + G] + i32(i) * 9);
+    let b = u32(info[14 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -465,27 +459,27 @@ fn st_P(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ldj_P(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
-    let base = info[15 + ints[j]];
+    let base = info[14 + ints[j]];
     if (base == -2147483648) { return mat3x3<f32>(); }
     let b = u32(base + i32(j) * 9);
     return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u])), sgn);
 }
 fn ld_dv(i: u32) -> vec3<f32> {
-    let b = u32(info[16 + G] + i32(i) * 3);
+    let b = u32(info[15 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_dv(i: u32, v: vec3<f32>) {
-    let b = u32(info[16 + G] + i32(i) * 3);
+    let b = u32(info[15 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_hourglass_rate2(i: u32) -> f32 {
-    let b = u32(info[17 + G] + i32(i) * 1);
+    let b = u32(info[16 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_hourglass_rate2(i: u32, v: f32) {
-    let b = u32(info[17 + G] + i32(i) * 1);
+    let b = u32(info[16 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
@@ -537,9 +531,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var dv: vec3<f32> = vec3<f32>(0.0);
     var hourglass_rate2: f32 = 0.0;
     var a: vec3<f32> = vec3<f32>(0.0);
+    let x_i = ld_x(i);
     let v_i = ld_v(i);
     let body_i = ld_body(i);
-    let X_i = ld_X(i);
     let u_i = ld_u(i);
     let L0_inv_i = ld_L0_inv(i);
     let H_i = ld_H(i);
@@ -587,11 +581,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             if (r2 >= rc * rc || r2 == 0.0) { continue; }
             let x_ij = (dxv * sgn);
             let r_ij = sqrt(r2);
-            // pairsum tl_momentum (stdlib/solid/total_lagrangian.sph:110)
+            // pairsum tl_momentum (stdlib/solid/total_lagrangian.sph:112)
             if ((body_i == ldj_body(j, sgn))) {
-                let X_ij = (X_i - ldj_X(j, sgn));
-                let g0 = kernel_grad_at(X_ij, h_ij);
-                let X_j = ldj_X(j, sgn);
+                let X_j = (x_i - x_ij);
                 let n_2 = prm_clamp_normal(i);
                 let at_2 = prm_clamp_at(i);
                 let clamped = (dot(X_j, n_2) < at_2);
@@ -599,6 +591,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 let n_3 = prm_clamp_normal(i);
                 let clamped_2 = clamped;
                 let u_ij = (u_i - select(a_2, (((2.0 * dot(a_2, n_3)) * n_3) - a_2), clamped_2));
+                let X_ij = (x_ij - u_ij);
+                let g0 = kernel_grad_at(X_ij, h_ij);
                 let a_3 = (ldj_P(j, sgn) * (ldj_L0_inv(j, sgn) * g0));
                 let n_4 = prm_clamp_normal(i);
                 let clamped_3 = clamped;
@@ -607,8 +601,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 let p2 = prm_rho0(i);
                 a = a + (ldj_m(j, sgn) * (((P_i * (L0_inv_i * g0)) / (p2 * p2)) + side_j));
                 let r0 = length(X_ij);
-                let d = (X_ij + u_ij);
-                let e = (d / length(d));
+                let e = (x_ij / r_ij);
                 let H_j = sel_m(ldj_H(j, sgn), ((2.0 * outer(prm_clamp_normal(i), (transpose(ldj_H(j, sgn)) * prm_clamp_normal(i)))) - ldj_H(j, sgn)), clamped);
                 let miss = dot((((0.5 * (H_i + H_j)) * X_ij) - u_ij), e);
                 let k_2 = ((((prm_hourglass_alpha(i) * ldj_vol(j, sgn)) * kernel_w_at(r0, h_ij)) * prm_E(i)) / (prm_rho0(i) * (r0 * r0)));
@@ -618,7 +611,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 let clamped_4 = clamped;
                 let v_ij = (v_i - select(a_4, (((2.0 * dot(a_4, n_5)) * n_5) - a_4), clamped_4));
                 let c_body = sqrt(((prm_bulk(i) + ((4.0 * prm_G(i)) / 3.0)) / prm_rho0(i)));
-                let approach = (dot(v_ij, d) / (dot(d, d) + (0.01 * (h_ij * h_ij))));
+                let approach = (dot(v_ij, x_ij) / ((r_ij * r_ij) + (0.01 * (h_ij * h_ij))));
                 a = a + (-(((((((ldj_m(j, sgn) * prm_viscosity_alpha(i)) * c_body) * h_ij) * approach) / prm_rho0(i)) * length(g0)) * e));
                 hourglass_rate2 = hourglass_rate2 + k_2;
             }

@@ -371,19 +371,19 @@ fn st_h(i: u32, v: f32) {
     data[b] = v;
 }
 fn ld_drho(i: u32) -> f32 {
-    let b = u32(info[49 + G] + i32(i) * 1);
+    let b = u32(info[46 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho(i: u32, v: f32) {
-    let b = u32(info[49 + G] + i32(i) * 1);
+    let b = u32(info[46 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_mu_max(i: u32) -> f32 {
-    let b = u32(info[70 + G] + i32(i) * 1);
+    let b = u32(info[67 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_mu_max(i: u32, v: f32) {
-    let b = u32(info[70 + G] + i32(i) * 1);
+    let b = u32(info[67 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {

@@ -330,6 +330,16 @@ fn pos3(p: u32) -> vec3<f32> {
     return vec3<f32>(data[b + 0u], data[b + 1u], data[b + 2u]);
 }
 fn h_of(p: u32) -> f32 { return data[u32(info[25u + ints[p]] + i32(p))]; }
+fn ld_x(i: u32) -> vec3<f32> {
+    let b = u32(info[7 + G] + i32(i) * 3);
+    return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
+}
+fn st_x(i: u32, v: vec3<f32>) {
+    let b = u32(info[7 + G] + i32(i) * 3);
+    data[b] = v[0];
+    data[b + 1u] = v[1];
+    data[b + 2u] = v[2];
+}
 fn ld_v(i: u32) -> vec3<f32> {
     let b = u32(info[10 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
@@ -432,62 +442,46 @@ fn st_dv(i: u32, v: vec3<f32>) {
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
-fn ld_X(i: u32) -> vec3<f32> {
-    let b = u32(info[43 + G] + i32(i) * 3);
-    return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
-}
-fn st_X(i: u32, v: vec3<f32>) {
-    let b = u32(info[43 + G] + i32(i) * 3);
-    data[b] = v[0];
-    data[b + 1u] = v[1];
-    data[b + 2u] = v[2];
-}
-fn ldj_X(j: u32, sgn: vec3<f32>) -> vec3<f32> {
-    let base = info[43 + ints[j]];
-    if (base == -2147483648) { return vec3<f32>(0.0); }
-    let b = u32(base + i32(j) * 3);
-    return (vec3<f32>(data[b], data[b + 1u], data[b + 2u]) * sgn);
-}
 fn ld_u(i: u32) -> vec3<f32> {
-    let b = u32(info[46 + G] + i32(i) * 3);
+    let b = u32(info[43 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_u(i: u32, v: vec3<f32>) {
-    let b = u32(info[46 + G] + i32(i) * 3);
+    let b = u32(info[43 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ldj_u(j: u32, sgn: vec3<f32>) -> vec3<f32> {
-    let base = info[46 + ints[j]];
+    let base = info[43 + ints[j]];
     if (base == -2147483648) { return vec3<f32>(0.0); }
     let b = u32(base + i32(j) * 3);
     return (vec3<f32>(data[b], data[b + 1u], data[b + 2u]) * sgn);
 }
 fn ld_a_interface(i: u32) -> vec3<f32> {
-    let b = u32(info[52 + G] + i32(i) * 3);
+    let b = u32(info[49 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_a_interface(i: u32, v: vec3<f32>) {
-    let b = u32(info[52 + G] + i32(i) * 3);
+    let b = u32(info[49 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_drho_interface(i: u32) -> f32 {
-    let b = u32(info[55 + G] + i32(i) * 1);
+    let b = u32(info[52 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho_interface(i: u32, v: f32) {
-    let b = u32(info[55 + G] + i32(i) * 1);
+    let b = u32(info[52 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_L0_inv(i: u32) -> mat3x3<f32> {
-    let b = u32(info[58 + G] + i32(i) * 9);
+    let b = u32(info[55 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_L0_inv(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[58 + G] + i32(i) * 9);
+    let b = u32(info[55 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -499,17 +493,17 @@ fn st_L0_inv(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ldj_L0_inv(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
-    let base = info[58 + ints[j]];
+    let base = info[55 + ints[j]];
     if (base == -2147483648) { return mat3x3<f32>(); }
     let b = u32(base + i32(j) * 9);
     return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u])), sgn);
 }
 fn ld_H(i: u32) -> mat3x3<f32> {
-    let b = u32(info[61 + G] + i32(i) * 9);
+    let b = u32(info[58 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_H(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[61 + G] + i32(i) * 9);
+    let b = u32(info[58 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -521,17 +515,17 @@ fn st_H(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ldj_H(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
-    let base = info[61 + ints[j]];
+    let base = info[58 + ints[j]];
     if (base == -2147483648) { return mat3x3<f32>(); }
     let b = u32(base + i32(j) * 9);
     return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u])), sgn);
 }
 fn ld_P(i: u32) -> mat3x3<f32> {
-    let b = u32(info[64 + G] + i32(i) * 9);
+    let b = u32(info[61 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_P(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[64 + G] + i32(i) * 9);
+    let b = u32(info[61 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -543,17 +537,17 @@ fn st_P(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ldj_P(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
-    let base = info[64 + ints[j]];
+    let base = info[61 + ints[j]];
     if (base == -2147483648) { return mat3x3<f32>(); }
     let b = u32(base + i32(j) * 9);
     return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u])), sgn);
 }
 fn ld_hourglass_rate2(i: u32) -> f32 {
-    let b = u32(info[67 + G] + i32(i) * 1);
+    let b = u32(info[64 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_hourglass_rate2(i: u32, v: f32) {
-    let b = u32(info[67 + G] + i32(i) * 1);
+    let b = u32(info[64 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
@@ -624,13 +618,13 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var dv: vec3<f32> = vec3<f32>(0.0);
     var hourglass_rate2: f32 = 0.0;
     var a: vec3<f32> = vec3<f32>(0.0);
+    let x_i = ld_x(i);
     let v_i = ld_v(i);
     let body_i = ld_body(i);
     let m_i = ld_m(i);
     let rho_i = ld_rho(i);
     let p_i = ld_p(i);
     let c_i = ld_c(i);
-    let X_i = ld_X(i);
     let u_i = ld_u(i);
     let L0_inv_i = ld_L0_inv(i);
     let H_i = ld_H(i);
@@ -699,12 +693,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 a_interface = a_interface + ((pressure + artificial) + laminar);
                 drho_interface = drho_interface + ((rho_i * volume_j) * dot((v_i - ldj_v(j, sgn)), gradW_ij));
             }
-            // pairsum tl_momentum (stdlib/solid/total_lagrangian.sph:110)
+            // pairsum tl_momentum (stdlib/solid/total_lagrangian.sph:112)
             if (in_groups(4u, ints[j])) {
                 if ((body_i == ldj_body(j, sgn))) {
-                    let X_ij = (X_i - ldj_X(j, sgn));
-                    let g0 = kernel_grad_at(X_ij, h_ij);
-                    let X_j = ldj_X(j, sgn);
+                    let X_j = (x_i - x_ij);
                     let n_2 = prm_clamp_normal(i);
                     let at_2 = prm_clamp_at(i);
                     let clamped = (dot(X_j, n_2) < at_2);
@@ -712,6 +704,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                     let n_3 = prm_clamp_normal(i);
                     let clamped_2 = clamped;
                     let u_ij = (u_i - select(a_2, (((2.0 * dot(a_2, n_3)) * n_3) - a_2), clamped_2));
+                    let X_ij = (x_ij - u_ij);
+                    let g0 = kernel_grad_at(X_ij, h_ij);
                     let a_3 = (ldj_P(j, sgn) * (ldj_L0_inv(j, sgn) * g0));
                     let n_4 = prm_clamp_normal(i);
                     let clamped_3 = clamped;
@@ -720,8 +714,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                     let p3 = prm_rho0(i);
                     a = a + (ldj_m(j, sgn) * (((P_i * (L0_inv_i * g0)) / (p3 * p3)) + side_j));
                     let r0 = length(X_ij);
-                    let d = (X_ij + u_ij);
-                    let e = (d / length(d));
+                    let e = (x_ij / r_ij);
                     let H_j = sel_m(ldj_H(j, sgn), ((2.0 * outer(prm_clamp_normal(i), (transpose(ldj_H(j, sgn)) * prm_clamp_normal(i)))) - ldj_H(j, sgn)), clamped);
                     let miss = dot((((0.5 * (H_i + H_j)) * X_ij) - u_ij), e);
                     let k_2 = ((((prm_hourglass_alpha(i) * ldj_vol(j, sgn)) * kernel_w_at(r0, h_ij)) * prm_E(i)) / (prm_rho0(i) * (r0 * r0)));
@@ -731,7 +724,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                     let clamped_4 = clamped;
                     let v_ij = (v_i - select(a_4, (((2.0 * dot(a_4, n_5)) * n_5) - a_4), clamped_4));
                     let c_body = sqrt(((prm_bulk(i) + ((4.0 * prm_G(i)) / 3.0)) / prm_rho0(i)));
-                    let approach = (dot(v_ij, d) / (dot(d, d) + (0.01 * (h_ij * h_ij))));
+                    let approach = (dot(v_ij, x_ij) / ((r_ij * r_ij) + (0.01 * (h_ij * h_ij))));
                     a = a + (-(((((((ldj_m(j, sgn) * prm_viscosity_alpha(i)) * c_body) * h_ij) * approach) / prm_rho0(i)) * length(g0)) * e));
                     hourglass_rate2 = hourglass_rate2 + k_2;
                 }

@@ -423,21 +423,21 @@ fn st_dv(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn ld_a_interface(i: u32) -> vec3<f32> {
-    let b = u32(info[52 + G] + i32(i) * 3);
+    let b = u32(info[49 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_a_interface(i: u32, v: vec3<f32>) {
-    let b = u32(info[52 + G] + i32(i) * 3);
+    let b = u32(info[49 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_drho_interface(i: u32) -> f32 {
-    let b = u32(info[55 + G] + i32(i) * 1);
+    let b = u32(info[52 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho_interface(i: u32, v: f32) {
-    let b = u32(info[55 + G] + i32(i) * 1);
+    let b = u32(info[52 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_nu0(i: u32) -> f32 {
