@@ -882,16 +882,24 @@ fn a_graded_fill_sits_half_a_spacing_off_the_symmetry_planes() {
     let quarter = std::f64::consts::PI * 0.255_f64.powi(2) * 0.008 / 4.0;
     assert!((volume / quarter - 1.0).abs() < 1e-9, "the quarter plate holds {volume} m³, not {quarter} m³");
     // A node-centred fill puts a row on each plane: an error, where it used to be dropped silently.
-    let text = std::fs::read_to_string(case("cube_on_cube")).expect("case");
     let shape = "shape = { box = { min = [\"-5 mm\", \"-5 mm\", \"-10 mm\"], max = [\"5 mm\", \"5 mm\", 0] } }";
-    assert!(text.contains(shape), "the cube_on_cube case's plate changed");
-    let dir = out_dir("on-plane");
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join("cube_on_cube.toml");
-    std::fs::write(&path, text.replace(shape, &format!("{shape}\nfill = \"nodes\""))).unwrap();
-    let err = prepare(&path, &Default::default()).err().expect("a row on the plane is an error").to_string();
+    let err = load_error_of_edited("cube_on_cube", shape, &format!("{shape}\nfill = \"nodes\""));
     assert!(err.contains("C0025") && err.contains("use `fill = \"cells\"`"), "{err}");
+}
+
+/// The error that loading bundled case `name` gives with `from` (which it must hold) replaced by
+/// `to`, written into a scratch folder that is removed after.
+fn load_error_of_edited(name: &str, from: &str, to: &str) -> String {
+    let text = std::fs::read_to_string(case(name)).expect("case");
+    assert!(text.contains(from), "the {name} case no longer holds {from}");
+    static EDITS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let dir = out_dir(&format!("edited-{name}-{}", EDITS.fetch_add(1, std::sync::atomic::Ordering::Relaxed)));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join(format!("{name}.toml"));
+    std::fs::write(&path, text.replace(from, to)).unwrap();
+    let err = prepare(&path, &Default::default()).err().unwrap_or_else(|| panic!("{name} with {to}: no error"));
     let _ = std::fs::remove_dir_all(&dir);
+    err.to_string()
 }
 
 /// Two symmetry planes on one axis (clamped_plate_2d: the clamp at x = 0 keeping above, the
@@ -905,12 +913,7 @@ fn two_symmetry_planes_on_one_axis_keep_the_slab_between_them_and_bad_pairs_are_
     assert_eq!(xs.len(), 40 * 8, "particles");
     let (least, most) = pairsum::compare::extremes(&xs).expect("finite positions");
     assert!((least - 0.0025).abs() < 1e-12 && (most - 0.1975).abs() < 1e-12, "x in [{least}, {most}]");
-    let text = std::fs::read_to_string(case("clamped_plate_2d")).expect("case");
     let upper = "at = \"0.2 m\"\nkeep = \"below\"";
-    assert!(text.contains(upper), "the case's mid-span plane changed");
-    let dir = out_dir("two-planes");
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join("clamped_plate_2d.toml");
     for (bad, says) in [
         ("at = \"0.2 m\"", "at most two symmetry planes"),
         (
@@ -919,11 +922,9 @@ fn two_symmetry_planes_on_one_axis_keep_the_slab_between_them_and_bad_pairs_are_
         ),
         ("at = \"0.2 m\"\nkeep = \"sideways\"", "`keep` is \"above\" or \"below\", found `sideways`"),
     ] {
-        std::fs::write(&path, text.replace(upper, bad)).unwrap();
-        let err = prepare(&path, &Default::default()).err().expect("an error").to_string();
+        let err = load_error_of_edited("clamped_plate_2d", upper, bad);
         assert!(err.contains("C0014") && err.contains(says), "{bad}: {err}");
     }
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// A node list of a quarter body whose first rows lie a whole spacing off the symmetry planes
