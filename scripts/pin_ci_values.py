@@ -33,6 +33,7 @@ RUNS = [
     ("cantilever", {}),
     ("cantilever_lsm", {}),
     ("cantilever_2d", {}),
+    ("cantilever_3d", {}),
     ("clamped_plate_2d", {}),
     ("sod_shock_tube", {}),
     ("poiseuille_2d", {}),

@@ -1014,6 +1014,13 @@ fn total_lagrangian_cantilever_2d_deflection_error_halves_from_4_to_8_particles_
     assert_error_halves("cantilever_2d", "ci@25mm", "ci");
 }
 
+/// The same beam in 3D at 4 particles across: its pinned figure and its tolerance, 35 % (it is
+/// −33.0 % too stiff: the gap issue 37 leaves open, docs/results/cantilever_3d_convergence/).
+#[test]
+fn total_lagrangian_cantilever_3d_deflection_is_within_its_35_percent_tolerance_at_4_particles_across() {
+    run_and_check("cantilever_3d", Precision::F64);
+}
+
 #[test]
 fn total_lagrangian_clamped_plate_2d_deflection_is_within_its_tolerance_at_8_particles_across() {
     run_and_check("clamped_plate_2d", Precision::F64);
