@@ -1014,10 +1014,10 @@ fn total_lagrangian_cantilever_2d_deflection_error_halves_from_4_to_8_particles_
     assert_error_halves("cantilever_2d", "ci@25mm", "ci");
 }
 
-/// The same beam in 3D at 4 particles across: its pinned figure and its tolerance, 35 % (it is
-/// −33.0 % too stiff: the gap issue 37 leaves open, docs/results/cantilever_3d_convergence/).
+/// The same beam in 3D at 4 particles across: its pinned figure and its tolerance, 25 % (it is
+/// +21.5 %, as scripts/tlsph_static_3d.py computes; docs/results/cantilever_3d_convergence/).
 #[test]
-fn total_lagrangian_cantilever_3d_deflection_is_within_its_35_percent_tolerance_at_4_particles_across() {
+fn total_lagrangian_cantilever_3d_deflection_is_within_its_25_percent_tolerance_at_4_particles_across() {
     run_and_check("cantilever_3d", Precision::F64);
 }
 
