@@ -79,15 +79,19 @@ RHO = 1000.0
 P_WAVE = np.sqrt((E / (3 * (1 - 2 * NU)) + 4 * E / (2 * (1 + NU)) / 3) / RHO)
 
 
-def gradients(pos, dx, order):
-    """G[l]: (∂φ/∂X_l)_i = Σ_j w_ij,l (φ_j − φ_i), as n × n matrices, and the pairs."""
-    n = len(pos)
-    i, j, wt, d, r, w = gradient_weights(pos, dx, order)
+def gradient_operators(i, j, wt, n):
+    """G[l]: (∂φ/∂X_l)_i = Σ_j w_ij,l (φ_j − φ_i), as n × n matrices, one per axis of the weights."""
     grad = []
-    for comp in range(2):
+    for comp in range(wt.shape[1]):
         m = sp.coo_matrix((wt[:, comp], (i, j)), shape=(n, n)).tocsr()
         grad.append(m - sp.diags(np.asarray(m.sum(axis=1)).ravel()))
-    return grad, (i, j, d, r, w)
+    return grad
+
+
+def gradients(pos, dx, order):
+    """The gradient operators (gradient_operators) and the pairs."""
+    i, j, wt, d, r, w = gradient_weights(pos, dx, order)
+    return gradient_operators(i, j, wt, len(pos)), (i, j, d, r, w)
 
 
 def stress_stiffness(grad, dx, energy):

@@ -19,6 +19,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spl
 from scipy.spatial import cKDTree
+from tlsph_static import gradient_operators
 
 E, NU, H_RATIO, L, D = 10e6, 0.3, 1.3, 0.5, 0.1
 REF = 4.7169e-3
@@ -78,11 +79,7 @@ def weights(pos, dx, order):
 def stiffness(pos, dx, order, alpha, energy):
     n = len(pos)
     i, j, wt, d, r, w = weights(pos, dx, order)
-    grad = []
-    for c in range(3):
-        m = sp.coo_matrix((wt[:, c], (i, j)), shape=(n, n)).tocsr()
-        grad.append(m - sp.diags(np.asarray(m.sum(axis=1)).ravel()))
-    Z = sp.csr_matrix((n, n))
+    grad = gradient_operators(i, j, wt, n)
     on = lambda comp, m: sp.hstack([m if k == comp else sp.csr_matrix(m.shape) for k in range(3)])
     # H[c][l] = d u_c / d X_l
     H = [[on(c, grad[l]) for l in range(3)] for c in range(3)]
