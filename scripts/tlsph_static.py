@@ -47,9 +47,7 @@ def kernel(r, h):
 
 
 def lattice(x0, x1, dx):
-    xs = np.arange(x0 + dx / 2, x1 - 1e-12, dx)
-    ys = np.arange(dx / 2, DEPTH - 1e-12, dx)
-    return np.array([(x, y) for x in xs for y in ys])
+    return lattice_of(x0, x1, DEPTH, dx)
 
 
 def gradient_weights(pos, dx, order):

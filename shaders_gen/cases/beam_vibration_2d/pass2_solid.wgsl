@@ -182,39 +182,35 @@ fn st_hourglass_rate2(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 20u + 0u;
     return params[b];
 }
 fn prm_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 4u;
-    return params[b];
-}
-fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 6u;
-    return params[b];
-}
-fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 20u + 4u;
     return params[b];
 }
 fn prm_hourglass_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 20u + 8u;
     return params[b];
 }
 fn prm_viscosity_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 20u + 10u;
+    return params[b];
+}
+fn prm_c_p(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 20u + 11u;
     return params[b];
 }
 fn prm_damping(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 20u + 12u;
     return params[b];
 }
 fn prm_clamp_normal(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 20u + 14u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 fn prm_clamp_at(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 20u + 16u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -269,7 +265,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         if (r2 >= rc * rc || r2 == 0.0) { continue; }
         let x_ij = (dxv * sgn).xy;
         let r_ij = sqrt(r2);
-        // pairsum tl_momentum (stdlib/solid/total_lagrangian.sph:117)
+        // pairsum tl_momentum (stdlib/solid/total_lagrangian.sph:118)
         if ((body_i == ldj_body(j, sgn))) {
             let X_j = (x_i - x_ij);
             let n_2 = prm_clamp_normal(i);
@@ -298,9 +294,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let n_5 = prm_clamp_normal(i);
             let clamped_4 = clamped;
             let v_ij = (v_i - select(a_4, (((2.0 * dot(a_4, n_5)) * n_5) - a_4), clamped_4));
-            let c_body = sqrt(((prm_bulk(i) + ((4.0 * prm_G(i)) / 3.0)) / prm_rho0(i)));
             let approach = (dot(v_ij, x_ij) / ((r_ij * r_ij) + (0.01 * (h_ij * h_ij))));
-            a = a + (-(((((((ldj_m(j, sgn) * prm_viscosity_alpha(i)) * c_body) * h_ij) * approach) / prm_rho0(i)) * length(g0)) * e));
+            a = a + (-(((((((ldj_m(j, sgn) * prm_viscosity_alpha(i)) * prm_c_p(i)) * h_ij) * approach) / prm_rho0(i)) * length(g0)) * e));
             hourglass_rate2 = hourglass_rate2 + k_2;
         }
     }

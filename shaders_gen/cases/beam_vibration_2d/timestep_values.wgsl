@@ -51,19 +51,19 @@ fn st_hourglass_rate2(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 20u + 0u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 20u + 6u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 20u + 7u;
     return params[b];
 }
 fn prm_cfl_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 20u + 13u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -232,27 +232,27 @@ fn st_a_contact(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 7u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 8u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 10u;
     return params[b];
 }
 fn prm_clamp_normal(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 15u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm_clamp_at(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 18u;
     return params[b];
 }
 fn prm_K_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 19u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -311,7 +311,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         if (r2 >= rc * rc || r2 == 0.0) { continue; }
         let x_ij = (dxv * sgn);
         let r_ij = sqrt(r2);
-        // pairsum deformation_gradient (stdlib/solid/total_lagrangian.sph:97)
+        // pairsum deformation_gradient (stdlib/solid/total_lagrangian.sph:98)
         if ((body_i == ldj_body(j, sgn))) {
             let a = ldj_u(j, sgn);
             let n_2 = prm_clamp_normal(i);

@@ -208,39 +208,35 @@ fn st_hourglass_rate2(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 0u;
     return params[b];
 }
 fn prm_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 5u;
-    return params[b];
-}
-fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 7u;
-    return params[b];
-}
-fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 5u;
     return params[b];
 }
 fn prm_hourglass_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 9u;
     return params[b];
 }
 fn prm_viscosity_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 11u;
+    return params[b];
+}
+fn prm_c_p(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 12u;
     return params[b];
 }
 fn prm_damping(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 13u;
     return params[b];
 }
 fn prm_clamp_normal(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 15u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm_clamp_at(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 18u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -295,7 +291,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         if (r2 >= rc * rc || r2 == 0.0) { continue; }
         let x_ij = (dxv * sgn);
         let r_ij = sqrt(r2);
-        // pairsum tl_momentum (stdlib/solid/total_lagrangian.sph:117)
+        // pairsum tl_momentum (stdlib/solid/total_lagrangian.sph:118)
         if ((body_i == ldj_body(j, sgn))) {
             let X_j = (x_i - x_ij);
             let n_2 = prm_clamp_normal(i);
@@ -324,9 +320,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let n_5 = prm_clamp_normal(i);
             let clamped_4 = clamped;
             let v_ij = (v_i - select(a_4, (((2.0 * dot(a_4, n_5)) * n_5) - a_4), clamped_4));
-            let c_body = sqrt(((prm_bulk(i) + ((4.0 * prm_G(i)) / 3.0)) / prm_rho0(i)));
             let approach = (dot(v_ij, x_ij) / ((r_ij * r_ij) + (0.01 * (h_ij * h_ij))));
-            a = a + (-(((((((ldj_m(j, sgn) * prm_viscosity_alpha(i)) * c_body) * h_ij) * approach) / prm_rho0(i)) * length(g0)) * e));
+            a = a + (-(((((((ldj_m(j, sgn) * prm_viscosity_alpha(i)) * prm_c_p(i)) * h_ij) * approach) / prm_rho0(i)) * length(g0)) * e));
             hourglass_rate2 = hourglass_rate2 + k_2;
         }
     }

@@ -206,27 +206,27 @@ fn st_a_contact(i: u32, v: vec2<f32>) {
     data[b + 1u] = v[1];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 24u + 6u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 24u + 7u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 24u + 9u;
     return params[b];
 }
 fn prm_clamp_normal(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 24u + 14u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 fn prm_clamp_at(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 24u + 16u;
     return params[b];
 }
 fn prm_K_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 24u + 17u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -285,7 +285,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         if (r2 >= rc * rc || r2 == 0.0) { continue; }
         let x_ij = (dxv * sgn).xy;
         let r_ij = sqrt(r2);
-        // pairsum deformation_gradient (stdlib/solid/total_lagrangian.sph:97)
+        // pairsum deformation_gradient (stdlib/solid/total_lagrangian.sph:98)
         if ((body_i == ldj_body(j, sgn))) {
             let a = ldj_u(j, sgn);
             let n_2 = prm_clamp_normal(i);

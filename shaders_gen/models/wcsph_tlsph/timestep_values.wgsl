@@ -85,23 +85,23 @@ fn st_mu_max(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 0u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 14u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 15u;
     return params[b];
 }
 fn prm_cfl_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 21u;
     return params[b];
 }
 fn prm_cfl_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 26u;
     return params[b];
 }
 @compute @workgroup_size(64)
