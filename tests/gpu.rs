@@ -620,10 +620,12 @@ fn reordering_on_the_gpu_sorts_by_cell_within_groups_and_keeps_every_value() {
 
     gpu.reorder().expect("reorder");
 
-    // The order the cell list of the same positions gives (bit-identical on both sides).
+    // The order the cell list of the same positions gives (bit-identical on both sides), with
+    // the GPU's cells per cut-off.
     let pos32: Vec<f32> = pos.iter().map(|v| *v as f32).collect();
     let support = plan.model.kernels[plan.kernel.index()].support as f32;
-    let grid = Grid::build(&pos32, dim, support as f64 * h_max as f64);
+    let per_cutoff = gpu.cells_per_cutoff() as f64;
+    let grid = Grid::build(&pos32, dim, support as f64 * h_max as f64 / per_cutoff);
     let keys: Vec<(u32, u32, usize, usize)> = (0..groups.len())
         .map(|i| {
             let mut p = [0.0; 3];

@@ -52,9 +52,13 @@ struct Cloud {
     outlier: Option<[f32; 3]>,
     /// A NaN and an infinite coordinate.
     non_finite: bool,
+    /// Cells per cut-off of the cell list (1, 2, 4 or 8).
+    cells_per_cutoff: u32,
 }
 
 const SUPPORT: f32 = 2.0;
+/// Words per particle at the head of the query's output.
+const HEAD: usize = 7;
 
 fn point(x: &[f32], dim: usize, i: usize) -> [f64; 3] {
     let mut p = [0.0; 3];
@@ -66,6 +70,11 @@ fn point(x: &[f32], dim: usize, i: usize) -> [f64; 3] {
 
 fn h_max(h: &[f32]) -> f64 {
     h.iter().fold(0.0f64, |m, &v| m.max(v as f64))
+}
+
+/// The cell size the cloud's cell list asks for: the cut-off over the cells per cut-off.
+fn cell_request(c: &Cloud, h: &[f32]) -> f64 {
+    SUPPORT as f64 * h_max(h) / c.cells_per_cutoff as f64
 }
 
 fn build_cloud(c: &Cloud) -> (Vec<f32>, Vec<f32>) {
@@ -82,7 +91,7 @@ fn build_cloud(c: &Cloud) -> (Vec<f32>, Vec<f32>) {
     if c.faces {
         // The geometry depends only on the bounding box and h_max, which moving interior
         // particles onto interior faces does not change.
-        let g = Grid::build(&x, dim, SUPPORT as f64 * h_max(&h));
+        let g = Grid::build(&x, dim, cell_request(c, &h));
         let (origin, cell, counts) = (g.origin(), g.cell_size(), g.cells_per_axis());
         let mut lo = [f32::INFINITY; 3];
         let mut hi = [f32::NEG_INFINITY; 3];
@@ -112,7 +121,7 @@ fn build_cloud(c: &Cloud) -> (Vec<f32>, Vec<f32>) {
                 x[i * dim + k] = v;
             }
         }
-        let g2 = Grid::build(&x, dim, SUPPORT as f64 * h_max(&h));
+        let g2 = Grid::build(&x, dim, cell_request(c, &h));
         assert_eq!((g2.cell_size(), g2.cells_per_axis()), (cell, counts), "{}: faces moved the bbox", c.name);
     }
     if c.non_finite {
@@ -125,7 +134,8 @@ fn build_cloud(c: &Cloud) -> (Vec<f32>, Vec<f32>) {
 
 /// A pass-like kernel that uses the WGSL helpers: for particle i, its cell, the candidates in
 /// the 3^d cells around it (z, then y, then x; slots in order) and the neighbours within
-/// support * (h_i + h_j) / 2.
+/// support * (h_i + h_j) / 2 among them; then the candidates and neighbours of the walk the pass
+/// kernels take (`walk_cells`, `walk_skips`).
 const QUERY_WGSL: &str = r#"
 struct Query {
     n: u32,
@@ -142,6 +152,8 @@ struct Query {
 @group(0) @binding(2) var<storage, read> grid: array<u32>;
 @group(0) @binding(3) var<storage, read> cells: array<u32>;
 @group(0) @binding(4) var<storage, read_write> out: array<u32>;
+// Words per particle at the head of `out`.
+const HEAD = 7u;
 
 fn pos(i: u32) -> vec3<f32> {
     var p = vec3<f32>(0.0);
@@ -164,7 +176,7 @@ fn main(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wg: ve
     let hc = min(c + vec3<u32>(1u), dims - vec3<u32>(1u));
     var k = 0u;
     var nb = 0u;
-    let base = 5u * q.n + i * q.cap;
+    let base = HEAD * q.n + i * q.cap;
     for (var z = lo.z; z <= hc.z; z++) {
         for (var y = lo.y; y <= hc.y; y++) {
             for (var x = lo.x; x <= hc.x; x++) {
@@ -182,11 +194,34 @@ fn main(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wg: ve
             }
         }
     }
-    out[5u * i] = c.x;
-    out[5u * i + 1u] = c.y;
-    out[5u * i + 2u] = c.z;
-    out[5u * i + 3u] = k;
-    out[5u * i + 4u] = nb;
+    // The walk the pass kernels take: the cells within the cut-off of the largest h.
+    let wk = walk_cells(xi, q.support * bitcast<f32>(grid[9]));
+    var k_walk = 0u;
+    var nb_walk = 0u;
+    for (var z = wk.lo.z; z <= wk.hi.z; z++) {
+        for (var y = wk.lo.y; y <= wk.hi.y; y++) {
+            for (var x = wk.lo.x; x <= wk.hi.x; x++) {
+                if (walk_skips(wk, vec3<u32>(x, y, z))) { continue; }
+                let cell = cell_index(vec3<u32>(x, y, z));
+                for (var s = cell_start(cell); s < cell_start(cell + 1u); s++) {
+                    let j = sorted_particle(s);
+                    k_walk++;
+                    if (j == i) { continue; }
+                    let d = xi - pos(j);
+                    let r2 = d.x * d.x + d.y * d.y + d.z * d.z;
+                    let rc = q.support * (0.5 * (hi + data[q.h_offset + j]));
+                    if (r2 < rc * rc) { nb_walk++; }
+                }
+            }
+        }
+    }
+    out[HEAD * i] = c.x;
+    out[HEAD * i + 1u] = c.y;
+    out[HEAD * i + 2u] = c.z;
+    out[HEAD * i + 3u] = k;
+    out[HEAD * i + 4u] = nb;
+    out[HEAD * i + 5u] = k_walk;
+    out[HEAD * i + 6u] = nb_walk;
 }
 "#;
 
@@ -217,7 +252,7 @@ fn check_cloud(c: &Cloud) {
 fn check_cloud_on(gpu: &Gpu, c: &Cloud) {
     let (x, h) = build_cloud(c);
     let (n, dim) = (c.n, c.dim);
-    let cpu = Grid::build(&x, dim, SUPPORT as f64 * h_max(&h));
+    let cpu = Grid::build(&x, dim, cell_request(c, &h));
 
     // The caller's data buffer, with the positions and h at odd offsets.
     let x_offset = 5usize;
@@ -228,7 +263,7 @@ fn check_cloud_on(gpu: &Gpu, c: &Cloud) {
     let buf = gpu.storage_buffer("test data", 4 * data.len() as u64, wgpu::BufferUsages::empty()).unwrap();
     gpu.upload(&buf, 0, &data).unwrap();
 
-    let cl = CellList::new(gpu, n, dim).unwrap_or_else(|e| panic!("{e}"));
+    let cl = CellList::new(gpu, n, dim, c.cells_per_cutoff).unwrap_or_else(|e| panic!("{e}"));
     let mut cap = 0;
     let mut cpu_cands = vec![];
     for i in 0..n {
@@ -241,7 +276,7 @@ fn check_cloud_on(gpu: &Gpu, c: &Cloud) {
     let query = gpu
         .compile("test: query", &format!("{}{QUERY_WGSL}", wgsl_helpers()), "main")
         .unwrap_or_else(|e| panic!("{e}"));
-    let out = gpu.storage_buffer("test out", 4 * (5 * n + n * cap) as u64, wgpu::BufferUsages::empty()).unwrap();
+    let out = gpu.storage_buffer("test out", 4 * (HEAD * n + n * cap) as u64, wgpu::BufferUsages::empty()).unwrap();
     let qp = [n as u32, dim as u32, x_offset as u32, h_offset as u32, cap as u32, SUPPORT.to_bits(), 0, 0];
     let qbuf = gpu.uniform_buffer("test query params", &qp);
     let bind = gpu.bind("test query", &query, &[&qbuf, &buf, cl.grid_buffer(), cl.cells_buffer(), &out]);
@@ -257,7 +292,7 @@ fn check_cloud_on(gpu: &Gpu, c: &Cloud) {
     let g: Vec<u32> = gpu.download(cl.grid_buffer(), 0, 16).unwrap();
     let max_cells = pairsum::grid::max_cells(n);
     let cells: Vec<u32> = gpu.download(cl.cells_buffer(), 0, max_cells + 1 + n).unwrap();
-    let res: Vec<u32> = gpu.download(&out, 0, 5 * n + n * cap).unwrap();
+    let res: Vec<u32> = gpu.download(&out, 0, HEAD * n + n * cap).unwrap();
     eprintln!("{}: n = {n}, {} cells, build + query {elapsed:?}", c.name, cpu.num_cells());
 
     // How many particles a plain f32 computation would put in another cell than the CPU: the
@@ -293,7 +328,11 @@ fn check_cloud_on(gpu: &Gpu, c: &Cloud) {
     assert_eq!(g[7] as usize, cpu.num_cells(), "{name}: cells used");
     assert_eq!(g[8] as usize, max_cells + 1, "{name}: offset of the order");
     assert_eq!(f(g[9]), h_max(&h), "{name}: h_max");
-    assert_eq!(&g[14..16], &[0, 0], "{name}: reserved words");
+    // Cells on each side of a walk: the cells per cut-off, halved by each doubling of the cell.
+    let doubled = cpu.cell_size() / (cell_request(c, &h) * (1.0 + pairsum::grid::CELL_MARGIN));
+    let walk = if doubled.is_finite() { (c.cells_per_cutoff as f64 / doubled).max(1.0) as u32 } else { 1 };
+    assert_eq!(g[14], walk, "{name}: cells walked on each side (cell size {doubled} times the request)");
+    assert_eq!(g[15], 0, "{name}: reserved word");
 
     // The counting sort, entry for entry.
     let ncells = cpu.num_cells();
@@ -304,17 +343,30 @@ fn check_cloud_on(gpu: &Gpu, c: &Cloud) {
     // Per particle: cell, candidate sequence, neighbour count (and the grid is complete).
     for i in 0..n {
         let p = point(&x, dim, i);
-        let head = &res[5 * i..5 * i + 5];
+        let head = &res[HEAD * i..HEAD * (i + 1)];
         assert_eq!(&head[..3], &cpu.cell_coords(p), "{name}: cell of particle {i} at {p:?}");
         let k = head[3] as usize;
         let gpu_cands: Vec<usize> =
-            res[5 * n + i * cap..5 * n + i * cap + k.min(cap)].iter().map(|&j| j as usize).collect();
+            res[HEAD * n + i * cap..HEAD * n + i * cap + k.min(cap)].iter().map(|&j| j as usize).collect();
         assert_eq!(k, cpu_cands[i].len(), "{name}: number of candidates of particle {i}");
         assert_eq!(gpu_cands, cpu_cands[i], "{name}: candidates of particle {i}");
         let nb_cpu = count_within(&x, &h, dim, i, cpu_cands[i].iter().copied());
         assert_eq!(head[4], nb_cpu, "{name}: neighbours of particle {i}");
-        assert_eq!(nb_cpu, count_within(&x, &h, dim, i, 0..n), "{name}: the CPU grid misses neighbours of {i}");
+        let all = count_within(&x, &h, dim, i, 0..n);
+        if c.cells_per_cutoff == 1 {
+            assert_eq!(nb_cpu, all, "{name}: the CPU grid misses neighbours of {i}");
+            assert!(head[5] <= head[3], "{name}: the walk of {i} takes more candidates than its 3^d cells");
+        }
+        assert_eq!(head[6], all, "{name}: the walk finds another number of neighbours of {i} than all pairs");
     }
+    let (cands, walked): (u64, u64) = (0..n)
+        .map(|i| (res[HEAD * i + 3] as u64, res[HEAD * i + 5] as u64))
+        .fold((0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+    eprintln!(
+        "{name}: candidates per particle {:.1} in 3^d cells, {:.1} walked",
+        cands as f64 / n as f64,
+        walked as f64 / n as f64
+    );
 }
 
 #[test]
@@ -328,6 +380,7 @@ fn cells_2d_uniform_h() {
         faces: false,
         outlier: None,
         non_finite: false,
+        cells_per_cutoff: 1,
     });
 }
 
@@ -342,6 +395,7 @@ fn cells_2d_variable_h_faces() {
         faces: true,
         outlier: None,
         non_finite: false,
+        cells_per_cutoff: 1,
     });
 }
 
@@ -356,6 +410,7 @@ fn cells_2d_outlier_faces() {
         faces: true,
         outlier: Some([40.0, -25.0, 0.0]),
         non_finite: false,
+        cells_per_cutoff: 1,
     });
 }
 
@@ -370,6 +425,7 @@ fn cells_3d_uniform_h_faces() {
         faces: true,
         outlier: None,
         non_finite: false,
+        cells_per_cutoff: 1,
     });
 }
 
@@ -384,6 +440,53 @@ fn cells_3d_variable_h_outlier_non_finite() {
         faces: true,
         outlier: Some([3.0, 2.5, -4.0]),
         non_finite: true,
+        cells_per_cutoff: 1,
+    });
+}
+
+#[test]
+fn cells_3d_two_per_cutoff_walk_finds_every_neighbour() {
+    check_cloud(&Cloud {
+        name: "3d uniform h, two cells per cut-off, faces",
+        dim: 3,
+        n: 4000,
+        seed: 11,
+        variable_h: false,
+        faces: true,
+        outlier: None,
+        non_finite: false,
+        cells_per_cutoff: 2,
+    });
+}
+
+#[test]
+fn cells_3d_two_per_cutoff_variable_h_doubled_non_finite() {
+    // The outlier doubles the cell: the walk takes one cell on each side again.
+    check_cloud(&Cloud {
+        name: "3d variable h, two cells per cut-off, outlier, NaN/inf, faces",
+        dim: 3,
+        n: 4000,
+        seed: 12,
+        variable_h: true,
+        faces: true,
+        outlier: Some([3.0, 2.5, -4.0]),
+        non_finite: true,
+        cells_per_cutoff: 2,
+    });
+}
+
+#[test]
+fn cells_2d_four_per_cutoff_variable_h_faces() {
+    check_cloud(&Cloud {
+        name: "2d variable h, four cells per cut-off, faces",
+        dim: 2,
+        n: 3000,
+        seed: 13,
+        variable_h: true,
+        faces: true,
+        outlier: None,
+        non_finite: false,
+        cells_per_cutoff: 4,
     });
 }
 
@@ -399,6 +502,7 @@ fn cells_1d_and_three_scan_levels() {
         faces: true,
         outlier: None,
         non_finite: false,
+        cells_per_cutoff: 1,
     });
 }
 
@@ -419,6 +523,7 @@ fn two_dimensional_dispatch() {
             faces: true,
             outlier: None,
             non_finite: true,
+            cells_per_cutoff: 1,
         },
     );
     let red = Reducer::new(&g).unwrap();
@@ -454,12 +559,13 @@ fn cells_single_cell_fallback() {
     let data: Vec<f32> = x.iter().chain(&h).copied().collect();
     let buf = gpu.storage_buffer("test data", 4 * data.len() as u64, wgpu::BufferUsages::empty()).unwrap();
     gpu.upload(&buf, 0, &data).unwrap();
-    let cl = CellList::new(gpu, n, 2).unwrap();
+    let cl = CellList::new(gpu, n, 2, 2).unwrap();
     let mut enc = gpu.encoder("test");
     cl.record(gpu, &mut enc, &buf, 0, 2 * n as u32, SUPPORT);
     gpu.submit(enc);
     let g: Vec<u32> = gpu.download(cl.grid_buffer(), 0, 16).unwrap();
     assert_eq!(&g[4..8], &[1, 1, 1, 1]);
+    assert_eq!(g[14], 1, "one cell walked on each side of the single cell");
     assert_eq!(f32::from_bits(g[3]), f32::INFINITY);
     assert_eq!(f32::from_bits(g[9]), f32::INFINITY);
     assert_eq!((g[10], g[11]), (0, 0), "inv = 0");
@@ -624,7 +730,7 @@ fn too_large_buffers() {
     }
     // A cell list too large for the device is refused before anything is allocated.
     let n = (limit / 4) as usize;
-    assert!(matches!(CellList::new(gpu, n, 3), Err(GpuError::TooLarge { .. })));
+    assert!(matches!(CellList::new(gpu, n, 3, 1), Err(GpuError::TooLarge { .. })));
     assert!(matches!(
         gpu.download::<u32>(&gpu.storage_buffer("small", 8, wgpu::BufferUsages::empty()).unwrap(), 4, 4),
         Err(GpuError::Map(_))
@@ -786,4 +892,25 @@ fn soft_f64_matches_cpu() {
             assert!(same(f32::from_bits(w[9]) as f64, a as f32 as f64), "to f32, {ctx}");
         }
     }
+}
+
+/// A cubic (or square) lattice of `side` particles per axis at unit spacing.
+fn lattice(side: usize, dim: usize) -> Vec<f32> {
+    let n = side.pow(dim as u32);
+    (0..n).flat_map(|i| (0..dim).map(move |k| ((i / side.pow(k as u32)) % side) as f32)).collect()
+}
+
+#[test]
+fn two_cells_per_cutoff_only_where_half_a_cutoff_holds_five_particles() {
+    use pairsum::backend::gpu::runtime::cells_per_cutoff;
+    // PySPH's impact3d (3 h, h = 1.3 dx): 7.4 particles per half cell in the bulk.
+    assert_eq!(cells_per_cutoff(&lattice(24, 3), 3, 3.9), 2);
+    // The 3D dam break (2 h, h = 1.5 dx): 3.4.
+    assert_eq!(cells_per_cutoff(&lattice(24, 3), 3, 3.0), 1);
+    // The 2D dam break: 2.25; twice the cut-off: 9.
+    assert_eq!(cells_per_cutoff(&lattice(60, 2), 2, 3.0), 1);
+    assert_eq!(cells_per_cutoff(&lattice(60, 2), 2, 6.0), 2);
+    // No particles, or no finite cut-off: one cell.
+    assert_eq!(cells_per_cutoff(&[], 3, 3.9), 1);
+    assert_eq!(cells_per_cutoff(&lattice(8, 3), 3, f64::NAN), 1);
 }

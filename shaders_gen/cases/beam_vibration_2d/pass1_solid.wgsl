@@ -44,10 +44,10 @@ fn kernel_grad_at(x: vec2<f32>, h: f32) -> vec2<f32> {
     return select(vec2<f32>(0.0), kernel_grad(r, h) * x, r > 0.0 && r / h < 2.0);
 }
 fn pos3(p: u32) -> vec3<f32> {
-    let b = u32(info[3u + ints[p]] + i32(p) * 2);
+    let b = u32(info[3u] + i32(p) * 2);
     return vec3<f32>(data[b + 0u], data[b + 1u], 0.0);
 }
-fn h_of(p: u32) -> f32 { return data[u32(info[10u + ints[p]] + i32(p))]; }
+fn h_of(p: u32) -> f32 { return data[u32(info[10u] + i32(p))]; }
 fn ld_x(i: u32) -> vec2<f32> {
     let b = u32(info[3 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
@@ -67,14 +67,12 @@ fn st_v(i: u32, v: vec2<f32>) {
     data[b + 1u] = v[1];
 }
 fn ldj_v(j: u32, sgn: vec3<f32>) -> vec2<f32> {
-    let base = info[4 + ints[j]];
-    if (base == -2147483648) { return vec2<f32>(0.0); }
+    let base = info[4u];
     let b = u32(base + i32(j) * 2);
     return (vec2<f32>(data[b], data[b + 1u]) * sgn.xy);
 }
 fn ldj_vol(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[5 + ints[j]];
-    if (base == -2147483648) { return 0.0; }
+    let base = info[5u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
@@ -87,8 +85,7 @@ fn st_dx(i: u32, v: f32) {
     data[b] = v;
 }
 fn ldj_dx(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[6 + ints[j]];
-    if (base == -2147483648) { return 0.0; }
+    let base = info[6u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
@@ -101,8 +98,7 @@ fn st_body(i: u32, v: f32) {
     data[b] = v;
 }
 fn ldj_body(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[7 + ints[j]];
-    if (base == -2147483648) { return 0.0; }
+    let base = info[7u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
@@ -115,8 +111,7 @@ fn st_m(i: u32, v: f32) {
     data[b] = v;
 }
 fn ldj_m(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[8 + ints[j]];
-    if (base == -2147483648) { return 0.0; }
+    let base = info[8u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
@@ -129,8 +124,7 @@ fn st_rho(i: u32, v: f32) {
     data[b] = v;
 }
 fn ldj_rho(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[9 + ints[j]];
-    if (base == -2147483648) { return 0.0; }
+    let base = info[9u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
@@ -143,8 +137,7 @@ fn st_h(i: u32, v: f32) {
     data[b] = v;
 }
 fn ldj_h(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[10 + ints[j]];
-    if (base == -2147483648) { return 0.0; }
+    let base = info[10u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
@@ -158,8 +151,7 @@ fn st_u(i: u32, v: vec2<f32>) {
     data[b + 1u] = v[1];
 }
 fn ldj_u(j: u32, sgn: vec3<f32>) -> vec2<f32> {
-    let base = info[11 + ints[j]];
-    if (base == -2147483648) { return vec2<f32>(0.0); }
+    let base = info[11u];
     let b = u32(base + i32(j) * 2);
     return (vec2<f32>(data[b], data[b + 1u]) * sgn.xy);
 }

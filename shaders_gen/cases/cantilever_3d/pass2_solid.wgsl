@@ -51,10 +51,10 @@ fn kernel_grad_at(x: vec3<f32>, h: f32) -> vec3<f32> {
     return select(vec3<f32>(0.0), kernel_grad(r, h) * x, r > 0.0 && r / h < 2.0);
 }
 fn pos3(p: u32) -> vec3<f32> {
-    let b = u32(info[3u + ints[p]] + i32(p) * 3);
+    let b = u32(info[3u] + i32(p) * 3);
     return vec3<f32>(data[b + 0u], data[b + 1u], data[b + 2u]);
 }
-fn h_of(p: u32) -> f32 { return data[u32(info[11u + ints[p]] + i32(p))]; }
+fn h_of(p: u32) -> f32 { return data[u32(info[11u] + i32(p))]; }
 fn ld_x(i: u32) -> vec3<f32> {
     let b = u32(info[3 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
@@ -76,14 +76,12 @@ fn st_v(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn ldj_v(j: u32, sgn: vec3<f32>) -> vec3<f32> {
-    let base = info[4 + ints[j]];
-    if (base == -2147483648) { return vec3<f32>(0.0); }
+    let base = info[4u];
     let b = u32(base + i32(j) * 3);
     return (vec3<f32>(data[b], data[b + 1u], data[b + 2u]) * sgn);
 }
 fn ldj_vol(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[5 + ints[j]];
-    if (base == -2147483648) { return 0.0; }
+    let base = info[5u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
@@ -96,14 +94,12 @@ fn st_body(i: u32, v: f32) {
     data[b] = v;
 }
 fn ldj_body(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[7 + ints[j]];
-    if (base == -2147483648) { return 0.0; }
+    let base = info[7u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
 fn ldj_m(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[9 + ints[j]];
-    if (base == -2147483648) { return 0.0; }
+    let base = info[9u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
@@ -118,8 +114,7 @@ fn st_u(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn ldj_u(j: u32, sgn: vec3<f32>) -> vec3<f32> {
-    let base = info[12 + ints[j]];
-    if (base == -2147483648) { return vec3<f32>(0.0); }
+    let base = info[12u];
     let b = u32(base + i32(j) * 3);
     return (vec3<f32>(data[b], data[b + 1u], data[b + 2u]) * sgn);
 }
@@ -140,8 +135,7 @@ fn st_L0_inv(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ldj_L0_inv(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
-    let base = info[13 + ints[j]];
-    if (base == -2147483648) { return mat3x3<f32>(); }
+    let base = info[13u];
     let b = u32(base + i32(j) * 9);
     return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u])), sgn);
 }
@@ -162,8 +156,7 @@ fn st_H(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ldj_H(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
-    let base = info[14 + ints[j]];
-    if (base == -2147483648) { return mat3x3<f32>(); }
+    let base = info[14u];
     let b = u32(base + i32(j) * 9);
     return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u])), sgn);
 }
@@ -184,8 +177,7 @@ fn st_P(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ldj_P(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
-    let base = info[15 + ints[j]];
-    if (base == -2147483648) { return mat3x3<f32>(); }
+    let base = info[15u];
     let b = u32(base + i32(j) * 9);
     return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u])), sgn);
 }

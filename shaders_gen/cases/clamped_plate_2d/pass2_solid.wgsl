@@ -44,10 +44,10 @@ fn kernel_grad_at(x: vec2<f32>, h: f32) -> vec2<f32> {
     return select(vec2<f32>(0.0), kernel_grad(r, h) * x, r > 0.0 && r / h < 2.0);
 }
 fn pos3(p: u32) -> vec3<f32> {
-    let b = u32(info[3u + ints[p]] + i32(p) * 2);
+    let b = u32(info[3u] + i32(p) * 2);
     return vec3<f32>(data[b + 0u], data[b + 1u], 0.0);
 }
-fn h_of(p: u32) -> f32 { return data[u32(info[11u + ints[p]] + i32(p))]; }
+fn h_of(p: u32) -> f32 { return data[u32(info[11u] + i32(p))]; }
 fn ld_x(i: u32) -> vec2<f32> {
     let b = u32(info[3 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
@@ -67,14 +67,12 @@ fn st_v(i: u32, v: vec2<f32>) {
     data[b + 1u] = v[1];
 }
 fn ldj_v(j: u32, sgn: vec3<f32>) -> vec2<f32> {
-    let base = info[4 + ints[j]];
-    if (base == -2147483648) { return vec2<f32>(0.0); }
+    let base = info[4u];
     let b = u32(base + i32(j) * 2);
     return (vec2<f32>(data[b], data[b + 1u]) * sgn.xy);
 }
 fn ldj_vol(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[5 + ints[j]];
-    if (base == -2147483648) { return 0.0; }
+    let base = info[5u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
@@ -87,14 +85,12 @@ fn st_body(i: u32, v: f32) {
     data[b] = v;
 }
 fn ldj_body(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[7 + ints[j]];
-    if (base == -2147483648) { return 0.0; }
+    let base = info[7u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
 fn ldj_m(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[9 + ints[j]];
-    if (base == -2147483648) { return 0.0; }
+    let base = info[9u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
@@ -108,8 +104,7 @@ fn st_u(i: u32, v: vec2<f32>) {
     data[b + 1u] = v[1];
 }
 fn ldj_u(j: u32, sgn: vec3<f32>) -> vec2<f32> {
-    let base = info[12 + ints[j]];
-    if (base == -2147483648) { return vec2<f32>(0.0); }
+    let base = info[12u];
     let b = u32(base + i32(j) * 2);
     return (vec2<f32>(data[b], data[b + 1u]) * sgn.xy);
 }
@@ -125,8 +120,7 @@ fn st_L0_inv(i: u32, v: mat2x2<f32>) {
     data[b + 3u] = v[1][1];
 }
 fn ldj_L0_inv(j: u32, sgn: vec3<f32>) -> mat2x2<f32> {
-    let base = info[13 + ints[j]];
-    if (base == -2147483648) { return mat2x2<f32>(); }
+    let base = info[13u];
     let b = u32(base + i32(j) * 4);
     return flip_m(mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u])), sgn.xy);
 }
@@ -142,8 +136,7 @@ fn st_H(i: u32, v: mat2x2<f32>) {
     data[b + 3u] = v[1][1];
 }
 fn ldj_H(j: u32, sgn: vec3<f32>) -> mat2x2<f32> {
-    let base = info[14 + ints[j]];
-    if (base == -2147483648) { return mat2x2<f32>(); }
+    let base = info[14u];
     let b = u32(base + i32(j) * 4);
     return flip_m(mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u])), sgn.xy);
 }
@@ -159,8 +152,7 @@ fn st_P(i: u32, v: mat2x2<f32>) {
     data[b + 3u] = v[1][1];
 }
 fn ldj_P(j: u32, sgn: vec3<f32>) -> mat2x2<f32> {
-    let base = info[15 + ints[j]];
-    if (base == -2147483648) { return mat2x2<f32>(); }
+    let base = info[15u];
     let b = u32(base + i32(j) * 4);
     return flip_m(mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u])), sgn.xy);
 }

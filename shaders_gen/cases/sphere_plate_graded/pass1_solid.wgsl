@@ -45,10 +45,10 @@ fn kernel_w(r: f32, h: f32) -> f32 { return 0.48205584 / (h * h * h) * kernel_sh
 fn kernel_w_at(r: f32, h: f32) -> f32 { return select(0.0, kernel_w(r, h), r / h < 2.0); }
 fn kernel_grad(r: f32, h: f32) -> f32 { return 0.48205584 / (h * h * h * h) * kernel_slope(r / h) / r; }
 fn pos3(p: u32) -> vec3<f32> {
-    let b = u32(info[3u + ints[p]] + i32(p) * 3);
+    let b = u32(info[3u] + i32(p) * 3);
     return vec3<f32>(data[b + 0u], data[b + 1u], data[b + 2u]);
 }
-fn h_of(p: u32) -> f32 { return data[u32(info[7u + ints[p]] + i32(p))]; }
+fn h_of(p: u32) -> f32 { return data[u32(info[7u] + i32(p))]; }
 fn ld_v(i: u32) -> vec3<f32> {
     let b = u32(info[4 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
@@ -60,14 +60,12 @@ fn st_v(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn ldj_v(j: u32, sgn: vec3<f32>) -> vec3<f32> {
-    let base = info[4 + ints[j]];
-    if (base == -2147483648) { return vec3<f32>(0.0); }
+    let base = info[4u];
     let b = u32(base + i32(j) * 3);
     return (vec3<f32>(data[b], data[b + 1u], data[b + 2u]) * sgn);
 }
 fn ldj_m(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[5 + ints[j]];
-    if (base == -2147483648) { return 0.0; }
+    let base = info[5u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
@@ -80,8 +78,7 @@ fn st_rho(i: u32, v: f32) {
     data[b] = v;
 }
 fn ldj_rho(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[6 + ints[j]];
-    if (base == -2147483648) { return 0.0; }
+    let base = info[6u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
@@ -99,8 +96,7 @@ fn st_s(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ldj_s(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
-    let base = info[8 + ints[j]];
-    if (base == -2147483648) { return mat3x3<f32>(); }
+    let base = info[8u];
     let b = u32(base + i32(j) * 6);
     return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u])), sgn);
 }
@@ -136,8 +132,7 @@ fn st_p(i: u32, v: f32) {
     data[b] = v;
 }
 fn ldj_p(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[12 + ints[j]];
-    if (base == -2147483648) { return 0.0; }
+    let base = info[12u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
@@ -150,8 +145,7 @@ fn st_c(i: u32, v: f32) {
     data[b] = v;
 }
 fn ldj_c(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[13 + ints[j]];
-    if (base == -2147483648) { return 0.0; }
+    let base = info[13u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }

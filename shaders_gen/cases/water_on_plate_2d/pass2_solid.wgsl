@@ -292,6 +292,39 @@ fn cell_index(c: vec3<u32>) -> u32 {
     let n = grid_dims();
     return c.x + n.x * (c.y + n.y * c.z);
 }
+// A walk over the cells that may hold a particle within `radius` of point p: from `lo` to `hi`
+// (grid[14] cells on each side of p's cell `c`, clamped to the grid), less the cells that
+// `walk_skips`. `q` is p's place inside its cell, in cells; `reach2` the squared radius in cells.
+struct CellWalk {
+    c: vec3<u32>,
+    lo: vec3<u32>,
+    hi: vec3<u32>,
+    q: vec3<f32>,
+    reach2: f32,
+}
+fn walk_cells(p: vec3<f32>, radius: f32) -> CellWalk {
+    let c = cell_coords(p);
+    let n = grid_dims();
+    let w = vec3<u32>(grid[14]);
+    let cs = grid_cell_size();
+    let q = (p - grid_origin()) / cs - vec3<f32>(c);
+    // q's f32 rounding grows with the cells along an axis; the slack keeps every cell that may
+    // hold a particle within the radius (it is many times the rounding).
+    let reach = radius / cs + 1e-3 + 1e-6 * f32(max(n.x, max(n.y, n.z)));
+    return CellWalk(c, c - min(c, w), min(c + w, n - vec3<u32>(1u)), q, reach * reach);
+}
+// How many cells from the walk's point to the nearest face of cell a, along one axis.
+fn cell_gap(a: u32, c: u32, q: f32) -> f32 {
+    if (a > c) { return max(f32(a - c) - q, 0.0); }
+    if (a < c) { return max(f32(c - a - 1u) + q, 0.0); }
+    return 0.0;
+}
+// Whether every point of `cell` is beyond the walk's radius (a NaN point skips nothing).
+fn walk_skips(wk: CellWalk, cell: vec3<u32>) -> bool {
+    let g = vec3<f32>(cell_gap(cell.x, wk.c.x, wk.q.x), cell_gap(cell.y, wk.c.y, wk.q.y),
+                      cell_gap(cell.z, wk.c.z, wk.q.z));
+    return dot(g, g) > wk.reach2;
+}
 
 // ---- GPU cell list: need `cells: array<u32>` (and `grid`) ----
 // First sorted slot of cell c; cell c holds slots cell_start(c) .. cell_start(c + 1).
@@ -313,19 +346,17 @@ fn kernel_w(r: f32, h: f32) -> f32 { return 0.6820926 / (h * h) * kernel_shape(r
 fn kernel_w_at(r: f32, h: f32) -> f32 { return select(0.0, kernel_w(r, h), r / h < 2.0); }
 fn kernel_grad(r: f32, h: f32) -> f32 { return 0.6820926 / (h * h * h) * kernel_slope(r / h) / r; }
 fn pos3(p: u32) -> vec3<f32> {
-    let b = u32(info[5u + ints[p]] + i32(p) * 2);
+    let b = u32(info[5u] + i32(p) * 2);
     return vec3<f32>(data[b + 0u], data[b + 1u], 0.0);
 }
-fn h_of(p: u32) -> f32 { return data[u32(info[15u + ints[p]] + i32(p))]; }
+fn h_of(p: u32) -> f32 { return data[u32(info[15u] + i32(p))]; }
 fn ldj_rho(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[13 + ints[j]];
-    if (base == -2147483648) { return 0.0; }
+    let base = info[13u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
 fn ldj_p(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[29 + ints[j]];
-    if (base == -2147483648) { return 0.0; }
+    let base = info[29u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
@@ -379,13 +410,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             }
         }
         if (skip || any(shifted > vec3<u32>(1u))) { continue; }
-        let c = cell_coords(yi);
-        let dims = grid_dims();
-        let lo = select(c - vec3<u32>(1u), vec3<u32>(0u), c == vec3<u32>(0u));
-        let hi_c = min(c + vec3<u32>(1u), dims - vec3<u32>(1u));
-        for (var z = lo.z; z <= hi_c.z; z++) {
-        for (var y = lo.y; y <= hi_c.y; y++) {
-        for (var x = lo.x; x <= hi_c.x; x++) {
+        let wk = walk_cells(yi, 2.0 * h_max);
+        for (var z = wk.lo.z; z <= wk.hi.z; z++) {
+        for (var y = wk.lo.y; y <= wk.hi.y; y++) {
+        for (var x = wk.lo.x; x <= wk.hi.x; x++) {
+        if (walk_skips(wk, vec3<u32>(x, y, z))) { continue; }
         let cell = cell_index(vec3<u32>(x, y, z));
         for (var s = cell_start(cell); s < cell_start(cell + 1u); s++) {
             let j = sorted_particle(s);

@@ -160,10 +160,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     }
     state[4u * n + i] = f;
     let h_max = bitcast<f32>(grid[9]);
-    // The 3^d cells around i hold everything within a cell size: a skin from an earlier full
+    // The walk's cells hold everything within grid[14] cell sizes: a skin from an earlier full
     // build, with a larger h_max then, may not reach further (the adaptive search's rebuilds).
     let skin_len = bitcast<f32>(atomicLoad(&lists[8]));
-    let radius = min(params.support * 0.5 * (hi + h_max) + skin_len, bitcast<f32>(grid[3]));
+    let radius = min(params.support * 0.5 * (hi + h_max) + skin_len, f32(grid[14]) * bitcast<f32>(grid[3]));
     let stride = atomicLoad(&lists[0]);
     let first = 16u + n + i * stride;
     var count = 0u;
@@ -187,13 +187,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         }
         // Both sides of one periodic axis together move i nowhere.
         if (far || any(shifted > vec3<u32>(1u))) { continue; }
-        let c = cell_coords(yi);
-        let dims = grid_dims();
-        let lo = select(c - vec3<u32>(1u), vec3<u32>(0u), c == vec3<u32>(0u));
-        let hi_c = min(c + vec3<u32>(1u), dims - vec3<u32>(1u));
-        for (var z = lo.z; z <= hi_c.z; z++) {
-        for (var y = lo.y; y <= hi_c.y; y++) {
-        for (var x = lo.x; x <= hi_c.x; x++) {
+        let wk = walk_cells(yi, radius);
+        for (var z = wk.lo.z; z <= wk.hi.z; z++) {
+        for (var y = wk.lo.y; y <= wk.hi.y; y++) {
+        for (var x = wk.lo.x; x <= wk.hi.x; x++) {
+            if (walk_skips(wk, vec3<u32>(x, y, z))) { continue; }
             let cell = cell_index(vec3<u32>(x, y, z));
             for (var s = cell_start(cell); s < cell_start(cell + 1u); s++) {
                 let j = sorted_particle(s);

@@ -149,7 +149,7 @@ impl GpuBackend {
             .map_err(err)?;
         let info = gpu.storage_buffer("layout", 4 * (lay.meta_len() + 1) as u64, storage).map_err(err)?;
         let globals = gpu.storage_buffer("clock and reductions", 4 * gl::SIZE as u64, storage).map_err(err)?;
-        let cells = CellList::new(&gpu, n, plan.dim).map_err(err)?;
+        let cells = CellList::new(&gpu, n, plan.dim, initial_cells_per_cutoff(&plan, &store)).map_err(err)?;
         let reducer = Reducer::new(&gpu).map_err(err)?;
         // The layout table: group ranges and the base of every (field, group).
         let mut meta = vec![0i32; lay.meta_len() + 1];
@@ -163,8 +163,15 @@ impl GpuBackend {
         for (f, slot) in &lay.slots {
             let col = store.column(*f).expect("layout field is stored");
             for g in 0..lay.n_groups {
+                if lay.everywhere[*slot] && col.has(g) && col.base[g] != 0 {
+                    return Err(BackendError(format!("a field stored on every group has rows offset on group {g}")));
+                }
+                // A field on every group has rows = indices: its base on a group without
+                // particles is the same as on the others (`Layout::everywhere`).
                 meta[lay.base_index(*slot, g)] = if col.has(g) {
                     (offset[f.index()].expect("stored") as isize + col.base[g] * col.comps as isize) as i32
+                } else if lay.everywhere[*slot] {
+                    offset[f.index()].expect("stored") as i32
                 } else {
                     ABSENT
                 };
@@ -363,6 +370,11 @@ impl GpuBackend {
 
     pub fn gpu(&self) -> &Gpu {
         &self.gpu
+    }
+
+    /// The cells per cut-off of its cell list ([`cells_per_cutoff`], chosen at the start).
+    pub fn cells_per_cutoff(&self) -> u32 {
+        self.cells.cells_per_cutoff()
     }
 
     /// The kernels, for `pairsum emit` and tests.
@@ -856,4 +868,44 @@ fn list_stride(inp: Option<crate::backend::cpu::lists::BuildInput<f32>>, skin: f
     lists.prepare(&Search::Verlet { skin }, &inp, |_| vec![]);
     let most = lists.of.iter().map(Vec::len).max().unwrap_or(0);
     (2 * most + 16) as u32
+}
+
+/// Particles a cell of half the cut-off must hold on average, weighted by particle, before the
+/// cell list takes two cells per cut-off. Finer cells cut the candidates a pass loads (about 2.6×
+/// fewer in 3D) but add cells to walk, and the threads of a warp diverge over more, emptier
+/// cells. On an H200 (`docs/results/gpu_h200`, run 7) two cells per cut-off made PySPH's
+/// `impact3d` 1.34× faster at 7.4 particles per half cell and the dam breaks 1.27× (3D, 3.4) and
+/// 1.23× (2D, 2.25) slower; the bound lies between.
+const HALF_CELL_MIN_PARTICLES: f64 = 5.0;
+
+/// [`cells_per_cutoff`] for the store's positions and its largest finite h at the start.
+fn initial_cells_per_cutoff(plan: &Plan, store: &Store<f32>) -> u32 {
+    let column = |name| plan.model.field_id(name).and_then(|f| store.column(f));
+    let (Some(x), Some(h)) = (column("x"), column("h")) else { return 1 };
+    let support = plan.model.kernels[plan.kernel.index()].support;
+    let h_max = crate::scene::max_keeping_nan(0.0, h.data.iter().map(|v| *v as f64).filter(|v| v.is_finite()));
+    cells_per_cutoff(&x.data, plan.dim, support * h_max)
+}
+
+/// The cells per cut-off of the GPU's cell list for particles at `x` (`dim` components each) with
+/// the cut-off `cutoff`: 2 when a cell of half the cut-off holds at least
+/// [`HALF_CELL_MIN_PARTICLES`] on average over the particles, else 1. The environment variable
+/// `PAIRSUM_GPU_CELLS_PER_CUTOFF` (1, 2, 4 or 8) overrides the choice.
+pub fn cells_per_cutoff(x: &[f32], dim: usize, cutoff: f64) -> u32 {
+    if let Some(k) = std::env::var("PAIRSUM_GPU_CELLS_PER_CUTOFF").ok().and_then(|v| v.parse().ok()) {
+        return k;
+    }
+    let n = x.len() / dim.max(1);
+    if n == 0 || !(cutoff.is_finite() && cutoff > 0.0) {
+        return 1;
+    }
+    let grid = crate::grid::Grid::build(x, dim, cutoff);
+    // Each particle counts the particles of its own cell: the bulk, not the surface, decides.
+    let weighted: f64 = grid.cell_start().windows(2).map(|w| ((w[1] - w[0]) as f64).powi(2)).sum();
+    let per_half_cell = weighted / n as f64 / (1u32 << dim) as f64;
+    if per_half_cell >= HALF_CELL_MIN_PARTICLES {
+        2
+    } else {
+        1
+    }
 }

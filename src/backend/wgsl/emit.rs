@@ -614,8 +614,10 @@ impl<'a> Writer<'a> {
                 }
                 Side::J => {
                     let _ = writeln!(s, "fn ldj_{name}(j: u32, sgn: vec3<f32>) -> {t} {{");
-                    let _ = writeln!(s, "    let base = {};", base_expr("ints[j]"));
-                    let _ = writeln!(s, "    if (base == {}) {{ return {}; }}", super::ABSENT, fill(0.0, shape, d));
+                    let _ = writeln!(s, "    let base = {};", self.lay.base_of(slot, "j"));
+                    if !self.lay.everywhere[slot] {
+                        let _ = writeln!(s, "    if (base == {}) {{ return {}; }}", super::ABSENT, fill(0.0, shape, d));
+                    }
                     let _ = writeln!(s, "    let b = u32(base + i32(j) * {comps});");
                     let _ = writeln!(s, "    return {};", flip(shape, d, &construct(shape, d, "b")));
                     let _ = writeln!(s, "}}");
@@ -836,7 +838,7 @@ fn position_fn(plan: &Plan, lay: &Layout) -> String {
     let d = plan.dim;
     let x = plan.model.field_id("x").expect("x");
     let slot = lay.slot(x).expect("x is stored");
-    let base = format!("info[{}u + ints[p]]", lay.base_index(slot, 0));
+    let base = lay.base_of(slot, "p");
     let comps: Vec<String> = (0..3).map(|c| if c < d { format!("data[b + {c}u]") } else { "0.0".into() }).collect();
     format!(
         "fn pos3(p: u32) -> vec3<f32> {{\n    let b = u32({base} + i32(p) * {d});\n    return vec3<f32>({});\n}}\n",
@@ -847,7 +849,7 @@ fn position_fn(plan: &Plan, lay: &Layout) -> String {
 fn h_fn(plan: &Plan, lay: &Layout) -> String {
     let h = plan.model.field_id("h").expect("h");
     let slot = lay.slot(h).expect("h is stored");
-    format!("fn h_of(p: u32) -> f32 {{ return data[u32(info[{}u + ints[p]] + i32(p))]; }}\n", lay.base_index(slot, 0))
+    format!("fn h_of(p: u32) -> f32 {{ return data[u32({} + i32(p))]; }}\n", lay.base_of(slot, "p"))
 }
 
 fn pass_kernel(plan: &Plan, lay: &Layout, pass: usize, v: &PassVariant, cell_helpers: &str) -> Kernel {
@@ -1007,7 +1009,8 @@ fn pass_kernel(plan: &Plan, lay: &Layout, pass: usize, v: &PassVariant, cell_hel
     Kernel { name, kind: KernelKind::Pass { pass, group: g }, wgsl, bindings }
 }
 
-/// Opens the neighbour loop over the cells around particle i (and around its mirror images):
+/// Opens the neighbour loop over the cells around particle i (and around its mirror images) that
+/// may hold a particle within the cut-off (`walk_cells`, `walk_skips` of `backend::gpu::cells`):
 /// `j`, `yi` (i or its image) and `sgn` are in scope inside. Returns the lines that close it, each
 /// with how far it is outdented.
 fn cell_walk(w: &mut Writer, support: &str) -> Vec<(usize, &'static str)> {
@@ -1015,13 +1018,11 @@ fn cell_walk(w: &mut Writer, support: &str) -> Vec<(usize, &'static str)> {
     w.line("for (var tr = 0u; tr < (1u << mirrors); tr++) {");
     w.indent += 1;
     reflect(w, Some(&format!("abs(xi[axis] - at) >= {support} * h_max")));
-    w.line("let c = cell_coords(yi);");
-    w.line("let dims = grid_dims();");
-    w.line("let lo = select(c - vec3<u32>(1u), vec3<u32>(0u), c == vec3<u32>(0u));");
-    w.line("let hi_c = min(c + vec3<u32>(1u), dims - vec3<u32>(1u));");
-    w.line("for (var z = lo.z; z <= hi_c.z; z++) {");
-    w.line("for (var y = lo.y; y <= hi_c.y; y++) {");
-    w.line("for (var x = lo.x; x <= hi_c.x; x++) {");
+    w.line(format!("let wk = walk_cells(yi, {support} * h_max);"));
+    w.line("for (var z = wk.lo.z; z <= wk.hi.z; z++) {");
+    w.line("for (var y = wk.lo.y; y <= wk.hi.y; y++) {");
+    w.line("for (var x = wk.lo.x; x <= wk.hi.x; x++) {");
+    w.line("if (walk_skips(wk, vec3<u32>(x, y, z))) { continue; }");
     w.line("let cell = cell_index(vec3<u32>(x, y, z));");
     w.line("for (var s = cell_start(cell); s < cell_start(cell + 1u); s++) {");
     w.indent += 1;

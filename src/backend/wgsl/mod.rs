@@ -60,6 +60,11 @@ pub struct Layout {
     pub n_groups: usize,
     /// Layout slot of each stored field (index in `plan.layout`).
     pub slots: Vec<(FieldId, usize)>,
+    /// Per slot: whether the field is stored on every group. Its rows are then the particles'
+    /// indices and its base the same on every group (`meta` holds it for every group, present or
+    /// not), so a kernel reads it from group 0's entry, one address for all threads, instead of
+    /// looking up each neighbour's group first.
+    pub everywhere: Vec<bool>,
     pub param_offset: Vec<usize>,
     pub param_stride: usize,
 }
@@ -67,13 +72,16 @@ pub struct Layout {
 impl Layout {
     pub fn new(plan: &Plan) -> Layout {
         let slots = plan.layout.iter().enumerate().map(|(k, l)| (l.field, k)).collect();
+        let n_groups = plan.model.groups.len();
+        let everywhere =
+            plan.layout.iter().map(|l| (0..n_groups).all(|g| l.groups.contains(GroupId(g as u32)))).collect();
         let mut param_offset = vec![];
         let mut stride = 0;
         for p in &plan.model.params {
             param_offset.push(stride);
             stride += crate::ir::components(p.ty.shape, plan.dim);
         }
-        Layout { n_groups: plan.model.groups.len(), slots, param_offset, param_stride: stride }
+        Layout { n_groups, slots, everywhere, param_offset, param_stride: stride }
     }
     pub fn slot(&self, f: FieldId) -> Option<usize> {
         self.slots.iter().find(|(g, _)| *g == f).map(|(_, s)| *s)
@@ -81,6 +89,15 @@ impl Layout {
     /// Index in `meta` of the base of slot `s` on group `g`.
     pub fn base_index(&self, slot: usize, g: usize) -> usize {
         1 + 2 * self.n_groups + slot * self.n_groups + g
+    }
+    /// The WGSL expression of slot `s`'s base for particle `p`'s group: group 0's entry when the
+    /// field is stored on every group, else the entry of `ints[p]`.
+    pub fn base_of(&self, slot: usize, p: &str) -> String {
+        if self.everywhere[slot] {
+            format!("info[{}u]", self.base_index(slot, 0))
+        } else {
+            format!("info[{}u + ints[{p}]]", self.base_index(slot, 0))
+        }
     }
     pub fn meta_len(&self) -> usize {
         1 + 2 * self.n_groups + self.slots.len() * self.n_groups
