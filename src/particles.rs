@@ -47,8 +47,12 @@ pub trait Real:
     fn is_finite(self) -> bool;
     /// exp by the CPU backend's vectorisable recipe (`backend::cpu::math`), not libm.
     fn lane_exp(self) -> Self;
-    /// The constants of that recipe in this precision.
+    /// ln and pow by the same module's recipes.
+    fn lane_ln(self) -> Self;
+    fn lane_pow(self, e: Self) -> Self;
+    /// The constants of those recipes in this precision.
     const EXP: &'static crate::backend::cpu::math::ExpConsts;
+    const LN: &'static crate::backend::cpu::math::LnConsts;
     fn zero() -> Self {
         Self::from_f64(0.0)
     }
@@ -58,14 +62,23 @@ pub trait Real:
 }
 
 macro_rules! real {
-    ($t:ty, $name:expr, $exp:path, $consts:path) => {
+    ($t:ty, $name:expr, $exp:path, $ln:path, $pow:path, $consts:path, $ln_consts:path) => {
         impl Real for $t {
             const BYTES: usize = std::mem::size_of::<$t>();
             const NAME: &'static str = $name;
             const EXP: &'static crate::backend::cpu::math::ExpConsts = &$consts;
+            const LN: &'static crate::backend::cpu::math::LnConsts = &$ln_consts;
             #[inline(always)]
             fn lane_exp(self) -> Self {
                 $exp(self)
+            }
+            #[inline(always)]
+            fn lane_ln(self) -> Self {
+                $ln(self)
+            }
+            #[inline(always)]
+            fn lane_pow(self, e: Self) -> Self {
+                $pow(self, e)
             }
             #[inline(always)]
             fn from_f64(x: f64) -> Self {
@@ -130,8 +143,24 @@ macro_rules! real {
         }
     };
 }
-real!(f32, "f32", crate::backend::cpu::math::exp_f32, crate::backend::cpu::math::EXP_F32);
-real!(f64, "f64", crate::backend::cpu::math::exp_f64, crate::backend::cpu::math::EXP_F64);
+real!(
+    f32,
+    "f32",
+    crate::backend::cpu::math::exp_f32,
+    crate::backend::cpu::math::ln_f32,
+    crate::backend::cpu::math::pow_f32,
+    crate::backend::cpu::math::EXP_F32,
+    crate::backend::cpu::math::LN_F32
+);
+real!(
+    f64,
+    "f64",
+    crate::backend::cpu::math::exp_f64,
+    crate::backend::cpu::math::ln_f64,
+    crate::backend::cpu::math::pow_f64,
+    crate::backend::cpu::math::EXP_F64,
+    crate::backend::cpu::math::LN_F64
+);
 
 /// Where a column has no row for a group.
 pub const ABSENT: isize = isize::MIN;

@@ -489,7 +489,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let dt = globals[1u];
     // pairsum extrapolated_pressure: accumulators
     var p_wall: f32 = 0.0;
-    var c_2: f32 = 0.0;
+    var c: f32 = 0.0;
     var p_over_rho2: f32 = 0.0;
     var weighted: f32 = 0.0;
     var weight: f32 = 0.0;
@@ -577,7 +577,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     p_wall = (weighted / max(weight, 1e-30));
     let p1 = prm_c0(i);
     let ratio = pow(((p_wall / (((p1 * p1) * prm_rho0(i)) / prm_gamma(i))) + 1.0), (1.0 / prm_gamma(i)));
-    c_2 = (prm_c0(i) * pow(ratio, ((prm_gamma(i) - 1.0) / 2.0)));
+    c = (prm_c0(i) * pow(ratio, ((prm_gamma(i) - 1.0) / 2.0)));
     let p2 = (prm_rho0(i) * ratio);
     p_over_rho2 = (p_wall / (p2 * p2));
     // then body_pressure
@@ -585,7 +585,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     p_i = p_wall;
     st_p(i, p_i);
     st_p_over_rho2(i, p_over_rho2);
-    st_c(i, c_2);
+    st_c(i, c);
     st_p_wall(i, p_wall);
     st_a_lsm(i, a_lsm);
 }

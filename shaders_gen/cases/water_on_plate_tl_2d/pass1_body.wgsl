@@ -516,7 +516,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let dt = globals[1u];
     // pairsum extrapolated_pressure: accumulators
     var p_wall: f32 = 0.0;
-    var c_2: f32 = 0.0;
+    var c: f32 = 0.0;
     var p_over_rho2: f32 = 0.0;
     var weighted: f32 = 0.0;
     var weight: f32 = 0.0;
@@ -599,7 +599,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     p_wall = (weighted / max(weight, 1e-30));
     let p1 = prm_c0(i);
     let ratio = pow(((p_wall / (((p1 * p1) * prm_rho0(i)) / prm_gamma(i))) + 1.0), (1.0 / prm_gamma(i)));
-    c_2 = (prm_c0(i) * pow(ratio, ((prm_gamma(i) - 1.0) / 2.0)));
+    c = (prm_c0(i) * pow(ratio, ((prm_gamma(i) - 1.0) / 2.0)));
     // then body_pressure
     var p_i: f32 = ld_p(i);
     p_i = p_wall;
@@ -614,7 +614,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let strain = (sym(H_2) + (0.5 * sym((transpose(H_2) * H_2))));
     P_i = ((eye() + H_2) * ((((bulk - ((2.0 * G_2) / 3.0)) * trace(strain)) * eye()) + ((2.0 * G_2) * strain)));
     st_p(i, p_i);
-    st_c(i, c_2);
+    st_c(i, c);
     st_p_wall(i, p_wall);
     st_L0_inv(i, L0_inv);
     st_H(i, H);

@@ -7,17 +7,17 @@
 //! particle's own values itself and folds its sums into the particle's accumulators
 //! ([`fold_partials`], which the closures use too); compensated sums are written per lane for Rust
 //! to fold (Kahan). It emits the same operations in the same order as the closures (no fused
-//! multiply–adds; min/max and exp as `program.rs` computes them), hence bit-identical results —
-//! `tests/jit.rs` checks that on every bundled case.
+//! multiply–adds; min/max, exp, ln and pow as `program.rs` computes them), hence bit-identical
+//! results — `tests/jit.rs` checks that on every bundled case.
 //!
-//! A program with an operation the JIT does not emit (`ln`, `pow` with a varying exponent) keeps
-//! its closures; so does a pass whose gathered columns are not stored with one base on every
+//! A program with an operation the JIT does not emit (`sin`, `cos`, `acos`, the hyperbolic
+//! functions) keeps its closures; so does a pass whose gathered columns are not stored with one base on every
 //! group that stores them. A neighbour whose group does not store a gathered field (the
 //! projectile's, for the plate's damage) reads zeros there, as with the closures.
 //! `PAIRSUM_NO_JIT=1` turns the JIT off.
 
 use super::lower::{Bin, Graph, Id, Node, Un};
-use super::math::ExpConsts;
+use super::math::{ExpConsts, LnConsts};
 use super::program::LANES;
 use super::program::{lane_max, lane_min, sign_axes};
 use crate::ir::{FieldId, Global, GroupSet, Model, Reduce, Side};
@@ -276,10 +276,8 @@ fn demand_order(spec: &PairSpec) -> Vec<Id> {
 
 fn supported(node: &Node) -> Result<(), String> {
     match node {
-        Node::Un(Un::Ln, _) => Err("ln".into()),
         Node::Un(Un::Sin | Un::Cos | Un::Acos, _) => Err("sin, cos and acos".into()),
         Node::Un(Un::Sinh | Un::Cosh | Un::Tanh, _) => Err("sinh, cosh and tanh".into()),
-        Node::Bin(Bin::Pow, _, _) => Err("pow with a varying exponent".into()),
         Node::Load { side: Side::I, .. } | Node::Param { side: Side::I, .. } => {
             Err("a value of particle i read per lane".into())
         }
@@ -543,7 +541,8 @@ impl<'a, 'b, T: Real> Emitter<'a, 'b, T> {
                             self.truth(m, one, zero)
                         }
                         Un::Exp => self.exp(a, T::EXP),
-                        Un::Ln | Un::Sin | Un::Cos | Un::Acos | Un::Sinh | Un::Cosh | Un::Tanh => {
+                        Un::Ln => self.ln(a, T::LN),
+                        Un::Sin | Un::Cos | Un::Acos | Un::Sinh | Un::Cosh | Un::Tanh => {
                             unreachable!("checked by `supported`")
                         }
                     }
@@ -713,8 +712,91 @@ impl<'a, 'b, T: Real> Emitter<'a, 'b, T> {
                 let m = self.b.ins().bor(nan, beyond);
                 self.select(m, c, a)
             }
-            Bin::Pow => unreachable!("checked by `supported`"),
+            Bin::Pow => self.pow(a, c, one, zero),
         }
+    }
+
+    /// `math::ln_f64` / `ln_f32`, operation for operation (k to a real by the magic constant:
+    /// exact, as the recipe's conversion).
+    fn ln(&mut self, x: Value, k: &LnConsts) -> Value {
+        let min_normal = self.splat(k.min_normal);
+        let tiny = self.b.ins().fcmp(FloatCC::LessThan, x, min_normal);
+        let up = self.splat(2f64.powi(k.scale as i32));
+        let scaled = self.b.ins().fmul(x, up);
+        let xs = self.select(tiny, scaled, x);
+        let bits = self.bits_as_int(xs);
+        let e = self.b.ins().ushr_imm_u(bits, k.mantissa as i64);
+        let mant_mask = self.splat_int((1i64 << k.mantissa) - 1);
+        let mant = self.b.ins().band(bits, mant_mask);
+        let sqrt2 = self.splat_int(k.sqrt2_mantissa);
+        let big = self.b.ins().icmp(IntCC::SignedGreaterThan, mant, sqrt2);
+        let (one_int, zero_int) = (self.splat_int(1), self.splat_int(0));
+        let big = self.b.ins().bitselect(big, one_int, zero_int);
+        let bias = self.splat_int(k.bias);
+        let zexp = self.b.ins().isub(bias, big);
+        let zexp = self.b.ins().ishl_imm_u(zexp, k.mantissa as i64);
+        let zbits = self.b.ins().bor(mant, zexp);
+        let z = self.mask_as_float(zbits);
+        let n = self.b.ins().isub(e, bias);
+        let n = self.b.ins().iadd(n, big);
+        let scale = self.splat_int(k.scale);
+        let adjust = self.b.ins().bitselect(tiny, scale, zero_int);
+        let n = self.b.ins().isub(n, adjust);
+        let (one, two, half) = (self.splat(1.0), self.splat(2.0), self.splat(0.5));
+        let f = self.b.ins().fsub(z, one);
+        let d = self.b.ins().fadd(two, f);
+        let s = self.b.ins().fdiv(f, d);
+        let w = self.b.ins().fmul(s, s);
+        let lg = k.lg;
+        let mut r = self.splat(lg[lg.len() - 1]);
+        for c in lg[..lg.len() - 1].iter().rev() {
+            let c = self.splat(*c);
+            r = self.b.ins().fmul(r, w);
+            r = self.b.ins().fadd(r, c);
+        }
+        let r = self.b.ins().fmul(r, w);
+        let hf = self.b.ins().fmul(half, f);
+        let hfsq = self.b.ins().fmul(hf, f);
+        let magic = T::EXP.magic;
+        let magic_bits = if T::BYTES == 8 { magic.to_bits() as i64 } else { (magic as f32).to_bits() as i64 };
+        let magic_int = self.splat_int(magic_bits);
+        let nb = self.b.ins().iadd(n, magic_int);
+        let nb = self.mask_as_float(nb);
+        let magic = self.splat(magic);
+        let nf = self.b.ins().fsub(nb, magic);
+        let (ln2_hi, ln2_lo) = (self.splat(k.ln2_hi), self.splat(k.ln2_lo));
+        // nf·ln2_hi − ((hfsq − (s·(hfsq + r) + nf·ln2_lo)) − f)
+        let a = self.b.ins().fadd(hfsq, r);
+        let a = self.b.ins().fmul(s, a);
+        let lo = self.b.ins().fmul(nf, ln2_lo);
+        let a = self.b.ins().fadd(a, lo);
+        let a = self.b.ins().fsub(hfsq, a);
+        let a = self.b.ins().fsub(a, f);
+        let hi = self.b.ins().fmul(nf, ln2_hi);
+        let y = self.b.ins().fsub(hi, a);
+        let zero = self.splat(0.0);
+        let is_zero = self.b.ins().fcmp(FloatCC::Equal, x, zero);
+        let minus_inf = self.splat(f64::NEG_INFINITY);
+        let y = self.select(is_zero, minus_inf, y);
+        let inf = self.splat(f64::INFINITY);
+        let is_inf = self.b.ins().fcmp(FloatCC::Equal, x, inf);
+        let y = self.select(is_inf, inf, y);
+        let negative = self.b.ins().fcmp(FloatCC::LessThan, x, zero);
+        let nan = self.b.ins().fcmp(FloatCC::Unordered, x, x);
+        let undefined = self.b.ins().bor(negative, nan);
+        let nan = self.splat(f64::NAN);
+        self.select(undefined, nan, y)
+    }
+
+    /// `math::pow_f64` / `pow_f32`: exp(y · ln x), 1 where y = 0 or x = 1.
+    fn pow(&mut self, x: Value, y: Value, one: Value, zero: Value) -> Value {
+        let l = self.ln(x, T::LN);
+        let a = self.b.ins().fmul(y, l);
+        let p = self.exp(a, T::EXP);
+        let y0 = self.b.ins().fcmp(FloatCC::Equal, y, zero);
+        let x1 = self.b.ins().fcmp(FloatCC::Equal, x, one);
+        let m = self.b.ins().bor(y0, x1);
+        self.select(m, one, p)
     }
 
     /// `math::exp_f64` / `exp_f32`, operation for operation.
