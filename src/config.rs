@@ -24,6 +24,9 @@ pub struct Env {
     pub gpu_memory_limit: Option<u64>,
     /// `PAIRSUM_WGSL_FAULT`: breaks the first generated kernel (tests the path of a rejected module).
     pub wgsl_fault: bool,
+    /// `PAIRSUM_GPU_CELLS_PER_CUTOFF`: the GPU cell list's cells per cut-off (1, 2, 4 or 8) instead
+    /// of the scene's choice (`backend::gpu::runtime::cells_per_cutoff`); as written, checked there.
+    pub gpu_cells_per_cutoff: Option<String>,
 }
 
 fn var(name: &str) -> Option<String> {
@@ -41,6 +44,7 @@ impl Env {
             no_jit: var("PAIRSUM_NO_JIT").is_some(),
             gpu_memory_limit: var("PAIRSUM_GPU_MEMORY_LIMIT").and_then(|v| v.parse().ok()),
             wgsl_fault: var("PAIRSUM_WGSL_FAULT").is_some(),
+            gpu_cells_per_cutoff: var("PAIRSUM_GPU_CELLS_PER_CUTOFF"),
         }
     }
 }

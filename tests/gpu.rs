@@ -198,6 +198,18 @@ fn pairsum(args: &[&str], env: &[(&str, &str)]) -> (Option<i32>, String) {
 }
 
 #[test]
+fn a_cells_per_cutoff_override_other_than_1_2_4_or_8_stops_the_run_naming_the_variable() {
+    let dir = std::env::temp_dir().join(format!("pairsum-gpu-cells-{}", std::process::id()));
+    for bad in ["3", "two"] {
+        let args = ["run", "sod_shock_tube", "--backend", "gpu", "--max-steps", "2", "--out", dir.to_str().unwrap()];
+        let (code, err) = pairsum(&args, &[("PAIRSUM_GPU_CELLS_PER_CUTOFF", bad)]);
+        assert_eq!(code, Some(1), "{err}");
+        assert!(err.contains(&format!("PAIRSUM_GPU_CELLS_PER_CUTOFF is `{bad}`: it takes 1, 2, 4 or 8")), "{err}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
 fn pairsum_run_on_the_gpu_writes_the_same_report_format() {
     let dir = std::env::temp_dir().join(format!("pairsum-gpu-run-{}", std::process::id()));
     let (code, err) =

@@ -149,7 +149,7 @@ impl GpuBackend {
             .map_err(err)?;
         let info = gpu.storage_buffer("layout", 4 * (lay.meta_len() + 1) as u64, storage).map_err(err)?;
         let globals = gpu.storage_buffer("clock and reductions", 4 * gl::SIZE as u64, storage).map_err(err)?;
-        let cells = CellList::new(&gpu, n, plan.dim, initial_cells_per_cutoff(&plan, &store)).map_err(err)?;
+        let cells = CellList::new(&gpu, n, plan.dim, initial_cells_per_cutoff(&plan, &store)?).map_err(err)?;
         let reducer = Reducer::new(&gpu).map_err(err)?;
         // The layout table: group ranges and the base of every (field, group).
         let mut meta = vec![0i32; lay.meta_len() + 1];
@@ -879,22 +879,25 @@ fn list_stride(inp: Option<crate::backend::cpu::lists::BuildInput<f32>>, skin: f
 const HALF_CELL_MIN_PARTICLES: f64 = 5.0;
 
 /// [`cells_per_cutoff`] for the store's positions and its largest finite h at the start.
-fn initial_cells_per_cutoff(plan: &Plan, store: &Store<f32>) -> u32 {
+/// `PAIRSUM_GPU_CELLS_PER_CUTOFF` overrides it (1, 2, 4 or 8; anything else is an error).
+fn initial_cells_per_cutoff(plan: &Plan, store: &Store<f32>) -> Result<u32, BackendError> {
+    if let Some(v) = &crate::config::env().gpu_cells_per_cutoff {
+        return match v.trim().parse() {
+            Ok(k @ (1 | 2 | 4 | 8)) => Ok(k),
+            _ => Err(BackendError(format!("PAIRSUM_GPU_CELLS_PER_CUTOFF is `{v}`: it takes 1, 2, 4 or 8"))),
+        };
+    }
     let column = |name| plan.model.field_id(name).and_then(|f| store.column(f));
-    let (Some(x), Some(h)) = (column("x"), column("h")) else { return 1 };
+    let (Some(x), Some(h)) = (column("x"), column("h")) else { return Ok(1) };
     let support = plan.model.kernels[plan.kernel.index()].support;
     let h_max = crate::scene::max_keeping_nan(0.0, h.data.iter().map(|v| *v as f64).filter(|v| v.is_finite()));
-    cells_per_cutoff(&x.data, plan.dim, support * h_max)
+    Ok(cells_per_cutoff(&x.data, plan.dim, support * h_max))
 }
 
 /// The cells per cut-off of the GPU's cell list for particles at `x` (`dim` components each) with
 /// the cut-off `cutoff`: 2 when a cell of half the cut-off holds at least
-/// [`HALF_CELL_MIN_PARTICLES`] on average over the particles, else 1. The environment variable
-/// `PAIRSUM_GPU_CELLS_PER_CUTOFF` (1, 2, 4 or 8) overrides the choice.
+/// [`HALF_CELL_MIN_PARTICLES`] on average over the particles, else 1.
 pub fn cells_per_cutoff(x: &[f32], dim: usize, cutoff: f64) -> u32 {
-    if let Some(k) = std::env::var("PAIRSUM_GPU_CELLS_PER_CUTOFF").ok().and_then(|v| v.parse().ok()) {
-        return k;
-    }
     let n = x.len() / dim.max(1);
     if n == 0 || !(cutoff.is_finite() && cutoff > 0.0) {
         return 1;
