@@ -2,7 +2,7 @@
 //! `use a::b` from a file in directory D looks for `D/a/b.sph`, then `<stdlib>/a/b.sph`.
 
 use crate::diag::{Diagnostic, Sources, Span};
-use crate::syntax::ast::Ident;
+use crate::syntax::ast::{self, Ident};
 use crate::syntax::ast::{File, Item, UsePath};
 use crate::syntax::parse_file;
 use std::collections::HashMap;
@@ -214,8 +214,18 @@ impl<'s> Loader<'s> {
                 let index = self.modules.len();
                 self.modules.push(Module { file, ast, root, uses: vec![] });
                 self.seen.insert(found.key, Some(index));
+                let mut first_use: HashMap<usize, ast::Use> = HashMap::new();
                 for u in uses {
                     if let Some(target) = self.resolve_use(&u.path, u.span, found.dir.as_deref()) {
+                        match first_use.get(&target) {
+                            Some(first) if restriction(first) != restriction(&u) => {
+                                self.diags.push(used_twice(first, &u));
+                            }
+                            Some(_) => {}
+                            None => {
+                                first_use.insert(target, u.clone());
+                            }
+                        }
                         self.modules[index].uses.push(UseEdge {
                             target,
                             on: u.on,
@@ -273,4 +283,30 @@ impl<'s> Loader<'s> {
         self.diags.push(d);
         None
     }
+}
+
+/// What a `use` restricts its module to: the `on` and `from` group names (as sets) and `own`.
+type Restriction = (Option<std::collections::BTreeSet<String>>, Option<std::collections::BTreeSet<String>>, bool, bool);
+
+fn restriction(u: &ast::Use) -> Restriction {
+    let names = |l: &Option<Vec<Ident>>| l.as_ref().map(|l| l.iter().map(|i| i.name.clone()).collect());
+    (names(&u.on), names(&u.from), u.own, u.own_body)
+}
+
+/// E0111: one module used twice by one file with different restrictions. A module's equations
+/// have one set of groups to run on and one of neighbours for all of them (the union over the
+/// paths that reach it), so `on A` with `on B from S` cannot keep S to B.
+fn used_twice(first: &ast::Use, second: &ast::Use) -> Diagnostic {
+    let name = match &second.path {
+        UsePath::Module(parts) => parts.iter().map(|p| p.name.as_str()).collect::<Vec<_>>().join("::"),
+        UsePath::File(f) => f.clone(),
+    };
+    Diagnostic::error("E0111", format!("`{name}` is used twice, with different restrictions"))
+        .at(second.span, "used again")
+        .also(first.span, "first used here")
+        .note(
+            "a module's equations run on the union of the groups its `use` lines allow and see the union of \
+             their neighbours, so the restrictions do not pair; write the equations you want on one group \
+             in a module of their own",
+        )
 }
