@@ -264,10 +264,7 @@ impl<'s> Loader<'s> {
             return self.load_stdlib_module(&rel, Some(span), false);
         }
         looked.push(self.stdlib.display(&rel));
-        let shown = match path {
-            UsePath::Module(parts) => parts.iter().map(|p| p.name.as_str()).collect::<Vec<_>>().join("::"),
-            UsePath::File(f) => f.clone(),
-        };
+        let shown = use_name(path);
         let mut d = Diagnostic::error("E0003", format!("cannot find module `{shown}`"))
             .at(span, "no such module")
             .note(format!("looked for {}", looked.join(" and ")));
@@ -297,11 +294,7 @@ fn restriction(u: &ast::Use) -> Restriction {
 /// have one set of groups to run on and one of neighbours for all of them (the union over the
 /// paths that reach it), so `on A` with `on B from S` cannot keep S to B.
 fn used_twice(first: &ast::Use, second: &ast::Use) -> Diagnostic {
-    let name = match &second.path {
-        UsePath::Module(parts) => parts.iter().map(|p| p.name.as_str()).collect::<Vec<_>>().join("::"),
-        UsePath::File(f) => f.clone(),
-    };
-    Diagnostic::error("E0111", format!("`{name}` is used twice, with different restrictions"))
+    Diagnostic::error("E0111", format!("`{}` is used twice, with different restrictions", use_name(&second.path)))
         .at(second.span, "used again")
         .also(first.span, "first used here")
         .note(
@@ -309,4 +302,12 @@ fn used_twice(first: &ast::Use, second: &ast::Use) -> Diagnostic {
              their neighbours, so the restrictions do not pair; write the equations you want on one group \
              in a module of their own",
         )
+}
+
+/// A `use`'s module as written: `a::b`, or the file's path.
+fn use_name(path: &UsePath) -> String {
+    match path {
+        UsePath::Module(parts) => parts.iter().map(|p| p.name.as_str()).collect::<Vec<_>>().join("::"),
+        UsePath::File(f) => f.clone(),
+    }
 }

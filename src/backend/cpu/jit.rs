@@ -349,6 +349,12 @@ impl<'a, 'b, T: Real> Emitter<'a, 'b, T> {
         x
     }
 
+    /// A vector of the bit pattern of `v` rounded to T, as integers.
+    fn splat_bits_of(&mut self, v: f64) -> Value {
+        let bits = if T::BYTES == 8 { v.to_bits() as i64 } else { (v as f32).to_bits() as i64 };
+        self.splat_int(bits)
+    }
+
     fn mask_as_float(&mut self, mask: Value) -> Value {
         self.b.ins().bitcast(self.vec, MemFlags::new(), mask)
     }
@@ -758,8 +764,7 @@ impl<'a, 'b, T: Real> Emitter<'a, 'b, T> {
         let hf = self.b.ins().fmul(half, f);
         let hfsq = self.b.ins().fmul(hf, f);
         let magic = T::EXP.magic;
-        let magic_bits = if T::BYTES == 8 { magic.to_bits() as i64 } else { (magic as f32).to_bits() as i64 };
-        let magic_int = self.splat_int(magic_bits);
+        let magic_int = self.splat_bits_of(magic);
         let nb = self.b.ins().iadd(n, magic_int);
         let nb = self.mask_as_float(nb);
         let magic = self.splat(magic);
@@ -824,8 +829,7 @@ impl<'a, 'b, T: Real> Emitter<'a, 'b, T> {
             p = self.b.ins().fmul(p, r);
             p = self.b.ins().fadd(p, ci);
         }
-        let magic_bits = if T::BYTES == 8 { k.magic.to_bits() as i64 } else { (k.magic as f32).to_bits() as i64 };
-        let magic_int = self.splat_int(magic_bits);
+        let magic_int = self.splat_bits_of(k.magic);
         let t_int = self.bits_as_int(t);
         let n = self.b.ins().isub(t_int, magic_int);
         let zero = self.splat(0.0);
