@@ -636,7 +636,7 @@ fn history_plots(scene: &Scene, histories: &[measure::History]) -> Vec<History> 
                 .results
                 .iter()
                 .find(|r| scene.probes[r.probe].name == p.name)
-                .and_then(|r| r.reference.map(|x| x / r.scale)),
+                .and_then(|r| r.reference.map(|x| (x - r.offset) / r.scale)),
             log_log: false,
         })
         .collect()

@@ -972,6 +972,10 @@ fn build(
             Some(v) => Some(cx.scalar(v, runit, &format!("reference of `{}`", r.quantity.get_ref()))?),
             None => None,
         };
+        let offset = match &r.offset {
+            Some(v) => cx.scalar(v, runit, &format!("offset of `{}`", r.quantity.get_ref()))?,
+            None => 0.0,
+        };
         let from = match &r.from {
             Some(v) => Some(time_scale * cx.scalar(v, s, "from")?),
             None => None,
@@ -992,6 +996,7 @@ fn build(
             to,
             time,
             scale: r.scale.unwrap_or(1.0),
+            offset,
             unit: unit_text,
             reference,
             source: r.source.clone(),

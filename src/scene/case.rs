@@ -381,6 +381,10 @@ pub struct ResultSpec {
     pub time: Option<Value>,
     #[serde(default)]
     pub scale: Option<f64>,
+    /// Added after `scale`, in the result's unit: a length from the displacement a probe with
+    /// `relative = true` records.
+    #[serde(default)]
+    pub offset: Option<Value>,
     #[serde(default)]
     pub reference: Option<Value>,
     #[serde(default)]

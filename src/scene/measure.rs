@@ -763,7 +763,7 @@ pub fn result_value(r: &ResultSpec, h: &History) -> f64 {
         }
         _ => pts.last().map(|p| p.1).unwrap_or(f64::NAN),
     };
-    v * r.scale
+    v * r.scale + r.offset
 }
 
 #[cfg(test)]
@@ -793,12 +793,23 @@ mod tests {
             to: None,
             time,
             scale: 1.0,
+            offset: 0.0,
             unit: String::new(),
             reference: None,
             source: None,
             tolerance: None,
             tolerance_why: None,
         }
+    }
+
+    #[test]
+    fn a_result_is_its_value_at_times_scale_plus_offset() {
+        // A foot's radius grows by 0.5 mm from 3.2 mm: its diameter is 2 × 0.5 mm + 6.4 mm.
+        let h = History { points: vec![(0.0, 0.0), (1.0, 2.5e-4), (2.0, 5e-4)], initial: None };
+        let r = ResultSpec { scale: 2.0, offset: 6.4e-3, ..result("end", None) };
+        assert!((result_value(&r, &h) - 7.4e-3).abs() < 1e-15);
+        let r = ResultSpec { scale: 2.0, offset: 6.4e-3, ..result("at_time", Some(1.0)) };
+        assert!((result_value(&r, &h) - 6.9e-3).abs() < 1e-15);
     }
 
     #[test]

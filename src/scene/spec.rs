@@ -130,6 +130,8 @@ pub struct ResultSpec {
     /// The time of `at_time` (s, multiplied by the resolution's `time_scale`).
     pub time: Option<f64>,
     pub scale: f64,
+    /// Added after `scale` (SI).
+    pub offset: f64,
     pub unit: String,
     pub reference: Option<f64>,
     pub source: Option<String>,
