@@ -242,79 +242,83 @@ fn st_e_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 0u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 7u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 8u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 9u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 10u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 16u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 17u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 18u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 19u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 20u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 21u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 22u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 23u;
     return params[b];
 }
 fn prm_D1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 24u;
     return params[b];
 }
 fn prm_D2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 25u;
     return params[b];
 }
 fn prm_D3(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 26u;
     return params[b];
 }
 fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 27u;
     return params[b];
 }
 fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 28u;
     return params[b];
 }
 fn prm_C_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 30u;
+    return params[b];
+}
+fn prm_taylor_quinney(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 31u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -371,7 +375,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let rate_2 = (1.0 + (prm_jc_C(i) * log(max((rate_p_2 / prm_eps_rate0(i)), 1.0))));
     let T_4 = T_3;
     let sigma_y_2 = ((hardening_2 * rate_2) * (1.0 - pow(min(max(((T_4 - prm_T_room(i)) / (prm_T_melt(i) - prm_T_room(i))), 0.0), 1.0), prm_jc_m(i))));
-    T_i = (T_i + ((sigma_y_2 * deps_p_i) / (prm_rho0(i) * prm_C_p(i))));
+    T_i = (T_i + (((prm_taylor_quinney(i) * sigma_y_2) * deps_p_i) / (prm_rho0(i) * prm_C_p(i))));
     // damage
     var D_i: f32 = ld_D(i);
     let D = D_i;
