@@ -51,6 +51,7 @@ RUNS = [
     ("water_on_plate_tl_2d", {}),
     ("rings_2d", {}),
     ("hypervelocity_impact", {}),
+    ("taylor_bar", {}),
     ("borvik_8mm", {}),
     ("tensile_artificial_stress", {}),
     ("cube_on_cube_cspm", {}),

@@ -1021,6 +1021,15 @@ fn total_lagrangian_cantilever_3d_deflection_is_within_its_25_percent_tolerance_
     run_and_check("cantilever_3d", Precision::F64);
 }
 
+/// The Taylor bar (steel at 287 m/s on a rigid wall, a quarter model) at 0.8 mm, 4 particles
+/// across its radius: its final length and foot diameter against the Abaqus reference within the
+/// case's bounds, and their pinned figures (docs/results/taylor_bar_convergence/ has the finer
+/// spacings).
+#[test]
+fn taylor_bar_final_length_and_foot_diameter_are_within_their_tolerances_at_4_particles_across_the_radius() {
+    run_and_check("taylor_bar", Precision::F64);
+}
+
 #[test]
 fn total_lagrangian_clamped_plate_2d_deflection_is_within_its_tolerance_at_8_particles_across() {
     run_and_check("clamped_plate_2d", Precision::F64);

@@ -362,6 +362,12 @@ fn hypervelocity_impact_on_the_gpu_matches_the_cpu_through_the_shock() {
 }
 
 #[test]
+fn taylor_bar_on_the_gpu_matches_the_cpu_against_its_wall_plane() {
+    // The bar starts on the wall, a symmetry plane: 30 steps are 1.9 µs of flow against it, heated.
+    case_matches_cpu("taylor_bar", &[], 30, &["p", "eps_p", "T"], 2e-3);
+}
+
+#[test]
 fn borvik_perforation_on_the_gpu_matches_the_cpu_in_contact() {
     // Started 0.2 mm above the plate (0.7 µs at 298 m/s): 60 steps are 8.6 µs, nearly all in contact.
     case_matches_cpu("borvik_perforation", &[("gap", "0.2")], 60, &["p", "eps_p"], 5e-3);
