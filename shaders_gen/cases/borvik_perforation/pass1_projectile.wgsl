@@ -610,6 +610,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var de: f32 = 0.0;
     // pairsum contact: accumulators
     var a_contact: vec3<f32> = vec3<f32>(0.0);
+    let G_i = prm_G(i);
+    let visc_a_i = prm_visc_a(i);
+    let visc_b_i = prm_visc_b(i);
+    let eta_ratio_i = prm_eta_ratio(i);
+    let K_p_i = prm_K_p(i);
     let v_i = ld_v(i);
     let dx_i = ld_dx(i);
     let body_i = ld_body(i);
@@ -682,11 +687,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 let c_j = ldj_c(j, sgn);
                 let vr = dot((v_i - ldj_v(j, sgn)), x_ij);
                 let hh = h_ij;
-                let p1 = (prm_eta_ratio(i) * hh);
+                let p1 = (eta_ratio_i * hh);
                 let phi = ((hh * vr) / ((r_ij * r_ij) + (p1 * p1)));
                 let c_bar = ((c_i_2 + c_j) / 2.0);
                 let rho_bar = (0.5 * (rho_i + ldj_rho(j, sgn)));
-                let pi_ij = select(0.0, (((((-prm_visc_a(i)) * c_bar) * phi) + (prm_visc_b(i) * (phi * phi))) / rho_bar), (vr < 0.0));
+                let pi_ij = select(0.0, (((((-visc_a_i) * c_bar) * phi) + (visc_b_i * (phi * phi))) / rho_bar), (vr < 0.0));
                 let p2 = ldj_rho(j, sgn);
                 let A = ((div_m(sig_i, (rho_i * rho_i)) + div_m(sig_j, (p2 * p2))) - (pi_ij * eye()));
                 de = de + (-((0.5 * ldj_m(j, sgn)) * dot((v_i - ldj_v(j, sgn)), (A * gradW_ij))));
@@ -696,13 +701,13 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             if ((((body_i != ldj_body(j, sgn)) && (pen > 0.0)) && (r_ij > 0.0))) {
                 let n_2 = (x_ij / r_ij);
                 let f1 = (((((2.0 * m_i) * ldj_m(j, sgn)) / (m_i + ldj_m(j, sgn))) * pen) / (dt * dt));
-                let f2 = ((sqrt(((h_i * ldj_h(j, sgn)) / (h_i + ldj_h(j, sgn)))) * ((prm_G(i) * prm_G(j)) / (prm_G(i) + prm_G(j)))) * (pen * sqrt(pen)));
+                let f2 = ((sqrt(((h_i * ldj_h(j, sgn)) / (h_i + ldj_h(j, sgn)))) * ((G_i * prm_G(j)) / (G_i + prm_G(j)))) * (pen * sqrt(pen)));
                 let pen_rate = ((-dot(x_ij, (v_i - ldj_v(j, sgn)))) / r_ij);
                 let p3 = ldj_h(j, sgn);
                 let p4 = ldj_h(j, sgn);
                 let mass = ((((rho_i * ldj_rho(j, sgn)) * (h_i * h_i * h_i)) * (p3 * p3 * p3)) / ((rho_i * (h_i * h_i * h_i)) + (ldj_rho(j, sgn) * (p4 * p4 * p4))));
                 let f3 = select(0.0, ((mass * pen_rate) / dt), (pen_rate > 0.0));
-                a_contact = a_contact + (((prm_K_p(i) * max(max(f1, f2), f3)) / m_i) * n_2);
+                a_contact = a_contact + (((K_p_i * max(max(f1, f2), f3)) / m_i) * n_2);
             }
         }
         }}}
@@ -717,7 +722,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     spin = skew(g_2);
     // then jaumann
     var ds_i: mat3x3<f32> = ld_ds(i);
-    ds_i = (((2.0 * prm_G(i)) * dev(edot)) + sym(((s_i * transpose(spin)) + (spin * s_i))));
+    ds_i = (((2.0 * G_i) * dev(edot)) + sym(((s_i * transpose(spin)) + (spin * s_i))));
     st_L_inv(i, L_inv);
     st_edot(i, edot);
     st_spin(i, spin);

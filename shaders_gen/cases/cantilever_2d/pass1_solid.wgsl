@@ -237,6 +237,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var H0: mat2x2<f32> = mat2x2<f32>();
     // pairsum contact: accumulators
     var a_contact: vec2<f32> = vec2<f32>(0.0);
+    let G_i = prm_G(i);
+    let clamp_normal_i = prm_clamp_normal(i);
+    let clamp_at_i = prm_clamp_at(i);
+    let K_p_i = prm_K_p(i);
     let x_i = ld_x(i);
     let v_i = ld_v(i);
     let dx_i = ld_dx(i);
@@ -280,10 +284,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         // pairsum deformation_gradient (stdlib/solid/total_lagrangian.sph:98)
         if ((body_i == ldj_body(j, sgn))) {
             let a = ldj_u(j, sgn);
-            let n_2 = prm_clamp_normal(i);
+            let n_2 = clamp_normal_i;
             let X_j = (x_i - x_ij);
-            let n_3 = prm_clamp_normal(i);
-            let at_2 = prm_clamp_at(i);
+            let n_3 = clamp_normal_i;
+            let at_2 = clamp_at_i;
             let clamped = (dot(X_j, n_3) < at_2);
             let u_j = select(a, (((2.0 * dot(a, n_2)) * n_2) - a), clamped);
             let X_ij = (x_ij - (u_i - u_j));
@@ -296,13 +300,13 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         if ((((body_i != ldj_body(j, sgn)) && (pen > 0.0)) && (r_ij > 0.0))) {
             let n_4 = (x_ij / r_ij);
             let f1 = (((((2.0 * m_i) * ldj_m(j, sgn)) / (m_i + ldj_m(j, sgn))) * pen) / (dt * dt));
-            let f2 = ((sqrt(((h_i * ldj_h(j, sgn)) / (h_i + ldj_h(j, sgn)))) * ((prm_G(i) * prm_G(j)) / (prm_G(i) + prm_G(j)))) * (pen * sqrt(pen)));
+            let f2 = ((sqrt(((h_i * ldj_h(j, sgn)) / (h_i + ldj_h(j, sgn)))) * ((G_i * prm_G(j)) / (G_i + prm_G(j)))) * (pen * sqrt(pen)));
             let pen_rate = ((-dot(x_ij, (v_i - ldj_v(j, sgn)))) / r_ij);
             let p1 = ldj_h(j, sgn);
             let p2 = ldj_h(j, sgn);
             let mass = ((((rho_i * ldj_rho(j, sgn)) * (h_i * h_i * h_i)) * (p1 * p1 * p1)) / ((rho_i * (h_i * h_i * h_i)) + (ldj_rho(j, sgn) * (p2 * p2 * p2))));
             let f3 = select(0.0, ((mass * pen_rate) / dt), (pen_rate > 0.0));
-            a_contact = a_contact + (((prm_K_p(i) * max(max(f1, f2), f3)) / m_i) * n_4);
+            a_contact = a_contact + (((K_p_i * max(max(f1, f2), f3)) / m_i) * n_4);
         }
     }
     // then deformation_gradient
@@ -311,7 +315,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // then piola_kirchhoff
     var P_i: mat2x2<f32> = ld_P(i);
     let H_2 = H;
-    let G_2 = prm_G(i);
+    let G_2 = G_i;
     let bulk = prm_bulk(i);
     let strain = (sym(H_2) + (0.5 * sym((transpose(H_2) * H_2))));
     P_i = ((eye() + H_2) * ((((bulk - ((2.0 * G_2) / 3.0)) * trace(strain)) * eye()) + ((2.0 * G_2) * strain)));

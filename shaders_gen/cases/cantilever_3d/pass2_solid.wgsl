@@ -244,6 +244,13 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var dv: vec3<f32> = vec3<f32>(0.0);
     var hourglass_rate2: f32 = 0.0;
     var a: vec3<f32> = vec3<f32>(0.0);
+    let rho0_i = prm_rho0(i);
+    let E_i = prm_E(i);
+    let hourglass_alpha_i = prm_hourglass_alpha(i);
+    let viscosity_alpha_i = prm_viscosity_alpha(i);
+    let c_p_i = prm_c_p(i);
+    let clamp_normal_i = prm_clamp_normal(i);
+    let clamp_at_i = prm_clamp_at(i);
     let x_i = ld_x(i);
     let v_i = ld_v(i);
     let body_i = ld_body(i);
@@ -286,34 +293,33 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         // pairsum tl_momentum (stdlib/solid/total_lagrangian.sph:118)
         if ((body_i == ldj_body(j, sgn))) {
             let X_j = (x_i - x_ij);
-            let n_2 = prm_clamp_normal(i);
-            let at_2 = prm_clamp_at(i);
+            let n_2 = clamp_normal_i;
+            let at_2 = clamp_at_i;
             let clamped = (dot(X_j, n_2) < at_2);
             let a_2 = ldj_u(j, sgn);
-            let n_3 = prm_clamp_normal(i);
+            let n_3 = clamp_normal_i;
             let clamped_2 = clamped;
             let u_ij = (u_i - select(a_2, (((2.0 * dot(a_2, n_3)) * n_3) - a_2), clamped_2));
             let X_ij = (x_ij - u_ij);
             let g0 = kernel_grad_at(X_ij, h_ij);
             let a_3 = (ldj_P(j, sgn) * (ldj_L0_inv(j, sgn) * g0));
-            let n_4 = prm_clamp_normal(i);
+            let n_4 = clamp_normal_i;
             let clamped_3 = clamped;
             let p1 = prm_rho0(j);
             let side_j = (select(a_3, (((2.0 * dot(a_3, n_4)) * n_4) - a_3), clamped_3) / (p1 * p1));
-            let p2 = prm_rho0(i);
-            a = a + (ldj_m(j, sgn) * (((P_i * (L0_inv_i * g0)) / (p2 * p2)) + side_j));
+            a = a + (ldj_m(j, sgn) * (((P_i * (L0_inv_i * g0)) / (rho0_i * rho0_i)) + side_j));
             let r0 = length(X_ij);
             let e = (x_ij / r_ij);
-            let H_j = sel_m(ldj_H(j, sgn), ((2.0 * outer(prm_clamp_normal(i), (transpose(ldj_H(j, sgn)) * prm_clamp_normal(i)))) - ldj_H(j, sgn)), clamped);
+            let H_j = sel_m(ldj_H(j, sgn), ((2.0 * outer(clamp_normal_i, (transpose(ldj_H(j, sgn)) * clamp_normal_i))) - ldj_H(j, sgn)), clamped);
             let miss = dot((((0.5 * (H_i + H_j)) * X_ij) - u_ij), e);
-            let k_2 = ((((prm_hourglass_alpha(i) * ldj_vol(j, sgn)) * kernel_w_at(r0, h_ij)) * prm_E(i)) / (prm_rho0(i) * (r0 * r0)));
+            let k_2 = ((((hourglass_alpha_i * ldj_vol(j, sgn)) * kernel_w_at(r0, h_ij)) * E_i) / (rho0_i * (r0 * r0)));
             a = a + ((k_2 * miss) * e);
             let a_4 = ldj_v(j, sgn);
-            let n_5 = prm_clamp_normal(i);
+            let n_5 = clamp_normal_i;
             let clamped_4 = clamped;
             let v_ij = (v_i - select(a_4, (((2.0 * dot(a_4, n_5)) * n_5) - a_4), clamped_4));
             let approach = (dot(v_ij, x_ij) / ((r_ij * r_ij) + (0.01 * (h_ij * h_ij))));
-            a = a + (-(((((((ldj_m(j, sgn) * prm_viscosity_alpha(i)) * prm_c_p(i)) * h_ij) * approach) / prm_rho0(i)) * length(g0)) * e));
+            a = a + (-(((((((ldj_m(j, sgn) * viscosity_alpha_i) * c_p_i) * h_ij) * approach) / rho0_i) * length(g0)) * e));
             hourglass_rate2 = hourglass_rate2 + k_2;
         }
     }

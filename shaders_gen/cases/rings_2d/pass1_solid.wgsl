@@ -552,6 +552,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // pairsum xsph: accumulators
     var v_xsph: vec2<f32> = vec2<f32>(0.0);
     var smooth_: vec2<f32> = vec2<f32>(0.0);
+    let art_n_i = prm_art_n(i);
+    let visc_a_i = prm_visc_a(i);
+    let visc_b_i = prm_visc_b(i);
+    let eta_ratio_i = prm_eta_ratio(i);
     let v_i = ld_v(i);
     let dx_i = ld_dx(i);
     let rho_i = ld_rho(i);
@@ -613,14 +617,14 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let c_j = ldj_c(j, sgn);
             let vr = dot((v_i - ldj_v(j, sgn)), x_ij);
             let hh = h_ij;
-            let p1 = (prm_eta_ratio(i) * hh);
+            let p1 = (eta_ratio_i * hh);
             let phi = ((hh * vr) / ((r_ij * r_ij) + (p1 * p1)));
             let c_bar = ((c_i_2 + c_j) / 2.0);
             let rho_bar = (0.5 * (rho_i + ldj_rho(j, sgn)));
-            let pi_ij = select(0.0, (((((-prm_visc_a(i)) * c_bar) * phi) + (prm_visc_b(i) * (phi * phi))) / rho_bar), (vr < 0.0));
+            let pi_ij = select(0.0, (((((-visc_a_i) * c_bar) * phi) + (visc_b_i * (phi * phi))) / rho_bar), (vr < 0.0));
             let f = (W_ij / kernel_w_at(((dx_i + ldj_dx(j, sgn)) / 2.0), h_ij));
             let p2 = ldj_rho(j, sgn);
-            let bracket = (((div_m(sig_i, (rho_i * rho_i)) + div_m(sig_j, (p2 * p2))) - (pi_ij * eye())) + (pow(f, prm_art_n(i)) * (R_art_i + ldj_R_art(j, sgn))));
+            let bracket = (((div_m(sig_i, (rho_i * rho_i)) + div_m(sig_j, (p2 * p2))) - (pi_ij * eye())) + (pow(f, art_n_i) * (R_art_i + ldj_R_art(j, sgn))));
             dv = dv + ((ldj_m(j, sgn) * bracket) * gradW_ij);
             // pairsum xsph (stdlib/xsph.sph:7)
             smooth_ = smooth_ + (W_ij * ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * (v_i - ldj_v(j, sgn))));

@@ -460,6 +460,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let dt = globals[1u];
     // pairsum momentum: accumulators
     var dv: f32 = 0.0;
+    let visc_a_i = prm_visc_a(i);
+    let visc_b_i = prm_visc_b(i);
+    let eta_ratio_i = prm_eta_ratio(i);
     let v_i = ld_v(i);
     let body_i = ld_body(i);
     let rho_i = ld_rho(i);
@@ -518,11 +521,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 let c_j = ldj_c(j, sgn);
                 let vr = ((v_i - ldj_v(j, sgn)) * x_ij);
                 let hh = h_ij;
-                let p1 = (prm_eta_ratio(i) * hh);
+                let p1 = (eta_ratio_i * hh);
                 let phi = ((hh * vr) / ((r_ij * r_ij) + (p1 * p1)));
                 let c_bar = ((c_i_2 + c_j) / 2.0);
                 let rho_bar = (0.5 * (rho_i + ldj_rho(j, sgn)));
-                let pi_ij = select(0.0, (((((-prm_visc_a(i)) * c_bar) * phi) + (prm_visc_b(i) * (phi * phi))) / rho_bar), (vr < 0.0));
+                let pi_ij = select(0.0, (((((-visc_a_i) * c_bar) * phi) + (visc_b_i * (phi * phi))) / rho_bar), (vr < 0.0));
                 let p2 = ldj_rho(j, sgn);
                 let L_inv = L_inv_i;
                 let g = gradW_ij;

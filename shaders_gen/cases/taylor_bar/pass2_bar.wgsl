@@ -541,6 +541,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var diffusion: f32 = 0.0;
     // pairsum momentum: accumulators
     var dv: vec3<f32> = vec3<f32>(0.0);
+    let delta_i = prm_delta(i);
+    let c0_i = prm_c0(i);
+    let visc_a_i = prm_visc_a(i);
+    let visc_b_i = prm_visc_b(i);
+    let eta_ratio_i = prm_eta_ratio(i);
     let v_i = ld_v(i);
     let body_i = ld_body(i);
     let rho_i = ld_rho(i);
@@ -599,7 +604,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let g = gradW_ij;
             div_v = div_v + (vol_j * dot((v_i - ldj_v(j, sgn)), (L_inv * g)));
             let phi = ((((2.0 * (rho_i - ldj_rho(j, sgn))) * x_ij) / (r_ij * r_ij)) - (grad_rho_i + ldj_grad_rho(j, sgn)));
-            diffusion = diffusion + ((((prm_delta(i) * h_i) * prm_c0(i)) * vol_j) * dot(phi, gradW_ij));
+            diffusion = diffusion + ((((delta_i * h_i) * c0_i) * vol_j) * dot(phi, gradW_ij));
             // pairsum momentum (stdlib/momentum/corrected.sph:13)
             if ((body_i == ldj_body(j, sgn))) {
                 let sig_i = (s_i - (p_i * eye()));
@@ -608,11 +613,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 let c_j = ldj_c(j, sgn);
                 let vr = dot((v_i - ldj_v(j, sgn)), x_ij);
                 let hh = h_ij;
-                let p1 = (prm_eta_ratio(i) * hh);
+                let p1 = (eta_ratio_i * hh);
                 let phi_2 = ((hh * vr) / ((r_ij * r_ij) + (p1 * p1)));
                 let c_bar = ((c_i_2 + c_j) / 2.0);
                 let rho_bar = (0.5 * (rho_i + ldj_rho(j, sgn)));
-                let pi_ij = select(0.0, (((((-prm_visc_a(i)) * c_bar) * phi_2) + (prm_visc_b(i) * (phi_2 * phi_2))) / rho_bar), (vr < 0.0));
+                let pi_ij = select(0.0, (((((-visc_a_i) * c_bar) * phi_2) + (visc_b_i * (phi_2 * phi_2))) / rho_bar), (vr < 0.0));
                 let p2 = ldj_rho(j, sgn);
                 let L_inv_2 = L_inv_i;
                 let g_2 = gradW_ij;

@@ -385,6 +385,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var p_interface: f32 = 0.0;
     var weighted: f32 = 0.0;
     var weight: f32 = 0.0;
+    let gravity_i = prm_gravity(i);
     let xi = pos3(i);
     let hi = h_of(i);
     let mirrors = u32(globals[72u]);
@@ -431,7 +432,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let gradW_ij = kernel_grad(r_ij, h_ij) * x_ij;
             // pairsum interface_pressure (stdlib/coupling/fluid_solid.sph:58)
             let w = max(W_ij, 0.0);
-            weighted = weighted + ((ldj_p(j, sgn) + (ldj_rho(j, sgn) * dot(prm_gravity(i), x_ij))) * w);
+            weighted = weighted + ((ldj_p(j, sgn) + (ldj_rho(j, sgn) * dot(gravity_i, x_ij))) * w);
             weight = weight + w;
         }
         }}}

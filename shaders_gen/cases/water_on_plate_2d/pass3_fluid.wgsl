@@ -455,6 +455,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let dt = globals[1u];
     // pairsum momentum: accumulators
     var dv: vec2<f32> = vec2<f32>(0.0);
+    let visc_a_i = prm_visc_a(i);
+    let visc_b_i = prm_visc_b(i);
+    let eta_ratio_i = prm_eta_ratio(i);
     let v_i = ld_v(i);
     let rho_i = ld_rho(i);
     let c_i = ld_c(i);
@@ -510,21 +513,21 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 let c_j = ldj_c(j, sgn);
                 let vr = dot((v_i - ldj_v(j, sgn)), x_ij);
                 let hh = h_ij;
-                let p2 = (prm_eta_ratio(i) * hh);
+                let p2 = (eta_ratio_i * hh);
                 let phi = ((hh * vr) / ((r_ij * r_ij) + (p2 * p2)));
                 let c_bar = ((c_i_2 + c_j) / 2.0);
                 let rho_bar = (0.5 * (rho_i + ldj_rho(j, sgn)));
-                dv = dv + (ldj_m(j, sgn) * (((div_m(sigma_i, (rho_i * rho_i)) + div_m(ldj_sigma(j, sgn), (p1 * p1))) - (select(0.0, (((((-prm_visc_a(i)) * c_bar) * phi) + (prm_visc_b(i) * (phi * phi))) / rho_bar), (vr < 0.0)) * eye())) * gradW_ij));
+                dv = dv + (ldj_m(j, sgn) * (((div_m(sigma_i, (rho_i * rho_i)) + div_m(ldj_sigma(j, sgn), (p1 * p1))) - (select(0.0, (((((-visc_a_i) * c_bar) * phi) + (visc_b_i * (phi * phi))) / rho_bar), (vr < 0.0)) * eye())) * gradW_ij));
             } else {
                 let c_i_3 = c_i;
                 let c_j_2 = ldj_c(j, sgn);
                 let vr_2 = dot((v_i - ldj_v(j, sgn)), x_ij);
                 let hh_2 = h_ij;
-                let p3 = (prm_eta_ratio(i) * hh_2);
+                let p3 = (eta_ratio_i * hh_2);
                 let phi_2 = ((hh_2 * vr_2) / ((r_ij * r_ij) + (p3 * p3)));
                 let c_bar_2 = ((c_i_3 + c_j_2) / 2.0);
                 let rho_bar_2 = (0.5 * (rho_i + ldj_rho(j, sgn)));
-                dv = dv + (((-ldj_m(j, sgn)) * (((p_interface_i + ldj_p_interface(j, sgn)) / (rho_i * ldj_rho(j, sgn))) + select(0.0, (((((-prm_visc_a(i)) * c_bar_2) * phi_2) + (prm_visc_b(i) * (phi_2 * phi_2))) / rho_bar_2), (vr_2 < 0.0)))) * gradW_ij);
+                dv = dv + (((-ldj_m(j, sgn)) * (((p_interface_i + ldj_p_interface(j, sgn)) / (rho_i * ldj_rho(j, sgn))) + select(0.0, (((((-visc_a_i) * c_bar_2) * phi_2) + (visc_b_i * (phi_2 * phi_2))) / rho_bar_2), (vr_2 < 0.0)))) * gradW_ij);
             }
         }
         }}}

@@ -532,6 +532,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var de: f32 = 0.0;
     // pairsum momentum: accumulators
     var dv: vec3<f32> = vec3<f32>(0.0);
+    let visc_a_i = prm_visc_a(i);
+    let visc_b_i = prm_visc_b(i);
+    let eta_ratio_i = prm_eta_ratio(i);
     let v_i = ld_v(i);
     let rho_i = ld_rho(i);
     let s_i = ld_s(i);
@@ -591,11 +594,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let c_j = ldj_c(j, sgn);
             let vr = dot((v_i - ldj_v(j, sgn)), x_ij);
             let hh = h_ij;
-            let p1 = (prm_eta_ratio(i) * hh);
+            let p1 = (eta_ratio_i * hh);
             let phi = ((hh * vr) / ((r_ij * r_ij) + (p1 * p1)));
             let c_bar = ((c_i_2 + c_j) / 2.0);
             let rho_bar = (0.5 * (rho_i + ldj_rho(j, sgn)));
-            let pi_ij = select(0.0, (((((-prm_visc_a(i)) * c_bar) * phi) + (prm_visc_b(i) * (phi * phi))) / rho_bar), (vr < 0.0));
+            let pi_ij = select(0.0, (((((-visc_a_i) * c_bar) * phi) + (visc_b_i * (phi * phi))) / rho_bar), (vr < 0.0));
             let p2 = ldj_rho(j, sgn);
             let A = ((div_m(sig_i, (rho_i * rho_i)) + div_m(sig_j, (p2 * p2))) - (pi_ij * eye()));
             de = de + (-((0.5 * ldj_m(j, sgn)) * dot((v_i - ldj_v(j, sgn)), (A * gradW_ij))));
@@ -606,11 +609,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let c_j_2 = ldj_c(j, sgn);
             let vr_2 = dot((v_i - ldj_v(j, sgn)), x_ij);
             let hh_2 = h_ij;
-            let p3 = (prm_eta_ratio(i) * hh_2);
+            let p3 = (eta_ratio_i * hh_2);
             let phi_2 = ((hh_2 * vr_2) / ((r_ij * r_ij) + (p3 * p3)));
             let c_bar_2 = ((c_i_3 + c_j_2) / 2.0);
             let rho_bar_2 = (0.5 * (rho_i + ldj_rho(j, sgn)));
-            let pi_ij_2 = select(0.0, (((((-prm_visc_a(i)) * c_bar_2) * phi_2) + (prm_visc_b(i) * (phi_2 * phi_2))) / rho_bar_2), (vr_2 < 0.0));
+            let pi_ij_2 = select(0.0, (((((-visc_a_i) * c_bar_2) * phi_2) + (visc_b_i * (phi_2 * phi_2))) / rho_bar_2), (vr_2 < 0.0));
             let p4 = ldj_rho(j, sgn);
             dv = dv + (ldj_m(j, sgn) * (((div_m(sig_i_2, (rho_i * rho_i)) + div_m(sig_j_2, (p4 * p4))) - (pi_ij_2 * eye())) * gradW_ij));
         }

@@ -549,6 +549,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var de: f32 = 0.0;
     // pairsum failing_momentum: accumulators
     var dv: vec3<f32> = vec3<f32>(0.0);
+    let visc_a_i = prm_visc_a(i);
+    let visc_b_i = prm_visc_b(i);
+    let eta_ratio_i = prm_eta_ratio(i);
+    let damage_coupling_i = prm_damage_coupling(i);
     let v_i = ld_v(i);
     let rho_i = ld_rho(i);
     let s_i = ld_s(i);
@@ -606,7 +610,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let s_2 = s_i;
             let p = p_i;
             let D = D_i;
-            let coupling = prm_damage_coupling(i);
+            let coupling = damage_coupling_i;
             let w = select((coupling * D), 1.0, (D >= 1.0));
             let sig_i = (((1.0 - w) * (s_2 - (min(p, 0.0) * eye()))) - (max(p, 0.0) * eye()));
             let s_3 = ldj_s(j, sgn);
@@ -619,11 +623,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let c_j = ldj_c(j, sgn);
             let vr = dot((v_i - ldj_v(j, sgn)), x_ij);
             let hh = h_ij;
-            let p1 = (prm_eta_ratio(i) * hh);
+            let p1 = (eta_ratio_i * hh);
             let phi = ((hh * vr) / ((r_ij * r_ij) + (p1 * p1)));
             let c_bar = ((c_i_2 + c_j) / 2.0);
             let rho_bar = (0.5 * (rho_i + ldj_rho(j, sgn)));
-            let pi_ij = select(0.0, (((((-prm_visc_a(i)) * c_bar) * phi) + (prm_visc_b(i) * (phi * phi))) / rho_bar), (vr < 0.0));
+            let pi_ij = select(0.0, (((((-visc_a_i) * c_bar) * phi) + (visc_b_i * (phi * phi))) / rho_bar), (vr < 0.0));
             let p2 = ldj_rho(j, sgn);
             let A = ((div_m(sig_i, (rho_i * rho_i)) + div_m(sig_j, (p2 * p2))) - (pi_ij * eye()));
             de = de + (-((0.5 * ldj_m(j, sgn)) * dot((v_i - ldj_v(j, sgn)), (A * gradW_ij))));
@@ -631,7 +635,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let s_4 = s_i;
             let p_3 = p_i;
             let D_3 = D_i;
-            let coupling_3 = prm_damage_coupling(i);
+            let coupling_3 = damage_coupling_i;
             let w_3 = select((coupling_3 * D_3), 1.0, (D_3 >= 1.0));
             let sig_i_2 = (((1.0 - w_3) * (s_4 - (min(p_3, 0.0) * eye()))) - (max(p_3, 0.0) * eye()));
             let s_5 = ldj_s(j, sgn);
@@ -644,11 +648,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let c_j_2 = ldj_c(j, sgn);
             let vr_2 = dot((v_i - ldj_v(j, sgn)), x_ij);
             let hh_2 = h_ij;
-            let p3 = (prm_eta_ratio(i) * hh_2);
+            let p3 = (eta_ratio_i * hh_2);
             let phi_2 = ((hh_2 * vr_2) / ((r_ij * r_ij) + (p3 * p3)));
             let c_bar_2 = ((c_i_3 + c_j_2) / 2.0);
             let rho_bar_2 = (0.5 * (rho_i + ldj_rho(j, sgn)));
-            let pi_ij_2 = select(0.0, (((((-prm_visc_a(i)) * c_bar_2) * phi_2) + (prm_visc_b(i) * (phi_2 * phi_2))) / rho_bar_2), (vr_2 < 0.0));
+            let pi_ij_2 = select(0.0, (((((-visc_a_i) * c_bar_2) * phi_2) + (visc_b_i * (phi_2 * phi_2))) / rho_bar_2), (vr_2 < 0.0));
             let p4 = ldj_rho(j, sgn);
             dv = dv + (ldj_m(j, sgn) * (((div_m(sig_i_2, (rho_i * rho_i)) + div_m(sig_j_2, (p4 * p4))) - (pi_ij_2 * eye())) * gradW_ij));
         }

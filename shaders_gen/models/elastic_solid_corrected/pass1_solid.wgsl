@@ -552,6 +552,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var grad_v: mat3x3<f32> = mat3x3<f32>();
     // pairsum contact: accumulators
     var a_contact: vec3<f32> = vec3<f32>(0.0);
+    let G_i = prm_G(i);
+    let K_p_i = prm_K_p(i);
     let v_i = ld_v(i);
     let dx_i = ld_dx(i);
     let body_i = ld_body(i);
@@ -612,13 +614,13 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             if ((((body_i != ldj_body(j, sgn)) && (pen > 0.0)) && (r_ij > 0.0))) {
                 let n_2 = (x_ij / r_ij);
                 let f1 = (((((2.0 * m_i) * ldj_m(j, sgn)) / (m_i + ldj_m(j, sgn))) * pen) / (dt * dt));
-                let f2 = ((sqrt(((h_i * ldj_h(j, sgn)) / (h_i + ldj_h(j, sgn)))) * ((prm_G(i) * prm_G(j)) / (prm_G(i) + prm_G(j)))) * (pen * sqrt(pen)));
+                let f2 = ((sqrt(((h_i * ldj_h(j, sgn)) / (h_i + ldj_h(j, sgn)))) * ((G_i * prm_G(j)) / (G_i + prm_G(j)))) * (pen * sqrt(pen)));
                 let pen_rate = ((-dot(x_ij, (v_i - ldj_v(j, sgn)))) / r_ij);
                 let p1 = ldj_h(j, sgn);
                 let p2 = ldj_h(j, sgn);
                 let mass = ((((rho_i * ldj_rho(j, sgn)) * (h_i * h_i * h_i)) * (p1 * p1 * p1)) / ((rho_i * (h_i * h_i * h_i)) + (ldj_rho(j, sgn) * (p2 * p2 * p2))));
                 let f3 = select(0.0, ((mass * pen_rate) / dt), (pen_rate > 0.0));
-                a_contact = a_contact + (((prm_K_p(i) * max(max(f1, f2), f3)) / m_i) * n_2);
+                a_contact = a_contact + (((K_p_i * max(max(f1, f2), f3)) / m_i) * n_2);
             }
         }
         }}}
@@ -634,7 +636,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     drho_i = ((-rho_i) * trace(edot));
     // then jaumann
     var ds_i: mat3x3<f32> = ld_ds(i);
-    ds_i = (((2.0 * prm_G(i)) * dev(edot)) + sym(((ld_s(i) * transpose(spin)) + (spin * ld_s(i)))));
+    ds_i = (((2.0 * G_i) * dev(edot)) + sym(((ld_s(i) * transpose(spin)) + (spin * ld_s(i)))));
     st_L_inv(i, L_inv);
     st_edot(i, edot);
     st_spin(i, spin);

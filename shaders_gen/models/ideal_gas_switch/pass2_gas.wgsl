@@ -495,6 +495,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // pairsum momentum_energy: accumulators
     var dv: vec3<f32> = vec3<f32>(0.0);
     var de: f32 = 0.0;
+    let cond_alpha_i = prm_cond_alpha(i);
+    let visc_beta_i = prm_visc_beta(i);
     let v_i = ld_v(i);
     let rho_i = ld_rho(i);
     let e_i = ld_e(i);
@@ -549,12 +551,12 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let c_i_2 = c_i;
             let c_j = ldj_c(j, sgn);
             let w = min((dot((v_i - ldj_v(j, sgn)), x_ij) / r_ij), 0.0);
-            let v_sig = ((c_i_2 + c_j) - (prm_visc_beta(i) * w));
+            let v_sig = ((c_i_2 + c_j) - (visc_beta_i * w));
             let pi_ij = ((((0.5 * (alpha_visc_i + ldj_alpha_visc(j, sgn))) * v_sig) * (-w)) / (2.0 * (0.5 * (rho_i + ldj_rho(j, sgn)))));
             let work = (ldj_m(j, sgn) * dot((v_i - ldj_v(j, sgn)), gradW_ij));
             dv = dv + (-((ldj_m(j, sgn) * ((p_over_rho2_i + ldj_p_over_rho2(j, sgn)) + pi_ij)) * gradW_ij));
             let v_u = sqrt((abs((p_i - ldj_p(j, sgn))) / (0.5 * (rho_i + ldj_rho(j, sgn)))));
-            let conduction = ((((((prm_cond_alpha(i) * ldj_m(j, sgn)) * v_u) * (e_i - ldj_e(j, sgn))) / (0.5 * (rho_i + ldj_rho(j, sgn)))) * dot(x_ij, gradW_ij)) / r_ij);
+            let conduction = ((((((cond_alpha_i * ldj_m(j, sgn)) * v_u) * (e_i - ldj_e(j, sgn))) / (0.5 * (rho_i + ldj_rho(j, sgn)))) * dot(x_ij, gradW_ij)) / r_ij);
             de = de + (((p_over_rho2_i + (0.5 * pi_ij)) * work) + conduction);
         }
         }}}

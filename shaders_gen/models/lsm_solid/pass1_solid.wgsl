@@ -439,6 +439,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let dt = globals[1u];
     // pairsum lattice_spring: accumulators
     var a_lsm: vec3<f32> = vec3<f32>(0.0);
+    let lattice_damping_i = prm_lattice_damping(i);
+    let E_i = prm_E(i);
     let v_i = ld_v(i);
     let dx_i = ld_dx(i);
     let m_i = ld_m(i);
@@ -489,7 +491,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let rest_2 = rest;
             let spacing = dx_i;
             if (((length(rest_2) > (0.5 * spacing)) && (length(rest_2) <= ((1.0001 * sqrt(2.0)) * spacing)))) {
-                let modulus = prm_E(i);
+                let modulus = E_i;
                 let spacing_2 = dx_i;
                 let slab = ((modulus * 1.0) / 1.5);
                 let bar = ((modulus * 1.0) / spacing_2);
@@ -502,7 +504,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 let k_2 = (((2.0 * k_i) * k_j) / (k_i + k_j));
                 let along = (x_ij / r_ij);
                 let stretch = (r_ij - length(rest));
-                a_lsm = a_lsm + (((-((k_2 * stretch) + ((0.5 * (prm_lattice_damping(i) + prm_lattice_damping(j))) * dot((v_i - ldj_v(j, sgn)), along)))) * along) / m_i);
+                a_lsm = a_lsm + (((-((k_2 * stretch) + ((0.5 * (lattice_damping_i + prm_lattice_damping(j))) * dot((v_i - ldj_v(j, sgn)), along)))) * along) / m_i);
             }
         }
         }}}

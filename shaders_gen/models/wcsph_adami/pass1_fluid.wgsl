@@ -451,6 +451,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var diffusion: f32 = 0.0;
     // pairsum viscous_speed: accumulators
     var mu_max: f32 = (-pinf());
+    let rho0_i = prm_rho0(i);
+    let gravity_i = prm_gravity(i);
+    let delta_i = prm_delta(i);
+    let c0_i = prm_c0(i);
+    let gamma_i = prm_gamma(i);
     let v_i = ld_v(i);
     let rho_i = ld_rho(i);
     let h_i = ld_h(i);
@@ -499,10 +504,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let gradW_ij = kernel_grad(r_ij, h_ij) * x_ij;
             // pairsum continuity (stdlib/continuity/fourtakas.sph:20)
             div_v = div_v + (ldj_m(j, sgn) * dot((v_i - ldj_v(j, sgn)), gradW_ij));
-            let p1 = prm_c0(i);
-            let rho_h = (prm_rho0(i) * (pow((1.0 + ((prm_rho0(i) * dot(prm_gravity(i), x_ij)) / (((p1 * p1) * prm_rho0(i)) / prm_gamma(i)))), (1.0 / prm_gamma(i))) - 1.0));
+            let rho_h = (rho0_i * (pow((1.0 + ((rho0_i * dot(gravity_i, x_ij)) / (((c0_i * c0_i) * rho0_i) / gamma_i))), (1.0 / gamma_i)) - 1.0));
             let psi = (((2.0 * ((rho_i - ldj_rho(j, sgn)) - rho_h)) * x_ij) / (r_ij * r_ij));
-            let term = (((((prm_delta(i) * h_i) * prm_c0(i)) * ldj_m(j, sgn)) / ldj_rho(j, sgn)) * dot(psi, gradW_ij));
+            let term = (((((delta_i * h_i) * c0_i) * ldj_m(j, sgn)) / ldj_rho(j, sgn)) * dot(psi, gradW_ij));
             diffusion = diffusion + select(0.0, term, (true && in_groups(1u, ints[j])));
             // pairsum viscous_speed (stdlib/timestep/lsr.sph:11)
             mu_max = max(mu_max, abs(((h_ij * dot((v_i - ldj_v(j, sgn)), x_ij)) / (r_ij * r_ij))));

@@ -505,6 +505,15 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var dv: vec3<f32> = vec3<f32>(0.0);
     // pairsum viscous_speed: accumulators
     var mu_max: f32 = (-pinf());
+    let rho0_i = prm_rho0(i);
+    let gravity_i = prm_gravity(i);
+    let delta_i = prm_delta(i);
+    let c0_i = prm_c0(i);
+    let gamma_i = prm_gamma(i);
+    let nu0_i = prm_nu0(i);
+    let visc_a_i = prm_visc_a(i);
+    let visc_b_i = prm_visc_b(i);
+    let eta_ratio_i = prm_eta_ratio(i);
     let v_i = ld_v(i);
     let rho_i = ld_rho(i);
     let h_i = ld_h(i);
@@ -555,22 +564,21 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let gradW_ij = kernel_grad(r_ij, h_ij) * x_ij;
             // pairsum continuity (stdlib/continuity/fourtakas.sph:20)
             div_v = div_v + (ldj_m(j, sgn) * dot((v_i - ldj_v(j, sgn)), gradW_ij));
-            let p1 = prm_c0(i);
-            let rho_h = (prm_rho0(i) * (pow((1.0 + ((prm_rho0(i) * dot(prm_gravity(i), x_ij)) / (((p1 * p1) * prm_rho0(i)) / prm_gamma(i)))), (1.0 / prm_gamma(i))) - 1.0));
+            let rho_h = (rho0_i * (pow((1.0 + ((rho0_i * dot(gravity_i, x_ij)) / (((c0_i * c0_i) * rho0_i) / gamma_i))), (1.0 / gamma_i)) - 1.0));
             let psi = (((2.0 * ((rho_i - ldj_rho(j, sgn)) - rho_h)) * x_ij) / (r_ij * r_ij));
-            let term = (((((prm_delta(i) * h_i) * prm_c0(i)) * ldj_m(j, sgn)) / ldj_rho(j, sgn)) * dot(psi, gradW_ij));
+            let term = (((((delta_i * h_i) * c0_i) * ldj_m(j, sgn)) / ldj_rho(j, sgn)) * dot(psi, gradW_ij));
             diffusion = diffusion + select(0.0, term, (true && in_groups(1u, ints[j])));
             // pairsum momentum (stdlib/momentum/fluid.sph:18)
             let c_i_2 = c_i;
             let c_j = ldj_c(j, sgn);
             let vr = dot((v_i - ldj_v(j, sgn)), x_ij);
             let hh = h_ij;
-            let p2 = (prm_eta_ratio(i) * hh);
-            let phi = ((hh * vr) / ((r_ij * r_ij) + (p2 * p2)));
+            let p1 = (eta_ratio_i * hh);
+            let phi = ((hh * vr) / ((r_ij * r_ij) + (p1 * p1)));
             let c_bar = ((c_i_2 + c_j) / 2.0);
             let rho_bar = (0.5 * (rho_i + ldj_rho(j, sgn)));
-            let pressure = (((-ldj_m(j, sgn)) * ((ldj_p_over_rho2(j, sgn) + p_over_rho2_i) + select(0.0, (((((-prm_visc_a(i)) * c_bar) * phi) + (prm_visc_b(i) * (phi * phi))) / rho_bar), (vr < 0.0)))) * gradW_ij);
-            let laminar = (((((ldj_m(j, sgn) * 4.0) * prm_nu0(i)) * dot(x_ij, gradW_ij)) / ((rho_i + ldj_rho(j, sgn)) * (r_ij * r_ij))) * (v_i - ldj_v(j, sgn)));
+            let pressure = (((-ldj_m(j, sgn)) * ((ldj_p_over_rho2(j, sgn) + p_over_rho2_i) + select(0.0, (((((-visc_a_i) * c_bar) * phi) + (visc_b_i * (phi * phi))) / rho_bar), (vr < 0.0)))) * gradW_ij);
+            let laminar = (((((ldj_m(j, sgn) * 4.0) * nu0_i) * dot(x_ij, gradW_ij)) / ((rho_i + ldj_rho(j, sgn)) * (r_ij * r_ij))) * (v_i - ldj_v(j, sgn)));
             dv = dv + (pressure + laminar);
             // pairsum viscous_speed (stdlib/timestep/lsr.sph:11)
             mu_max = max(mu_max, abs(((h_ij * dot((v_i - ldj_v(j, sgn)), x_ij)) / (r_ij * r_ij))));

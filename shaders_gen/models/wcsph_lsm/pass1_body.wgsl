@@ -505,6 +505,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var weight: f32 = 0.0;
     // pairsum lattice_spring: accumulators
     var a_lsm: vec3<f32> = vec3<f32>(0.0);
+    let gravity_i = prm_gravity(i);
+    let lattice_damping_i = prm_lattice_damping(i);
+    let E_i = prm_E(i);
     let v_i = ld_v(i);
     let dx_i = ld_dx(i);
     let m_i = ld_m(i);
@@ -555,7 +558,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let gradW_ij = kernel_grad(r_ij, h_ij) * x_ij;
             // pairsum extrapolated_pressure (stdlib/boundary/extrapolated_pressure.sph:15)
             if (in_groups(1u, ints[j])) {
-                weighted = weighted + ((ldj_p(j, sgn) + (ldj_rho(j, sgn) * dot(prm_gravity(i), x_ij))) * W_ij);
+                weighted = weighted + ((ldj_p(j, sgn) + (ldj_rho(j, sgn) * dot(gravity_i, x_ij))) * W_ij);
                 weight = weight + W_ij;
             }
             // pairsum lattice_spring (stdlib/lsm/lattice_spring.sph:16)
@@ -564,7 +567,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 let rest_2 = rest;
                 let spacing = dx_i;
                 if (((length(rest_2) > (0.5 * spacing)) && (length(rest_2) <= ((1.0001 * sqrt(2.0)) * spacing)))) {
-                    let modulus = prm_E(i);
+                    let modulus = E_i;
                     let spacing_2 = dx_i;
                     let slab = ((modulus * 1.0) / 1.5);
                     let bar = ((modulus * 1.0) / spacing_2);
@@ -577,7 +580,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                     let k_2 = (((2.0 * k_i) * k_j) / (k_i + k_j));
                     let along = (x_ij / r_ij);
                     let stretch = (r_ij - length(rest));
-                    a_lsm = a_lsm + (((-((k_2 * stretch) + ((0.5 * (prm_lattice_damping(i) + prm_lattice_damping(j))) * dot((v_i - ldj_v(j, sgn)), along)))) * along) / m_i);
+                    a_lsm = a_lsm + (((-((k_2 * stretch) + ((0.5 * (lattice_damping_i + prm_lattice_damping(j))) * dot((v_i - ldj_v(j, sgn)), along)))) * along) / m_i);
                 }
             }
         }

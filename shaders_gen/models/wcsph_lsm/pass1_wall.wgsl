@@ -450,6 +450,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var weight: f32 = 0.0;
     // pairsum viscous_speed: accumulators
     var mu_max: f32 = (-pinf());
+    let gravity_i = prm_gravity(i);
     let v_i = ld_v(i);
     let xi = pos3(i);
     let hi = h_of(i);
@@ -496,7 +497,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let gradW_ij = kernel_grad(r_ij, h_ij) * x_ij;
             // pairsum extrapolated_pressure (stdlib/boundary/extrapolated_pressure.sph:15)
             if (in_groups(1u, ints[j])) {
-                weighted = weighted + ((ldj_p(j, sgn) + (ldj_rho(j, sgn) * dot(prm_gravity(i), x_ij))) * W_ij);
+                weighted = weighted + ((ldj_p(j, sgn) + (ldj_rho(j, sgn) * dot(gravity_i, x_ij))) * W_ij);
                 weight = weight + W_ij;
             }
             // pairsum viscous_speed (stdlib/timestep/lsr.sph:11)

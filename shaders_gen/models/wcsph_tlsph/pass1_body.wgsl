@@ -556,6 +556,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var H: mat3x3<f32> = mat3x3<f32>();
     var L0: mat3x3<f32> = mat3x3<f32>();
     var H0: mat3x3<f32> = mat3x3<f32>();
+    let gravity_i = prm_gravity(i);
+    let clamp_normal_i = prm_clamp_normal(i);
+    let clamp_at_i = prm_clamp_at(i);
     let x_i = ld_x(i);
     let body_i = ld_body(i);
     let u_i = ld_u(i);
@@ -605,17 +608,17 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let gradW_ij = kernel_grad(r_ij, h_ij) * x_ij;
             // pairsum extrapolated_pressure (stdlib/boundary/extrapolated_pressure.sph:15)
             if (in_groups(1u, ints[j])) {
-                weighted = weighted + ((ldj_p(j, sgn) + (ldj_rho(j, sgn) * dot(prm_gravity(i), x_ij))) * W_ij);
+                weighted = weighted + ((ldj_p(j, sgn) + (ldj_rho(j, sgn) * dot(gravity_i, x_ij))) * W_ij);
                 weight = weight + W_ij;
             }
             // pairsum deformation_gradient (stdlib/solid/total_lagrangian.sph:98)
             if (in_groups(4u, ints[j])) {
                 if ((body_i == ldj_body(j, sgn))) {
                     let a = ldj_u(j, sgn);
-                    let n_2 = prm_clamp_normal(i);
+                    let n_2 = clamp_normal_i;
                     let X_j = (x_i - x_ij);
-                    let n_3 = prm_clamp_normal(i);
-                    let at_2 = prm_clamp_at(i);
+                    let n_3 = clamp_normal_i;
+                    let at_2 = clamp_at_i;
                     let clamped = (dot(X_j, n_3) < at_2);
                     let u_j = select(a, (((2.0 * dot(a, n_2)) * n_2) - a), clamped);
                     let X_ij = (x_ij - (u_i - u_j));

@@ -182,6 +182,8 @@ struct Writer<'a> {
     namer: Namer,
     /// The variable holding each field's current value for particle i (set, or accumulated).
     current: BTreeMap<FieldId, String>,
+    /// The variables holding particle i's parameters, loaded once before a neighbour loop.
+    params_i: BTreeMap<ParamId, String>,
     /// Accessors the kernel needs: (field, side), (param, side).
     fields: BTreeSet<(FieldId, Side)>,
     params: BTreeSet<(ParamId, Side)>,
@@ -214,6 +216,7 @@ impl<'a> Writer<'a> {
             names,
             namer,
             current: BTreeMap::new(),
+            params_i: BTreeMap::new(),
             fields: BTreeSet::new(),
             params: BTreeSet::new(),
             stores: BTreeSet::new(),
@@ -281,6 +284,9 @@ impl<'a> Writer<'a> {
                 self.params.insert((*p, *side));
                 let name = self.names.param(*p);
                 if *side == Side::I {
+                    if let Some(v) = self.params_i.get(p) {
+                        return v.clone();
+                    }
                     format!("prm_{name}(i)")
                 } else {
                     format!("prm_{name}(j)")
@@ -901,16 +907,28 @@ fn pass_kernel(plan: &Plan, lay: &Layout, pass: usize, v: &PassVariant, cell_hel
     for init in &inits {
         w.stmts(init);
     }
-    // Values of particle i that the neighbour loop reads: loaded once.
+    // Values of particle i that the neighbour loop reads, fields and parameters: loaded once.
     let mut read_i = BTreeSet::new();
+    let mut params_i = BTreeSet::new();
     for e in &v.pair_sums {
         if let EquationKind::PairSum { body, .. } = &plan.equation(*e).kind {
-            ir::walk_stmts(body, &mut |x| {
-                if let ExprKind::Field(f, Side::I) = x.kind {
+            ir::walk_stmts(body, &mut |x| match x.kind {
+                ExprKind::Field(f, Side::I) => {
                     read_i.insert(f);
                 }
+                ExprKind::Param(p, Side::I) => {
+                    params_i.insert(p);
+                }
+                _ => {}
             });
         }
+    }
+    for p in params_i {
+        let name = w.names.param(p).to_string();
+        let var = w.fresh(&format!("{name}_i"));
+        w.params.insert((p, Side::I));
+        w.line(format!("let {var} = prm_{name}(i);"));
+        w.params_i.insert(p, var);
     }
     for f in read_i {
         if w.current.contains_key(&f) || plan.model.field(f).storage == Storage::Temp {
