@@ -367,27 +367,65 @@ impl Gpu {
         offset_bytes: u64,
         count: usize,
     ) -> Result<Vec<T>, GpuError> {
-        let size = (count * std::mem::size_of::<T>()) as u64;
+        let size = read_size::<T>(buffer, offset_bytes, count)?;
         if size == 0 {
             return Ok(Vec::new());
         }
-        if !offset_bytes.is_multiple_of(4) || !size.is_multiple_of(4) || offset_bytes + size > buffer.size() {
-            return Err(GpuError::Map(format!(
-                "download of {size} bytes at byte {offset_bytes} from a buffer of {} bytes (offset and size must be \
-                 multiples of 4, and fit)",
-                buffer.size()
-            )));
-        }
         self.check_lost()?;
         let started = std::time::Instant::now();
-        let staging =
-            self.buffer("download staging", size, wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST)?;
+        let staging = self.staging_buffer(size)?;
         let mut encoder =
             self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("download") });
         encoder.copy_buffer_to_buffer(buffer, offset_bytes, &staging, 0, size);
         self.queue.submit([encoder.finish()]);
+        self.map_read(&staging, count, started)
+    }
+
+    /// A buffer the host can map to read `size` bytes copied into it.
+    pub fn staging_buffer(&self, size: u64) -> Result<wgpu::Buffer, GpuError> {
+        self.buffer("download staging", size, wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST)
+    }
+
+    /// Submits `encoder` with a copy of `count` values of `T` from `buffer` (at byte
+    /// `offset_bytes`) into `staging` ([`Gpu::staging_buffer`], kept by the caller) appended, waits
+    /// and returns the values: one submission and one wait where [`Gpu::download`] after the
+    /// submission would take two, and a new staging buffer.
+    pub fn submit_and_read<T: bytemuck::Pod>(
+        &self,
+        mut encoder: wgpu::CommandEncoder,
+        buffer: &wgpu::Buffer,
+        offset_bytes: u64,
+        count: usize,
+        staging: &wgpu::Buffer,
+    ) -> Result<Vec<T>, GpuError> {
+        let size = read_size::<T>(buffer, offset_bytes, count)?;
+        if size > staging.size() {
+            return Err(GpuError::Map(format!("a read of {size} bytes into a staging buffer of {}", staging.size())));
+        }
+        if size > 0 {
+            encoder.copy_buffer_to_buffer(buffer, offset_bytes, staging, 0, size);
+        }
+        self.check_lost()?;
+        let started = std::time::Instant::now();
+        self.submit(encoder);
+        if size == 0 {
+            return Ok(Vec::new());
+        }
+        self.map_read(staging, count, started)
+    }
+
+    /// Waits for `staging` to be mappable (for the submission that copies into it to end), copies
+    /// its first `count` values out and unmaps it. `started` is when the wait began, for the
+    /// timing.
+    pub fn map_read<T: bytemuck::Pod>(
+        &self,
+        staging: &wgpu::Buffer,
+        count: usize,
+        started: std::time::Instant,
+    ) -> Result<Vec<T>, GpuError> {
+        let size = count * std::mem::size_of::<T>();
         let (tx, rx) = std::sync::mpsc::channel();
-        staging.map_async(wgpu::MapMode::Read, .., move |r| {
+        staging.map_async(wgpu::MapMode::Read, ..size as u64, move |r| {
             let _ = tx.send(r);
         });
         self.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| {
@@ -402,15 +440,26 @@ impl Gpu {
         }
         let mut out = vec![T::zeroed(); count];
         {
-            let view = staging.get_mapped_range(..).map_err(|e| GpuError::Map(format!("{e:?}")))?;
-            bytemuck::cast_slice_mut::<T, u8>(&mut out).copy_from_slice(&view[..size as usize]);
+            let view = staging.get_mapped_range(..size as u64).map_err(|e| GpuError::Map(format!("{e:?}")))?;
+            bytemuck::cast_slice_mut::<T, u8>(&mut out).copy_from_slice(&view[..size]);
         }
         staging.unmap();
         if let Some(t) = &self.timing {
-            t.readback(size, started.elapsed());
+            t.readback(size as u64, started.elapsed());
         }
         self.check()?;
         Ok(out)
+    }
+
+    /// Whether the run's timing is kept (`pairsum run --timing`): its timestamps are resolved at
+    /// each submission, so commands must be submitted from their encoder, not finished ahead.
+    pub fn is_timed(&self) -> bool {
+        self.timing.is_some()
+    }
+
+    /// Submits commands finished ahead of their submission (never with timing: [`Gpu::is_timed`]).
+    pub fn submit_finished(&self, commands: wgpu::CommandBuffer) {
+        self.queue.submit([commands]);
     }
 
     /// Submits the encoder's commands.
@@ -504,6 +553,20 @@ impl Gpu {
 
 /// `(x, y)` with `x <= max_per_dim` and `x * y >= groups`, as square as needed: `(groups, 1)`
 /// when it fits.
+/// The bytes of a read of `count` values of `T` at byte `offset_bytes` of `buffer`, checked: both
+/// multiples of 4, and within the buffer.
+fn read_size<T>(buffer: &wgpu::Buffer, offset_bytes: u64, count: usize) -> Result<u64, GpuError> {
+    let size = (count * std::mem::size_of::<T>()) as u64;
+    if size > 0 && (!offset_bytes.is_multiple_of(4) || !size.is_multiple_of(4) || offset_bytes + size > buffer.size()) {
+        return Err(GpuError::Map(format!(
+            "download of {size} bytes at byte {offset_bytes} from a buffer of {} bytes (offset and size must be \
+             multiples of 4, and fit)",
+            buffer.size()
+        )));
+    }
+    Ok(size)
+}
+
 pub fn dispatch_grid(groups: u32, max_per_dim: u32) -> (u32, u32) {
     let max = max_per_dim.max(1);
     if groups <= max {
