@@ -246,10 +246,21 @@ impl Gpu {
         let shader_error =
             |message: String| GpuError::Shader { label: label.to_string(), wgsl: wgsl.to_string(), message };
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let module = self.device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some(label),
-            source: wgpu::ShaderSource::Wgsl(wgsl.into()),
-        });
+        let descriptor =
+            wgpu::ShaderModuleDescriptor { label: Some(label), source: wgpu::ShaderSource::Wgsl(wgsl.into()) };
+        // Every runtime check stays on but naga's loop bounding, which gives every loop a 64-bit
+        // countdown so that a loop that never ends cannot be assumed away; in the neighbour loop
+        // that cost 3–5 % of a 3D pass on an H200 (docs/results/gpu_h200/, run 12).
+        // SAFETY: wgpu requires that no shader given this way loops forever. Every loop of the
+        // kernels pairsum compiles (generated from the IR, which has no loops of its own, or
+        // written in `cells`, `reduce`, `reorder`, `lists` and `probe`) either counts a u32 up by
+        // one to a bound read before the loop (cells, slots, list entries, mirror images, with
+        // `<=` only to a cell count below u32::MAX), strides by at most 1024 × 256 up to a count
+        // of particles, cells or partial results far below u32::MAX (buffer sizes bound them),
+        // halves or doubles a power of two within 1..=256, or (the cell list's fit) doubles a
+        // cell size whose exponent ends the loop past 1023.
+        let checks = wgpu::ShaderRuntimeChecks { force_loop_bounding: false, ..wgpu::ShaderRuntimeChecks::checked() };
+        let module = unsafe { self.device.create_shader_module_trusted(descriptor, checks) };
         let pipeline = self.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
             label: Some(label),
             layout: None,
