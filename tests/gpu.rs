@@ -375,8 +375,14 @@ fn borvik_perforation_on_the_gpu_matches_the_cpu_in_contact() {
 
 #[test]
 fn tensile_test_on_the_gpu_matches_the_cpu_while_the_grip_pulls() {
-    // 2000 steps are 169 µs: the bar has yielded.
-    case_matches_cpu("tensile_test", &[], 2000, &["s", "eps_p"], 2e-3);
+    // 800 steps are 68 µs: the neck yields from about 45 µs on, and its largest plastic strain
+    // is about 0.01 by the end (0.038 after 2000 steps, which took 2.5 times as long on lavapipe).
+    let path = Path::new(&case("tensile_test")).to_path_buf();
+    let engines = run_both(&path, &[], 800);
+    let (_, eps_p) = stored_field(&engines.0.backend, "eps_p");
+    let largest = common::largest("the CPU's plastic strain after 800 steps", &eps_p);
+    assert!(largest > 0.005, "the bar has not yielded: largest plastic strain {largest}");
+    engines_match(&path, engines, 800, &["s", "eps_p"], 2e-3);
 }
 
 #[test]
