@@ -607,6 +607,41 @@ fn the_gpu_keeps_its_verlet_lists_across_evaluations_and_counts_its_rebuilds() {
     assert!(c.full_builds.abs_diff(g.full_builds) <= 2, "CPU {} vs GPU {} full builds", c.full_builds, g.full_builds);
 }
 
+/// Kept lists hold a bounded number of candidates per particle. When the particles crowd far
+/// beyond their initial packing (here every particle moved onto one short line), the step that
+/// builds the lists stops the run, saying so: the step's own read-back carries the largest
+/// candidate count with the clock.
+#[test]
+fn the_gpu_stops_a_step_whose_particles_find_more_candidates_than_their_kept_lists_hold() {
+    use pairsum::engine::Engine;
+    use pairsum::runner::prepare;
+    let opts = pairsum::scene::Options {
+        set: vec![("search".into(), "verlet".into()), ("skin".into(), "0.1".into())],
+        ..Default::default()
+    };
+    let (scene, plan) = prepare(Path::new(&case("fans_bullet")), &opts).expect("case");
+    let store = build_store::<f32>(&plan, &scene.particles, &scene.materials).expect("store");
+    let x = plan.model.field_id("x").expect("x");
+    let mut gpu = Engine::new(GpuBackend::new(gpu(), plan, store, &scene.mirrors).expect("gpu"), scene.config.clone());
+    gpu.initialise().expect("gpu init");
+    gpu.step().expect("a first step with the particles as packed");
+    let mut crowded = gpu.backend.snapshot().expect("snapshot");
+    let column = crowded.columns[x.index()].as_mut().expect("x is stored");
+    let n = crowded.id.len();
+    let dim = column.len() / n;
+    for (k, p) in column.chunks_mut(dim).enumerate() {
+        p.fill(0.0);
+        p[0] = 1e-6 * k as f64;
+    }
+    gpu.backend.restore(&crowded).expect("restore");
+    let e = gpu.step().expect_err("the lists cannot hold every particle as a candidate");
+    let message = e.to_string();
+    assert!(
+        message.contains("neighbour candidates, more than the") && message.contains("checking the neighbour lists"),
+        "{message}"
+    );
+}
+
 /// The Morton code of cell coordinates as the GPU reorder builds it: 10 bits per axis in 3D and
 /// 16 in 2D, after dropping the low bits of every axis when the largest needs more.
 fn coarse_morton(c: [u32; 3], dims: [usize; 3], dim: usize) -> u32 {

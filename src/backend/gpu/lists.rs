@@ -345,7 +345,17 @@ impl GpuLists {
     /// An error when a particle had more candidates than its list holds (its list was cut short,
     /// so the last evaluation missed pairs).
     pub fn check_overflow(&self, gpu: &Gpu) -> Result<(), GpuError> {
-        let largest = self.header(gpu)?[LARGEST];
+        self.check_largest(self.header(gpu)?[LARGEST])
+    }
+
+    /// Records a copy of the largest candidate count (the word [`GpuLists::check_largest`] takes)
+    /// into `to` at byte `at`, so that a step's own read-back carries it.
+    pub fn record_largest_copy(&self, encoder: &mut wgpu::CommandEncoder, to: &wgpu::Buffer, at: u64) {
+        encoder.copy_buffer_to_buffer(&self.lists, 4 * LARGEST as u64, to, at, 4);
+    }
+
+    /// An error if a particle found more candidates than its list holds.
+    pub fn check_largest(&self, largest: u32) -> Result<(), GpuError> {
         if largest > self.stride {
             return Err(GpuError::Device(format!(
                 "a particle has {largest} neighbour candidates, more than the {} its list holds (twice the most at \

@@ -74,7 +74,7 @@ pub struct GpuBackend {
 pub const PROBES_ON_DEVICE_FROM: usize = 65_536;
 
 /// The clock (time, time steps, end time, step), the globals a step's submission copies for the
-/// host.
+/// host (followed there, with kept lists, by their largest candidate count).
 const CLOCK_BYTES: u64 = 4 * (gl::STEP as u64 + 1);
 
 fn err(e: GpuError) -> BackendError {
@@ -510,6 +510,9 @@ impl GpuBackend {
             }
         }
         encoder.copy_buffer_to_buffer(&self.globals, 0, &self.globals_staging, 0, CLOCK_BYTES);
+        if let Some(l) = &self.lists {
+            l.record_largest_copy(&mut encoder, &self.globals_staging, CLOCK_BYTES);
+        }
         encoder
     }
 
@@ -542,11 +545,16 @@ impl GpuBackend {
             // one: wgpu's encoding of a step takes 0.2–0.7 ms on the host.
             self.next_step = Some(self.record_step().finish());
         }
-        let clock: Vec<f32> =
-            self.gpu.map_read(&self.globals_staging, gl::STEP + 1, started).map_err(failed("running a step"))?;
-        self.check_lists()?;
+        // The clock's words, then (with kept lists) their largest candidate count.
+        let words: Vec<u32> = self
+            .gpu
+            .map_read(&self.globals_staging, gl::STEP + 1 + self.lists.is_some() as usize, started)
+            .map_err(failed("running a step"))?;
+        if let Some(l) = &self.lists {
+            l.check_largest(words[gl::STEP + 1]).map_err(failed("checking the neighbour lists"))?;
+        }
         // Time accumulates on the host in f64 from the device's f32 step.
-        let dt = clock[gl::DT] as f64;
+        let dt = f32::from_bits(words[gl::DT]) as f64;
         Ok((time + dt, dt, step + 1))
     }
 }
@@ -880,7 +888,7 @@ pub fn step_traffic(plan: &Plan, n: usize) -> Result<String, String> {
         )
     };
     let readbacks = if plan.search.keeps_lists() {
-        format!("two blocking read-backs (the clock, {CLOCK_BYTES} bytes, and the lists' overflow check)")
+        format!("one blocking read-back (the clock, {CLOCK_BYTES} bytes, and the lists' largest candidate count)")
     } else {
         format!("one blocking read-back (the clock, {CLOCK_BYTES} bytes)")
     };
