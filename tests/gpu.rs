@@ -579,16 +579,21 @@ fn bullet_with_adaptive_lists_on_the_gpu_matches_the_cpu() {
     case_matches_cpu("fans_bullet", &[("search", "adaptive"), ("threshold", "1e-5")], 120, &["eps_p", "s"], 2e-3);
 }
 
-#[test]
-fn the_gpu_keeps_its_verlet_lists_across_evaluations_and_counts_its_rebuilds() {
-    use pairsum::engine::Engine;
-    use pairsum::runner::prepare;
+/// The bullet case (fans_bullet) with Verlet lists of skin 0.1, its plan and its f32 store.
+fn bullet_with_verlet_lists() -> (pairsum::scene::Scene, Plan, pairsum::particles::Store<f32>) {
     let opts = pairsum::scene::Options {
         set: vec![("search".into(), "verlet".into()), ("skin".into(), "0.1".into())],
         ..Default::default()
     };
-    let (scene, plan) = prepare(Path::new(&case("fans_bullet")), &opts).expect("case");
+    let (scene, plan) = pairsum::runner::prepare(Path::new(&case("fans_bullet")), &opts).expect("case");
     let store = build_store::<f32>(&plan, &scene.particles, &scene.materials).expect("store");
+    (scene, plan, store)
+}
+
+#[test]
+fn the_gpu_keeps_its_verlet_lists_across_evaluations_and_counts_its_rebuilds() {
+    use pairsum::engine::Engine;
+    let (scene, plan, store) = bullet_with_verlet_lists();
     let config = pairsum::engine::RunConfig { reorder_every: 0, ..scene.config.clone() };
     let mut cpu =
         Engine::new(CpuBackend::new(plan.clone(), store.clone(), scene.mirrors.clone()).expect("cpu"), config.clone());
@@ -614,13 +619,7 @@ fn the_gpu_keeps_its_verlet_lists_across_evaluations_and_counts_its_rebuilds() {
 #[test]
 fn the_gpu_stops_a_step_whose_particles_find_more_candidates_than_their_kept_lists_hold() {
     use pairsum::engine::Engine;
-    use pairsum::runner::prepare;
-    let opts = pairsum::scene::Options {
-        set: vec![("search".into(), "verlet".into()), ("skin".into(), "0.1".into())],
-        ..Default::default()
-    };
-    let (scene, plan) = prepare(Path::new(&case("fans_bullet")), &opts).expect("case");
-    let store = build_store::<f32>(&plan, &scene.particles, &scene.materials).expect("store");
+    let (scene, plan, store) = bullet_with_verlet_lists();
     let x = plan.model.field_id("x").expect("x");
     let mut gpu = Engine::new(GpuBackend::new(gpu(), plan, store, &scene.mirrors).expect("gpu"), scene.config.clone());
     gpu.initialise().expect("gpu init");
