@@ -377,7 +377,7 @@ fn borvik_perforation_on_the_gpu_matches_the_cpu_in_contact() {
 fn tensile_test_on_the_gpu_matches_the_cpu_while_the_grip_pulls() {
     // 800 steps are 68 µs: the neck yields from about 45 µs on, and its largest plastic strain
     // is about 0.01 by the end (0.038 after 2000 steps, which took 2.5 times as long on lavapipe).
-    let path = Path::new(&case("tensile_test")).to_path_buf();
+    let path = std::path::PathBuf::from(case("tensile_test"));
     let engines = run_both(&path, &[], 800);
     let (_, eps_p) = stored_field(&engines.0.backend, "eps_p");
     let largest = common::largest("the CPU's plastic strain after 800 steps", &eps_p);

@@ -562,8 +562,6 @@ impl Gpu {
     }
 }
 
-/// `(x, y)` with `x <= max_per_dim` and `x * y >= groups`, as square as needed: `(groups, 1)`
-/// when it fits.
 /// The bytes of a read of `count` values of `T` at byte `offset_bytes` of `buffer`, checked: both
 /// multiples of 4, and within the buffer.
 fn read_size<T>(buffer: &wgpu::Buffer, offset_bytes: u64, count: usize) -> Result<u64, GpuError> {
@@ -578,6 +576,8 @@ fn read_size<T>(buffer: &wgpu::Buffer, offset_bytes: u64, count: usize) -> Resul
     Ok(size)
 }
 
+/// `(x, y)` with `x <= max_per_dim` and `x * y >= groups`, as square as needed: `(groups, 1)`
+/// when it fits.
 pub fn dispatch_grid(groups: u32, max_per_dim: u32) -> (u32, u32) {
     let max = max_per_dim.max(1);
     if groups <= max {
