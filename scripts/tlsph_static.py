@@ -9,7 +9,9 @@ or from a moving-least-squares gradient exact for quadratic fields (order 2: wei
 basis ΔX, ΔY, ΔX², ΔX ΔY, ΔY²), the strain energy Σ_i V_i ½ ε_i : C : ε_i, and Ganzenmüller's
 hourglass force linearised (α). Solving K u = f gives what the dynamic model settles to: the
 cantilever at 8 particles across is +3.30 % with order 1, α = 10 and the odd clamp here and in
-cases/cantilever_2d.toml, and the vibrating beam's period 0.120788 s against the run's 0.120785 s.
+cases/cantilever_2d.toml before stop 54, and the vibrating beam's period 0.120788 s against the
+run's 0.120785 s; with the model's gradient since then (`jacobi`, below) +1.76 % against the run's
++1.75 %, and 0.119837 s against 0.119832 s.
 
 Three experiments:
   cantilever    cases/cantilever_2d.toml's beam (0.5 × 0.1 m, 100 N on the last 25 mm) at 4, 8 and
@@ -42,6 +44,17 @@ delay makes the dynamics grow: every step multiplies the fastest mode of the vib
 across by 1.17 (1.06 with hourglass control), so the lagged form is unusable and the exact one
 needs a linear solve a step, or the quadratic MLS gradient ("order 2": a 5 × 5 system per
 particle in 2D, 9 × 9 in 3D) in the language.
+
+A fifth, `scripts/tlsph_static.py jacobi` (about two minutes): the model's gradient since stop 54,
+one Jacobi step of that equation from H = D u, H = D u − S D u (solid/total_lagrangian.sph,
+quadratic_gradient): two passes a step more, no lag, and a symmetric stiffness (the force is the
+energy's derivative through Q). The cantilever +10.59 / +2.70 / +0.78 % at 4 / 8 / 16 across
+without hourglass control and +5.48 / +1.76 / +0.53 % with it (α = 10), pure bending
+κ/κ_exact 1.0939 / 1.0207 / 1.0047 (1.0540 / 1.0152 / 1.0040 with α = 10, for the corrected
+gradient's 1.0927 / 1.0326 / 1.0093), the vibrating beam's first period 0.122051 / 0.119837 s
+at 4 / 8 across (the runs: 0.122054 / 0.119832 s); undamped, its fastest modes grow at 227 and
+328 1/s, and with the pair viscosity (viscosity_alpha = 0.1) every mode decays. Two Jacobi steps
+give +1.80 % at 8 across, three +1.83 %, the exact solve +1.90 %: one step is as good as any.
 """
 import numpy as np
 import scipy.sparse as sp
@@ -342,6 +355,34 @@ def lagged_amplification(across, alpha):
     return np.abs(np.linalg.eigvals(np.vstack([drift, kick, last]))).max()
 
 
+def jacobi_gradients(pos, dx, order):
+    """The gradient operators of H = D u − S D u (one Jacobi step of H = D u − S H from H = D u),
+    the model's (solid/total_lagrangian.sph, quadratic_gradient), in the form gradients() returns."""
+    grad, s, pairs = trapezoid_operators(pos, dx)
+    n = len(pos)
+    d = sp.vstack([grad[0], grad[1]]).tocsr()
+    stepped = (d - s @ d).tocsr()
+    return [stepped[:n], stepped[n:]], pairs
+
+
+def jacobi():
+    """The model's gradient (jacobi_gradients): the cantilever, pure bending and the vibrating beam."""
+    global gradients
+    first_order = gradients
+    gradients = jacobi_gradients
+    for alpha in (0.0, 10.0):
+        cant = [cantilever(a, 1, alpha, "odd") for a in (4, 8, 16)]
+        print(f"one Jacobi step, alpha = {alpha:g}, odd clamp | " + " / ".join(f"{100 * e:+6.2f} %" for e in cant))
+    for alpha in (0.0, 10.0):
+        bend = " / ".join(f"{pure_bending(a, 1, alpha):.4f}" for a in (4, 8, 16))
+        print(f"one Jacobi step, alpha = {alpha:g}, pure bending κ / κ_exact | {bend}")
+    for across in (4, 8):
+        for viscosity_alpha in (0.0, 0.1):
+            rate, period = growth(across, "odd", viscosity_alpha)
+            print(f"vibrating beam, {across} across, odd clamp, viscosity_alpha = {viscosity_alpha:g}: growth {rate:+10.4g}, period {period:.6f}")
+    gradients = first_order
+
+
 def quadratic():
     global gradients
     first_order = gradients
@@ -362,4 +403,4 @@ def quadratic():
 if __name__ == "__main__":
     import sys
 
-    quadratic() if sys.argv[1:] == ["quadratic"] else main()
+    {"quadratic": quadratic, "jacobi": jacobi}.get(sys.argv[1] if sys.argv[1:] else "", main)()

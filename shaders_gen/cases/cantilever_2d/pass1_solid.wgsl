@@ -166,59 +166,44 @@ fn st_L0_inv(i: u32, v: mat2x2<f32>) {
     data[b + 2u] = v[0][1];
     data[b + 3u] = v[1][1];
 }
-fn ld_H(i: u32) -> mat2x2<f32> {
+fn ld_H_linear(i: u32) -> mat2x2<f32> {
     let b = u32(info[14 + G] + i32(i) * 4);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u]));
 }
-fn st_H(i: u32, v: mat2x2<f32>) {
+fn st_H_linear(i: u32, v: mat2x2<f32>) {
     let b = u32(info[14 + G] + i32(i) * 4);
-    data[b] = v[0][0];
-    data[b + 1u] = v[1][0];
-    data[b + 2u] = v[0][1];
-    data[b + 3u] = v[1][1];
-}
-fn ld_P(i: u32) -> mat2x2<f32> {
-    let b = u32(info[15 + G] + i32(i) * 4);
-    return mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u]));
-}
-fn st_P(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[15 + G] + i32(i) * 4);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[0][1];
     data[b + 3u] = v[1][1];
 }
 fn ld_a_contact(i: u32) -> vec2<f32> {
-    let b = u32(info[18 + G] + i32(i) * 2);
+    let b = u32(info[20 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_a_contact(i: u32, v: vec2<f32>) {
-    let b = u32(info[18 + G] + i32(i) * 2);
+    let b = u32(info[20 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 6u;
-    return params[b];
-}
-fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 6u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 9u;
     return params[b];
 }
 fn prm_clamp_normal(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 15u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 fn prm_clamp_at(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 17u;
     return params[b];
 }
 fn prm_K_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 18u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -232,7 +217,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let dt = globals[1u];
     // pairsum deformation_gradient: accumulators
     var L0_inv: mat2x2<f32> = mat2x2<f32>();
-    var H: mat2x2<f32> = mat2x2<f32>();
+    var H_linear: mat2x2<f32> = mat2x2<f32>();
     var L0: mat2x2<f32> = mat2x2<f32>();
     var H0: mat2x2<f32> = mat2x2<f32>();
     // pairsum contact: accumulators
@@ -281,7 +266,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         if (r2 >= rc * rc || r2 == 0.0) { continue; }
         let x_ij = (dxv * sgn).xy;
         let r_ij = sqrt(r2);
-        // pairsum deformation_gradient (stdlib/solid/total_lagrangian.sph:98)
+        // pairsum deformation_gradient (stdlib/solid/total_lagrangian.sph:111)
         if ((body_i == ldj_body(j, sgn))) {
             let a = ldj_u(j, sgn);
             let n_2 = clamp_normal_i;
@@ -311,16 +296,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     }
     // then deformation_gradient
     L0_inv = sel_m(eye(), inv(L0), (abs(determinant(L0)) > prm_det_min(i)));
-    H = (H0 * transpose(L0_inv));
-    // then piola_kirchhoff
-    var P_i: mat2x2<f32> = ld_P(i);
-    let H_2 = H;
-    let G_2 = G_i;
-    let bulk = prm_bulk(i);
-    let strain = (sym(H_2) + (0.5 * sym((transpose(H_2) * H_2))));
-    P_i = ((eye() + H_2) * ((((bulk - ((2.0 * G_2) / 3.0)) * trace(strain)) * eye()) + ((2.0 * G_2) * strain)));
+    H_linear = (H0 * transpose(L0_inv));
     st_L0_inv(i, L0_inv);
-    st_H(i, H);
-    st_P(i, P_i);
+    st_H_linear(i, H_linear);
     st_a_contact(i, a_contact);
 }

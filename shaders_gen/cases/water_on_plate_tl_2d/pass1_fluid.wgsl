@@ -441,47 +441,47 @@ fn st_drho(i: u32, v: f32) {
     data[b] = v;
 }
 fn ld_mu_max(i: u32) -> f32 {
-    let b = u32(info[67 + G] + i32(i) * 1);
+    let b = u32(info[73 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_mu_max(i: u32, v: f32) {
-    let b = u32(info[67 + G] + i32(i) * 1);
+    let b = u32(info[73 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 0u;
     return params[b];
 }
 fn prm_gravity(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 2u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 2u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 fn prm_delta(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 4u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 4u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 5u;
     return params[b];
 }
 fn prm_gamma(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 6u;
     return params[b];
 }
 fn prm_nu0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 7u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 8u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 9u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 10u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -111,57 +111,57 @@ fn st_drho_interface(i: u32, v: f32) {
     data[b] = v;
 }
 fn ld_x_0(i: u32) -> vec2<f32> {
-    let b = u32(info[70 + G] + i32(i) * 2);
+    let b = u32(info[76 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_x_0(i: u32, v: vec2<f32>) {
-    let b = u32(info[70 + G] + i32(i) * 2);
+    let b = u32(info[76 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_v_0(i: u32) -> vec2<f32> {
-    let b = u32(info[73 + G] + i32(i) * 2);
+    let b = u32(info[79 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_v_0(i: u32, v: vec2<f32>) {
-    let b = u32(info[73 + G] + i32(i) * 2);
+    let b = u32(info[79 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_rho_0(i: u32) -> f32 {
-    let b = u32(info[76 + G] + i32(i) * 1);
+    let b = u32(info[82 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho_0(i: u32, v: f32) {
-    let b = u32(info[76 + G] + i32(i) * 1);
+    let b = u32(info[82 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 0u;
     return params[b];
 }
 fn prm_gravity(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 2u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 2u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 5u;
     return params[b];
 }
 fn prm_gamma(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 6u;
     return params[b];
 }
 fn prm__damping(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 26u;
     return params[b];
 }
 fn prm__symmetry0(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 27u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 fn prm__symmetry1(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 29u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 @compute @workgroup_size(64)

@@ -468,28 +468,12 @@ fn st_L0_inv(i: u32, v: mat3x3<f32>) {
     data[b + 7u] = v[1][2];
     data[b + 8u] = v[2][2];
 }
-fn ld_H(i: u32) -> mat3x3<f32> {
+fn ld_H_linear(i: u32) -> mat3x3<f32> {
     let b = u32(info[58 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
-fn st_H(i: u32, v: mat3x3<f32>) {
+fn st_H_linear(i: u32, v: mat3x3<f32>) {
     let b = u32(info[58 + G] + i32(i) * 9);
-    data[b] = v[0][0];
-    data[b + 1u] = v[1][0];
-    data[b + 2u] = v[2][0];
-    data[b + 3u] = v[0][1];
-    data[b + 4u] = v[1][1];
-    data[b + 5u] = v[2][1];
-    data[b + 6u] = v[0][2];
-    data[b + 7u] = v[1][2];
-    data[b + 8u] = v[2][2];
-}
-fn ld_P(i: u32) -> mat3x3<f32> {
-    let b = u32(info[61 + G] + i32(i) * 9);
-    return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
-}
-fn st_P(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[61 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -501,39 +485,31 @@ fn st_P(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 0u;
     return params[b];
 }
 fn prm_gravity(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 2u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 2u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 6u;
     return params[b];
 }
 fn prm_gamma(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 7u;
-    return params[b];
-}
-fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 14u;
-    return params[b];
-}
-fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 7u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 17u;
     return params[b];
 }
 fn prm_clamp_normal(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 23u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm_clamp_at(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 26u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -553,7 +529,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var weight: f32 = 0.0;
     // pairsum deformation_gradient: accumulators
     var L0_inv: mat3x3<f32> = mat3x3<f32>();
-    var H: mat3x3<f32> = mat3x3<f32>();
+    var H_linear: mat3x3<f32> = mat3x3<f32>();
     var L0: mat3x3<f32> = mat3x3<f32>();
     var H0: mat3x3<f32> = mat3x3<f32>();
     let gravity_i = prm_gravity(i);
@@ -611,7 +587,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 weighted = weighted + ((ldj_p(j, sgn) + (ldj_rho(j, sgn) * dot(gravity_i, x_ij))) * W_ij);
                 weight = weight + W_ij;
             }
-            // pairsum deformation_gradient (stdlib/solid/total_lagrangian.sph:98)
+            // pairsum deformation_gradient (stdlib/solid/total_lagrangian.sph:111)
             if (in_groups(4u, ints[j])) {
                 if ((body_i == ldj_body(j, sgn))) {
                     let a = ldj_u(j, sgn);
@@ -642,19 +618,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     p_i = p_wall;
     // then deformation_gradient
     L0_inv = sel_m(eye(), inv(L0), (abs(determinant(L0)) > prm_det_min(i)));
-    H = (H0 * transpose(L0_inv));
-    // then piola_kirchhoff
-    var P_i: mat3x3<f32> = ld_P(i);
-    let H_2 = H;
-    let G_2 = prm_G(i);
-    let bulk = prm_bulk(i);
-    let strain = (sym(H_2) + (0.5 * sym((transpose(H_2) * H_2))));
-    P_i = ((eye() + H_2) * ((((bulk - ((2.0 * G_2) / 3.0)) * trace(strain)) * eye()) + ((2.0 * G_2) * strain)));
+    H_linear = (H0 * transpose(L0_inv));
     st_p(i, p_i);
     st_p_over_rho2(i, p_over_rho2);
     st_c(i, c);
     st_p_wall(i, p_wall);
     st_L0_inv(i, L0_inv);
-    st_H(i, H);
-    st_P(i, P_i);
+    st_H_linear(i, H_linear);
 }

@@ -410,27 +410,27 @@ fn st_p_wall(i: u32, v: f32) {
     data[b] = v;
 }
 fn ld_mu_max(i: u32) -> f32 {
-    let b = u32(info[67 + G] + i32(i) * 1);
+    let b = u32(info[73 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_mu_max(i: u32, v: f32) {
-    let b = u32(info[67 + G] + i32(i) * 1);
+    let b = u32(info[73 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 0u;
     return params[b];
 }
 fn prm_gravity(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 2u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 2u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 6u;
     return params[b];
 }
 fn prm_gamma(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 7u;
     return params[b];
 }
 @compute @workgroup_size(64)
