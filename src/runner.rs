@@ -654,9 +654,8 @@ pub fn backend_failure(e: BackendError) -> RunFailure {
 pub fn run_study(path: &Path, opts: &RunOptions, reanalyse: bool) -> Result<RunOutcome, RunFailure> {
     use crate::scene::study;
     let PreparedStudy { study: st, runs, .. } = prepare_study(path, opts)?;
-    if !reanalyse {
-        claim_out(opts)?;
-    }
+    // Reanalysing writes the study's report too: the folder is claimed as a run claims it.
+    claim_out(opts)?;
     let mut outcomes: Vec<(study::RunSpec, RunOutcome)> = vec![];
     for (r, o) in runs {
         let outcome = if reanalyse {
@@ -953,9 +952,8 @@ pub fn run_convergence(
             levels.join(", ")
         )));
     }
-    if !reanalyse {
-        claim_out(opts)?;
-    }
+    // Reanalysing writes the study's report too: the folder is claimed as a run claims it.
+    claim_out(opts)?;
     let mut reports = vec![];
     let mut notes = vec![];
     for level in levels {
