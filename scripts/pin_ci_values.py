@@ -52,6 +52,7 @@ RUNS = [
     ("rings_2d", {}),
     ("hypervelocity_impact", {}),
     ("taylor_bar", {}),
+    ("taylor_bar_copper", {}),
     ("borvik_8mm", {}),
     ("tensile_artificial_stress", {}),
     ("cube_on_cube_cspm", {}),

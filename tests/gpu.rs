@@ -362,6 +362,12 @@ fn hypervelocity_impact_on_the_gpu_matches_the_cpu_through_the_shock() {
 }
 
 #[test]
+fn copper_taylor_bar_on_the_gpu_matches_the_cpu_against_its_wall_plane() {
+    // Linear hardening, no heating: 30 steps of flow against the wall plane.
+    case_matches_cpu("taylor_bar_copper", &[], 30, &["p", "eps_p"], 2e-3);
+}
+
+#[test]
 fn taylor_bar_on_the_gpu_matches_the_cpu_against_its_wall_plane() {
     // The bar starts on the wall, a symmetry plane: 30 steps are 1.9 µs of flow against it, heated.
     case_matches_cpu("taylor_bar", &[], 30, &["p", "eps_p", "T"], 2e-3);
