@@ -45,7 +45,7 @@ across by 1.17 (1.06 with hourglass control), so the lagged form is unusable and
 needs a linear solve a step, or the quadratic MLS gradient ("order 2": a 5 × 5 system per
 particle in 2D, 9 × 9 in 3D) in the language.
 
-A fifth, `scripts/tlsph_static.py jacobi` (about two minutes): the model's gradient since stop 54,
+A fifth, `scripts/tlsph_static.py jacobi` (about half a minute): the model's gradient since stop 54,
 one Jacobi step of that equation from H = D u, H = D u − S D u (solid/total_lagrangian.sph,
 quadratic_gradient): two passes a step more, no lag, and a symmetric stiffness (the force is the
 energy's derivative through Q). The cantilever +10.59 / +2.70 / +0.78 % at 4 / 8 / 16 across

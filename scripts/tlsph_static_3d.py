@@ -15,7 +15,7 @@ fields ("jacobi": H = D u − S D u, solid/total_lagrangian.sph), gives +7.74 % 
 +2.16 % at 8 (+10.84 / +2.85 % without hourglass control); two steps would give +2.01 % at 8
 across. No det_min here: the model's earlier det_min of 0.1 dropped the correction at every 3D
 corner and edge (det L0 = 0.023 at a corner), which made its 3D beam 33 % too stiff at 4 across.
-Needs numpy and scipy. Takes about two minutes.
+Needs numpy and scipy. Takes about ten minutes (the 8-across rows most of it).
 """
 
 import numpy as np
