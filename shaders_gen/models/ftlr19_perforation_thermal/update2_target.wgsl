@@ -143,20 +143,28 @@ fn st_T(i: u32, v: f32) {
     let b = u32(info[39 + G] + i32(i) * 1);
     data[b] = v;
 }
+fn ld_eps_nl(i: u32) -> f32 {
+    let b = u32(info[41 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_eps_nl(i: u32, v: f32) {
+    let b = u32(info[41 + G] + i32(i) * 1);
+    data[b] = v;
+}
 fn ld_drho(i: u32) -> f32 {
-    let b = u32(info[43 + G] + i32(i) * 1);
+    let b = u32(info[45 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho(i: u32, v: f32) {
-    let b = u32(info[43 + G] + i32(i) * 1);
+    let b = u32(info[45 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_ds(i: u32) -> mat3x3<f32> {
-    let b = u32(info[45 + G] + i32(i) * 6);
+    let b = u32(info[47 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_ds(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[45 + G] + i32(i) * 6);
+    let b = u32(info[47 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -165,67 +173,83 @@ fn st_ds(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_de(i: u32) -> f32 {
-    let b = u32(info[47 + G] + i32(i) * 1);
+    let b = u32(info[49 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_de(i: u32, v: f32) {
-    let b = u32(info[47 + G] + i32(i) * 1);
+    let b = u32(info[49 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_dv(i: u32) -> vec3<f32> {
-    let b = u32(info[49 + G] + i32(i) * 3);
+    let b = u32(info[51 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_dv(i: u32, v: vec3<f32>) {
-    let b = u32(info[49 + G] + i32(i) * 3);
+    let b = u32(info[51 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_a_contact(i: u32) -> vec3<f32> {
-    let b = u32(info[51 + G] + i32(i) * 3);
+    let b = u32(info[53 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_a_contact(i: u32, v: vec3<f32>) {
-    let b = u32(info[51 + G] + i32(i) * 3);
+    let b = u32(info[53 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
+fn ld_lap_sum(i: u32) -> f32 {
+    let b = u32(info[55 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_lap_sum(i: u32, v: f32) {
+    let b = u32(info[55 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_lap_weight(i: u32) -> f32 {
+    let b = u32(info[57 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_lap_weight(i: u32, v: f32) {
+    let b = u32(info[57 + G] + i32(i) * 1);
+    data[b] = v;
+}
 fn ld_x_0(i: u32) -> vec3<f32> {
-    let b = u32(info[53 + G] + i32(i) * 3);
+    let b = u32(info[59 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_x_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[53 + G] + i32(i) * 3);
+    let b = u32(info[59 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_v_0(i: u32) -> vec3<f32> {
-    let b = u32(info[55 + G] + i32(i) * 3);
+    let b = u32(info[61 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_v_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[55 + G] + i32(i) * 3);
+    let b = u32(info[61 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_rho_0(i: u32) -> f32 {
-    let b = u32(info[57 + G] + i32(i) * 1);
+    let b = u32(info[63 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho_0(i: u32, v: f32) {
-    let b = u32(info[57 + G] + i32(i) * 1);
+    let b = u32(info[63 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s_0(i: u32) -> mat3x3<f32> {
-    let b = u32(info[59 + G] + i32(i) * 6);
+    let b = u32(info[65 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s_0(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[59 + G] + i32(i) * 6);
+    let b = u32(info[65 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -234,115 +258,127 @@ fn st_s_0(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_e_0(i: u32) -> f32 {
-    let b = u32(info[61 + G] + i32(i) * 1);
+    let b = u32(info[67 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_e_0(i: u32, v: f32) {
-    let b = u32(info[61 + G] + i32(i) * 1);
+    let b = u32(info[67 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_D_0(i: u32) -> f32 {
-    let b = u32(info[63 + G] + i32(i) * 1);
+    let b = u32(info[69 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_D_0(i: u32, v: f32) {
-    let b = u32(info[63 + G] + i32(i) * 1);
+    let b = u32(info[69 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_eps_p_0(i: u32) -> f32 {
-    let b = u32(info[65 + G] + i32(i) * 1);
+    let b = u32(info[71 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_eps_p_0(i: u32, v: f32) {
-    let b = u32(info[65 + G] + i32(i) * 1);
+    let b = u32(info[71 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_T_0(i: u32) -> f32 {
-    let b = u32(info[67 + G] + i32(i) * 1);
+    let b = u32(info[73 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_T_0(i: u32, v: f32) {
-    let b = u32(info[67 + G] + i32(i) * 1);
+    let b = u32(info[73 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_eps_nl_0(i: u32) -> f32 {
+    let b = u32(info[75 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_eps_nl_0(i: u32, v: f32) {
+    let b = u32(info[75 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 0u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 7u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 8u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 9u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 10u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 16u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 17u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 18u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 19u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 20u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 21u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 22u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 23u;
+    return params[b];
+}
+fn prm_damage_length(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 24u;
     return params[b];
 }
 fn prm_D1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 25u;
     return params[b];
 }
 fn prm_D2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 26u;
     return params[b];
 }
 fn prm_D3(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 27u;
     return params[b];
 }
 fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 28u;
     return params[b];
 }
 fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 29u;
     return params[b];
 }
 fn prm_C_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 31u;
     return params[b];
 }
 fn prm_taylor_quinney(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 32u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -379,6 +415,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // restore T
     var T_i: f32 = ld_T(i);
     T_i = ld_T_0(i);
+    // restore eps_nl
+    var eps_nl_i: f32 = ld_eps_nl(i);
+    eps_nl_i = ld_eps_nl_0(i);
     // radial_return
     var deps_p_i: f32 = ld_deps_p(i);
     let sig_eq = sqrt(((3.0 * 0.5) * ddot(s_i, s_i)));
@@ -408,8 +447,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let sigma_y_2 = ((hardening_2 * rate_2) * (1.0 - pow(min(max(((T_4 - prm_T_room(i)) / (prm_T_melt(i) - prm_T_room(i))), 0.0), 1.0), prm_jc_m(i))));
     T_i = (T_i + (((prm_taylor_quinney(i) * sigma_y_2) * deps_p_i) / (prm_rho0(i) * prm_C_p(i))));
     // damage
+    let l2 = (prm_damage_length(i) * prm_damage_length(i));
+    let nonlocal = ((eps_p_i + (l2 * ld_lap_sum(i))) / (1.0 + (l2 * ld_lap_weight(i))));
+    let increment = select(deps_p_i, max((nonlocal - eps_nl_i), 0.0), (prm_damage_length(i) > 0.0));
     let D = D_i;
-    let deps_p = deps_p_i;
+    let deps_p = increment;
     let p = ld_p(i);
     let s_2 = s_i;
     let edot = ld_edot(i);
@@ -425,6 +467,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let triax = ((-p_2) / max(sqrt((1.5 * ddot(s_4, s_4))), 1e-30));
     let T_7 = T_6;
     D_i = min((D + (deps_p / max((((prm_D1(i) + (prm_D2(i) * exp((prm_D3(i) * triax)))) * (1.0 + (prm_D4(i) * log(max(rate_3, 1.0))))) * (1.0 + (prm_D5(i) * min(max(((T_7 - prm_T_room(i)) / (prm_T_melt(i) - prm_T_room(i))), 0.0), 1.0)))), 1e-12))), 1.0);
+    eps_nl_i = nonlocal;
     // failed_density_floor
     rho_i = select(rho_i, max(rho_i, prm_rho0(i)), (D_i >= 1.0));
     // eos
@@ -450,4 +493,5 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     st_eps_p(i, eps_p_i);
     st_deps_p(i, deps_p_i);
     st_T(i, T_i);
+    st_eps_nl(i, eps_nl_i);
 }
