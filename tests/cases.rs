@@ -284,7 +284,7 @@ fn an_elastic_body_dropped_on_water_floats_at_archimedes_draft_without_touching_
     // float level on average (the waves of its fall rock it by up to 2 mm).
     let h = run_and_check_with("body_in_water_2d", &[], Precision::F64);
     let gap = history(&h, "gap");
-    let closest = gap.iter().map(|p| p.1).fold(f64::INFINITY, f64::min);
+    let closest = common::least("the gap between the water and the hull", &gap.iter().map(|p| p.1).collect::<Vec<_>>());
     assert!(closest > 0.5, "water came within {closest} Δx of the hull");
     let mass = history(&h, "hull_mass");
     assert!(mass.len() > 10 && mass.iter().all(|p| p.1 == mass[0].1), "the hull's mass changed: {mass:?}");
@@ -307,8 +307,9 @@ fn an_elastic_body_dropped_on_water_floats_at_archimedes_draft_without_touching_
 #[test]
 fn a_water_jet_meets_a_plate_with_a_steady_gap_and_the_water_hammer_pressure() {
     let h = run_and_check_with("water_jet_plate_2d", &[], Precision::F64);
-    let least = |name: &str| history(&h, name).iter().map(|p| p.1).fold(f64::INFINITY, f64::min);
-    let most = |name: &str| history(&h, name).iter().map(|p| p.1).fold(f64::NEG_INFINITY, f64::max);
+    let values = |name: &str| history(&h, name).iter().map(|p| p.1).collect::<Vec<_>>();
+    let least = |name: &str| common::least(name, &values(name));
+    let most = |name: &str| common::largest(name, &values(name));
     let gap = history(&h, "gap");
     assert!(least("gap") >= 0.5, "water within {} Δx of the plate", least("gap"));
     assert_eq!(most("interpenetrated"), 0.0);
@@ -1099,14 +1100,15 @@ fn total_lagrangian_beam_vibration_2d_period_error_halves_from_4_to_8_particles_
     assert_error_halves("beam_vibration_2d", "ci@5mm");
 }
 
-/// The vibrating beam at 4 particles across, undamped, for 1 s (eight periods): the run ends
+/// The vibrating beam at 4 particles across, undamped, for 0.5 s (four periods): the run ends
 /// without the watchdog stopping it, and the tip's largest displacement in the last period is
-/// within 1 % of the first's (measured: −0.22 %; −0.38 % over twelve periods). Ganzenmüller's
-/// hourglass force alone makes the stiffness unsymmetric and its fastest modes grow (scripts/tlsph_static.py): without the pair viscosity this run went
-/// unstable at 0.73 s (1.33 s with fixed particles as the clamp; 0.25 s at 8 across), and with the
-/// gradient nearly exact for quadratic fields its fastest undamped mode grows at 227 1/s.
+/// within 1 % of the first's (measured: −0.09 %; −0.22 % over eight periods, −0.38 % over twelve).
+/// Ganzenmüller's hourglass force alone makes the stiffness unsymmetric and its fastest modes grow
+/// (scripts/tlsph_static.py): without the pair viscosity this run went unstable at 0.73 s (1.33 s
+/// with fixed particles as the clamp; 0.25 s at 8 across), and with the gradient nearly exact for
+/// quadratic fields its fastest undamped mode grows at 227 1/s, a factor e^113 over 0.5 s.
 #[test]
-fn total_lagrangian_beam_vibration_2d_keeps_its_amplitude_within_1_percent_over_eight_periods() {
+fn total_lagrangian_beam_vibration_2d_keeps_its_amplitude_within_1_percent_over_four_periods() {
     let mut opts = RunOptions {
         backend: BackendChoice::Cpu,
         out: out_dir("beam_vibration_2d-long"),
@@ -1114,9 +1116,9 @@ fn total_lagrangian_beam_vibration_2d_keeps_its_amplitude_within_1_percent_over_
         ..RunOptions::default()
     };
     opts.scene.resolution = Some("ci@5mm".to_string());
-    opts.scene.end_time = Some(1.0);
+    opts.scene.end_time = Some(0.5);
     let outcome =
-        run_case(&case("beam_vibration_2d"), &opts).unwrap_or_else(|e| panic!("beam_vibration_2d over 1 s: {e}"));
+        run_case(&case("beam_vibration_2d"), &opts).unwrap_or_else(|e| panic!("beam_vibration_2d over 0.5 s: {e}"));
     let _ = std::fs::remove_dir_all(&opts.out);
     let tip = history(&outcome.histories, "tip_displacement");
     let largest = |from: f64, to: f64| {
@@ -1124,7 +1126,7 @@ fn total_lagrangian_beam_vibration_2d_keeps_its_amplitude_within_1_percent_over_
         assert!(values.len() > 10, "tip history over [{from}, {to}) s: {values:?}");
         common::largest(&format!("the tip's displacement over [{from}, {to}) s"), &values)
     };
-    let (first, last) = (largest(0.0, 0.125), largest(0.875, 1.0));
+    let (first, last) = (largest(0.0, 0.125), largest(0.375, 0.5));
     assert!(first > 9e-4, "the first period's amplitude {first:e} m, the case releases the beam at 1 mm");
     assert!((last / first - 1.0).abs() < 0.01, "amplitude {first:e} m in the first period, {last:e} m in the last");
 }

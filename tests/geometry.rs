@@ -81,8 +81,8 @@ fn box_nodes_sit_at_cell_centres_in_every_dimension() {
                 assert!(x[a] > 0.0, "no particle on a face: {x:?}");
             }
         }
-        let lo = p.positions.iter().map(|x| x[0]).fold(f64::INFINITY, f64::min);
-        let hi = p.positions.iter().map(|x| x[0]).fold(f64::NEG_INFINITY, f64::max);
+        let xs: Vec<f64> = p.positions.iter().map(|x| x[0]).collect();
+        let (lo, hi) = pairsum::compare::extremes(&xs).unwrap_or_else(|e| panic!("the particles' x: {e}"));
         assert!(close(lo, 0.05, 1e-12) && close(hi, 0.95, 1e-12));
     }
 }
@@ -300,7 +300,8 @@ fn graded_box_with_a_fine_disc() {
     let mut rng = XorShift(7);
     for _ in 0..2000 {
         let q = [2.0 * rng.unit(), rng.unit(), 0.0];
-        let d = p.positions.iter().map(|x| dist(*x, q)).fold(f64::INFINITY, f64::min);
+        let distances: Vec<f64> = p.positions.iter().map(|x| dist(*x, q)).collect();
+        let d = pairsum::compare::extremes(&distances).unwrap_or_else(|e| panic!("distances to {q:?}: {e}")).0;
         assert!(d <= c * 2f64.sqrt() / 2.0 + 1e-9, "gap of {d} at {q:?}");
     }
 }
