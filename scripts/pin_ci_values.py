@@ -54,6 +54,7 @@ RUNS = [
     ("taylor_bar", {}),
     ("taylor_bar_copper", {}),
     ("borvik_8mm", {}),
+    ("borvik_perforation", {"damage_length": "2"}),
     ("tensile_artificial_stress", {}),
     ("cube_on_cube_cspm", {}),
     ("sphere_plate_graded_study", {}),
