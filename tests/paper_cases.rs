@@ -75,26 +75,32 @@ fn hypervelocity_impact_crater_and_debris_cloud() {
     assert!(value(&o, "max_speed") <= 1.25 * 6180.0, "max speed {}", value(&o, "max_speed"));
 }
 
+/// A Børvik run at `v_i` (its results named `prefix` + quantity) perforated the plate: the
+/// projectile left slower than it came, the plug slower than 1.5 times that, and the kinetic
+/// energy never exceeded the projectile's at impact (197 g, a quarter model).
+fn perforated_without_gaining_energy(o: &RunOutcome, prefix: &str, v_i: f64) {
+    let proj = value(o, &format!("{prefix}projectile_residual_velocity"));
+    assert!(proj > 0.0 && proj < v_i, "{v_i} m/s: projectile residual {proj}");
+    let ke0 = 0.5 * 0.197 / 4.0 * v_i * v_i;
+    let peak = value(o, &format!("{prefix}peak_kinetic_energy"));
+    assert!(peak <= 1.02 * ke0, "{v_i} m/s: kinetic energy rose to {peak} J from {ke0} J");
+    let plug = value(o, &format!("{prefix}plug_residual_velocity"));
+    assert!((0.0..1.5 * v_i).contains(&plug), "{v_i} m/s: plug {plug}");
+}
+
 #[test]
 fn borvik_8mm_plate_is_perforated_without_gaining_energy() {
     let o = run_ci("borvik_8mm");
     // The CI runs: 298, 250.8, 190.7 m/s, all above the ballistic limit (152.5 m/s).
     for v in ["298", "250.8", "190.7"] {
         let v_i: f64 = v.parse().unwrap();
-        let proj = value(&o, &format!("{v}: projectile_residual_velocity"));
-        assert!(proj > 0.0 && proj < v_i, "{v} m/s: projectile residual {proj}");
-        // The kinetic energy never exceeds the projectile's at impact (197 g, a quarter model),
-        // and no particle is thrown off at more than 2.5 times the impact speed. (It was 1.14
-        // times before failed particles were floored at ρ0: the floor re-pressurises a failed
-        // particle at once when it is compressed again, and throws single debris particles at up
-        // to 2.02 times here, 2.5 times in the fine 12 mm study: a known artefact, docs/results/.)
-        let ke0 = 0.5 * 0.197 / 4.0 * v_i * v_i;
-        let peak = value(&o, &format!("{v}: peak_kinetic_energy"));
-        assert!(peak <= 1.02 * ke0, "{v} m/s: kinetic energy rose to {peak} J from {ke0} J");
+        perforated_without_gaining_energy(&o, &format!("{v}: "), v_i);
+        // No particle is thrown off at more than 2.5 times the impact speed. (It was 1.14 times
+        // before failed particles were floored at ρ0: the floor re-pressurises a failed particle
+        // at once when it is compressed again, and throws single debris particles at up to 2.02
+        // times here, 2.5 times in the fine 12 mm study: a known artefact, docs/results/.)
         let fastest = value(&o, &format!("{v}: max_speed"));
         assert!(fastest < 2.5 * v_i, "{v} m/s: a particle thrown at {fastest} m/s");
-        let plug = value(&o, &format!("{v}: plug_residual_velocity"));
-        assert!((0.0..1.5 * v_i).contains(&plug), "{v} m/s: plug {plug}");
     }
     // The ballistic limit from Recht and Ipson's plugging curve (p = 2, a = m_p / (m_p + m_plug)
     // = 0.909) through these three runs, on a plate of 40 mm radius with four particles through
@@ -123,14 +129,7 @@ fn borvik_8mm_plate_is_perforated_without_gaining_energy() {
 #[test]
 fn borvik_8mm_plate_with_nonlocal_damage_is_perforated_without_gaining_energy() {
     let o = run_ci_with("borvik_perforation", &[("damage_length", "2")]);
-    let v_i = 298.0;
-    let proj = value(&o, "projectile_residual_velocity");
-    assert!(proj > 0.0 && proj < v_i, "projectile residual {proj} m/s");
-    let ke0 = 0.5 * 0.197 / 4.0 * v_i * v_i;
-    let peak = value(&o, "peak_kinetic_energy");
-    assert!(peak <= 1.02 * ke0, "kinetic energy rose to {peak} J from {ke0} J");
-    let plug = value(&o, "plug_residual_velocity");
-    assert!((0.0..1.5 * v_i).contains(&plug), "plug {plug} m/s");
+    perforated_without_gaining_energy(&o, "", 298.0);
 }
 
 // The bar does not neck where the FEM's does at CI: its peak plastic strain lies at 30.7 mm, past
