@@ -162,6 +162,48 @@ fn the_watchdog_names_step_particle_group_and_field_and_keeps_the_last_good_stat
     assert!(col.iter().all(|v| v.is_finite()));
 }
 
+/// A vec field that holds one value on every particle and that nothing writes is folded into the
+/// pair programs as a constant; gathered from an image across a symmetry plane its component along
+/// the normal must still flip. Σ_j s_j,x W_ij over a 6 × 6 block at a plane x = 0, with s = (1, 1)
+/// everywhere, is the kernel sum over the block's other particles minus that over their images,
+/// summed here from the positions (until stop 56 the fold gave the images +1).
+#[test]
+fn a_constant_vec_gathered_from_an_image_across_a_symmetry_plane_has_its_normal_component_flipped() {
+    let m = model(
+        "use kernels\ngroup g\nkernel = wendland_c2\nstate s: vec [-] = vec(1, 1)\n\
+         field flips: scalar [1/m^3]\npairsum flipped -> flips { flips += s[j].x * W_ij }\n\
+         integrate { x' = v  v' = 0 }\n",
+    );
+    let (n, dx) = (6, 0.01);
+    let inp = input(2, lattice(2, n, dx), dx);
+    let mat = material(&m, &[("rho0", vec![1000.0]), ("h_ratio", vec![1.3])]);
+    let sc = scene(&m, 2, &["flips"], IntegratorKind::Euler);
+    let mut b = backend::<f64>(&m, &sc, &inp, &[mat], vec![Mirror::symmetry(0, 0.0)]);
+    b.evaluate(Default::default()).expect("evaluate");
+    let got = field_by_id(&b, "flips").1;
+    let h = 1.3 * dx;
+    // Wendland C2 in 2D: 7 / (4π h²) (1 − q/2)⁴ (2q + 1) for q = r/h < 2.
+    let w = |r: f64| {
+        let q = r / h;
+        if q < 2.0 { 7.0 / (4.0 * std::f64::consts::PI * h * h) * (1.0 - q / 2.0).powi(4) * (2.0 * q + 1.0) } else { 0.0 }
+    };
+    let mut images_seen = 0;
+    for (i, p) in inp.x.iter().enumerate() {
+        let (mut own, mut images) = (0.0, 0.0);
+        for (k, q) in inp.x.iter().enumerate() {
+            // A pair sum leaves out the particle itself, not its own image.
+            if k != i {
+                own += w(((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sqrt());
+            }
+            images += w(((p[0] + q[0]).powi(2) + (p[1] - q[1]).powi(2)).sqrt());
+        }
+        images_seen += usize::from(images > 0.0);
+        let expected = own - images;
+        assert!((got[i] - expected).abs() < 1e-9 * own, "particle {i} at {p:?}: {} against {expected}", got[i]);
+    }
+    assert!(images_seen >= 2 * n, "particles near the plane see images: {images_seen}");
+}
+
 /// Two 6 × 6 blocks at 10 mm side by side along x, `gap` apart, the second one body 1 (and, with
 /// `second_group`, group 1); the Shepard sum Σ_j W_ij of every particle under the model `text`.
 fn shepard_sums_of_two_blocks(text: &str, gap: f64, second_group: bool) -> Vec<f64> {

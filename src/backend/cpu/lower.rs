@@ -499,8 +499,13 @@ impl<'a> Lowerer<'a> {
             }
         }
         let shape = self.model.field(f).ty.shape;
+        // A neighbour's vec or tensor is gathered with the sign flips of a symmetry plane's image,
+        // so only a scalar, or a field that is 0 everywhere, is the same constant on both sides.
+        let same_on_images = side == Side::I || shape == Shape::Scalar || shape == Shape::Bool;
         if let Some(values) = self.known.fields.get(f.index()).and_then(|v| v.as_ref()) {
-            return self.expand(shape, |g, k| g.c(values[k]));
+            if same_on_images || values.iter().all(|v| *v == 0.0) {
+                return self.expand(shape, |g, k| g.c(values[k]));
+            }
         }
         self.expand(shape, |g, k| g.intern(Node::Load { field: f, comp: k as u16, side }))
     }
