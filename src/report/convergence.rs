@@ -100,6 +100,21 @@ pub fn error_order(points: &[(f64, f64)]) -> Option<f64> {
     (pts.len() >= 2 && sxx > 1e-24).then(|| sxy / sxx)
 }
 
+/// The error order where the errors keep one sign and fall at every refinement (points coarse
+/// to fine); otherwise why there is none. An error that passes through the reference, or grows
+/// on the way, gives a log-log slope that is no order of convergence.
+pub fn error_order_if_falling(points: &[(f64, f64)]) -> Result<f64, &'static str> {
+    let above_rounding: Vec<f64> =
+        points.iter().filter(|(h, e)| *h > 0.0 && e.is_finite() && e.abs() > 1e-9).map(|p| p.1).collect();
+    if above_rounding.windows(2).any(|w| w[0].signum() != w[1].signum()) {
+        return Err("none: the error changes sign");
+    }
+    if above_rounding.windows(2).any(|w| w[1].abs() >= w[0].abs()) {
+        return Err("none: the error does not fall at every refinement");
+    }
+    error_order(points).ok_or("")
+}
+
 /// What a convergence study adds to its report.
 #[derive(Debug, Default)]
 pub struct Convergence {
@@ -157,7 +172,7 @@ pub fn analyse(levels: &[(String, RunReport)]) -> Convergence {
             Some(Trend::Converging { order, limit }) => Some((order, limit)),
             _ => None,
         };
-        let slope = q.errors().and_then(|e| error_order(&h.iter().copied().zip(e).collect::<Vec<_>>()));
+        let slope = q.errors().map(|e| error_order_if_falling(&h.iter().copied().zip(e).collect::<Vec<_>>()));
         if let Some((p, f0)) = order {
             let mut est =
                 ResultRow::new(format!("{}, Richardson estimate", row.quantity), &row.unit, f0, row.reference);
@@ -165,7 +180,7 @@ pub fn analyse(levels: &[(String, RunReport)]) -> Convergence {
             out.results.push(est);
             out.results.push(ResultRow::new(format!("{}, observed order", row.quantity), "", p, None));
         }
-        if let Some(s) = slope {
+        if let Some(Ok(s)) = slope {
             out.results.push(ResultRow::new(format!("{}, error order", row.quantity), "", s, None));
         }
         summary.push(vec![
@@ -176,7 +191,11 @@ pub fn analyse(levels: &[(String, RunReport)]) -> Convergence {
             order
                 .and_then(|(_, f0)| row.reference.filter(|r| *r != 0.0).map(|r| fmt_percent((f0 - r) / r.abs())))
                 .unwrap_or_default(),
-            slope.map(|s| format!("{s:.2}")).unwrap_or_default(),
+            match slope {
+                Some(Ok(s)) => format!("{s:.2}"),
+                Some(Err(why)) => why.to_string(),
+                None => String::new(),
+            },
         ]);
     }
     out.tables.push(Table {
@@ -189,7 +208,7 @@ pub fn analyse(levels: &[(String, RunReport)]) -> Convergence {
     out.histories = error_plots(&levels, &followed);
     out.notes = vec![
         "Observed order p: through the three finest spacings, f(Δx) = f0 + C Δx^p; none when their differences change sign or do not shrink enough for p in [0.05, 10]. Richardson estimate: that f0. It is trustworthy only in the asymptotic range: a p far from the scheme's order, or from the error order q, says the spacings are not there yet.".into(),
-        "Error order q: the least-squares slope of ln |error| against ln Δx over every resolution (the error falls as Δx^q).".into(),
+        "Error order q: the least-squares slope of ln |error| against ln Δx over every resolution (the error falls as Δx^q); none when the error changes sign or does not fall at every refinement.".into(),
     ];
     out
 }
@@ -300,6 +319,16 @@ mod tests {
         assert_eq!(error_order(&[(1.0, 0.1)]), None);
         assert_eq!(error_order(&[(1.0, 0.1), (1.0, 0.2)]), None);
         assert_eq!(error_order(&[(1.0, 1e-16), (0.5, -2e-16), (0.25, 0.0)]), None, "exact up to rounding");
+    }
+
+    #[test]
+    fn error_order_if_falling_is_none_for_an_error_that_changes_sign_or_grows() {
+        let falling = [(1.0, 0.08), (0.5, 0.02), (0.25, 0.005)];
+        assert!((error_order_if_falling(&falling).unwrap() - 2.0).abs() < 1e-12);
+        let crossing = [(1.0, 0.0774), (0.5, 0.0102), (0.25, -0.0215)];
+        assert_eq!(error_order_if_falling(&crossing), Err("none: the error changes sign"));
+        let growing = [(1.0, 0.0774), (0.666, 0.0102), (0.5, 0.0215)];
+        assert_eq!(error_order_if_falling(&growing), Err("none: the error does not fall at every refinement"));
     }
 
     fn level(name: &str, dx: f64, value: f64, wall: f64) -> (String, RunReport) {
