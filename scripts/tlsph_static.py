@@ -118,6 +118,14 @@ def gradients(pos, dx, order):
     return gradient_operators(i, j, wt, len(pos)), (i, j, d, r, w)
 
 
+# The corrected gradient's operators, whichever gradient an experiment puts in `gradients`.
+first_order_gradients = gradients
+
+
+# Whether the particles' cell energy is in (the `cell` experiment; the model's default since stop 56).
+CELL = False
+
+
 def stress_stiffness(grad, dx, energy):
     """Σ_i V_i ½ ε_i : C : ε_i over the particles in `energy`, as a matrix on u = [u_x; u_y]."""
     n = grad[0].shape[0]
@@ -130,6 +138,26 @@ def stress_stiffness(grad, dx, energy):
     vol = sp.diags(np.where(energy, dx * dx, 0.0))
     k = (lam + 2 * mu) * (exx.T @ vol @ exx + eyy.T @ vol @ eyy) + lam * (exx.T @ vol @ eyy + eyy.T @ vol @ exx)
     return k + mu * gxy.T @ vol @ gxy
+
+
+def cell_stiffness(first, dx, energy):
+    """Each particle's cell energy (solid/total_lagrangian.sph, cell_quadrature): Σ_i V_i (Δ²/24)
+    Σ_k ∂_kε_i : C : ∂_kε_i, ε from the corrected gradient D u and ∂_k by D again (`first`: the
+    corrected gradient's operators), as a matrix on u."""
+    n = first[0].shape[0]
+    zero = sp.csr_matrix((n, n))
+    ux = lambda m: sp.hstack([m, zero])  # noqa: E731
+    uy = lambda m: sp.hstack([zero, m])  # noqa: E731
+    exx, eyy, gxy = ux(first[0]), uy(first[1]), ux(first[1]) + uy(first[0])
+    lam = E * NU / ((1 + NU) * (1 - 2 * NU))
+    mu = E / (2 * (1 + NU))
+    vol = sp.diags(np.where(energy, dx * dx * dx * dx / 12, 0.0))
+    k = sp.csr_matrix((2 * n, 2 * n))
+    for along in first:
+        a, b, c = along @ exx, along @ eyy, along @ gxy
+        k = k + (lam + 2 * mu) * (a.T @ vol @ a + b.T @ vol @ b) + lam * (a.T @ vol @ b + b.T @ vol @ a)
+        k = k + mu * c.T @ vol @ c
+    return k
 
 
 def pair_misses(grad, pairs):
@@ -200,8 +228,12 @@ def beam_stiffness(pos, beam, t, dx, order, alpha, clamp, form="G"):
     in_beam = pos[:, 0] > 0
     if clamp == "odd":  # the images have no energy: K = Tᵀ (∂² energy of the beam) T
         k = t.T @ stress_stiffness(grad, dx, in_beam) @ t
+        if CELL:
+            k = k + t.T @ cell_stiffness(first_order_gradients(pos, dx, 1)[0], dx, in_beam) @ t
     else:  # fixed particles, or images with the odd field's stress: the beam's rows of the whole
         k = stress_stiffness(grad, dx, np.ones(n, bool))[rows] @ t
+        if CELL:
+            k = k + cell_stiffness(first_order_gradients(pos, dx, 1)[0], dx, np.ones(n, bool))[rows] @ t
     if alpha > 0:
         hg = hourglass_stiffness(grad, pairs, dx, alpha, form, in_beam if form == "var" and clamp == "odd" else np.ones(n, bool))
         k = k + (t.T @ hg @ t if form == "var" else hg[rows] @ t)
@@ -400,7 +432,26 @@ def quadratic():
         print(f"lagged trapezoid, 4 across, alpha = {alpha:g}: one step multiplies the fastest mode by {lagged_amplification(4, alpha):.4f}")
 
 
+def cell():
+    """The model since stop 56: the gradient of `jacobi` and each particle's cell energy
+    (cell_stiffness): the cantilever, pure bending and the vibrating beam."""
+    global gradients, CELL
+    first_order = gradients
+    gradients, CELL = jacobi_gradients, True
+    for alpha in (0.0, 10.0):
+        cant = [cantilever(a, 1, alpha, "odd") for a in (4, 8, 16)]
+        print(f"cell energy, alpha = {alpha:g}, odd clamp | " + " / ".join(f"{100 * e:+6.2f} %" for e in cant))
+    for alpha in (0.0, 10.0):
+        bend = " / ".join(f"{pure_bending(a, 1, alpha):.4f}" for a in (4, 8, 16))
+        print(f"cell energy, alpha = {alpha:g}, pure bending κ / κ_exact | {bend}")
+    for across in (4, 8):
+        for viscosity_alpha in (0.0, 0.1):
+            rate, period = growth(across, "odd", viscosity_alpha)
+            print(f"vibrating beam, {across} across, odd clamp, viscosity_alpha = {viscosity_alpha:g}: growth {rate:+10.4g}, period {period:.6f}")
+    gradients, CELL = first_order, False
+
+
 if __name__ == "__main__":
     import sys
 
-    {"quadratic": quadratic, "jacobi": jacobi}.get(sys.argv[1] if sys.argv[1:] else "", main)()
+    {"quadratic": quadratic, "jacobi": jacobi, "cell": cell}.get(sys.argv[1] if sys.argv[1:] else "", main)()

@@ -212,9 +212,10 @@ fn result_at(name: &str, resolution: &str, quantity: &str) -> f64 {
 /// (`clamped_plate_2d` at 10 mm under its 100 Pa, scaled to the water's 981 Pa and the plate's own
 /// 392.4 Pa; the elastic solution of the two loads differs by 0.01 %, scripts/beam_references.py):
 /// so the coupling hands the plate the water's whole weight, and what is left of the error is the
-/// plate's in bending (issue 37). Measured: 1.8420 mm against 1.8452 mm, −0.17 % (with the
-/// corrected gradient alone, before stop 54: 1.8897 mm against 1.8932 mm; with fixed particles as
-/// the clamps, before stop 50: 2.0449 mm against 2.0506 mm).
+/// plate's in bending (issue 37). Measured: 1.7656 mm against 1.7684 mm, −0.16 % (before stop 56,
+/// each particle's energy at its centre: 1.8420 mm against 1.8452 mm; with the corrected gradient
+/// alone, before stop 54: 1.8897 mm against 1.8932 mm; with fixed particles as the clamps, before
+/// stop 50: 2.0449 mm against 2.0506 mm).
 #[test]
 fn water_at_rest_bends_a_total_lagrangian_plate_as_its_weight_by_volume_does_within_1_percent() {
     let histories = run_and_check_with("water_on_plate_tl_2d", &[], Precision::F64);
@@ -869,13 +870,14 @@ fn a_convergence_study_reports_every_spacing_the_observed_order_and_richardsons_
     assert!((value("wave_speed, Richardson estimate").expect("an estimate") - limit).abs() < 1e-6 * limit);
     assert_eq!(value("wave_speed"), Some(f[2]), "the finest run's value");
     // Every level's front runs within 0.2 % of √(E/ρ) (+0.10 / +0.11 / +0.12 %: the error does
-    // not shrink below about 0.1 %), and the error order is the levels' own.
+    // not shrink below about 0.1 %), so the report gives the error no order, and says why.
     let c = (100e6f64 / 1000.0).sqrt();
     assert!(f.iter().all(|v| ((v - c) / c).abs() < 2e-3), "{f:?} vs {c}");
-    let q = value("wave_speed, error order").expect("an error order");
-    let q_fit = ((f[0] - c).abs().ln() - (f[2] - c).abs().ln()) / 4f64.ln();
-    assert!((q - q_fit).abs() < 0.3, "{q} vs end-to-end {q_fit}");
+    let errors: Vec<f64> = f.iter().map(|v| (v - c).abs()).collect();
+    assert!(errors[2] > errors[0], "the error grows from 4 to 1 mm: {errors:?}");
+    assert_eq!(value("wave_speed, error order"), None, "an error that grows has no order");
     let md = std::fs::read_to_string(dir.join("report.md")).expect("report.md");
+    assert!(md.contains("none: the error does not fall at every refinement"), "{md}");
     for section in ["## Each resolution", "## Value (and error) at each resolution", "## Convergence"] {
         assert!(md.contains(section), "{section} in\n{md}");
     }
@@ -1060,11 +1062,12 @@ fn total_lagrangian_cantilever_2d_deflection_error_halves_from_4_to_8_particles_
     assert_error_halves("cantilever_2d", "ci@25mm");
 }
 
-/// The same beam in 3D at 4 particles across: its pinned figure and its tolerance, 10 % (it is
-/// +7.74 %, as scripts/tlsph_static_3d.py computes; +21.5 % with the corrected gradient alone;
-/// docs/results/cantilever_3d_convergence/).
+/// The same beam in 3D at 4 particles across, a half model whose z plane is a symmetry plane: its
+/// pinned figure and its tolerance, 5 % (it is +2.88 %, as scripts/tlsph_static_3d.py cell computes
+/// for the full beam, which checks the cell energy's fields per axis across that plane; +7.74 %
+/// before stop 56; docs/results/cantilever_3d_convergence/).
 #[test]
-fn total_lagrangian_cantilever_3d_deflection_is_within_its_10_percent_tolerance_at_4_particles_across() {
+fn total_lagrangian_cantilever_3d_deflection_is_within_its_5_percent_tolerance_at_4_particles_across() {
     run_and_check("cantilever_3d", Precision::F64);
 }
 

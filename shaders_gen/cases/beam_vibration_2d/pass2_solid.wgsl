@@ -62,6 +62,14 @@ fn ldj_vol(j: u32, sgn: vec3<f32>) -> f32 {
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
+fn ld_dx(i: u32) -> f32 {
+    let b = u32(info[6 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_dx(i: u32, v: f32) {
+    let b = u32(info[6 + G] + i32(i) * 1);
+    data[b] = v;
+}
 fn ld_body(i: u32) -> f32 {
     let b = u32(info[7 + G] + i32(i) * 1);
     return data[b];
@@ -90,72 +98,120 @@ fn ldj_u(j: u32, sgn: vec3<f32>) -> vec2<f32> {
     return (vec2<f32>(data[b], data[b + 1u]) * sgn.xy);
 }
 fn ld_L0_inv(i: u32) -> mat2x2<f32> {
-    let b = u32(info[12 + G] + i32(i) * 4);
+    let b = u32(info[13 + G] + i32(i) * 4);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u]));
 }
 fn st_L0_inv(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[12 + G] + i32(i) * 4);
+    let b = u32(info[13 + G] + i32(i) * 4);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[0][1];
     data[b + 3u] = v[1][1];
 }
 fn ld_H_linear(i: u32) -> mat2x2<f32> {
-    let b = u32(info[13 + G] + i32(i) * 4);
+    let b = u32(info[14 + G] + i32(i) * 4);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u]));
 }
 fn st_H_linear(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[13 + G] + i32(i) * 4);
+    let b = u32(info[14 + G] + i32(i) * 4);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[0][1];
     data[b + 3u] = v[1][1];
 }
 fn ldj_H_linear(j: u32, sgn: vec3<f32>) -> mat2x2<f32> {
-    let base = info[13u];
+    let base = info[14u];
     let b = u32(base + i32(j) * 4);
     return flip_m(mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u])), sgn.xy);
 }
 fn ld_H(i: u32) -> mat2x2<f32> {
-    let b = u32(info[14 + G] + i32(i) * 4);
+    let b = u32(info[15 + G] + i32(i) * 4);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u]));
 }
 fn st_H(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[14 + G] + i32(i) * 4);
+    let b = u32(info[15 + G] + i32(i) * 4);
+    data[b] = v[0][0];
+    data[b + 1u] = v[1][0];
+    data[b + 2u] = v[0][1];
+    data[b + 3u] = v[1][1];
+}
+fn ld_cell_x(i: u32) -> mat2x2<f32> {
+    let b = u32(info[16 + G] + i32(i) * 4);
+    return mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u]));
+}
+fn st_cell_x(i: u32, v: mat2x2<f32>) {
+    let b = u32(info[16 + G] + i32(i) * 4);
+    data[b] = v[0][0];
+    data[b + 1u] = v[1][0];
+    data[b + 2u] = v[0][1];
+    data[b + 3u] = v[1][1];
+}
+fn ld_cell_y(i: u32) -> mat2x2<f32> {
+    let b = u32(info[17 + G] + i32(i) * 4);
+    return mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u]));
+}
+fn st_cell_y(i: u32, v: mat2x2<f32>) {
+    let b = u32(info[17 + G] + i32(i) * 4);
+    data[b] = v[0][0];
+    data[b + 1u] = v[1][0];
+    data[b + 2u] = v[0][1];
+    data[b + 3u] = v[1][1];
+}
+fn ld_cell_z(i: u32) -> mat2x2<f32> {
+    let b = u32(info[18 + G] + i32(i) * 4);
+    return mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u]));
+}
+fn st_cell_z(i: u32, v: mat2x2<f32>) {
+    let b = u32(info[18 + G] + i32(i) * 4);
+    data[b] = v[0][0];
+    data[b + 1u] = v[1][0];
+    data[b + 2u] = v[0][1];
+    data[b + 3u] = v[1][1];
+}
+fn ld_cell_own(i: u32) -> mat2x2<f32> {
+    let b = u32(info[19 + G] + i32(i) * 4);
+    return mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u]));
+}
+fn st_cell_own(i: u32, v: mat2x2<f32>) {
+    let b = u32(info[19 + G] + i32(i) * 4);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[0][1];
     data[b + 3u] = v[1][1];
 }
 fn ld_P(i: u32) -> mat2x2<f32> {
-    let b = u32(info[15 + G] + i32(i) * 4);
+    let b = u32(info[20 + G] + i32(i) * 4);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u]));
 }
 fn st_P(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[15 + G] + i32(i) * 4);
+    let b = u32(info[20 + G] + i32(i) * 4);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[0][1];
     data[b + 3u] = v[1][1];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 6u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 7u;
     return params[b];
 }
 fn prm_quadratic_correction(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 11u;
+    return params[b];
+}
+fn prm_cell_quadrature(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 12u;
     return params[b];
 }
 fn prm_clamp_normal(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 16u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 fn prm_clamp_at(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 18u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -169,7 +225,15 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let dt = globals[1u];
     // pairsum quadratic_gradient: accumulators
     var H: mat2x2<f32> = mat2x2<f32>();
+    var cell_x: mat2x2<f32> = mat2x2<f32>();
+    var cell_y: mat2x2<f32> = mat2x2<f32>();
+    var cell_z: mat2x2<f32> = mat2x2<f32>();
+    var cell_own: mat2x2<f32> = mat2x2<f32>();
     var miss: mat2x2<f32> = mat2x2<f32>();
+    var slope_x: mat2x2<f32> = mat2x2<f32>();
+    var slope_y: mat2x2<f32> = mat2x2<f32>();
+    var slope_z: mat2x2<f32> = mat2x2<f32>();
+    var w_sum: vec2<f32> = vec2<f32>(0.0);
     let clamp_normal_i = prm_clamp_normal(i);
     let clamp_at_i = prm_clamp_at(i);
     let x_i = ld_x(i);
@@ -208,7 +272,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         if (r2 >= rc * rc || r2 == 0.0) { continue; }
         let x_ij = (dxv * sgn).xy;
         let r_ij = sqrt(r2);
-        // pairsum quadratic_gradient (stdlib/solid/total_lagrangian.sph:137)
+        // pairsum quadratic_gradient (stdlib/solid/total_lagrangian.sph:170)
         if ((body_i == ldj_body(j, sgn))) {
             let X_j = (x_i - x_ij);
             let n_2 = clamp_normal_i;
@@ -221,19 +285,87 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let A = ldj_H_linear(j, sgn);
             let n_4 = clamp_normal_i;
             let clamped_3 = clamped;
-            let D_j = sel_m(A, ((2.0 * outer(n_4, (transpose(A) * n_4))) - A), clamped_3);
-            miss = miss + outer(((D_j - H_linear_i) * X_ij), (ldj_vol(j, sgn) * kernel_grad_at(X_ij, h_ij)));
+            let D_ij = (sel_m(A, ((2.0 * outer(n_4, (transpose(A) * n_4))) - A), clamped_3) - H_linear_i);
+            let w = (ldj_vol(j, sgn) * kernel_grad_at(X_ij, h_ij));
+            miss = miss + outer((D_ij * X_ij), w);
+            slope_x = slope_x + (dot(w, vec2<f32>(1.0, 0.0)) * D_ij);
+            slope_y = slope_y + (dot(w, vec2<f32>(0.0, 1.0)) * D_ij);
+            slope_z = slope_z + (dot(w, vec2<f32>(0.0, 0.0)) * D_ij);
+            w_sum = w_sum + w;
         }
     }
     // then quadratic_gradient
     H = (H_linear_i + (((0.5 * prm_quadratic_correction(i)) * miss) * transpose(ld_L0_inv(i))));
+    let F = (eye() + H_linear_i);
+    let p1 = ld_dx(i);
+    let cell_area = ((prm_cell_quadrature(i) * (p1 * p1)) / 12.0);
+    let A_x = slope_x;
+    let A_y = slope_y;
+    let A_z = slope_z;
+    let a_2 = (transpose(ld_L0_inv(i)) * vec2<f32>(1.0, 0.0));
+    let dF_x = (((dot(a_2, vec2<f32>(1.0, 0.0)) * A_x) + (dot(a_2, vec2<f32>(0.0, 1.0)) * A_y)) + (dot(a_2, vec2<f32>(0.0, 0.0)) * A_z));
+    let A_x_2 = slope_x;
+    let A_y_2 = slope_y;
+    let A_z_2 = slope_z;
+    let a_3 = (transpose(ld_L0_inv(i)) * vec2<f32>(0.0, 1.0));
+    let dF_y = (((dot(a_3, vec2<f32>(1.0, 0.0)) * A_x_2) + (dot(a_3, vec2<f32>(0.0, 1.0)) * A_y_2)) + (dot(a_3, vec2<f32>(0.0, 0.0)) * A_z_2));
+    let A_x_3 = slope_x;
+    let A_y_3 = slope_y;
+    let A_z_3 = slope_z;
+    let a_4 = (transpose(ld_L0_inv(i)) * vec2<f32>(0.0, 0.0));
+    let dF_z = (((dot(a_4, vec2<f32>(1.0, 0.0)) * A_x_3) + (dot(a_4, vec2<f32>(0.0, 1.0)) * A_y_3)) + (dot(a_4, vec2<f32>(0.0, 0.0)) * A_z_3));
+    let F_2 = F;
+    let dF = dF_x;
+    let G_2 = prm_G(i);
+    let bulk = prm_bulk(i);
+    let dE = sym((transpose(F_2) * dF));
+    let S_x = ((((bulk - ((2.0 * G_2) / 3.0)) * trace(dE)) * eye()) + ((2.0 * G_2) * dE));
+    let F_3 = F;
+    let dF_2 = dF_y;
+    let G_3 = prm_G(i);
+    let bulk_2 = prm_bulk(i);
+    let dE_2 = sym((transpose(F_3) * dF_2));
+    let S_y = ((((bulk_2 - ((2.0 * G_3) / 3.0)) * trace(dE_2)) * eye()) + ((2.0 * G_3) * dE_2));
+    let F_4 = F;
+    let dF_3 = dF_z;
+    let G_4 = prm_G(i);
+    let bulk_3 = prm_bulk(i);
+    let dE_3 = sym((transpose(F_4) * dF_3));
+    let S_z = ((((bulk_3 - ((2.0 * G_4) / 3.0)) * trace(dE_3)) * eye()) + ((2.0 * G_4) * dE_3));
+    let FS_x = ((cell_area * F) * S_x);
+    let FS_y = ((cell_area * F) * S_y);
+    let FS_z = ((cell_area * F) * S_z);
+    let A_x_4 = FS_x;
+    let A_y_4 = FS_y;
+    let A_z_4 = FS_z;
+    let a_5 = (ld_L0_inv(i) * vec2<f32>(1.0, 0.0));
+    cell_x = (((dot(a_5, vec2<f32>(1.0, 0.0)) * A_x_4) + (dot(a_5, vec2<f32>(0.0, 1.0)) * A_y_4)) + (dot(a_5, vec2<f32>(0.0, 0.0)) * A_z_4));
+    let A_x_5 = FS_x;
+    let A_y_5 = FS_y;
+    let A_z_5 = FS_z;
+    let a_6 = (ld_L0_inv(i) * vec2<f32>(0.0, 1.0));
+    cell_y = (((dot(a_6, vec2<f32>(1.0, 0.0)) * A_x_5) + (dot(a_6, vec2<f32>(0.0, 1.0)) * A_y_5)) + (dot(a_6, vec2<f32>(0.0, 0.0)) * A_z_5));
+    let A_x_6 = FS_x;
+    let A_y_6 = FS_y;
+    let A_z_6 = FS_z;
+    let a_7 = (ld_L0_inv(i) * vec2<f32>(0.0, 0.0));
+    cell_z = (((dot(a_7, vec2<f32>(1.0, 0.0)) * A_x_6) + (dot(a_7, vec2<f32>(0.0, 1.0)) * A_y_6)) + (dot(a_7, vec2<f32>(0.0, 0.0)) * A_z_6));
+    let A_x_7 = cell_x;
+    let A_y_7 = cell_y;
+    let A_z_7 = cell_z;
+    let a_8 = w_sum;
+    cell_own = ((cell_area * (((dF_x * S_x) + (dF_y * S_y)) + (dF_z * S_z))) - (((dot(a_8, vec2<f32>(1.0, 0.0)) * A_x_7) + (dot(a_8, vec2<f32>(0.0, 1.0)) * A_y_7)) + (dot(a_8, vec2<f32>(0.0, 0.0)) * A_z_7)));
     // then piola_kirchhoff
     var P_i: mat2x2<f32> = ld_P(i);
     let H_2 = H;
-    let G_2 = prm_G(i);
-    let bulk = prm_bulk(i);
+    let G_5 = prm_G(i);
+    let bulk_4 = prm_bulk(i);
     let strain = (sym(H_2) + (0.5 * sym((transpose(H_2) * H_2))));
-    P_i = ((eye() + H_2) * ((((bulk - ((2.0 * G_2) / 3.0)) * trace(strain)) * eye()) + ((2.0 * G_2) * strain)));
+    P_i = ((eye() + H_2) * ((((bulk_4 - ((2.0 * G_5) / 3.0)) * trace(strain)) * eye()) + ((2.0 * G_5) * strain)));
     st_H(i, H);
+    st_cell_x(i, cell_x);
+    st_cell_y(i, cell_y);
+    st_cell_z(i, cell_z);
+    st_cell_own(i, cell_own);
     st_P(i, P_i);
 }

@@ -43,27 +43,27 @@ fn st_h(i: u32, v: f32) {
     data[b] = v;
 }
 fn ld_hourglass_rate2(i: u32) -> f32 {
-    let b = u32(info[18 + ints[i]] + i32(i) * 1);
+    let b = u32(info[23 + ints[i]] + i32(i) * 1);
     return data[b];
 }
 fn st_hourglass_rate2(i: u32, v: f32) {
-    let b = u32(info[18 + ints[i]] + i32(i) * 1);
+    let b = u32(info[23 + ints[i]] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 0u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 6u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 7u;
     return params[b];
 }
 fn prm_cfl_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 15u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -74,7 +74,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     if (i >= n) { return; }
     let t = globals[0u];
     let dt = globals[1u];
-    let scratch = u32(info[23]);
+    let scratch = u32(info[28]);
     data[scratch + 0u * n + i] = (prm_cfl_alpha(i) / (0.3 * sqrt((2.0 * ld_hourglass_rate2(i)))));
     data[scratch + 1u * n + i] = (prm_cfl_alpha(i) * ld_h(i));
     data[scratch + 2u * n + i] = (sqrt(((prm_bulk(i) + ((4.0 * prm_G(i)) / 3.0)) / prm_rho0(i))) + length(ld_v(i)));

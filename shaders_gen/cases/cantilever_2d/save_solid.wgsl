@@ -54,29 +54,29 @@ fn st_u(i: u32, v: vec2<f32>) {
     data[b + 1u] = v[1];
 }
 fn ld_x_0(i: u32) -> vec2<f32> {
-    let b = u32(info[21 + G] + i32(i) * 2);
+    let b = u32(info[26 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_x_0(i: u32, v: vec2<f32>) {
-    let b = u32(info[21 + G] + i32(i) * 2);
+    let b = u32(info[26 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_v_0(i: u32) -> vec2<f32> {
-    let b = u32(info[22 + G] + i32(i) * 2);
+    let b = u32(info[27 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_v_0(i: u32, v: vec2<f32>) {
-    let b = u32(info[22 + G] + i32(i) * 2);
+    let b = u32(info[27 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_u_0(i: u32) -> vec2<f32> {
-    let b = u32(info[23 + G] + i32(i) * 2);
+    let b = u32(info[28 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_u_0(i: u32, v: vec2<f32>) {
-    let b = u32(info[23 + G] + i32(i) * 2);
+    let b = u32(info[28 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }

@@ -119,11 +119,11 @@ fn ldj_u(j: u32, sgn: vec3<f32>) -> vec3<f32> {
     return (vec3<f32>(data[b], data[b + 1u], data[b + 2u]) * sgn);
 }
 fn ld_L0_inv(i: u32) -> mat3x3<f32> {
-    let b = u32(info[13 + G] + i32(i) * 9);
+    let b = u32(info[14 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_L0_inv(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[13 + G] + i32(i) * 9);
+    let b = u32(info[14 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -135,16 +135,16 @@ fn st_L0_inv(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ldj_L0_inv(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
-    let base = info[13u];
+    let base = info[14u];
     let b = u32(base + i32(j) * 9);
     return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u])), sgn);
 }
 fn ld_H(i: u32) -> mat3x3<f32> {
-    let b = u32(info[15 + G] + i32(i) * 9);
+    let b = u32(info[16 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_H(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[15 + G] + i32(i) * 9);
+    let b = u32(info[16 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -156,16 +156,16 @@ fn st_H(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ldj_H(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
-    let base = info[15u];
+    let base = info[16u];
     let b = u32(base + i32(j) * 9);
     return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u])), sgn);
 }
 fn ld_Q(i: u32) -> mat3x3<f32> {
-    let b = u32(info[17 + G] + i32(i) * 9);
+    let b = u32(info[22 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_Q(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[17 + G] + i32(i) * 9);
+    let b = u32(info[22 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -177,58 +177,58 @@ fn st_Q(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ldj_Q(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
-    let base = info[17u];
+    let base = info[22u];
     let b = u32(base + i32(j) * 9);
     return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u])), sgn);
 }
 fn ld_dv(i: u32) -> vec3<f32> {
-    let b = u32(info[18 + G] + i32(i) * 3);
+    let b = u32(info[23 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_dv(i: u32, v: vec3<f32>) {
-    let b = u32(info[18 + G] + i32(i) * 3);
+    let b = u32(info[23 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_hourglass_rate2(i: u32) -> f32 {
-    let b = u32(info[19 + G] + i32(i) * 1);
+    let b = u32(info[24 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_hourglass_rate2(i: u32, v: f32) {
-    let b = u32(info[19 + G] + i32(i) * 1);
+    let b = u32(info[24 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 0u;
     return params[b];
 }
 fn prm_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 5u;
     return params[b];
 }
 fn prm_hourglass_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 9u;
     return params[b];
 }
 fn prm_viscosity_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 11u;
     return params[b];
 }
 fn prm_c_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 14u;
     return params[b];
 }
 fn prm_damping(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 15u;
     return params[b];
 }
 fn prm_clamp_normal(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 17u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm_clamp_at(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 20u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -290,7 +290,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         if (r2 >= rc * rc || r2 == 0.0) { continue; }
         let x_ij = (dxv * sgn);
         let r_ij = sqrt(r2);
-        // pairsum tl_momentum (stdlib/solid/total_lagrangian.sph:174)
+        // pairsum tl_momentum (stdlib/solid/total_lagrangian.sph:235)
         if ((body_i == ldj_body(j, sgn))) {
             let X_j = (x_i - x_ij);
             let n_2 = clamp_normal_i;

@@ -156,54 +156,54 @@ fn ldj_u(j: u32, sgn: vec3<f32>) -> vec2<f32> {
     return (vec2<f32>(data[b], data[b + 1u]) * sgn.xy);
 }
 fn ld_L0_inv(i: u32) -> mat2x2<f32> {
-    let b = u32(info[13 + G] + i32(i) * 4);
+    let b = u32(info[14 + G] + i32(i) * 4);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u]));
 }
 fn st_L0_inv(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[13 + G] + i32(i) * 4);
+    let b = u32(info[14 + G] + i32(i) * 4);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[0][1];
     data[b + 3u] = v[1][1];
 }
 fn ld_H_linear(i: u32) -> mat2x2<f32> {
-    let b = u32(info[14 + G] + i32(i) * 4);
+    let b = u32(info[15 + G] + i32(i) * 4);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u]));
 }
 fn st_H_linear(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[14 + G] + i32(i) * 4);
+    let b = u32(info[15 + G] + i32(i) * 4);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[0][1];
     data[b + 3u] = v[1][1];
 }
 fn ld_a_contact(i: u32) -> vec2<f32> {
-    let b = u32(info[20 + G] + i32(i) * 2);
+    let b = u32(info[25 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_a_contact(i: u32, v: vec2<f32>) {
-    let b = u32(info[20 + G] + i32(i) * 2);
+    let b = u32(info[25 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 6u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 9u;
     return params[b];
 }
 fn prm_clamp_normal(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 16u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 fn prm_clamp_at(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 18u;
     return params[b];
 }
 fn prm_K_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 19u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -266,7 +266,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         if (r2 >= rc * rc || r2 == 0.0) { continue; }
         let x_ij = (dxv * sgn).xy;
         let r_ij = sqrt(r2);
-        // pairsum deformation_gradient (stdlib/solid/total_lagrangian.sph:111)
+        // pairsum deformation_gradient (stdlib/solid/total_lagrangian.sph:129)
         if ((body_i == ldj_body(j, sgn))) {
             let a = ldj_u(j, sgn);
             let n_2 = clamp_normal_i;

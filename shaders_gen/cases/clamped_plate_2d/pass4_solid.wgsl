@@ -109,100 +109,100 @@ fn ldj_u(j: u32, sgn: vec3<f32>) -> vec2<f32> {
     return (vec2<f32>(data[b], data[b + 1u]) * sgn.xy);
 }
 fn ld_L0_inv(i: u32) -> mat2x2<f32> {
-    let b = u32(info[13 + G] + i32(i) * 4);
+    let b = u32(info[14 + G] + i32(i) * 4);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u]));
 }
 fn st_L0_inv(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[13 + G] + i32(i) * 4);
+    let b = u32(info[14 + G] + i32(i) * 4);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[0][1];
     data[b + 3u] = v[1][1];
 }
 fn ldj_L0_inv(j: u32, sgn: vec3<f32>) -> mat2x2<f32> {
-    let base = info[13u];
+    let base = info[14u];
     let b = u32(base + i32(j) * 4);
     return flip_m(mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u])), sgn.xy);
 }
 fn ld_H(i: u32) -> mat2x2<f32> {
-    let b = u32(info[15 + G] + i32(i) * 4);
+    let b = u32(info[16 + G] + i32(i) * 4);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u]));
 }
 fn st_H(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[15 + G] + i32(i) * 4);
+    let b = u32(info[16 + G] + i32(i) * 4);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[0][1];
     data[b + 3u] = v[1][1];
 }
 fn ldj_H(j: u32, sgn: vec3<f32>) -> mat2x2<f32> {
-    let base = info[15u];
+    let base = info[16u];
     let b = u32(base + i32(j) * 4);
     return flip_m(mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u])), sgn.xy);
 }
 fn ld_Q(i: u32) -> mat2x2<f32> {
-    let b = u32(info[17 + G] + i32(i) * 4);
+    let b = u32(info[22 + G] + i32(i) * 4);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u]));
 }
 fn st_Q(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[17 + G] + i32(i) * 4);
+    let b = u32(info[22 + G] + i32(i) * 4);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[0][1];
     data[b + 3u] = v[1][1];
 }
 fn ldj_Q(j: u32, sgn: vec3<f32>) -> mat2x2<f32> {
-    let base = info[17u];
+    let base = info[22u];
     let b = u32(base + i32(j) * 4);
     return flip_m(mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u])), sgn.xy);
 }
 fn ld_dv(i: u32) -> vec2<f32> {
-    let b = u32(info[18 + G] + i32(i) * 2);
+    let b = u32(info[23 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_dv(i: u32, v: vec2<f32>) {
-    let b = u32(info[18 + G] + i32(i) * 2);
+    let b = u32(info[23 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_hourglass_rate2(i: u32) -> f32 {
-    let b = u32(info[19 + G] + i32(i) * 1);
+    let b = u32(info[24 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_hourglass_rate2(i: u32, v: f32) {
-    let b = u32(info[19 + G] + i32(i) * 1);
+    let b = u32(info[24 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 0u;
     return params[b];
 }
 fn prm_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 4u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 4u;
     return params[b];
 }
 fn prm_hourglass_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 8u;
     return params[b];
 }
 fn prm_viscosity_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 10u;
     return params[b];
 }
 fn prm_c_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 13u;
     return params[b];
 }
 fn prm_damping(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 14u;
     return params[b];
 }
 fn prm_clamp_normal(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 16u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 fn prm_clamp_at(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 18u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -264,7 +264,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         if (r2 >= rc * rc || r2 == 0.0) { continue; }
         let x_ij = (dxv * sgn).xy;
         let r_ij = sqrt(r2);
-        // pairsum tl_momentum (stdlib/solid/total_lagrangian.sph:174)
+        // pairsum tl_momentum (stdlib/solid/total_lagrangian.sph:235)
         if ((body_i == ldj_body(j, sgn))) {
             let X_j = (x_i - x_ij);
             let n_2 = clamp_normal_i;

@@ -62,60 +62,60 @@ fn st_u(i: u32, v: vec2<f32>) {
     data[b + 1u] = v[1];
 }
 fn ld_dv(i: u32) -> vec2<f32> {
-    let b = u32(info[18 + G] + i32(i) * 2);
+    let b = u32(info[23 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_dv(i: u32, v: vec2<f32>) {
-    let b = u32(info[18 + G] + i32(i) * 2);
+    let b = u32(info[23 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_a_contact(i: u32) -> vec2<f32> {
-    let b = u32(info[20 + G] + i32(i) * 2);
+    let b = u32(info[25 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_a_contact(i: u32, v: vec2<f32>) {
-    let b = u32(info[20 + G] + i32(i) * 2);
+    let b = u32(info[25 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_x_0(i: u32) -> vec2<f32> {
-    let b = u32(info[21 + G] + i32(i) * 2);
+    let b = u32(info[26 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_x_0(i: u32, v: vec2<f32>) {
-    let b = u32(info[21 + G] + i32(i) * 2);
+    let b = u32(info[26 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_v_0(i: u32) -> vec2<f32> {
-    let b = u32(info[22 + G] + i32(i) * 2);
+    let b = u32(info[27 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_v_0(i: u32, v: vec2<f32>) {
-    let b = u32(info[22 + G] + i32(i) * 2);
+    let b = u32(info[27 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_u_0(i: u32) -> vec2<f32> {
-    let b = u32(info[23 + G] + i32(i) * 2);
+    let b = u32(info[28 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_u_0(i: u32, v: vec2<f32>) {
-    let b = u32(info[23 + G] + i32(i) * 2);
+    let b = u32(info[28 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn prm__load0(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 20u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 fn prm__symmetry0(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 22u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 fn prm__symmetry1(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 24u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 @compute @workgroup_size(64)

@@ -27,47 +27,47 @@ fn div_m(a: mat2x2<f32>, s: f32) -> mat2x2<f32> { return (1.0 / s) * a; }
 fn flip_m(a: mat2x2<f32>, s: vec2<f32>) -> mat2x2<f32> { return mat2x2<f32>(a[0] * s * s[0], a[1] * s * s[1]); }
 fn inv(a: mat2x2<f32>) -> mat2x2<f32> { return (1.0 / determinant(a)) * mat2x2<f32>(a[1][1], -a[0][1], -a[1][0], a[0][0]); }
 fn ld_rho(i: u32) -> f32 {
-    let b = u32(info[22 + G] + i32(i) * 1);
+    let b = u32(info[25 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho(i: u32, v: f32) {
-    let b = u32(info[22 + G] + i32(i) * 1);
+    let b = u32(info[25 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_p(i: u32) -> f32 {
-    let b = u32(info[28 + G] + i32(i) * 1);
+    let b = u32(info[31 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p(i: u32, v: f32) {
-    let b = u32(info[28 + G] + i32(i) * 1);
+    let b = u32(info[31 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_p_over_rho2(i: u32) -> f32 {
-    let b = u32(info[31 + G] + i32(i) * 1);
+    let b = u32(info[34 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p_over_rho2(i: u32, v: f32) {
-    let b = u32(info[31 + G] + i32(i) * 1);
+    let b = u32(info[34 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_c(i: u32) -> f32 {
-    let b = u32(info[34 + G] + i32(i) * 1);
+    let b = u32(info[37 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_c(i: u32, v: f32) {
-    let b = u32(info[34 + G] + i32(i) * 1);
+    let b = u32(info[37 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 0u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 5u;
     return params[b];
 }
 fn prm_gamma(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 6u;
     return params[b];
 }
 @compute @workgroup_size(64)

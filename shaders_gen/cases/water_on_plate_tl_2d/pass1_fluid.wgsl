@@ -351,7 +351,7 @@ fn pos3(p: u32) -> vec3<f32> {
     let b = u32(info[7u + ints[p]] + i32(p) * 2);
     return vec3<f32>(data[b + 0u], data[b + 1u], 0.0);
 }
-fn h_of(p: u32) -> f32 { return data[u32(info[25u + ints[p]] + i32(p))]; }
+fn h_of(p: u32) -> f32 { return data[u32(info[28u + ints[p]] + i32(p))]; }
 fn ld_v(i: u32) -> vec2<f32> {
     let b = u32(info[10 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
@@ -368,120 +368,120 @@ fn ldj_v(j: u32, sgn: vec3<f32>) -> vec2<f32> {
     return (vec2<f32>(data[b], data[b + 1u]) * sgn.xy);
 }
 fn ldj_m(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[19u + ints[j]];
-    if (base == -2147483648) { return 0.0; }
-    let b = u32(base + i32(j) * 1);
-    return data[b];
-}
-fn ld_rho(i: u32) -> f32 {
-    let b = u32(info[22 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_rho(i: u32, v: f32) {
-    let b = u32(info[22 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ldj_rho(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[22u + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
-fn ld_h(i: u32) -> f32 {
+fn ld_rho(i: u32) -> f32 {
     let b = u32(info[25 + G] + i32(i) * 1);
     return data[b];
 }
-fn st_h(i: u32, v: f32) {
+fn st_rho(i: u32, v: f32) {
     let b = u32(info[25 + G] + i32(i) * 1);
     data[b] = v;
 }
-fn ld_p_over_rho2(i: u32) -> f32 {
-    let b = u32(info[31 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_p_over_rho2(i: u32, v: f32) {
-    let b = u32(info[31 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ldj_p_over_rho2(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[31u + ints[j]];
+fn ldj_rho(j: u32, sgn: vec3<f32>) -> f32 {
+    let base = info[25u + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
-fn ld_c(i: u32) -> f32 {
+fn ld_h(i: u32) -> f32 {
+    let b = u32(info[28 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_h(i: u32, v: f32) {
+    let b = u32(info[28 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_p_over_rho2(i: u32) -> f32 {
     let b = u32(info[34 + G] + i32(i) * 1);
     return data[b];
 }
-fn st_c(i: u32, v: f32) {
+fn st_p_over_rho2(i: u32, v: f32) {
     let b = u32(info[34 + G] + i32(i) * 1);
     data[b] = v;
 }
-fn ldj_c(j: u32, sgn: vec3<f32>) -> f32 {
+fn ldj_p_over_rho2(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[34u + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
+fn ld_c(i: u32) -> f32 {
+    let b = u32(info[37 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_c(i: u32, v: f32) {
+    let b = u32(info[37 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ldj_c(j: u32, sgn: vec3<f32>) -> f32 {
+    let base = info[37u + ints[j]];
+    if (base == -2147483648) { return 0.0; }
+    let b = u32(base + i32(j) * 1);
+    return data[b];
+}
 fn ld_dv(i: u32) -> vec2<f32> {
-    let b = u32(info[37 + G] + i32(i) * 2);
+    let b = u32(info[40 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_dv(i: u32, v: vec2<f32>) {
-    let b = u32(info[37 + G] + i32(i) * 2);
+    let b = u32(info[40 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_drho(i: u32) -> f32 {
-    let b = u32(info[46 + G] + i32(i) * 1);
+    let b = u32(info[52 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho(i: u32, v: f32) {
-    let b = u32(info[46 + G] + i32(i) * 1);
+    let b = u32(info[52 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_mu_max(i: u32) -> f32 {
-    let b = u32(info[73 + G] + i32(i) * 1);
+    let b = u32(info[91 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_mu_max(i: u32, v: f32) {
-    let b = u32(info[73 + G] + i32(i) * 1);
+    let b = u32(info[91 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 0u;
     return params[b];
 }
 fn prm_gravity(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 2u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 2u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 fn prm_delta(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 4u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 4u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 5u;
     return params[b];
 }
 fn prm_gamma(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 6u;
     return params[b];
 }
 fn prm_nu0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 7u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 8u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 9u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 10u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -355,7 +355,7 @@ fn pos3(p: u32) -> vec3<f32> {
     let b = u32(info[7u + ints[p]] + i32(p) * 2);
     return vec3<f32>(data[b + 0u], data[b + 1u], 0.0);
 }
-fn h_of(p: u32) -> f32 { return data[u32(info[25u + ints[p]] + i32(p))]; }
+fn h_of(p: u32) -> f32 { return data[u32(info[28u + ints[p]] + i32(p))]; }
 fn ld_x(i: u32) -> vec2<f32> {
     let b = u32(info[7 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
@@ -387,138 +387,138 @@ fn ldj_vol(j: u32, sgn: vec3<f32>) -> f32 {
     return data[b];
 }
 fn ld_body(i: u32) -> f32 {
-    let b = u32(info[16 + G] + i32(i) * 1);
+    let b = u32(info[19 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_body(i: u32, v: f32) {
-    let b = u32(info[16 + G] + i32(i) * 1);
+    let b = u32(info[19 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_body(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[16u + ints[j]];
-    if (base == -2147483648) { return 0.0; }
-    let b = u32(base + i32(j) * 1);
-    return data[b];
-}
-fn ldj_m(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[19u + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
+fn ldj_m(j: u32, sgn: vec3<f32>) -> f32 {
+    let base = info[22u + ints[j]];
+    if (base == -2147483648) { return 0.0; }
+    let b = u32(base + i32(j) * 1);
+    return data[b];
+}
 fn ld_dv(i: u32) -> vec2<f32> {
-    let b = u32(info[37 + G] + i32(i) * 2);
+    let b = u32(info[40 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_dv(i: u32, v: vec2<f32>) {
-    let b = u32(info[37 + G] + i32(i) * 2);
+    let b = u32(info[40 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_u(i: u32) -> vec2<f32> {
-    let b = u32(info[43 + G] + i32(i) * 2);
+    let b = u32(info[46 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_u(i: u32, v: vec2<f32>) {
-    let b = u32(info[43 + G] + i32(i) * 2);
+    let b = u32(info[46 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ldj_u(j: u32, sgn: vec3<f32>) -> vec2<f32> {
-    let base = info[43u + ints[j]];
+    let base = info[46u + ints[j]];
     if (base == -2147483648) { return vec2<f32>(0.0); }
     let b = u32(base + i32(j) * 2);
     return (vec2<f32>(data[b], data[b + 1u]) * sgn.xy);
 }
 fn ld_L0_inv(i: u32) -> mat2x2<f32> {
-    let b = u32(info[55 + G] + i32(i) * 4);
+    let b = u32(info[61 + G] + i32(i) * 4);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u]));
 }
 fn st_L0_inv(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[55 + G] + i32(i) * 4);
+    let b = u32(info[61 + G] + i32(i) * 4);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[0][1];
     data[b + 3u] = v[1][1];
 }
 fn ldj_L0_inv(j: u32, sgn: vec3<f32>) -> mat2x2<f32> {
-    let base = info[55u + ints[j]];
+    let base = info[61u + ints[j]];
     if (base == -2147483648) { return mat2x2<f32>(); }
     let b = u32(base + i32(j) * 4);
     return flip_m(mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u])), sgn.xy);
 }
 fn ld_H(i: u32) -> mat2x2<f32> {
-    let b = u32(info[61 + G] + i32(i) * 4);
+    let b = u32(info[67 + G] + i32(i) * 4);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u]));
 }
 fn st_H(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[61 + G] + i32(i) * 4);
+    let b = u32(info[67 + G] + i32(i) * 4);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[0][1];
     data[b + 3u] = v[1][1];
 }
 fn ldj_H(j: u32, sgn: vec3<f32>) -> mat2x2<f32> {
-    let base = info[61u + ints[j]];
+    let base = info[67u + ints[j]];
     if (base == -2147483648) { return mat2x2<f32>(); }
     let b = u32(base + i32(j) * 4);
     return flip_m(mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u])), sgn.xy);
 }
 fn ld_Q(i: u32) -> mat2x2<f32> {
-    let b = u32(info[67 + G] + i32(i) * 4);
+    let b = u32(info[85 + G] + i32(i) * 4);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u]));
 }
 fn st_Q(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[67 + G] + i32(i) * 4);
+    let b = u32(info[85 + G] + i32(i) * 4);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[0][1];
     data[b + 3u] = v[1][1];
 }
 fn ldj_Q(j: u32, sgn: vec3<f32>) -> mat2x2<f32> {
-    let base = info[67u + ints[j]];
+    let base = info[85u + ints[j]];
     if (base == -2147483648) { return mat2x2<f32>(); }
     let b = u32(base + i32(j) * 4);
     return flip_m(mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u])), sgn.xy);
 }
 fn ld_hourglass_rate2(i: u32) -> f32 {
-    let b = u32(info[70 + G] + i32(i) * 1);
+    let b = u32(info[88 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_hourglass_rate2(i: u32, v: f32) {
-    let b = u32(info[70 + G] + i32(i) * 1);
+    let b = u32(info[88 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 0u;
     return params[b];
 }
 fn prm_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 11u;
     return params[b];
 }
 fn prm_hourglass_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 15u;
     return params[b];
 }
 fn prm_viscosity_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 17u;
     return params[b];
 }
 fn prm_c_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 20u;
     return params[b];
 }
 fn prm_damping(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 21u;
     return params[b];
 }
 fn prm_clamp_normal(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 23u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 fn prm_clamp_at(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 25u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -590,7 +590,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             if (r2 >= rc * rc || r2 == 0.0) { continue; }
             let x_ij = (dxv * sgn).xy;
             let r_ij = sqrt(r2);
-            // pairsum tl_momentum (stdlib/solid/total_lagrangian.sph:174)
+            // pairsum tl_momentum (stdlib/solid/total_lagrangian.sph:235)
             if ((body_i == ldj_body(j, sgn))) {
                 let X_j = (x_i - x_ij);
                 let n_2 = clamp_normal_i;

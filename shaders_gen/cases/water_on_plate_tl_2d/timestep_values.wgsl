@@ -35,64 +35,64 @@ fn st_v(i: u32, v: vec2<f32>) {
     data[b + 1u] = v[1];
 }
 fn ld_h(i: u32) -> f32 {
-    let b = u32(info[25 + ints[i]] + i32(i) * 1);
+    let b = u32(info[28 + ints[i]] + i32(i) * 1);
     return data[b];
 }
 fn st_h(i: u32, v: f32) {
-    let b = u32(info[25 + ints[i]] + i32(i) * 1);
+    let b = u32(info[28 + ints[i]] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_c(i: u32) -> f32 {
-    let b = u32(info[34 + ints[i]] + i32(i) * 1);
+    let b = u32(info[37 + ints[i]] + i32(i) * 1);
     return data[b];
 }
 fn st_c(i: u32, v: f32) {
-    let b = u32(info[34 + ints[i]] + i32(i) * 1);
+    let b = u32(info[37 + ints[i]] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_dv(i: u32) -> vec2<f32> {
-    let b = u32(info[37 + ints[i]] + i32(i) * 2);
+    let b = u32(info[40 + ints[i]] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_dv(i: u32, v: vec2<f32>) {
-    let b = u32(info[37 + ints[i]] + i32(i) * 2);
+    let b = u32(info[40 + ints[i]] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_hourglass_rate2(i: u32) -> f32 {
-    let b = u32(info[70 + ints[i]] + i32(i) * 1);
+    let b = u32(info[88 + ints[i]] + i32(i) * 1);
     return data[b];
 }
 fn st_hourglass_rate2(i: u32, v: f32) {
-    let b = u32(info[70 + ints[i]] + i32(i) * 1);
+    let b = u32(info[88 + ints[i]] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_mu_max(i: u32) -> f32 {
-    let b = u32(info[73 + ints[i]] + i32(i) * 1);
+    let b = u32(info[91 + ints[i]] + i32(i) * 1);
     return data[b];
 }
 fn st_mu_max(i: u32, v: f32) {
-    let b = u32(info[73 + ints[i]] + i32(i) * 1);
+    let b = u32(info[91 + ints[i]] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 0u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 13u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 14u;
     return params[b];
 }
 fn prm_cfl_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 22u;
     return params[b];
 }
 fn prm_cfl_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 26u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -103,7 +103,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     if (i >= n) { return; }
     let t = globals[0u];
     let dt = globals[1u];
-    let scratch = u32(info[88]);
+    let scratch = u32(info[106]);
     data[scratch + 0u * n + i] = select(pinf(), (prm_cfl_alpha(i) / (0.3 * sqrt((2.0 * ld_hourglass_rate2(i))))), in_groups(4u, ints[i]));
     data[scratch + 1u * n + i] = select(pinf(), (prm_cfl_C(i) * sqrt((ld_h(i) / max(length(ld_dv(i)), 1e-12)))), in_groups(3u, ints[i]));
     data[scratch + 2u * n + i] = select(pinf(), ((prm_cfl_C(i) * ld_h(i)) / (ld_c(i) + ld_mu_max(i))), in_groups(3u, ints[i]));

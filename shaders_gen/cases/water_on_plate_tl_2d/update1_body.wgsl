@@ -45,65 +45,65 @@ fn st_v(i: u32, v: vec2<f32>) {
     data[b + 1u] = v[1];
 }
 fn ld_dv(i: u32) -> vec2<f32> {
-    let b = u32(info[37 + G] + i32(i) * 2);
+    let b = u32(info[40 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_dv(i: u32, v: vec2<f32>) {
-    let b = u32(info[37 + G] + i32(i) * 2);
+    let b = u32(info[40 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_u(i: u32) -> vec2<f32> {
-    let b = u32(info[43 + G] + i32(i) * 2);
+    let b = u32(info[46 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_u(i: u32, v: vec2<f32>) {
-    let b = u32(info[43 + G] + i32(i) * 2);
+    let b = u32(info[46 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_a_interface(i: u32) -> vec2<f32> {
-    let b = u32(info[49 + G] + i32(i) * 2);
+    let b = u32(info[55 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_a_interface(i: u32, v: vec2<f32>) {
-    let b = u32(info[49 + G] + i32(i) * 2);
+    let b = u32(info[55 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_x_0(i: u32) -> vec2<f32> {
-    let b = u32(info[76 + G] + i32(i) * 2);
+    let b = u32(info[94 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_x_0(i: u32, v: vec2<f32>) {
-    let b = u32(info[76 + G] + i32(i) * 2);
+    let b = u32(info[94 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_v_0(i: u32) -> vec2<f32> {
-    let b = u32(info[79 + G] + i32(i) * 2);
+    let b = u32(info[97 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_v_0(i: u32, v: vec2<f32>) {
-    let b = u32(info[79 + G] + i32(i) * 2);
+    let b = u32(info[97 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_u_0(i: u32) -> vec2<f32> {
-    let b = u32(info[85 + G] + i32(i) * 2);
+    let b = u32(info[103 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_u_0(i: u32, v: vec2<f32>) {
-    let b = u32(info[85 + G] + i32(i) * 2);
+    let b = u32(info[103 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn prm_gravity(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 2u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 2u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 fn prm__damping(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 27u;
     return params[b];
 }
 @compute @workgroup_size(64)

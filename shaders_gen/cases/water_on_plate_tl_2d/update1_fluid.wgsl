@@ -45,115 +45,115 @@ fn st_v(i: u32, v: vec2<f32>) {
     data[b + 1u] = v[1];
 }
 fn ld_rho(i: u32) -> f32 {
-    let b = u32(info[22 + G] + i32(i) * 1);
+    let b = u32(info[25 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho(i: u32, v: f32) {
-    let b = u32(info[22 + G] + i32(i) * 1);
+    let b = u32(info[25 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_p(i: u32) -> f32 {
-    let b = u32(info[28 + G] + i32(i) * 1);
+    let b = u32(info[31 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p(i: u32, v: f32) {
-    let b = u32(info[28 + G] + i32(i) * 1);
+    let b = u32(info[31 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_p_over_rho2(i: u32) -> f32 {
-    let b = u32(info[31 + G] + i32(i) * 1);
+    let b = u32(info[34 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p_over_rho2(i: u32, v: f32) {
-    let b = u32(info[31 + G] + i32(i) * 1);
+    let b = u32(info[34 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_c(i: u32) -> f32 {
-    let b = u32(info[34 + G] + i32(i) * 1);
+    let b = u32(info[37 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_c(i: u32, v: f32) {
-    let b = u32(info[34 + G] + i32(i) * 1);
+    let b = u32(info[37 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_dv(i: u32) -> vec2<f32> {
-    let b = u32(info[37 + G] + i32(i) * 2);
+    let b = u32(info[40 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_dv(i: u32, v: vec2<f32>) {
-    let b = u32(info[37 + G] + i32(i) * 2);
+    let b = u32(info[40 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_drho(i: u32) -> f32 {
-    let b = u32(info[46 + G] + i32(i) * 1);
+    let b = u32(info[52 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho(i: u32, v: f32) {
-    let b = u32(info[46 + G] + i32(i) * 1);
+    let b = u32(info[52 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_a_interface(i: u32) -> vec2<f32> {
-    let b = u32(info[49 + G] + i32(i) * 2);
+    let b = u32(info[55 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_a_interface(i: u32, v: vec2<f32>) {
-    let b = u32(info[49 + G] + i32(i) * 2);
+    let b = u32(info[55 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_drho_interface(i: u32) -> f32 {
-    let b = u32(info[52 + G] + i32(i) * 1);
+    let b = u32(info[58 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho_interface(i: u32, v: f32) {
-    let b = u32(info[52 + G] + i32(i) * 1);
+    let b = u32(info[58 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_x_0(i: u32) -> vec2<f32> {
-    let b = u32(info[76 + G] + i32(i) * 2);
+    let b = u32(info[94 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_x_0(i: u32, v: vec2<f32>) {
-    let b = u32(info[76 + G] + i32(i) * 2);
+    let b = u32(info[94 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_v_0(i: u32) -> vec2<f32> {
-    let b = u32(info[79 + G] + i32(i) * 2);
+    let b = u32(info[97 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_v_0(i: u32, v: vec2<f32>) {
-    let b = u32(info[79 + G] + i32(i) * 2);
+    let b = u32(info[97 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_rho_0(i: u32) -> f32 {
-    let b = u32(info[82 + G] + i32(i) * 1);
+    let b = u32(info[100 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho_0(i: u32, v: f32) {
-    let b = u32(info[82 + G] + i32(i) * 1);
+    let b = u32(info[100 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 0u;
     return params[b];
 }
 fn prm_gravity(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 2u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 2u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 5u;
     return params[b];
 }
 fn prm_gamma(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 6u;
     return params[b];
 }
 fn prm__damping(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 27u;
     return params[b];
 }
 @compute @workgroup_size(64)

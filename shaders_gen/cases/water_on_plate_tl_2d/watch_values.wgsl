@@ -42,11 +42,11 @@ fn st_v(i: u32, v: vec2<f32>) {
     data[b + 1u] = v[1];
 }
 fn ld_m(i: u32) -> f32 {
-    let b = u32(info[19 + ints[i]] + i32(i) * 1);
+    let b = u32(info[22 + ints[i]] + i32(i) * 1);
     return data[b];
 }
 fn st_m(i: u32, v: f32) {
-    let b = u32(info[19 + ints[i]] + i32(i) * 1);
+    let b = u32(info[22 + ints[i]] + i32(i) * 1);
     data[b] = v;
 }
 @compute @workgroup_size(64)
@@ -55,7 +55,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let n = u32(info[0]);
     let i = k;
     if (i >= n) { return; }
-    let scratch = u32(info[88]) + 5u * n;
+    let scratch = u32(info[106]) + 5u * n;
     var speed2 = 0.0;
     var energy = 0.0;
     var kinetic = 0.0;

@@ -474,11 +474,11 @@ fn ldj_u(j: u32, sgn: vec3<f32>) -> vec3<f32> {
     return (vec3<f32>(data[b], data[b + 1u], data[b + 2u]) * sgn);
 }
 fn ld_L0_inv(i: u32) -> mat3x3<f32> {
-    let b = u32(info[12 + G] + i32(i) * 9);
+    let b = u32(info[13 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_L0_inv(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[12 + G] + i32(i) * 9);
+    let b = u32(info[13 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -490,11 +490,11 @@ fn st_L0_inv(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ld_H_linear(i: u32) -> mat3x3<f32> {
-    let b = u32(info[13 + G] + i32(i) * 9);
+    let b = u32(info[14 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_H_linear(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[13 + G] + i32(i) * 9);
+    let b = u32(info[14 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -506,33 +506,33 @@ fn st_H_linear(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ld_a_contact(i: u32) -> vec3<f32> {
-    let b = u32(info[19 + G] + i32(i) * 3);
+    let b = u32(info[24 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_a_contact(i: u32, v: vec3<f32>) {
-    let b = u32(info[19 + G] + i32(i) * 3);
+    let b = u32(info[24 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 7u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 10u;
     return params[b];
 }
 fn prm_clamp_normal(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 17u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm_clamp_at(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 20u;
     return params[b];
 }
 fn prm_K_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 21u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -604,7 +604,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             if (r2 >= rc * rc || r2 == 0.0) { continue; }
             let x_ij = (dxv * sgn);
             let r_ij = sqrt(r2);
-            // pairsum deformation_gradient (stdlib/solid/total_lagrangian.sph:111)
+            // pairsum deformation_gradient (stdlib/solid/total_lagrangian.sph:129)
             if ((body_i == ldj_body(j, sgn))) {
                 let a = ldj_u(j, sgn);
                 let n_2 = clamp_normal_i;

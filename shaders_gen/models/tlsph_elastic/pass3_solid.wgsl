@@ -406,12 +406,17 @@ fn ldj_u(j: u32, sgn: vec3<f32>) -> vec3<f32> {
     let b = u32(base + i32(j) * 3);
     return (vec3<f32>(data[b], data[b + 1u], data[b + 2u]) * sgn);
 }
+fn ldj_axis_sign(j: u32, sgn: vec3<f32>) -> vec3<f32> {
+    let base = info[12u];
+    let b = u32(base + i32(j) * 3);
+    return (vec3<f32>(data[b], data[b + 1u], data[b + 2u]) * sgn);
+}
 fn ld_L0_inv(i: u32) -> mat3x3<f32> {
-    let b = u32(info[12 + G] + i32(i) * 9);
+    let b = u32(info[13 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_L0_inv(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[12 + G] + i32(i) * 9);
+    let b = u32(info[13 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -423,16 +428,47 @@ fn st_L0_inv(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ldj_L0_inv(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
-    let base = info[12u];
+    let base = info[13u];
     let b = u32(base + i32(j) * 9);
     return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u])), sgn);
 }
+fn ldj_cell_x(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
+    let base = info[16u];
+    let b = u32(base + i32(j) * 9);
+    return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u])), sgn);
+}
+fn ldj_cell_y(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
+    let base = info[17u];
+    let b = u32(base + i32(j) * 9);
+    return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u])), sgn);
+}
+fn ldj_cell_z(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
+    let base = info[18u];
+    let b = u32(base + i32(j) * 9);
+    return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u])), sgn);
+}
+fn ld_cell_own(i: u32) -> mat3x3<f32> {
+    let b = u32(info[19 + G] + i32(i) * 9);
+    return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
+}
+fn st_cell_own(i: u32, v: mat3x3<f32>) {
+    let b = u32(info[19 + G] + i32(i) * 9);
+    data[b] = v[0][0];
+    data[b + 1u] = v[1][0];
+    data[b + 2u] = v[2][0];
+    data[b + 3u] = v[0][1];
+    data[b + 4u] = v[1][1];
+    data[b + 5u] = v[2][1];
+    data[b + 6u] = v[0][2];
+    data[b + 7u] = v[1][2];
+    data[b + 8u] = v[2][2];
+}
 fn ld_P(i: u32) -> mat3x3<f32> {
-    let b = u32(info[15 + G] + i32(i) * 9);
+    let b = u32(info[20 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_P(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[15 + G] + i32(i) * 9);
+    let b = u32(info[20 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -444,16 +480,16 @@ fn st_P(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ldj_P(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
-    let base = info[15u];
+    let base = info[20u];
     let b = u32(base + i32(j) * 9);
     return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u])), sgn);
 }
 fn ld_Q(i: u32) -> mat3x3<f32> {
-    let b = u32(info[16 + G] + i32(i) * 9);
+    let b = u32(info[21 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_Q(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[16 + G] + i32(i) * 9);
+    let b = u32(info[21 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -465,15 +501,15 @@ fn st_Q(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn prm_quadratic_correction(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 12u;
     return params[b];
 }
 fn prm_clamp_normal(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 17u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm_clamp_at(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 20u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -488,6 +524,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // pairsum quadratic_stress: accumulators
     var Q: mat3x3<f32> = mat3x3<f32>();
     var back: mat3x3<f32> = mat3x3<f32>();
+    var cell_2: mat3x3<f32> = mat3x3<f32>();
     let clamp_normal_i = prm_clamp_normal(i);
     let clamp_at_i = prm_clamp_at(i);
     let x_i = ld_x(i);
@@ -536,7 +573,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             if (r2 >= rc * rc || r2 == 0.0) { continue; }
             let x_ij = (dxv * sgn);
             let r_ij = sqrt(r2);
-            // pairsum quadratic_stress (stdlib/solid/total_lagrangian.sph:160)
+            // pairsum quadratic_stress (stdlib/solid/total_lagrangian.sph:217)
             if ((body_i == ldj_body(j, sgn))) {
                 let X_j = (x_i - x_ij);
                 let n_2 = clamp_normal_i;
@@ -552,11 +589,21 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 let clamped_3 = clamped;
                 let side_j = select(a_2, (((2.0 * dot(a_2, n_4)) * n_4) - a_2), clamped_3);
                 back = back + (ldj_vol(j, sgn) * outer(((P_i * (L0_inv_i * g0)) - side_j), X_ij));
+                let s_2 = ldj_axis_sign(j, sgn);
+                let A_x = (dot(s_2, vec3<f32>(1.0, 0.0, 0.0)) * ldj_cell_x(j, sgn));
+                let A_y = (dot(s_2, vec3<f32>(0.0, 1.0, 0.0)) * ldj_cell_y(j, sgn));
+                let A_z = (dot(s_2, vec3<f32>(0.0, 0.0, 1.0)) * ldj_cell_z(j, sgn));
+                let a_3 = g0;
+                let cell_j = (((dot(a_3, vec3<f32>(1.0, 0.0, 0.0)) * A_x) + (dot(a_3, vec3<f32>(0.0, 1.0, 0.0)) * A_y)) + (dot(a_3, vec3<f32>(0.0, 0.0, 1.0)) * A_z));
+                let A = cell_j;
+                let n_5 = clamp_normal_i;
+                let clamped_4 = clamped;
+                cell_2 = cell_2 + (ldj_vol(j, sgn) * sel_m(A, ((2.0 * outer(n_5, (transpose(A) * n_5))) - A), clamped_4));
             }
         }
         }}}
     }
     // then quadratic_stress
-    Q = (P_i - ((0.5 * prm_quadratic_correction(i)) * back));
+    Q = (((P_i - ((0.5 * prm_quadratic_correction(i)) * back)) + ld_cell_own(i)) - cell_2);
     st_Q(i, Q);
 }

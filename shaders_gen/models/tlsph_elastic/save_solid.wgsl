@@ -64,31 +64,31 @@ fn st_u(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn ld_x_0(i: u32) -> vec3<f32> {
-    let b = u32(info[20 + G] + i32(i) * 3);
+    let b = u32(info[25 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_x_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[20 + G] + i32(i) * 3);
+    let b = u32(info[25 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_v_0(i: u32) -> vec3<f32> {
-    let b = u32(info[21 + G] + i32(i) * 3);
+    let b = u32(info[26 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_v_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[21 + G] + i32(i) * 3);
+    let b = u32(info[26 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_u_0(i: u32) -> vec3<f32> {
-    let b = u32(info[22 + G] + i32(i) * 3);
+    let b = u32(info[27 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_u_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[22 + G] + i32(i) * 3);
+    let b = u32(info[27 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];

@@ -34,47 +34,47 @@ fn inv(a: mat3x3<f32>) -> mat3x3<f32> {
     return (1.0 / det) * transpose(mat3x3<f32>(r0, r1, r2));
 }
 fn ld_rho(i: u32) -> f32 {
-    let b = u32(info[22 + G] + i32(i) * 1);
+    let b = u32(info[25 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho(i: u32, v: f32) {
-    let b = u32(info[22 + G] + i32(i) * 1);
+    let b = u32(info[25 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_p(i: u32) -> f32 {
-    let b = u32(info[28 + G] + i32(i) * 1);
+    let b = u32(info[31 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p(i: u32, v: f32) {
-    let b = u32(info[28 + G] + i32(i) * 1);
+    let b = u32(info[31 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_p_over_rho2(i: u32) -> f32 {
-    let b = u32(info[31 + G] + i32(i) * 1);
+    let b = u32(info[34 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p_over_rho2(i: u32, v: f32) {
-    let b = u32(info[31 + G] + i32(i) * 1);
+    let b = u32(info[34 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_c(i: u32) -> f32 {
-    let b = u32(info[34 + G] + i32(i) * 1);
+    let b = u32(info[37 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_c(i: u32, v: f32) {
-    let b = u32(info[34 + G] + i32(i) * 1);
+    let b = u32(info[37 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 0u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 6u;
     return params[b];
 }
 fn prm_gamma(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 7u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -362,7 +362,7 @@ fn pos3(p: u32) -> vec3<f32> {
     let b = u32(info[7u] + i32(p) * 3);
     return vec3<f32>(data[b + 0u], data[b + 1u], data[b + 2u]);
 }
-fn h_of(p: u32) -> f32 { return data[u32(info[25u] + i32(p))]; }
+fn h_of(p: u32) -> f32 { return data[u32(info[28u] + i32(p))]; }
 fn ld_x(i: u32) -> vec3<f32> {
     let b = u32(info[7 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
@@ -380,84 +380,84 @@ fn ldj_vol(j: u32, sgn: vec3<f32>) -> f32 {
     return data[b];
 }
 fn ld_body(i: u32) -> f32 {
-    let b = u32(info[16 + G] + i32(i) * 1);
+    let b = u32(info[19 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_body(i: u32, v: f32) {
-    let b = u32(info[16 + G] + i32(i) * 1);
+    let b = u32(info[19 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_body(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[16u + ints[j]];
+    let base = info[19u + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
 fn ldj_rho(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[22u];
+    let base = info[25u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
 fn ld_p(i: u32) -> f32 {
-    let b = u32(info[28 + G] + i32(i) * 1);
+    let b = u32(info[31 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p(i: u32, v: f32) {
-    let b = u32(info[28 + G] + i32(i) * 1);
+    let b = u32(info[31 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_p(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[28u + ints[j]];
+    let base = info[31u + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
 fn ld_p_over_rho2(i: u32) -> f32 {
-    let b = u32(info[31 + G] + i32(i) * 1);
+    let b = u32(info[34 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p_over_rho2(i: u32, v: f32) {
-    let b = u32(info[31 + G] + i32(i) * 1);
+    let b = u32(info[34 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_c(i: u32) -> f32 {
-    let b = u32(info[34 + G] + i32(i) * 1);
+    let b = u32(info[37 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_c(i: u32, v: f32) {
-    let b = u32(info[34 + G] + i32(i) * 1);
+    let b = u32(info[37 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_p_wall(i: u32) -> f32 {
-    let b = u32(info[40 + G] + i32(i) * 1);
+    let b = u32(info[43 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p_wall(i: u32, v: f32) {
-    let b = u32(info[40 + G] + i32(i) * 1);
+    let b = u32(info[43 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_u(i: u32) -> vec3<f32> {
-    let b = u32(info[43 + G] + i32(i) * 3);
+    let b = u32(info[46 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_u(i: u32, v: vec3<f32>) {
-    let b = u32(info[43 + G] + i32(i) * 3);
+    let b = u32(info[46 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ldj_u(j: u32, sgn: vec3<f32>) -> vec3<f32> {
-    let base = info[43u + ints[j]];
+    let base = info[46u + ints[j]];
     if (base == -2147483648) { return vec3<f32>(0.0); }
     let b = u32(base + i32(j) * 3);
     return (vec3<f32>(data[b], data[b + 1u], data[b + 2u]) * sgn);
 }
 fn ld_L0_inv(i: u32) -> mat3x3<f32> {
-    let b = u32(info[55 + G] + i32(i) * 9);
+    let b = u32(info[61 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_L0_inv(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[55 + G] + i32(i) * 9);
+    let b = u32(info[61 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -469,11 +469,11 @@ fn st_L0_inv(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ld_H_linear(i: u32) -> mat3x3<f32> {
-    let b = u32(info[58 + G] + i32(i) * 9);
+    let b = u32(info[64 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_H_linear(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[58 + G] + i32(i) * 9);
+    let b = u32(info[64 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -485,31 +485,31 @@ fn st_H_linear(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 0u;
     return params[b];
 }
 fn prm_gravity(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 2u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 2u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 6u;
     return params[b];
 }
 fn prm_gamma(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 7u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 17u;
     return params[b];
 }
 fn prm_clamp_normal(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 24u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm_clamp_at(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 27u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -587,7 +587,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 weighted = weighted + ((ldj_p(j, sgn) + (ldj_rho(j, sgn) * dot(gravity_i, x_ij))) * W_ij);
                 weight = weight + W_ij;
             }
-            // pairsum deformation_gradient (stdlib/solid/total_lagrangian.sph:111)
+            // pairsum deformation_gradient (stdlib/solid/total_lagrangian.sph:129)
             if (in_groups(4u, ints[j])) {
                 if ((body_i == ldj_body(j, sgn))) {
                     let a = ldj_u(j, sgn);

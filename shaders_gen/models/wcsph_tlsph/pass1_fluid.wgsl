@@ -358,7 +358,7 @@ fn pos3(p: u32) -> vec3<f32> {
     let b = u32(info[7u] + i32(p) * 3);
     return vec3<f32>(data[b + 0u], data[b + 1u], data[b + 2u]);
 }
-fn h_of(p: u32) -> f32 { return data[u32(info[25u] + i32(p))]; }
+fn h_of(p: u32) -> f32 { return data[u32(info[28u] + i32(p))]; }
 fn ld_v(i: u32) -> vec3<f32> {
     let b = u32(info[10 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
@@ -375,65 +375,65 @@ fn ldj_v(j: u32, sgn: vec3<f32>) -> vec3<f32> {
     return (vec3<f32>(data[b], data[b + 1u], data[b + 2u]) * sgn);
 }
 fn ldj_m(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[19u];
-    let b = u32(base + i32(j) * 1);
-    return data[b];
-}
-fn ld_rho(i: u32) -> f32 {
-    let b = u32(info[22 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_rho(i: u32, v: f32) {
-    let b = u32(info[22 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ldj_rho(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[22u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
-fn ld_h(i: u32) -> f32 {
+fn ld_rho(i: u32) -> f32 {
     let b = u32(info[25 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_rho(i: u32, v: f32) {
+    let b = u32(info[25 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ldj_rho(j: u32, sgn: vec3<f32>) -> f32 {
+    let base = info[25u];
+    let b = u32(base + i32(j) * 1);
+    return data[b];
+}
+fn ld_h(i: u32) -> f32 {
+    let b = u32(info[28 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_h(i: u32, v: f32) {
-    let b = u32(info[25 + G] + i32(i) * 1);
+    let b = u32(info[28 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_drho(i: u32) -> f32 {
-    let b = u32(info[46 + G] + i32(i) * 1);
+    let b = u32(info[52 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho(i: u32, v: f32) {
-    let b = u32(info[46 + G] + i32(i) * 1);
+    let b = u32(info[52 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_mu_max(i: u32) -> f32 {
-    let b = u32(info[73 + G] + i32(i) * 1);
+    let b = u32(info[91 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_mu_max(i: u32, v: f32) {
-    let b = u32(info[73 + G] + i32(i) * 1);
+    let b = u32(info[91 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 0u;
     return params[b];
 }
 fn prm_gravity(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 2u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 2u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm_delta(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 5u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 6u;
     return params[b];
 }
 fn prm_gamma(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 7u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -358,7 +358,7 @@ fn pos3(p: u32) -> vec3<f32> {
     let b = u32(info[7u] + i32(p) * 3);
     return vec3<f32>(data[b + 0u], data[b + 1u], data[b + 2u]);
 }
-fn h_of(p: u32) -> f32 { return data[u32(info[25u] + i32(p))]; }
+fn h_of(p: u32) -> f32 { return data[u32(info[28u] + i32(p))]; }
 fn ld_v(i: u32) -> vec3<f32> {
     let b = u32(info[10 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
@@ -375,113 +375,113 @@ fn ldj_v(j: u32, sgn: vec3<f32>) -> vec3<f32> {
     return (vec3<f32>(data[b], data[b + 1u], data[b + 2u]) * sgn);
 }
 fn ld_m(i: u32) -> f32 {
-    let b = u32(info[19 + G] + i32(i) * 1);
+    let b = u32(info[22 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_m(i: u32, v: f32) {
-    let b = u32(info[19 + G] + i32(i) * 1);
+    let b = u32(info[22 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_m(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[19u];
-    let b = u32(base + i32(j) * 1);
-    return data[b];
-}
-fn ld_rho(i: u32) -> f32 {
-    let b = u32(info[22 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_rho(i: u32, v: f32) {
-    let b = u32(info[22 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ldj_rho(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[22u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
+fn ld_rho(i: u32) -> f32 {
+    let b = u32(info[25 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_rho(i: u32, v: f32) {
+    let b = u32(info[25 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ldj_rho(j: u32, sgn: vec3<f32>) -> f32 {
+    let base = info[25u];
+    let b = u32(base + i32(j) * 1);
+    return data[b];
+}
 fn ld_p(i: u32) -> f32 {
-    let b = u32(info[28 + G] + i32(i) * 1);
+    let b = u32(info[31 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p(i: u32, v: f32) {
-    let b = u32(info[28 + G] + i32(i) * 1);
+    let b = u32(info[31 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_p(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[28u + ints[j]];
+    let base = info[31u + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
 fn ld_p_over_rho2(i: u32) -> f32 {
-    let b = u32(info[31 + G] + i32(i) * 1);
+    let b = u32(info[34 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p_over_rho2(i: u32, v: f32) {
-    let b = u32(info[31 + G] + i32(i) * 1);
+    let b = u32(info[34 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_p_over_rho2(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[31u];
-    let b = u32(base + i32(j) * 1);
-    return data[b];
-}
-fn ld_c(i: u32) -> f32 {
-    let b = u32(info[34 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_c(i: u32, v: f32) {
-    let b = u32(info[34 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ldj_c(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[34u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
+fn ld_c(i: u32) -> f32 {
+    let b = u32(info[37 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_c(i: u32, v: f32) {
+    let b = u32(info[37 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ldj_c(j: u32, sgn: vec3<f32>) -> f32 {
+    let base = info[37u];
+    let b = u32(base + i32(j) * 1);
+    return data[b];
+}
 fn ld_dv(i: u32) -> vec3<f32> {
-    let b = u32(info[37 + G] + i32(i) * 3);
+    let b = u32(info[40 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_dv(i: u32, v: vec3<f32>) {
-    let b = u32(info[37 + G] + i32(i) * 3);
+    let b = u32(info[40 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_a_interface(i: u32) -> vec3<f32> {
-    let b = u32(info[49 + G] + i32(i) * 3);
+    let b = u32(info[55 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_a_interface(i: u32, v: vec3<f32>) {
-    let b = u32(info[49 + G] + i32(i) * 3);
+    let b = u32(info[55 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_drho_interface(i: u32) -> f32 {
-    let b = u32(info[52 + G] + i32(i) * 1);
+    let b = u32(info[58 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho_interface(i: u32, v: f32) {
-    let b = u32(info[52 + G] + i32(i) * 1);
+    let b = u32(info[58 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_nu0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 8u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 9u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 10u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 11u;
     return params[b];
 }
 @compute @workgroup_size(64)

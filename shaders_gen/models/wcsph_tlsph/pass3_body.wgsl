@@ -362,7 +362,7 @@ fn pos3(p: u32) -> vec3<f32> {
     let b = u32(info[7u] + i32(p) * 3);
     return vec3<f32>(data[b + 0u], data[b + 1u], data[b + 2u]);
 }
-fn h_of(p: u32) -> f32 { return data[u32(info[25u] + i32(p))]; }
+fn h_of(p: u32) -> f32 { return data[u32(info[28u] + i32(p))]; }
 fn ld_x(i: u32) -> vec3<f32> {
     let b = u32(info[7 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
@@ -380,41 +380,47 @@ fn ldj_vol(j: u32, sgn: vec3<f32>) -> f32 {
     return data[b];
 }
 fn ld_body(i: u32) -> f32 {
-    let b = u32(info[16 + G] + i32(i) * 1);
+    let b = u32(info[19 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_body(i: u32, v: f32) {
-    let b = u32(info[16 + G] + i32(i) * 1);
+    let b = u32(info[19 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_body(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[16u + ints[j]];
+    let base = info[19u + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
 fn ld_u(i: u32) -> vec3<f32> {
-    let b = u32(info[43 + G] + i32(i) * 3);
+    let b = u32(info[46 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_u(i: u32, v: vec3<f32>) {
-    let b = u32(info[43 + G] + i32(i) * 3);
+    let b = u32(info[46 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ldj_u(j: u32, sgn: vec3<f32>) -> vec3<f32> {
-    let base = info[43u + ints[j]];
+    let base = info[46u + ints[j]];
+    if (base == -2147483648) { return vec3<f32>(0.0); }
+    let b = u32(base + i32(j) * 3);
+    return (vec3<f32>(data[b], data[b + 1u], data[b + 2u]) * sgn);
+}
+fn ldj_axis_sign(j: u32, sgn: vec3<f32>) -> vec3<f32> {
+    let base = info[49u + ints[j]];
     if (base == -2147483648) { return vec3<f32>(0.0); }
     let b = u32(base + i32(j) * 3);
     return (vec3<f32>(data[b], data[b + 1u], data[b + 2u]) * sgn);
 }
 fn ld_L0_inv(i: u32) -> mat3x3<f32> {
-    let b = u32(info[55 + G] + i32(i) * 9);
+    let b = u32(info[61 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_L0_inv(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[55 + G] + i32(i) * 9);
+    let b = u32(info[61 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -426,17 +432,51 @@ fn st_L0_inv(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ldj_L0_inv(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
-    let base = info[55u + ints[j]];
+    let base = info[61u + ints[j]];
     if (base == -2147483648) { return mat3x3<f32>(); }
     let b = u32(base + i32(j) * 9);
     return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u])), sgn);
 }
+fn ldj_cell_x(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
+    let base = info[70u + ints[j]];
+    if (base == -2147483648) { return mat3x3<f32>(); }
+    let b = u32(base + i32(j) * 9);
+    return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u])), sgn);
+}
+fn ldj_cell_y(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
+    let base = info[73u + ints[j]];
+    if (base == -2147483648) { return mat3x3<f32>(); }
+    let b = u32(base + i32(j) * 9);
+    return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u])), sgn);
+}
+fn ldj_cell_z(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
+    let base = info[76u + ints[j]];
+    if (base == -2147483648) { return mat3x3<f32>(); }
+    let b = u32(base + i32(j) * 9);
+    return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u])), sgn);
+}
+fn ld_cell_own(i: u32) -> mat3x3<f32> {
+    let b = u32(info[79 + G] + i32(i) * 9);
+    return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
+}
+fn st_cell_own(i: u32, v: mat3x3<f32>) {
+    let b = u32(info[79 + G] + i32(i) * 9);
+    data[b] = v[0][0];
+    data[b + 1u] = v[1][0];
+    data[b + 2u] = v[2][0];
+    data[b + 3u] = v[0][1];
+    data[b + 4u] = v[1][1];
+    data[b + 5u] = v[2][1];
+    data[b + 6u] = v[0][2];
+    data[b + 7u] = v[1][2];
+    data[b + 8u] = v[2][2];
+}
 fn ld_P(i: u32) -> mat3x3<f32> {
-    let b = u32(info[64 + G] + i32(i) * 9);
+    let b = u32(info[82 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_P(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[64 + G] + i32(i) * 9);
+    let b = u32(info[82 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -448,17 +488,17 @@ fn st_P(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ldj_P(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
-    let base = info[64u + ints[j]];
+    let base = info[82u + ints[j]];
     if (base == -2147483648) { return mat3x3<f32>(); }
     let b = u32(base + i32(j) * 9);
     return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u])), sgn);
 }
 fn ld_Q(i: u32) -> mat3x3<f32> {
-    let b = u32(info[67 + G] + i32(i) * 9);
+    let b = u32(info[85 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_Q(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[67 + G] + i32(i) * 9);
+    let b = u32(info[85 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -470,15 +510,15 @@ fn st_Q(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn prm_quadratic_correction(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 19u;
     return params[b];
 }
 fn prm_clamp_normal(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 24u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm_clamp_at(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 27u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -493,6 +533,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // pairsum quadratic_stress: accumulators
     var Q: mat3x3<f32> = mat3x3<f32>();
     var back: mat3x3<f32> = mat3x3<f32>();
+    var cell_2: mat3x3<f32> = mat3x3<f32>();
     let clamp_normal_i = prm_clamp_normal(i);
     let clamp_at_i = prm_clamp_at(i);
     let x_i = ld_x(i);
@@ -542,7 +583,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             if (r2 >= rc * rc || r2 == 0.0) { continue; }
             let x_ij = (dxv * sgn);
             let r_ij = sqrt(r2);
-            // pairsum quadratic_stress (stdlib/solid/total_lagrangian.sph:160)
+            // pairsum quadratic_stress (stdlib/solid/total_lagrangian.sph:217)
             if ((body_i == ldj_body(j, sgn))) {
                 let X_j = (x_i - x_ij);
                 let n_2 = clamp_normal_i;
@@ -558,11 +599,21 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 let clamped_3 = clamped;
                 let side_j = select(a_2, (((2.0 * dot(a_2, n_4)) * n_4) - a_2), clamped_3);
                 back = back + (ldj_vol(j, sgn) * outer(((P_i * (L0_inv_i * g0)) - side_j), X_ij));
+                let s_2 = ldj_axis_sign(j, sgn);
+                let A_x = (dot(s_2, vec3<f32>(1.0, 0.0, 0.0)) * ldj_cell_x(j, sgn));
+                let A_y = (dot(s_2, vec3<f32>(0.0, 1.0, 0.0)) * ldj_cell_y(j, sgn));
+                let A_z = (dot(s_2, vec3<f32>(0.0, 0.0, 1.0)) * ldj_cell_z(j, sgn));
+                let a_3 = g0;
+                let cell_j = (((dot(a_3, vec3<f32>(1.0, 0.0, 0.0)) * A_x) + (dot(a_3, vec3<f32>(0.0, 1.0, 0.0)) * A_y)) + (dot(a_3, vec3<f32>(0.0, 0.0, 1.0)) * A_z));
+                let A = cell_j;
+                let n_5 = clamp_normal_i;
+                let clamped_4 = clamped;
+                cell_2 = cell_2 + (ldj_vol(j, sgn) * sel_m(A, ((2.0 * outer(n_5, (transpose(A) * n_5))) - A), clamped_4));
             }
         }
         }}}
     }
     // then quadratic_stress
-    Q = (P_i - ((0.5 * prm_quadratic_correction(i)) * back));
+    Q = (((P_i - ((0.5 * prm_quadratic_correction(i)) * back)) + ld_cell_own(i)) - cell_2);
     st_Q(i, Q);
 }

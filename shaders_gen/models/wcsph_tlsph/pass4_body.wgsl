@@ -362,7 +362,7 @@ fn pos3(p: u32) -> vec3<f32> {
     let b = u32(info[7u] + i32(p) * 3);
     return vec3<f32>(data[b + 0u], data[b + 1u], data[b + 2u]);
 }
-fn h_of(p: u32) -> f32 { return data[u32(info[25u] + i32(p))]; }
+fn h_of(p: u32) -> f32 { return data[u32(info[28u] + i32(p))]; }
 fn ld_x(i: u32) -> vec3<f32> {
     let b = u32(info[7 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
@@ -395,56 +395,56 @@ fn ldj_vol(j: u32, sgn: vec3<f32>) -> f32 {
     return data[b];
 }
 fn ld_body(i: u32) -> f32 {
-    let b = u32(info[16 + G] + i32(i) * 1);
+    let b = u32(info[19 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_body(i: u32, v: f32) {
-    let b = u32(info[16 + G] + i32(i) * 1);
+    let b = u32(info[19 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_body(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[16u + ints[j]];
+    let base = info[19u + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
 fn ldj_m(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[19u];
+    let base = info[22u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
 fn ld_dv(i: u32) -> vec3<f32> {
-    let b = u32(info[37 + G] + i32(i) * 3);
+    let b = u32(info[40 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_dv(i: u32, v: vec3<f32>) {
-    let b = u32(info[37 + G] + i32(i) * 3);
+    let b = u32(info[40 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_u(i: u32) -> vec3<f32> {
-    let b = u32(info[43 + G] + i32(i) * 3);
+    let b = u32(info[46 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_u(i: u32, v: vec3<f32>) {
-    let b = u32(info[43 + G] + i32(i) * 3);
+    let b = u32(info[46 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ldj_u(j: u32, sgn: vec3<f32>) -> vec3<f32> {
-    let base = info[43u + ints[j]];
+    let base = info[46u + ints[j]];
     if (base == -2147483648) { return vec3<f32>(0.0); }
     let b = u32(base + i32(j) * 3);
     return (vec3<f32>(data[b], data[b + 1u], data[b + 2u]) * sgn);
 }
 fn ld_L0_inv(i: u32) -> mat3x3<f32> {
-    let b = u32(info[55 + G] + i32(i) * 9);
+    let b = u32(info[61 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_L0_inv(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[55 + G] + i32(i) * 9);
+    let b = u32(info[61 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -456,17 +456,17 @@ fn st_L0_inv(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ldj_L0_inv(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
-    let base = info[55u + ints[j]];
+    let base = info[61u + ints[j]];
     if (base == -2147483648) { return mat3x3<f32>(); }
     let b = u32(base + i32(j) * 9);
     return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u])), sgn);
 }
 fn ld_H(i: u32) -> mat3x3<f32> {
-    let b = u32(info[61 + G] + i32(i) * 9);
+    let b = u32(info[67 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_H(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[61 + G] + i32(i) * 9);
+    let b = u32(info[67 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -478,17 +478,17 @@ fn st_H(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ldj_H(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
-    let base = info[61u + ints[j]];
+    let base = info[67u + ints[j]];
     if (base == -2147483648) { return mat3x3<f32>(); }
     let b = u32(base + i32(j) * 9);
     return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u])), sgn);
 }
 fn ld_Q(i: u32) -> mat3x3<f32> {
-    let b = u32(info[67 + G] + i32(i) * 9);
+    let b = u32(info[85 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_Q(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[67 + G] + i32(i) * 9);
+    let b = u32(info[85 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -500,49 +500,49 @@ fn st_Q(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ldj_Q(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
-    let base = info[67u + ints[j]];
+    let base = info[85u + ints[j]];
     if (base == -2147483648) { return mat3x3<f32>(); }
     let b = u32(base + i32(j) * 9);
     return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u])), sgn);
 }
 fn ld_hourglass_rate2(i: u32) -> f32 {
-    let b = u32(info[70 + G] + i32(i) * 1);
+    let b = u32(info[88 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_hourglass_rate2(i: u32, v: f32) {
-    let b = u32(info[70 + G] + i32(i) * 1);
+    let b = u32(info[88 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 0u;
     return params[b];
 }
 fn prm_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 12u;
     return params[b];
 }
 fn prm_hourglass_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 16u;
     return params[b];
 }
 fn prm_viscosity_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 18u;
     return params[b];
 }
 fn prm_c_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 21u;
     return params[b];
 }
 fn prm_damping(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 22u;
     return params[b];
 }
 fn prm_clamp_normal(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 24u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm_clamp_at(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 27u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -614,7 +614,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             if (r2 >= rc * rc || r2 == 0.0) { continue; }
             let x_ij = (dxv * sgn);
             let r_ij = sqrt(r2);
-            // pairsum tl_momentum (stdlib/solid/total_lagrangian.sph:174)
+            // pairsum tl_momentum (stdlib/solid/total_lagrangian.sph:235)
             if ((body_i == ldj_body(j, sgn))) {
                 let X_j = (x_i - x_ij);
                 let n_2 = clamp_normal_i;

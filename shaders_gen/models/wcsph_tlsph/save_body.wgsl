@@ -54,49 +54,49 @@ fn st_v(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn ld_rho(i: u32) -> f32 {
-    let b = u32(info[22 + G] + i32(i) * 1);
+    let b = u32(info[25 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho(i: u32, v: f32) {
-    let b = u32(info[22 + G] + i32(i) * 1);
+    let b = u32(info[25 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_u(i: u32) -> vec3<f32> {
-    let b = u32(info[43 + G] + i32(i) * 3);
+    let b = u32(info[46 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_u(i: u32, v: vec3<f32>) {
-    let b = u32(info[43 + G] + i32(i) * 3);
+    let b = u32(info[46 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_x_0(i: u32) -> vec3<f32> {
-    let b = u32(info[76 + G] + i32(i) * 3);
+    let b = u32(info[94 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_x_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[76 + G] + i32(i) * 3);
+    let b = u32(info[94 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_v_0(i: u32) -> vec3<f32> {
-    let b = u32(info[79 + G] + i32(i) * 3);
+    let b = u32(info[97 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_v_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[79 + G] + i32(i) * 3);
+    let b = u32(info[97 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_u_0(i: u32) -> vec3<f32> {
-    let b = u32(info[85 + G] + i32(i) * 3);
+    let b = u32(info[103 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_u_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[85 + G] + i32(i) * 3);
+    let b = u32(info[103 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];

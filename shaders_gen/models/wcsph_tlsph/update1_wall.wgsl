@@ -34,11 +34,11 @@ fn inv(a: mat3x3<f32>) -> mat3x3<f32> {
     return (1.0 / det) * transpose(mat3x3<f32>(r0, r1, r2));
 }
 fn ld_dv(i: u32) -> vec3<f32> {
-    let b = u32(info[37 + G] + i32(i) * 3);
+    let b = u32(info[40 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_dv(i: u32, v: vec3<f32>) {
-    let b = u32(info[37 + G] + i32(i) * 3);
+    let b = u32(info[40 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];

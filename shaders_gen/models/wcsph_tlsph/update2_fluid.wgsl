@@ -54,111 +54,111 @@ fn st_v(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn ld_rho(i: u32) -> f32 {
-    let b = u32(info[22 + G] + i32(i) * 1);
+    let b = u32(info[25 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho(i: u32, v: f32) {
-    let b = u32(info[22 + G] + i32(i) * 1);
+    let b = u32(info[25 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_p(i: u32) -> f32 {
-    let b = u32(info[28 + G] + i32(i) * 1);
+    let b = u32(info[31 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p(i: u32, v: f32) {
-    let b = u32(info[28 + G] + i32(i) * 1);
+    let b = u32(info[31 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_p_over_rho2(i: u32) -> f32 {
-    let b = u32(info[31 + G] + i32(i) * 1);
+    let b = u32(info[34 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p_over_rho2(i: u32, v: f32) {
-    let b = u32(info[31 + G] + i32(i) * 1);
+    let b = u32(info[34 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_c(i: u32) -> f32 {
-    let b = u32(info[34 + G] + i32(i) * 1);
+    let b = u32(info[37 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_c(i: u32, v: f32) {
-    let b = u32(info[34 + G] + i32(i) * 1);
+    let b = u32(info[37 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_dv(i: u32) -> vec3<f32> {
-    let b = u32(info[37 + G] + i32(i) * 3);
+    let b = u32(info[40 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_dv(i: u32, v: vec3<f32>) {
-    let b = u32(info[37 + G] + i32(i) * 3);
+    let b = u32(info[40 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_drho(i: u32) -> f32 {
-    let b = u32(info[46 + G] + i32(i) * 1);
+    let b = u32(info[52 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho(i: u32, v: f32) {
-    let b = u32(info[46 + G] + i32(i) * 1);
+    let b = u32(info[52 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_a_interface(i: u32) -> vec3<f32> {
-    let b = u32(info[49 + G] + i32(i) * 3);
+    let b = u32(info[55 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_a_interface(i: u32, v: vec3<f32>) {
-    let b = u32(info[49 + G] + i32(i) * 3);
+    let b = u32(info[55 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_drho_interface(i: u32) -> f32 {
-    let b = u32(info[52 + G] + i32(i) * 1);
+    let b = u32(info[58 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho_interface(i: u32, v: f32) {
-    let b = u32(info[52 + G] + i32(i) * 1);
+    let b = u32(info[58 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_x_0(i: u32) -> vec3<f32> {
-    let b = u32(info[76 + G] + i32(i) * 3);
+    let b = u32(info[94 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_x_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[76 + G] + i32(i) * 3);
+    let b = u32(info[94 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_v_0(i: u32) -> vec3<f32> {
-    let b = u32(info[79 + G] + i32(i) * 3);
+    let b = u32(info[97 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_v_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[79 + G] + i32(i) * 3);
+    let b = u32(info[97 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_rho_0(i: u32) -> f32 {
-    let b = u32(info[82 + G] + i32(i) * 1);
+    let b = u32(info[100 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho_0(i: u32, v: f32) {
-    let b = u32(info[82 + G] + i32(i) * 1);
+    let b = u32(info[100 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 0u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 6u;
     return params[b];
 }
 fn prm_gamma(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 7u;
     return params[b];
 }
 @compute @workgroup_size(64)
