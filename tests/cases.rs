@@ -1105,7 +1105,8 @@ fn total_lagrangian_beam_vibration_2d_period_error_halves_from_4_to_8_particles_
 
 /// The vibrating beam at 4 particles across, undamped, for 0.5 s (four periods): the run ends
 /// without the watchdog stopping it, and the tip's largest displacement in the last period is
-/// within 1 % of the first's (measured: −0.09 %; −0.22 % over eight periods, −0.38 % over twelve).
+/// within 1 % of the first's (measured: −0.09 %, as before stop 56; before it −0.22 % over eight
+/// periods, −0.38 % over twelve).
 /// Ganzenmüller's hourglass force alone makes the stiffness unsymmetric and its fastest modes grow
 /// (scripts/tlsph_static.py): without the pair viscosity this run went unstable at 0.73 s (1.33 s
 /// with fixed particles as the clamp; 0.25 s at 8 across), and with the gradient nearly exact for

@@ -185,7 +185,11 @@ fn a_constant_vec_gathered_from_an_image_across_a_symmetry_plane_has_its_normal_
     // Wendland C2 in 2D: 7 / (4π h²) (1 − q/2)⁴ (2q + 1) for q = r/h < 2.
     let w = |r: f64| {
         let q = r / h;
-        if q < 2.0 { 7.0 / (4.0 * std::f64::consts::PI * h * h) * (1.0 - q / 2.0).powi(4) * (2.0 * q + 1.0) } else { 0.0 }
+        if q < 2.0 {
+            7.0 / (4.0 * std::f64::consts::PI * h * h) * (1.0 - q / 2.0).powi(4) * (2.0 * q + 1.0)
+        } else {
+            0.0
+        }
     };
     let mut images_seen = 0;
     for (i, p) in inp.x.iter().enumerate() {
