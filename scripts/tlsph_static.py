@@ -397,21 +397,26 @@ def jacobi_gradients(pos, dx, order):
     return [stepped[:n], stepped[n:]], pairs
 
 
+def bending_report(name):
+    """The cantilever, pure bending and the vibrating beam with the gradient in `gradients`."""
+    for alpha in (0.0, 10.0):
+        cant = [cantilever(a, 1, alpha, "odd") for a in (4, 8, 16)]
+        print(f"{name}, alpha = {alpha:g}, odd clamp | " + " / ".join(f"{100 * e:+6.2f} %" for e in cant))
+    for alpha in (0.0, 10.0):
+        bend = " / ".join(f"{pure_bending(a, 1, alpha):.4f}" for a in (4, 8, 16))
+        print(f"{name}, alpha = {alpha:g}, pure bending κ / κ_exact | {bend}")
+    for across in (4, 8):
+        for viscosity_alpha in (0.0, 0.1):
+            rate, period = growth(across, "odd", viscosity_alpha)
+            print(f"vibrating beam, {across} across, odd clamp, viscosity_alpha = {viscosity_alpha:g}: growth {rate:+10.4g}, period {period:.6f}")
+
+
 def jacobi():
     """The model's gradient (jacobi_gradients): the cantilever, pure bending and the vibrating beam."""
     global gradients
     first_order = gradients
     gradients = jacobi_gradients
-    for alpha in (0.0, 10.0):
-        cant = [cantilever(a, 1, alpha, "odd") for a in (4, 8, 16)]
-        print(f"one Jacobi step, alpha = {alpha:g}, odd clamp | " + " / ".join(f"{100 * e:+6.2f} %" for e in cant))
-    for alpha in (0.0, 10.0):
-        bend = " / ".join(f"{pure_bending(a, 1, alpha):.4f}" for a in (4, 8, 16))
-        print(f"one Jacobi step, alpha = {alpha:g}, pure bending κ / κ_exact | {bend}")
-    for across in (4, 8):
-        for viscosity_alpha in (0.0, 0.1):
-            rate, period = growth(across, "odd", viscosity_alpha)
-            print(f"vibrating beam, {across} across, odd clamp, viscosity_alpha = {viscosity_alpha:g}: growth {rate:+10.4g}, period {period:.6f}")
+    bending_report("one Jacobi step")
     gradients = first_order
 
 
@@ -438,16 +443,7 @@ def cell():
     global gradients, CELL
     first_order = gradients
     gradients, CELL = jacobi_gradients, True
-    for alpha in (0.0, 10.0):
-        cant = [cantilever(a, 1, alpha, "odd") for a in (4, 8, 16)]
-        print(f"cell energy, alpha = {alpha:g}, odd clamp | " + " / ".join(f"{100 * e:+6.2f} %" for e in cant))
-    for alpha in (0.0, 10.0):
-        bend = " / ".join(f"{pure_bending(a, 1, alpha):.4f}" for a in (4, 8, 16))
-        print(f"cell energy, alpha = {alpha:g}, pure bending κ / κ_exact | {bend}")
-    for across in (4, 8):
-        for viscosity_alpha in (0.0, 0.1):
-            rate, period = growth(across, "odd", viscosity_alpha)
-            print(f"vibrating beam, {across} across, odd clamp, viscosity_alpha = {viscosity_alpha:g}: growth {rate:+10.4g}, period {period:.6f}")
+    bending_report("cell energy")
     gradients, CELL = first_order, False
 
 
