@@ -172,7 +172,12 @@ pub fn analyse(levels: &[(String, RunReport)]) -> Convergence {
             Some(Trend::Converging { order, limit }) => Some((order, limit)),
             _ => None,
         };
-        let slope = q.errors().map(|e| error_order_if_falling(&h.iter().copied().zip(e).collect::<Vec<_>>()));
+        // An error that falls while the values' differences grow is passing through the
+        // reference, not converging to it: no order either.
+        let slope = q.errors().map(|e| match trend {
+            Some(Trend::Oscillating | Trend::NoOrder) => Err("none: the values do not converge"),
+            _ => error_order_if_falling(&h.iter().copied().zip(e).collect::<Vec<_>>()),
+        });
         if let Some((p, f0)) = order {
             let mut est =
                 ResultRow::new(format!("{}, Richardson estimate", row.quantity), &row.unit, f0, row.reference);
@@ -208,7 +213,7 @@ pub fn analyse(levels: &[(String, RunReport)]) -> Convergence {
     out.histories = error_plots(&levels, &followed);
     out.notes = vec![
         "Observed order p: through the three finest spacings, f(Δx) = f0 + C Δx^p; none when their differences change sign or do not shrink enough for p in [0.05, 10]. Richardson estimate: that f0. It is trustworthy only in the asymptotic range: a p far from the scheme's order, or from the error order q, says the spacings are not there yet.".into(),
-        "Error order q: the least-squares slope of ln |error| against ln Δx over every resolution (the error falls as Δx^q); none when the error changes sign or does not fall at every refinement.".into(),
+        "Error order q: the least-squares slope of ln |error| against ln Δx over every resolution (the error falls as Δx^q); none when the error changes sign or does not fall at every refinement, or when the values do not converge (no observed order p: an error that falls while the differences grow is passing through the reference).".into(),
     ];
     out
 }
@@ -357,6 +362,11 @@ mod tests {
         assert!((value("crater, error order").unwrap() - 2.0).abs() < 1e-9);
         assert!((value("gap, Richardson estimate").unwrap() - 20.0).abs() < 1e-9);
         assert_eq!(value("gap, error order"), None, "no reference, no error");
+        // Falling errors whose differences grow (+7.9 / +6.3 / +2.5 %): passing through, no order.
+        let through = vec![level("a", 1.0, 10.79, 1.0), level("b", 0.5, 10.63, 2.0), level("c", 0.25, 10.25, 4.0)];
+        let t = analyse(&through);
+        assert!(t.results.iter().all(|r| r.quantity != "crater, error order"), "no error order");
+        assert_eq!(t.tables[2].rows[0][5], "none: the values do not converge");
         let values = &c.tables[1];
         assert_eq!(values.header[3..], ["coarse (Δx = 1)", "ci (Δx = 0.5)", "fine (Δx = 0.25)"]);
         assert_eq!(values.rows[0][3], "6 (-40.00 %)");
