@@ -87,12 +87,7 @@ pub fn richardson(h: [f64; 3], f: [f64; 3], p: f64) -> f64 {
 /// The slope `q` of a least-squares line through `(ln h, ln |e|)`: the error falls as `h^q`.
 /// `None` with fewer than two errors above rounding (1e-9) at distinct spacings.
 pub fn error_order(points: &[(f64, f64)]) -> Option<f64> {
-    let pts: Vec<(f64, f64)> = points
-        .iter()
-        // An error at rounding level (an exact result) has no order.
-        .filter(|(h, e)| *h > 0.0 && e.is_finite() && e.abs() > 1e-9)
-        .map(|(h, e)| (h.ln(), e.abs().ln()))
-        .collect();
+    let pts: Vec<(f64, f64)> = above_rounding(points).map(|(h, e)| (h.ln(), e.abs().ln())).collect();
     let n = pts.len() as f64;
     let (mx, my) = (pts.iter().map(|p| p.0).sum::<f64>() / n, pts.iter().map(|p| p.1).sum::<f64>() / n);
     let sxx: f64 = pts.iter().map(|p| (p.0 - mx).powi(2)).sum();
@@ -100,16 +95,21 @@ pub fn error_order(points: &[(f64, f64)]) -> Option<f64> {
     (pts.len() >= 2 && sxx > 1e-24).then(|| sxy / sxx)
 }
 
+/// The points whose error is above rounding (1e-9): an error at rounding level (an exact
+/// result) has no order.
+fn above_rounding(points: &[(f64, f64)]) -> impl Iterator<Item = (f64, f64)> + '_ {
+    points.iter().copied().filter(|(h, e)| *h > 0.0 && e.is_finite() && e.abs() > 1e-9)
+}
+
 /// The error order where the errors keep one sign and fall at every refinement (points coarse
 /// to fine); otherwise why there is none. An error that passes through the reference, or grows
 /// on the way, gives a log-log slope that is no order of convergence.
 pub fn error_order_if_falling(points: &[(f64, f64)]) -> Result<f64, &'static str> {
-    let above_rounding: Vec<f64> =
-        points.iter().filter(|(h, e)| *h > 0.0 && e.is_finite() && e.abs() > 1e-9).map(|p| p.1).collect();
-    if above_rounding.windows(2).any(|w| w[0].signum() != w[1].signum()) {
+    let errors: Vec<f64> = above_rounding(points).map(|p| p.1).collect();
+    if errors.windows(2).any(|w| w[0].signum() != w[1].signum()) {
         return Err("none: the error changes sign");
     }
-    if above_rounding.windows(2).any(|w| w[1].abs() >= w[0].abs()) {
+    if errors.windows(2).any(|w| w[1].abs() >= w[0].abs()) {
         return Err("none: the error does not fall at every refinement");
     }
     error_order(points).ok_or("")

@@ -266,7 +266,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         if (r2 >= rc * rc || r2 == 0.0) { continue; }
         let x_ij = (dxv * sgn).xy;
         let r_ij = sqrt(r2);
-        // pairsum deformation_gradient (stdlib/solid/total_lagrangian.sph:129)
+        // pairsum deformation_gradient (stdlib/solid/total_lagrangian.sph:134)
         if ((body_i == ldj_body(j, sgn))) {
             let a = ldj_u(j, sgn);
             let n_2 = clamp_normal_i;

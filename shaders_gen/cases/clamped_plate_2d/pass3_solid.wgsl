@@ -227,7 +227,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         if (r2 >= rc * rc || r2 == 0.0) { continue; }
         let x_ij = (dxv * sgn).xy;
         let r_ij = sqrt(r2);
-        // pairsum quadratic_stress (stdlib/solid/total_lagrangian.sph:217)
+        // pairsum quadratic_stress (stdlib/solid/total_lagrangian.sph:222)
         if ((body_i == ldj_body(j, sgn))) {
             let X_j = (x_i - x_ij);
             let n_2 = clamp_normal_i;
@@ -243,12 +243,17 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let clamped_3 = clamped;
             let side_j = select(a_2, (((2.0 * dot(a_2, n_4)) * n_4) - a_2), clamped_3);
             back = back + (ldj_vol(j, sgn) * outer(((P_i * (L0_inv_i * g0)) - side_j), X_ij));
+            let A_x = ldj_cell_x(j, sgn);
+            let A_y = ldj_cell_y(j, sgn);
+            let A_z = ldj_cell_z(j, sgn);
             let s_2 = ldj_axis_sign(j, sgn);
-            let A_x = (dot(s_2, vec2<f32>(1.0, 0.0)) * ldj_cell_x(j, sgn));
-            let A_y = (dot(s_2, vec2<f32>(0.0, 1.0)) * ldj_cell_y(j, sgn));
-            let A_z = (dot(s_2, vec2<f32>(0.0, 0.0)) * ldj_cell_z(j, sgn));
             let a_3 = g0;
-            let cell_j = (((dot(a_3, vec2<f32>(1.0, 0.0)) * A_x) + (dot(a_3, vec2<f32>(0.0, 1.0)) * A_y)) + (dot(a_3, vec2<f32>(0.0, 0.0)) * A_z));
+            let A_x_2 = (dot(s_2, vec2<f32>(1.0, 0.0)) * vec2<f32>(1.0, 0.0));
+            let A_y_2 = (dot(s_2, vec2<f32>(0.0, 1.0)) * vec2<f32>(0.0, 1.0));
+            let A_z_2 = (dot(s_2, vec2<f32>(0.0, 0.0)) * vec2<f32>(0.0, 0.0));
+            let a_4 = a_3;
+            let a_5 = (((dot(a_4, vec2<f32>(1.0, 0.0)) * A_x_2) + (dot(a_4, vec2<f32>(0.0, 1.0)) * A_y_2)) + (dot(a_4, vec2<f32>(0.0, 0.0)) * A_z_2));
+            let cell_j = (((dot(a_5, vec2<f32>(1.0, 0.0)) * A_x) + (dot(a_5, vec2<f32>(0.0, 1.0)) * A_y)) + (dot(a_5, vec2<f32>(0.0, 0.0)) * A_z));
             let A = cell_j;
             let n_5 = clamp_normal_i;
             let clamped_4 = clamped;

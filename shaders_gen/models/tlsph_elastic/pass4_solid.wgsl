@@ -607,7 +607,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             if (r2 >= rc * rc || r2 == 0.0) { continue; }
             let x_ij = (dxv * sgn);
             let r_ij = sqrt(r2);
-            // pairsum tl_momentum (stdlib/solid/total_lagrangian.sph:235)
+            // pairsum tl_momentum (stdlib/solid/total_lagrangian.sph:239)
             if ((body_i == ldj_body(j, sgn))) {
                 let X_j = (x_i - x_ij);
                 let n_2 = clamp_normal_i;

@@ -587,7 +587,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 weighted = weighted + ((ldj_p(j, sgn) + (ldj_rho(j, sgn) * dot(gravity_i, x_ij))) * W_ij);
                 weight = weight + W_ij;
             }
-            // pairsum deformation_gradient (stdlib/solid/total_lagrangian.sph:129)
+            // pairsum deformation_gradient (stdlib/solid/total_lagrangian.sph:134)
             if (in_groups(4u, ints[j])) {
                 if ((body_i == ldj_body(j, sgn))) {
                     let a = ldj_u(j, sgn);

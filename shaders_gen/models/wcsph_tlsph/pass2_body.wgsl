@@ -777,7 +777,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 a_interface = a_interface + ((pressure + artificial) + laminar);
                 drho_interface = drho_interface + ((rho_i * volume_j) * dot((v_i - ldj_v(j, sgn)), gradW_ij));
             }
-            // pairsum quadratic_gradient (stdlib/solid/total_lagrangian.sph:170)
+            // pairsum quadratic_gradient (stdlib/solid/total_lagrangian.sph:175)
             if (in_groups(4u, ints[j])) {
                 if ((body_i == ldj_body(j, sgn))) {
                     let X_j = (x_i - x_ij);
