@@ -83,6 +83,7 @@ fn elastic_store<T: crate::particles::Real>(n: usize) -> Result<(Plan, Store<T>)
         planes: vec![],
         search: Default::default(),
         damping: None,
+        settled: vec![],
     };
     let plan = Plan::build(&model, &scene, None).map_err(|e| e.to_string())?;
     let mut store: Store<T> = build_store(&plan, &input, &[mat]).map_err(|e| e.to_string())?;

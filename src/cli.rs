@@ -495,6 +495,7 @@ fn run_plan(path: &Path, dim: usize, integrator: &str, precision: Precision, opt
         planes: vec![],
         search: Default::default(),
         damping: None,
+        settled: vec![],
     };
     match crate::schedule::Plan::build(&model, &scene, None) {
         Ok(plan) => {
@@ -531,6 +532,7 @@ pub fn plan_of(path: &Path, dim: usize) -> Result<crate::schedule::Plan, String>
         planes: vec![],
         search: Default::default(),
         damping: None,
+        settled: vec![],
     };
     crate::schedule::Plan::build(&checked.model, &scene, None).map_err(|e| render(&sources, &[*e.0]))
 }

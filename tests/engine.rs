@@ -829,3 +829,36 @@ fn the_nonlocal_plastic_strain_of_a_step_converges_at_second_order_to_the_helmho
     );
     assert!(errors[1] < 0.4 * errors[0], "not second order from 0.5 to 0.25 mm: {errors:?}");
 }
+
+/// A `select` whose condition reads only a parameter every material binds alike is taken when
+/// the plan is built (schedule/settle.rs): with `switch = 0` the pair sum that only the other
+/// branch reads is in no pass and its output is not stored, and the output is the branch taken;
+/// with `switch = 1` the sum is computed (Σ_j W_ij > 0 on every particle of the block).
+#[test]
+fn a_select_that_a_parameter_settles_drops_the_pair_sum_only_its_other_branch_reads() {
+    let m = model(
+        "use kernels\ngroup g\nkernel = wendland_c2\nparam switch: scalar [-] = 0\n\
+         pairsum shepard -> w_sum: scalar [1/m^3] { w_sum += W_ij }\n\
+         particle choose -> out: scalar [1/m^3] { out = select(switch > 0, w_sum, 7 [1/m^3]) }\n\
+         integrate { x' = v  v' = 0 }\n",
+    );
+    let (n, dx) = (6, 0.01);
+    let inp = input(2, lattice(2, n, dx), dx);
+    for switch in [0.0, 1.0] {
+        let mat = material(&m, &[("rho0", vec![1000.0]), ("h_ratio", vec![1.3]), ("switch", vec![switch])]);
+        let settled = m.params.iter().map(|p| (p.name == "switch").then(|| vec![switch])).collect();
+        let sc = pairsum::schedule::SceneSpec { settled, ..scene(&m, 2, &["out"], IntegratorKind::Euler) };
+        let mut b = backend::<f64>(&m, &sc, &inp, &[mat], vec![]);
+        let plan = b.plan();
+        let summed = plan.passes.iter().any(|p| p.pair_sums.iter().any(|e| plan.equation(*e).name == "shepard"));
+        let stored = plan.field_layout(m.field_id("w_sum").expect("w_sum")).is_some();
+        assert_eq!((summed, stored), (switch > 0.0, switch > 0.0), "switch = {switch}: shepard summed, w_sum stored");
+        b.evaluate(Default::default()).expect("evaluate");
+        let out = field_by_id(&b, "out").1;
+        if switch > 0.0 {
+            assert!(out.iter().all(|w| *w > 0.0), "switch = 1: Σ_j W_ij on every particle, got {out:?}");
+        } else {
+            assert!(out.iter().all(|w| *w == 7.0), "switch = 0: the branch taken, 7, got {out:?}");
+        }
+    }
+}

@@ -123,6 +123,7 @@ fn every_plasticity_thermal_and_eos_module_compose() {
                 planes: vec![],
                 search: Default::default(),
                 damping: None,
+                settled: vec![],
             };
             let plan = pairsum::schedule::Plan::build(&m, &scene, None).unwrap_or_else(|e| panic!("{what}: {e}"));
             let order: Vec<&str> =

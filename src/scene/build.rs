@@ -1085,7 +1085,9 @@ fn build(
         }
         None => None,
     };
-    let spec = SceneSpec { dim, groups, outputs, integrator, gravity, loads, constraints, planes, search, damping };
+    let settled = settled_params(&model, dim, &materials, &used);
+    let spec =
+        SceneSpec { dim, groups, outputs, integrator, gravity, loads, constraints, planes, search, damping, settled };
     let mut config =
         RunConfig { end_time, dt_max, reorder_every: case.reorder_every.unwrap_or(25), ..RunConfig::default() };
     if let Some(r) = &case.min_dt_ratio {
@@ -1816,6 +1818,28 @@ fn neighbour_search(cx: &mut Ctx, model: &Model, n: Option<&case::Neighbours>, v
             None
         }
     }
+}
+
+/// By parameter id: the value every material a body uses binds the parameter to (its default
+/// resolved), where they all agree; the plan takes the branches these decide
+/// (`schedule/settle.rs`).
+fn settled_params(
+    model: &Model,
+    dim: usize,
+    materials: &[MaterialInput],
+    used: &std::collections::BTreeSet<&str>,
+) -> Vec<Option<Vec<f64>>> {
+    let resolved: Vec<Vec<Option<Vec<f64>>>> = materials
+        .iter()
+        .filter(|m| used.contains(m.name.as_str()))
+        .map(|m| crate::engine::setup::resolve_material(model, dim, m))
+        .collect();
+    (0..model.params.len())
+        .map(|p| {
+            let first = resolved.first()?[p].clone()?;
+            resolved.iter().all(|r| r[p].as_ref() == Some(&first)).then_some(first)
+        })
+        .collect()
 }
 
 #[cfg(test)]

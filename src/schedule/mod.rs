@@ -1,7 +1,8 @@
 //! The scheduler: from a checked model and what a scene needs, the plan of one step.
 //!
 //! - **Dead code**: only the fields that a rate, a time step, a correction or an output needs are
-//!   kept, and only the equations that compute them (`live.rs`).
+//!   kept, and only the equations that compute them (`live.rs`), after the branches the case's
+//!   parameters decide are taken (`settle.rs`).
 //! - **Storage by group**: a field is stored only on the groups that read or write it.
 //! - **Fusion**: pair sums that do not depend on each other share one neighbour pass; per-particle
 //!   equations and `finally` blocks run in the tail of the pass that produces their inputs;
@@ -16,6 +17,7 @@ mod integrator;
 mod live;
 mod print;
 pub mod search;
+mod settle;
 
 pub use integrator::IntegratorKind;
 pub use live::stmts_of;
@@ -89,6 +91,9 @@ pub struct SceneSpec {
     /// Mass-proportional damping c (1/s): `−c v` joins the rate of `v` of every particle, to bring
     /// a loaded body to rest.
     pub damping: Option<f64>,
+    /// By parameter id: the value every material with particles binds it to, where they agree
+    /// (`settle.rs` takes the branches it decides); empty where no materials are known.
+    pub settled: Vec<Option<Vec<f64>>>,
 }
 
 /// The particles a load or a constraint acts on: a whole body, or a part (a region of a body).
@@ -295,6 +300,7 @@ impl Plan {
         check_components(model, scene.dim)?;
         let mut model = model.clone();
         let scene_params = integrator::scene_params(&mut model, scene);
+        settle::settle(&mut model, &scene.settled, scene.dim);
         let live = live::analyse(&model, scene)?;
         for (id, drop) in &live.unneeded {
             model.equations[id.index()] = live::pruned(&model.equations[id.index()], &model, drop);

@@ -75,6 +75,7 @@ pub fn scene(model: &Model, dim: usize, outputs: &[&str], integrator: Integrator
         planes: vec![],
         search: Default::default(),
         damping: None,
+        settled: vec![],
     }
 }
 

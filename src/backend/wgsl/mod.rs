@@ -233,6 +233,7 @@ mod tests {
                     planes: vec![],
                     search: Default::default(),
                     damping: None,
+                    settled: vec![],
                 };
                 let plan = Plan::build(&checked.model, &scene, None).expect("plan");
                 let kernels = generate(&plan, cells).unwrap_or_else(|e| panic!("{m} {dim}D: {e}"));
