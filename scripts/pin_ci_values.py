@@ -51,6 +51,7 @@ RUNS = [
     ("water_on_plate_tl_2d", {}),
     ("rings_2d", {}),
     ("hypervelocity_impact", {}),
+    ("hypervelocity_impact", {"damage_length": "2"}),
     ("taylor_bar", {}),
     ("taylor_bar_copper", {}),
     ("borvik_8mm", {}),

@@ -374,11 +374,6 @@ fn st_dx(i: u32, v: f32) {
     let b = u32(info[13 + G] + i32(i) * 1);
     data[b] = v;
 }
-fn ldj_dx(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[13u];
-    let b = u32(base + i32(j) * 1);
-    return data[b];
-}
 fn ld_m(i: u32) -> f32 {
     let b = u32(info[19 + G] + i32(i) * 1);
     return data[b];
@@ -558,15 +553,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 let spacing = dx_i;
                 if (((length(rest_2) > (0.5 * spacing)) && (length(rest_2) <= ((1.0001 * sqrt(2.0)) * spacing)))) {
                     let modulus = E_i;
-                    let spacing_2 = dx_i;
                     let slab = ((modulus * 1.0) / 1.5);
-                    let bar = ((modulus * 1.0) / spacing_2);
-                    let k_i = select(select(bar, slab, (2.0 == 2.0)), ((0.4 * modulus) * spacing_2), (2.0 == 3.0));
+                    let k_i = slab;
                     let modulus_2 = prm_E(j);
-                    let spacing_3 = ldj_dx(j, sgn);
                     let slab_2 = ((modulus_2 * 1.0) / 1.5);
-                    let bar_2 = ((modulus_2 * 1.0) / spacing_3);
-                    let k_j = select(select(bar_2, slab_2, (2.0 == 2.0)), ((0.4 * modulus_2) * spacing_3), (2.0 == 3.0));
+                    let k_j = slab_2;
                     let k_2 = (((2.0 * k_i) * k_j) / (k_i + k_j));
                     let along = (x_ij / r_ij);
                     let stretch = (r_ij - length(rest));

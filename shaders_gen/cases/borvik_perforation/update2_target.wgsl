@@ -151,28 +151,20 @@ fn st_T(i: u32, v: f32) {
     let b = u32(info[41 + G] + i32(i) * 1);
     data[b] = v;
 }
-fn ld_eps_nl(i: u32) -> f32 {
-    let b = u32(info[43 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_eps_nl(i: u32, v: f32) {
-    let b = u32(info[43 + G] + i32(i) * 1);
-    data[b] = v;
-}
 fn ld_drho(i: u32) -> f32 {
-    let b = u32(info[47 + G] + i32(i) * 1);
+    let b = u32(info[45 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho(i: u32, v: f32) {
-    let b = u32(info[47 + G] + i32(i) * 1);
+    let b = u32(info[45 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_ds(i: u32) -> mat3x3<f32> {
-    let b = u32(info[49 + G] + i32(i) * 6);
+    let b = u32(info[47 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_ds(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[49 + G] + i32(i) * 6);
+    let b = u32(info[47 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -181,83 +173,67 @@ fn st_ds(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_de(i: u32) -> f32 {
-    let b = u32(info[51 + G] + i32(i) * 1);
+    let b = u32(info[49 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_de(i: u32, v: f32) {
-    let b = u32(info[51 + G] + i32(i) * 1);
+    let b = u32(info[49 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_dv(i: u32) -> vec3<f32> {
-    let b = u32(info[53 + G] + i32(i) * 3);
+    let b = u32(info[51 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_dv(i: u32, v: vec3<f32>) {
-    let b = u32(info[53 + G] + i32(i) * 3);
+    let b = u32(info[51 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_a_contact(i: u32) -> vec3<f32> {
-    let b = u32(info[55 + G] + i32(i) * 3);
+    let b = u32(info[53 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_a_contact(i: u32, v: vec3<f32>) {
-    let b = u32(info[55 + G] + i32(i) * 3);
+    let b = u32(info[53 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
-fn ld_lap_sum(i: u32) -> f32 {
-    let b = u32(info[57 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_lap_sum(i: u32, v: f32) {
-    let b = u32(info[57 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ld_lap_weight(i: u32) -> f32 {
-    let b = u32(info[59 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_lap_weight(i: u32, v: f32) {
-    let b = u32(info[59 + G] + i32(i) * 1);
-    data[b] = v;
-}
 fn ld_x_0(i: u32) -> vec3<f32> {
-    let b = u32(info[61 + G] + i32(i) * 3);
+    let b = u32(info[55 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_x_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[61 + G] + i32(i) * 3);
+    let b = u32(info[55 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_v_0(i: u32) -> vec3<f32> {
-    let b = u32(info[63 + G] + i32(i) * 3);
+    let b = u32(info[57 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_v_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[63 + G] + i32(i) * 3);
+    let b = u32(info[57 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_rho_0(i: u32) -> f32 {
-    let b = u32(info[65 + G] + i32(i) * 1);
+    let b = u32(info[59 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho_0(i: u32, v: f32) {
-    let b = u32(info[65 + G] + i32(i) * 1);
+    let b = u32(info[59 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s_0(i: u32) -> mat3x3<f32> {
-    let b = u32(info[67 + G] + i32(i) * 6);
+    let b = u32(info[61 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s_0(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[67 + G] + i32(i) * 6);
+    let b = u32(info[61 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -266,35 +242,27 @@ fn st_s_0(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_e_0(i: u32) -> f32 {
-    let b = u32(info[69 + G] + i32(i) * 1);
+    let b = u32(info[63 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_e_0(i: u32, v: f32) {
-    let b = u32(info[69 + G] + i32(i) * 1);
+    let b = u32(info[63 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_D_0(i: u32) -> f32 {
-    let b = u32(info[71 + G] + i32(i) * 1);
+    let b = u32(info[65 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_D_0(i: u32, v: f32) {
-    let b = u32(info[71 + G] + i32(i) * 1);
+    let b = u32(info[65 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_eps_p_0(i: u32) -> f32 {
-    let b = u32(info[73 + G] + i32(i) * 1);
+    let b = u32(info[67 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_eps_p_0(i: u32, v: f32) {
-    let b = u32(info[73 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ld_eps_nl_0(i: u32) -> f32 {
-    let b = u32(info[75 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_eps_nl_0(i: u32, v: f32) {
-    let b = u32(info[75 + G] + i32(i) * 1);
+    let b = u32(info[67 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
@@ -349,28 +317,24 @@ fn prm_T_room(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 40u + 23u;
     return params[b];
 }
-fn prm_damage_length(i: u32) -> f32 {
+fn prm_D1(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 40u + 24u;
     return params[b];
 }
-fn prm_D1(i: u32) -> f32 {
+fn prm_D2(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 40u + 25u;
     return params[b];
 }
-fn prm_D2(i: u32) -> f32 {
+fn prm_D3(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 40u + 26u;
     return params[b];
 }
-fn prm_D3(i: u32) -> f32 {
+fn prm_D4(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 40u + 27u;
     return params[b];
 }
-fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 28u;
-    return params[b];
-}
 fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 28u;
     return params[b];
 }
 fn prm__constraint0(i: u32) -> vec3<f32> {
@@ -421,9 +385,6 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // restore eps_p
     var eps_p_i: f32 = ld_eps_p(i);
     eps_p_i = ld_eps_p_0(i);
-    // restore eps_nl
-    var eps_nl_i: f32 = ld_eps_nl(i);
-    eps_nl_i = ld_eps_nl_0(i);
     // radial_return
     var deps_p_i: f32 = ld_deps_p(i);
     let sig_eq = sqrt(((3.0 * 0.5) * ddot(s_i, s_i)));
@@ -442,11 +403,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     eps_p_i = (eps_p_i + d_2);
     deps_p_i = d_2;
     // damage
-    let l2 = (prm_damage_length(i) * prm_damage_length(i));
-    let nonlocal = ((eps_p_i + (l2 * ld_lap_sum(i))) / (1.0 + (l2 * ld_lap_weight(i))));
-    let increment = select(deps_p_i, max((nonlocal - eps_nl_i), 0.0), (prm_damage_length(i) > 0.0));
     let D = D_i;
-    let deps_p = increment;
+    let deps_p = deps_p_i;
+    let deps_p_2 = deps_p;
     let p = ld_p(i);
     let s_2 = s_i;
     let edot = ld_edot(i);
@@ -461,8 +420,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let s_4 = s_3;
     let triax = ((-p_2) / max(sqrt((1.5 * ddot(s_4, s_4))), 1e-30));
     let T_5 = T_4;
-    D_i = min((D + (deps_p / max((((prm_D1(i) + (prm_D2(i) * exp((prm_D3(i) * triax)))) * (1.0 + (prm_D4(i) * log(max(rate_2, 1.0))))) * (1.0 + (prm_D5(i) * min(max(((T_5 - prm_T_room(i)) / (prm_T_melt(i) - prm_T_room(i))), 0.0), 1.0)))), 1e-12))), 1.0);
-    eps_nl_i = nonlocal;
+    D_i = min((D + (deps_p_2 / max((((prm_D1(i) + (prm_D2(i) * exp((prm_D3(i) * triax)))) * (1.0 + (prm_D4(i) * log(max(rate_2, 1.0))))) * (1.0 + (prm_D5(i) * min(max(((T_5 - prm_T_room(i)) / (prm_T_melt(i) - prm_T_room(i))), 0.0), 1.0)))), 1e-12))), 1.0);
     // failed_density_floor
     rho_i = select(rho_i, max(rho_i, prm_rho0(i)), (D_i >= 1.0));
     // eos
@@ -487,5 +445,4 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     st_D(i, D_i);
     st_eps_p(i, eps_p_i);
     st_deps_p(i, deps_p_i);
-    st_eps_nl(i, eps_nl_i);
 }

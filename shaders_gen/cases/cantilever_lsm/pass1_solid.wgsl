@@ -493,14 +493,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             if (((length(rest_2) > (0.5 * spacing)) && (length(rest_2) <= ((1.0001 * sqrt(2.0)) * spacing)))) {
                 let modulus = E_i;
                 let spacing_2 = dx_i;
-                let slab = ((modulus * 1.0) / 1.5);
-                let bar = ((modulus * 1.0) / spacing_2);
-                let k_i = select(select(bar, slab, (3.0 == 2.0)), ((0.4 * modulus) * spacing_2), (3.0 == 3.0));
+                let k_i = ((0.4 * modulus) * spacing_2);
                 let modulus_2 = prm_E(j);
                 let spacing_3 = ldj_dx(j, sgn);
-                let slab_2 = ((modulus_2 * 1.0) / 1.5);
-                let bar_2 = ((modulus_2 * 1.0) / spacing_3);
-                let k_j = select(select(bar_2, slab_2, (3.0 == 2.0)), ((0.4 * modulus_2) * spacing_3), (3.0 == 3.0));
+                let k_j = ((0.4 * modulus_2) * spacing_3);
                 let k_2 = (((2.0 * k_i) * k_j) / (k_i + k_j));
                 let along = (x_ij / r_ij);
                 let stretch = (r_ij - length(rest));

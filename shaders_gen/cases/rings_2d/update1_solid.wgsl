@@ -172,10 +172,6 @@ fn prm_art_eps(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 16u + 8u;
     return params[b];
 }
-fn prm_art_axes(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 10u;
-    return params[b];
-}
 @compute @workgroup_size(64)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) li: u32) {
     let k = (wg.x + wg.y * nwg.x) * 64u + li;
@@ -209,19 +205,15 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let sigma_2 = sigma;
     let q = (trace(sigma_2) / 2.0);
     let b = (sigma_2 - (q * eye()));
-    let spread = sqrt((ddot(b, b) / select(2.0, 6.0, (2.0 == 3.0))));
-    let b_2 = b;
-    let spread_2 = spread;
-    let unit = select(1.0, spread_2, (spread_2 > 0.0));
-    let angle = (acos(min(max((determinant(div_m(b_2, unit)) / 2.0), -1.0), 1.0)) / 3.0);
-    let s1 = select((q + spread), (q + ((2.0 * spread) * cos(angle))), (2.0 == 3.0));
-    let s3 = select((q - spread), (q + ((2.0 * spread) * cos((angle + ((2.0 * 3.1415927) / 3.0))))), (2.0 == 3.0));
-    let s2 = select((q - spread), (((3.0 * q) - s1) - s3), (2.0 == 3.0));
+    let spread = sqrt((ddot(b, b) / 2.0));
+    let s1 = (q + spread);
+    let s3 = (q - spread);
+    let s2 = (q - spread);
     let d12 = select(select(0.0, (s1 / max((s1 - s2), s1)), (s1 > 0.0)), 1.0, (s2 > 0.0));
     let d23 = select(select(0.0, (s2 / max((s2 - s3), s2)), (s2 > 0.0)), 1.0, (s3 > 0.0));
     let d123 = ((d12 - d23) / select(1.0, (s1 - s3), (s1 > s3)));
     let r1 = (sigma_2 - (s1 * eye()));
-    let pulled = sel_m(max_m(sigma, mat2x2<f32>()), (((max(s1, 0.0) * eye()) + (d12 * r1)) + (d123 * sym((r1 * (sigma_2 - (s2 * eye())))))), (prm_art_axes(i) > 0.0));
+    let pulled = (((max(s1, 0.0) * eye()) + (d12 * r1)) + (d123 * sym((r1 * (sigma_2 - (s2 * eye()))))));
     R_art_i = div_m(((-prm_art_eps(i)) * pulled), (rho_i * rho_i));
     st_x(i, x_i);
     st_v(i, v_i);

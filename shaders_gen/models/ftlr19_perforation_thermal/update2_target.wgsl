@@ -349,27 +349,27 @@ fn prm_T_room(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 33u + 23u;
     return params[b];
 }
-fn prm_damage_length(i: u32) -> f32 {
+fn prm_D1(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 33u + 24u;
     return params[b];
 }
-fn prm_D1(i: u32) -> f32 {
+fn prm_D2(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 33u + 25u;
     return params[b];
 }
-fn prm_D2(i: u32) -> f32 {
+fn prm_D3(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 33u + 26u;
     return params[b];
 }
-fn prm_D3(i: u32) -> f32 {
+fn prm_D4(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 33u + 27u;
     return params[b];
 }
-fn prm_D4(i: u32) -> f32 {
+fn prm_D5(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 33u + 28u;
     return params[b];
 }
-fn prm_D5(i: u32) -> f32 {
+fn prm_damage_length(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 33u + 29u;
     return params[b];
 }
@@ -447,11 +447,16 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let sigma_y_2 = ((hardening_2 * rate_2) * (1.0 - pow(min(max(((T_4 - prm_T_room(i)) / (prm_T_melt(i) - prm_T_room(i))), 0.0), 1.0), prm_jc_m(i))));
     T_i = (T_i + (((prm_taylor_quinney(i) * sigma_y_2) * deps_p_i) / (prm_rho0(i) * prm_C_p(i))));
     // damage
+    let eps_p_3 = eps_p_i;
+    let lap_sum = ld_lap_sum(i);
+    let lap_weight = ld_lap_weight(i);
     let l2 = (prm_damage_length(i) * prm_damage_length(i));
-    let nonlocal = ((eps_p_i + (l2 * ld_lap_sum(i))) / (1.0 + (l2 * ld_lap_weight(i))));
-    let increment = select(deps_p_i, max((nonlocal - eps_nl_i), 0.0), (prm_damage_length(i) > 0.0));
+    let nonlocal = select(eps_p_3, ((eps_p_3 + (l2 * lap_sum)) / (1.0 + (l2 * lap_weight))), (prm_damage_length(i) > 0.0));
     let D = D_i;
-    let deps_p = increment;
+    let eps_nl_new = nonlocal;
+    let eps_nl = eps_nl_i;
+    let deps_p = deps_p_i;
+    let deps_p_2 = select(deps_p, max((eps_nl_new - eps_nl), 0.0), (prm_damage_length(i) > 0.0));
     let p = ld_p(i);
     let s_2 = s_i;
     let edot = ld_edot(i);
@@ -466,7 +471,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let s_4 = s_3;
     let triax = ((-p_2) / max(sqrt((1.5 * ddot(s_4, s_4))), 1e-30));
     let T_7 = T_6;
-    D_i = min((D + (deps_p / max((((prm_D1(i) + (prm_D2(i) * exp((prm_D3(i) * triax)))) * (1.0 + (prm_D4(i) * log(max(rate_3, 1.0))))) * (1.0 + (prm_D5(i) * min(max(((T_7 - prm_T_room(i)) / (prm_T_melt(i) - prm_T_room(i))), 0.0), 1.0)))), 1e-12))), 1.0);
+    D_i = min((D + (deps_p_2 / max((((prm_D1(i) + (prm_D2(i) * exp((prm_D3(i) * triax)))) * (1.0 + (prm_D4(i) * log(max(rate_3, 1.0))))) * (1.0 + (prm_D5(i) * min(max(((T_7 - prm_T_room(i)) / (prm_T_melt(i) - prm_T_room(i))), 0.0), 1.0)))), 1e-12))), 1.0);
     eps_nl_i = nonlocal;
     // failed_density_floor
     rho_i = select(rho_i, max(rho_i, prm_rho0(i)), (D_i >= 1.0));
