@@ -23,6 +23,14 @@ pub fn stmts_of(e: &Equation) -> Vec<&[ir::Stmt]> {
     }
 }
 
+/// The statement lists of an equation, to rewrite in place.
+pub fn stmts_of_mut(e: &mut Equation) -> Vec<&mut Vec<ir::Stmt>> {
+    match &mut e.kind {
+        EquationKind::PairSum { init, body, finally, .. } => vec![init, body, finally],
+        EquationKind::Particle { body } => vec![body],
+    }
+}
+
 fn expr_fields(e: &ir::Expr, out: &mut BTreeSet<FieldId>) {
     ir::walk_expr(e, &mut |x| {
         if let ExprKind::Field(f, _) = x.kind {
@@ -160,17 +168,9 @@ fn live_reads(model: &Model, e: &Equation) -> BTreeSet<(FieldId, Side)> {
 /// its writes, reads and parameters recomputed.
 pub fn pruned(e: &Equation, model: &Model, drop: &BTreeSet<FieldId>) -> Equation {
     let mut out = e.clone();
-    let prune = |stmts: &mut Vec<ir::Stmt>| {
+    for stmts in stmts_of_mut(&mut out) {
         drop_writes(stmts, drop);
         drop_unused_lets(stmts);
-    };
-    match &mut out.kind {
-        EquationKind::PairSum { init, body, finally, .. } => {
-            prune(init);
-            prune(body);
-            prune(finally);
-        }
-        EquationKind::Particle { body } => prune(body),
     }
     out.writes.retain(|f| !drop.contains(f));
     let (mut reads, mut params) = (BTreeSet::new(), BTreeSet::new());

@@ -10,7 +10,7 @@
 //! drop a whole pair sum and its stored fields.
 
 use crate::host_eval;
-use crate::ir::{self, Equation, EquationKind, Expr, ExprKind, FieldId, Global, LocalId, Model, ParamId, Reduce, Stmt};
+use crate::ir::{self, Equation, Expr, ExprKind, FieldId, Global, LocalId, Model, ParamId, Reduce, Stmt};
 
 /// Settles every equation of `model` by the parameter values `settled` (by parameter id; `None`
 /// or missing: not the same on every material). An equation that changes has its reads and
@@ -29,14 +29,8 @@ pub fn settle(model: &mut Model, settled: &[Option<Vec<f64>>], dim: usize) {
 
 fn settle_equation(e: &mut Equation, settled: &[Option<Vec<f64>>], dim: usize) -> bool {
     let mut changed = false;
-    let mut run = |stmts: &mut Vec<Stmt>| changed |= settle_stmts(stmts, settled, dim);
-    match &mut e.kind {
-        EquationKind::PairSum { init, body, finally, .. } => {
-            run(init);
-            run(body);
-            run(finally);
-        }
-        EquationKind::Particle { body } => run(body),
+    for stmts in super::live::stmts_of_mut(e) {
+        changed |= settle_stmts(stmts, settled, dim);
     }
     changed
 }
