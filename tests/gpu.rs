@@ -362,6 +362,19 @@ fn hypervelocity_impact_on_the_gpu_matches_the_cpu_through_the_shock() {
 }
 
 #[test]
+fn hypervelocity_impact_with_damage_over_a_length_on_the_gpu_matches_the_cpu_through_the_shock() {
+    // The damage driven by the plastic strain averaged over 2 mm of each body (`from own body`:
+    // the Laplacian's sum skips the other body's particles); 40 steps are 1.1 µs, the sphere in
+    // the plate from 0.16 µs on.
+    let path = std::path::PathBuf::from(case("hypervelocity_impact"));
+    let engines = run_both(&path, &[("damage_length", "2")], 40);
+    let (_, eps_nl) = stored_field(&engines.0.backend, "eps_nl");
+    let largest = common::largest("the CPU's nonlocal plastic strain after 40 steps", &eps_nl);
+    assert!(largest > 0.05, "hardly any flow: largest nonlocal plastic strain {largest}");
+    engines_match(&path, engines, 40, &["p", "eps_p", "eps_nl", "D"], 5e-3);
+}
+
+#[test]
 fn copper_taylor_bar_on_the_gpu_matches_the_cpu_against_its_wall_plane() {
     // Linear hardening, no heating: 30 steps of flow against the wall plane.
     case_matches_cpu("taylor_bar_copper", &[], 30, &["p", "eps_p"], 2e-3);
