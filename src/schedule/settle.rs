@@ -13,10 +13,11 @@ use crate::host_eval;
 use crate::ir::{self, Equation, Expr, ExprKind, FieldId, Global, LocalId, Model, ParamId, Reduce, Stmt};
 
 /// Settles every equation of `model` by the parameter values `settled` (by parameter id; `None`
-/// or missing: not the same on every material). An equation that changes has its reads and
-/// parameters recomputed (`live::pruned` with nothing to drop).
+/// or missing: not the same on every material; empty: no materials known, nothing settled). An
+/// equation that changes has its reads and parameters recomputed (`live::pruned` with nothing to
+/// drop).
 pub fn settle(model: &mut Model, settled: &[Option<Vec<f64>>], dim: usize) {
-    if settled.iter().all(Option::is_none) {
+    if settled.is_empty() {
         return;
     }
     for k in 0..model.equations.len() {
