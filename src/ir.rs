@@ -204,7 +204,11 @@ pub enum EquationKind {
     /// Summed over the neighbours j (in `sources`) of each particle i: `init`, then `body` per
     /// neighbour, then `finally`.
     PairSum {
+        /// Every group a neighbour may belong to, over all destination groups.
         sources: GroupSet,
+        /// The destination groups whose neighbours are fewer than `sources` (`use m on A` beside
+        /// `use m on B from S`), each with its own.
+        narrowed: Vec<(GroupId, GroupSet)>,
         /// `from own`: of `sources`, only the destination particle's own group.
         own: bool,
         accumulators: Vec<Accumulator>,
@@ -250,8 +254,15 @@ impl Equation {
     /// The groups a neighbour j may belong to when i is in group `g`.
     pub fn sources_for(&self, g: GroupId) -> GroupSet {
         match &self.kind {
-            EquationKind::PairSum { sources, own: true, .. } => sources.intersect(GroupSet::default().with(g)),
-            _ => self.sources(),
+            EquationKind::PairSum { sources, narrowed, own, .. } => {
+                let on_g = narrowed.iter().find(|(n, _)| *n == g).map_or(*sources, |(_, s)| *s);
+                if *own {
+                    on_g.intersect(GroupSet::default().with(g))
+                } else {
+                    on_g
+                }
+            }
+            EquationKind::Particle { .. } => GroupSet::default(),
         }
     }
     pub fn reads_field(&self, f: FieldId) -> bool {

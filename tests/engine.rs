@@ -211,6 +211,11 @@ fn a_constant_vec_gathered_from_an_image_across_a_symmetry_plane_has_its_normal_
 /// Two 6 × 6 blocks at 10 mm side by side along x, `gap` apart, the second one body 1 (and, with
 /// `second_group`, group 1); the Shepard sum Σ_j W_ij of every particle under the model `text`.
 fn shepard_sums_of_two_blocks(text: &str, gap: f64, second_group: bool) -> Vec<f64> {
+    field_of_two_blocks(text, "w_sum", gap, second_group)
+}
+
+/// As [`shepard_sums_of_two_blocks`], the field `name` of every particle.
+fn field_of_two_blocks(text: &str, name: &str, gap: f64, second_group: bool) -> Vec<f64> {
     let (n, dx) = (6, 0.01);
     let mut x = lattice(2, n, dx);
     let mut shifted: Vec<[f64; 3]> = x.iter().map(|p| [p[0] + n as f64 * dx + gap, p[1], 0.0]).collect();
@@ -223,9 +228,28 @@ fn shepard_sums_of_two_blocks(text: &str, gap: f64, second_group: bool) -> Vec<f
     }
     let m = model(text);
     let mat = material(&m, &[("rho0", vec![1000.0]), ("h_ratio", vec![1.3])]);
-    let mut b = backend::<f64>(&m, &scene(&m, 2, &["w_sum"], IntegratorKind::Euler), &blocks, &[mat], vec![]);
+    let mut b = backend::<f64>(&m, &scene(&m, 2, &[name], IntegratorKind::Euler), &blocks, &[mat], vec![]);
     b.evaluate(Default::default()).expect("evaluate");
-    field_by_id(&b, "w_sum").1
+    field_by_id(&b, name).1
+}
+
+/// A module used `on left` and again `on right from left` pairs the restrictions: the right
+/// block's particles sum over the left block only, the left block's over both. Each block's
+/// summed density equals what the module gives used once, from every group and from `left`.
+#[test]
+fn a_module_used_on_one_group_and_on_another_from_the_first_keeps_each_groups_neighbours() {
+    let text = |uses: &str| format!("use kernels\n{uses}\ngroup left, right\nkernel = wendland_c2\nintegrate {{ }}\n");
+    let rho = |uses: &str| field_of_two_blocks(&text(uses), "rho", 0.0, true);
+    let paired = rho("use density::summation on left\nuse density::summation on right from left");
+    let from_all = rho("use density::summation");
+    let from_left = rho("use density::summation from left");
+    let half = paired.len() / 2;
+    assert_eq!(paired[..half], from_all[..half], "the left block sums over both blocks");
+    assert_eq!(paired[half..], from_left[half..], "the right block sums over the left block only");
+    assert!(
+        (half..paired.len()).any(|k| paired[k] < from_all[k]),
+        "the right block's own particles are left out of its sums"
+    );
 }
 
 /// `from own`: a sum over neighbours of the particle's own group only. Two touching blocks, one

@@ -106,8 +106,8 @@ impl Checker {
 
     pub(crate) fn pairsum(&mut self, p: &ast::PairSumDef) {
         let what = format!("pairsum `{}`", p.name.name);
-        let dest = self.scoped_groups(p.on.as_ref(), false, p.name.span, &what);
-        let sources = self.scoped_groups(p.from.as_ref(), true, p.name.span, &what);
+        let dest = self.scoped_groups(p.on.as_ref(), p.name.span, &what);
+        let (sources, narrowed) = self.scoped_sources(p.from.as_ref(), dest, p.name.span, &what);
         let Some(stored) = self.resolve_outputs(&p.outputs, &what) else {
             return;
         };
@@ -159,8 +159,16 @@ impl Checker {
         self.temps.clear();
         let own = p.own || self.module_scope.own_group;
         let body = if p.own_body || self.module_scope.own_body { self.within_own_body(body) } else { body };
-        let kind =
-            EquationKind::PairSum { sources, own, accumulators, init, body, finally, compensated: p.compensated };
+        let kind = EquationKind::PairSum {
+            sources,
+            narrowed,
+            own,
+            accumulators,
+            init,
+            body,
+            finally,
+            compensated: p.compensated,
+        };
         self.push_equation(&p.name.name, kind, dest, stored, p.span);
     }
 
@@ -176,7 +184,7 @@ impl Checker {
 
     pub(crate) fn particle(&mut self, p: &ast::ParticleDef) {
         let what = format!("particle equation `{}`", p.name.name);
-        let dest = self.scoped_groups(p.on.as_ref(), false, p.name.span, &what);
+        let dest = self.scoped_groups(p.on.as_ref(), p.name.span, &what);
         let Some(outputs) = self.resolve_outputs(&p.outputs, &what) else {
             return;
         };
@@ -409,7 +417,7 @@ impl Checker {
     }
 
     pub(crate) fn integrate(&mut self, def: &ast::IntegrateDef) {
-        let dest = self.scoped_groups(def.on.as_ref(), false, def.span, "this `integrate` block");
+        let dest = self.scoped_groups(def.on.as_ref(), def.span, "this `integrate` block");
         for r in &def.rates {
             let Some(f) = self.model.field_id(&r.state.name) else {
                 self.unknown_field(&r.state, "this rate");
@@ -461,7 +469,7 @@ impl Checker {
         let Some(mut value) = self.expr_as(&def.value, &cx, Type::scalar(Unit::S), "a time step") else {
             return;
         };
-        let dest = self.scoped_groups(None, false, def.name.span, &format!("timestep `{}`", def.name.name));
+        let dest = self.scoped_groups(None, def.name.span, &format!("timestep `{}`", def.name.name));
         if dest.0 & self.model.all_groups().0 != self.model.all_groups().0 {
             reduce_only_on(&mut value, dest);
         }

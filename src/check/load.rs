@@ -218,7 +218,7 @@ impl<'s> Loader<'s> {
                 for u in uses {
                     if let Some(target) = self.resolve_use(&u.path, u.span, found.dir.as_deref()) {
                         match first_use.get(&target) {
-                            Some(first) if restriction(first) != restriction(&u) => {
+                            Some(first) if own_restriction(first) != own_restriction(&u) => {
                                 self.diags.push(used_twice(first, &u));
                             }
                             Some(_) => {}
@@ -282,25 +282,21 @@ impl<'s> Loader<'s> {
     }
 }
 
-/// What a `use` restricts its module to: the `on` and `from` group names (as sets) and `own`.
-type Restriction = (Option<std::collections::BTreeSet<String>>, Option<std::collections::BTreeSet<String>>, bool, bool);
-
-fn restriction(u: &ast::Use) -> Restriction {
-    let names = |l: &Option<Vec<Ident>>| l.as_ref().map(|l| l.iter().map(|i| i.name.clone()).collect());
-    (names(&u.on), names(&u.from), u.own, u.own_body)
+/// Whether a `use` keeps its module's pair sums to particle i's own group and to its own body.
+fn own_restriction(u: &ast::Use) -> (bool, bool) {
+    (u.own, u.own_body)
 }
 
-/// E0111: one module used twice by one file with different restrictions. A module's equations
-/// have one set of groups to run on and one of neighbours for all of them (the union over the
-/// paths that reach it), so `on A` with `on B from S` cannot keep S to B.
+/// E0111: one module used twice by one file, once `from own` (or `from own body`) and once not.
+/// The groups pair (`on A` beside `on B from S` keeps S to B), but `own` holds for a module's
+/// equations on every group or on none.
 fn used_twice(first: &ast::Use, second: &ast::Use) -> Diagnostic {
-    Diagnostic::error("E0111", format!("`{}` is used twice, with different restrictions", use_name(&second.path)))
+    Diagnostic::error("E0111", format!("`{}` is used twice, once `from own` and once not", use_name(&second.path)))
         .at(second.span, "used again")
         .also(first.span, "first used here")
         .note(
-            "a module's equations run on the union of the groups its `use` lines allow and see the union of \
-             their neighbours, so the restrictions do not pair; write the equations you want on one group \
-             in a module of their own",
+            "`from own` and `from own body` hold for all of a module's equations or for none; write the \
+             equations you want on one group in a module of their own",
         )
 }
 

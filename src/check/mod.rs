@@ -147,8 +147,9 @@ pub const RESERVED: [&str; 15] =
 pub(crate) struct Scope {
     /// The groups its equations run on.
     pub on: GroupSet,
-    /// The groups its pair sums see.
-    pub from: GroupSet,
+    /// For each group its equations run on (by index), the groups its pair sums see there: each
+    /// `use … on G from S` pairs S with G.
+    pub from: [GroupSet; 64],
     /// Its pair sums see only particle i's own group (`from own`).
     pub own_group: bool,
     /// Its pair sums see only particle i's own body (`from own body`).
@@ -157,7 +158,12 @@ pub(crate) struct Scope {
 
 impl Scope {
     /// Every group, no restriction.
-    const ALL: Scope = Scope { on: GroupSet::ALL, from: GroupSet::ALL, own_group: false, own_body: false };
+    const ALL: Scope = Scope { on: GroupSet::ALL, from: [GroupSet::ALL; 64], own_group: false, own_body: false };
+
+    /// The groups its pair sums see on group `g`.
+    pub fn sources_on(&self, g: ir::GroupId) -> GroupSet {
+        self.from[g.0 as usize]
+    }
 }
 
 /// The binding of a `let` whose value had an error: later uses stay quiet instead of reporting an
@@ -301,8 +307,8 @@ impl Checker {
     /// each says it).
     fn module_scopes(&mut self, modules: &[load::Module]) -> Vec<Scope> {
         let all = self.model.all_groups();
-        let none = Scope { on: GroupSet::default(), from: GroupSet::default(), own_group: true, own_body: true };
-        let root = Scope { on: all, from: all, own_group: false, own_body: false };
+        let none = Scope { on: GroupSet::default(), from: [GroupSet::default(); 64], own_group: true, own_body: true };
+        let root = Scope { on: all, from: [all; 64], own_group: false, own_body: false };
         let mut scopes: Vec<Scope> =
             modules.iter().enumerate().map(|(k, m)| if m.root || k == 0 { root } else { none }).collect();
         let mut edges = vec![];
@@ -320,12 +326,15 @@ impl Checker {
                 if sa.on.intersect(on).is_empty() {
                     continue;
                 }
-                let reach = Scope {
+                let mut reach = Scope {
                     on: sb.on.union(sa.on.intersect(on)),
-                    from: sb.from.union(sa.from.intersect(from)),
+                    from: sb.from,
                     own_group: sb.own_group && (sa.own_group || own),
                     own_body: sb.own_body && (sa.own_body || own_body),
                 };
+                for g in sa.on.intersect(on).iter(64) {
+                    reach.from[g.0 as usize] = sb.sources_on(g).union(sa.sources_on(g).intersect(from));
+                }
                 if reach != sb {
                     scopes[b] = reach;
                     changed = true;
@@ -337,16 +346,36 @@ impl Checker {
         }
     }
 
-    /// An equation's groups (`on`/`from`, default all) within the module's scope.
-    pub(crate) fn scoped_groups(
+    /// An equation's groups (`on`, default all) within the module's scope.
+    pub(crate) fn scoped_groups(&mut self, list: Option<&Vec<ast::Ident>>, span: Span, what: &str) -> GroupSet {
+        let scope = self.module_scope.on;
+        let set = self.groups(list).intersect(scope);
+        self.check_left_some(set, scope, false, span, what);
+        set
+    }
+
+    /// A pair sum's neighbour groups (`from`, default all) on each of its groups `dest`, within the
+    /// module's scope: their union, and the groups of `dest` that see fewer (each with its own).
+    pub(crate) fn scoped_sources(
         &mut self,
         list: Option<&Vec<ast::Ident>>,
-        sources: bool,
+        dest: GroupSet,
         span: Span,
         what: &str,
-    ) -> GroupSet {
-        let scope = if sources { self.module_scope.from } else { self.module_scope.on };
-        let set = self.groups(list).intersect(scope);
+    ) -> (GroupSet, Vec<(ir::GroupId, GroupSet)>) {
+        let from = self.groups(list);
+        let n = self.model.groups.len();
+        let on_each: Vec<_> = dest.iter(n).map(|g| (g, from.intersect(self.module_scope.sources_on(g)))).collect();
+        for &(g, s) in &on_each {
+            let on_g = format!("{what} on `{}`", self.model.groups[g.0 as usize].name);
+            self.check_left_some(s, self.module_scope.sources_on(g), true, span, &on_g);
+        }
+        let union = on_each.iter().fold(GroupSet::default(), |a, (_, s)| a.union(*s));
+        (union, on_each.into_iter().filter(|(_, s)| *s != union).collect())
+    }
+
+    /// E0110: the `use … on`/`from` clauses that reach an equation's module leave it no group.
+    fn check_left_some(&mut self, set: GroupSet, scope: GroupSet, sources: bool, span: Span, what: &str) {
         if set.is_empty() && scope != GroupSet::ALL && scope != self.model.all_groups() {
             let word = if sources { "neighbour" } else { "particle" };
             self.error(
@@ -359,7 +388,6 @@ impl Checker {
                     )),
             );
         }
-        set
     }
 
     fn collect_groups(&mut self, items: &[&Item]) {

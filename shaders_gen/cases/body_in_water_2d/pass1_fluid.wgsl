@@ -443,6 +443,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var diffusion: f32 = 0.0;
     // pairsum viscous_speed: accumulators
     var mu_max: f32 = (-pinf());
+    mu_max = 0.0;
     let rho0_i = prm_rho0(i);
     let gravity_i = prm_gravity(i);
     let delta_i = prm_delta(i);
@@ -502,7 +503,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 let term = (((((delta_i * h_i) * c0_i) * ldj_m(j, sgn)) / ldj_rho(j, sgn)) * dot(psi, gradW_ij));
                 diffusion = diffusion + select(0.0, term, (true && in_groups(1u, ints[j])));
             }
-            // pairsum viscous_speed (stdlib/timestep/lsr.sph:11)
+            // pairsum viscous_speed (stdlib/timestep/lsr.sph:13)
             mu_max = max(mu_max, abs(((h_ij * dot((v_i - ldj_v(j, sgn)), x_ij)) / (r_ij * r_ij))));
         }
         }}}

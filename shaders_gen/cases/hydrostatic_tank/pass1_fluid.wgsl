@@ -496,6 +496,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var dv: vec2<f32> = vec2<f32>(0.0);
     // pairsum viscous_speed: accumulators
     var mu_max: f32 = (-pinf());
+    mu_max = 0.0;
     let rho0_i = prm_rho0(i);
     let gravity_i = prm_gravity(i);
     let delta_i = prm_delta(i);
@@ -571,7 +572,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let pressure = (((-ldj_m(j, sgn)) * ((ldj_p_over_rho2(j, sgn) + p_over_rho2_i) + select(0.0, (((((-visc_a_i) * c_bar) * phi) + (visc_b_i * (phi * phi))) / rho_bar), (vr < 0.0)))) * gradW_ij);
             let laminar = (((((ldj_m(j, sgn) * 4.0) * nu0_i) * dot(x_ij, gradW_ij)) / ((rho_i + ldj_rho(j, sgn)) * (r_ij * r_ij))) * (v_i - ldj_v(j, sgn)));
             dv = dv + (pressure + laminar);
-            // pairsum viscous_speed (stdlib/timestep/lsr.sph:11)
+            // pairsum viscous_speed (stdlib/timestep/lsr.sph:13)
             mu_max = max(mu_max, abs(((h_ij * dot((v_i - ldj_v(j, sgn)), x_ij)) / (r_ij * r_ij))));
         }
         }}}

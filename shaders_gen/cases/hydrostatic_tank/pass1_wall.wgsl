@@ -443,6 +443,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var diffusion: f32 = 0.0;
     // pairsum viscous_speed: accumulators
     var mu_max: f32 = (-pinf());
+    mu_max = 0.0;
     let rho0_i = prm_rho0(i);
     let gravity_i = prm_gravity(i);
     let delta_i = prm_delta(i);
@@ -485,6 +486,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         for (var s = cell_start(cell); s < cell_start(cell + 1u); s++) {
             let j = sorted_particle(s);
             if (tr == 0u && j == i) { continue; }
+            if (!in_groups(1u, ints[j])) { continue; }
             let dxv = yi - pos3(j);
             let r2 = dot(dxv, dxv);
             let h_ij = 0.5 * (hi + h_of(j));
@@ -499,8 +501,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let rho_h = (rho0_i * (pow((1.0 + ((rho0_i * dot(gravity_i, x_ij)) / (((c0_i * c0_i) * rho0_i) / gamma_i))), (1.0 / gamma_i)) - 1.0));
             let psi = (((2.0 * ((rho_i - ldj_rho(j, sgn)) - rho_h)) * x_ij) / (r_ij * r_ij));
             let term = (((((delta_i * h_i) * c0_i) * ldj_m(j, sgn)) / ldj_rho(j, sgn)) * dot(psi, gradW_ij));
-            diffusion = diffusion + select(0.0, term, (false && in_groups(1u, ints[j])));
-            // pairsum viscous_speed (stdlib/timestep/lsr.sph:11)
+            diffusion = diffusion + select(0.0, term, (false && true));
+            // pairsum viscous_speed (stdlib/timestep/lsr.sph:13)
             mu_max = max(mu_max, abs(((h_ij * dot((v_i - ldj_v(j, sgn)), x_ij)) / (r_ij * r_ij))));
         }
         }}}

@@ -450,6 +450,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var weight: f32 = 0.0;
     // pairsum viscous_speed: accumulators
     var mu_max: f32 = (-pinf());
+    mu_max = 0.0;
     let gravity_i = prm_gravity(i);
     let v_i = ld_v(i);
     let xi = pos3(i);
@@ -486,6 +487,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         for (var s = cell_start(cell); s < cell_start(cell + 1u); s++) {
             let j = sorted_particle(s);
             if (tr == 0u && j == i) { continue; }
+            if (!in_groups(1u, ints[j])) { continue; }
             let dxv = yi - pos3(j);
             let r2 = dot(dxv, dxv);
             let h_ij = 0.5 * (hi + h_of(j));
@@ -496,11 +498,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let W_ij = kernel_w(r_ij, h_ij);
             let gradW_ij = kernel_grad(r_ij, h_ij) * x_ij;
             // pairsum extrapolated_pressure (stdlib/boundary/extrapolated_pressure.sph:15)
-            if (in_groups(1u, ints[j])) {
-                weighted = weighted + ((ldj_p(j, sgn) + (ldj_rho(j, sgn) * dot(gravity_i, x_ij))) * W_ij);
-                weight = weight + W_ij;
-            }
-            // pairsum viscous_speed (stdlib/timestep/lsr.sph:11)
+            weighted = weighted + ((ldj_p(j, sgn) + (ldj_rho(j, sgn) * dot(gravity_i, x_ij))) * W_ij);
+            weight = weight + W_ij;
+            // pairsum viscous_speed (stdlib/timestep/lsr.sph:13)
             mu_max = max(mu_max, abs(((h_ij * dot((v_i - ldj_v(j, sgn)), x_ij)) / (r_ij * r_ij))));
         }
         }}}
