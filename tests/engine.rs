@@ -886,3 +886,22 @@ fn a_select_that_a_parameter_settles_drops_the_pair_sum_only_its_other_branch_re
         }
     }
 }
+
+/// A drop of water with no neighbour (two particles far apart) limits the step by its sound speed
+/// alone: `timestep::lsr`'s signal speed is 0 there. Before, it was the empty maximum, −∞, and
+/// Δt_cv = C h / (c + mu_max) came out −0, which stopped the run at its first step.
+#[test]
+fn a_particle_without_neighbours_limits_the_step_by_its_sound_speed_alone() {
+    let m = model("use models::wcsph_fluid\n");
+    let dx = 0.01;
+    let inp = input(2, vec![[0.0; 3], [1.0, 0.0, 0.0]], dx);
+    let mat = material(&m, &[("rho0", vec![1000.0]), ("c0", vec![20.0]), ("h_ratio", vec![1.3])]);
+    let b = backend::<f64>(&m, &scene(&m, 2, &["rho"], IntegratorKind::Euler), &inp, &[mat], vec![]);
+    let mut e = Engine::new(b, RunConfig { end_time: 1.0, ..RunConfig::default() });
+    e.initialise().unwrap_or_else(|err| panic!("initialise: {err}"));
+    let (_, mu_max) = field_by_id(&e.backend, "mu_max");
+    assert_eq!(mu_max, vec![0.0, 0.0], "no neighbour, no signal speed");
+    // Δt = C h / c with C = 0.2 (cfl_C's default), h = 1.3 Δx, c = c0 at rest (ρ = ρ0).
+    let expected = 0.2 * 1.3 * dx / 20.0;
+    assert!((e.dt - expected).abs() < 1e-12 * expected, "first time step {} s, expected {expected} s", e.dt);
+}
