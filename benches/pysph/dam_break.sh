@@ -166,7 +166,7 @@ What differs (the compared figure is time per particle-step; read the per-evalua
 - Per evaluation, pairsum (models/wcsph_dbc.sph, pairsum plan dam_break_2d): one fused neighbour pass,
   fluid ← fluid|wall: continuity with Fourtakas density diffusion (δ = 0.1; a pow per fluid pair),
   momentum (pressure, Monaghan α = 0.1, laminar viscosity ν0 = 1e-6), the time step's viscous speed;
-  wall ← fluid|wall: continuity and viscous speed (wall–wall pairs are visited); then per particle:
+  wall ← fluid: continuity and viscous speed (wall–wall pairs are skipped in the search); then per particle:
   density floor (ρ ≥ ρ0 on walls, as PySPH's HG correction), Tait EOS, P/ρ². No XSPH.
 - Boundary: both are dynamic boundary particles (wall density from continuity, fixed positions).
 - Precision: PySPH's Cython/OpenMP build runs in f64 only; pairsum's f32 row has no PySPH counterpart.
