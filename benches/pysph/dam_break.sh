@@ -155,8 +155,10 @@ What differs (the compared figure is time per particle-step; read the per-evalua
   evaluation, correct (1 neighbour evaluation, 2 particle stages per step); the neighbour bins are
   rebuilt once per step (compute_accelerations: nnps.update) and the adaptive time step is reduced in
   Python after every step. pairsum symplectic (DualSPHysics): force evaluation, predict to t + Δt/2,
-  force evaluation, correct (2 neighbour evaluations, 2 particle stages per step); the cell list is
-  rebuilt for every evaluation. Per particle-step pairsum does twice PySPH's neighbour passes.
+  force evaluation, correct (2 neighbour evaluations, 2 particle stages per step). Neighbours come
+  from Verlet lists (the case's [neighbours], skin 0.1 of the cut-off) rebuilt when a particle may
+  have moved half the skin; the cell list behind them is built only then. Per particle-step
+  pairsum does twice PySPH's neighbour passes.
 - Per evaluation, PySPH (WCSPHScheme.get_equations, hg_correction, update_h, nu = 0, no delta-SPH):
   Group 1, per particle: TaitEOS on fluid, TaitEOSHGCorrection on boundary (ρ ≥ ρ0); Group 2, one
   neighbour loop per (destination, source) pair: fluid ← fluid: ContinuityEquation, MomentumEquation
