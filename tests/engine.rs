@@ -905,3 +905,19 @@ fn a_particle_without_neighbours_limits_the_step_by_its_sound_speed_alone() {
     let expected = 0.2 * 1.3 * dx / 20.0;
     assert!((e.dt - expected).abs() < 1e-12 * expected, "first time step {} s, expected {expected} s", e.dt);
 }
+
+/// `pairsum plan` names, on each group, the pair sums that see fewer groups than the pass: a wall
+/// whose continuity is paired with the fluid, beside a sum over every group, reads
+/// `on wall from fluid|wall: shepard, summation_density (from fluid)`.
+#[test]
+fn the_plan_names_a_pair_sum_that_sees_fewer_groups_than_its_pass() {
+    let m = model(
+        "use kernels\nuse density::summation on fluid\nuse density::summation on wall from fluid\n\
+         group fluid, wall\nkernel = wendland_c2\n\
+         pairsum shepard -> w_sum: scalar [1/m^3] { w_sum += W_ij }\nintegrate { }\n",
+    );
+    let sc = scene(&m, 2, &["rho", "w_sum"], IntegratorKind::Euler);
+    let text = pairsum::schedule::Plan::build(&m, &sc, None).expect("plan").describe(8);
+    assert!(text.contains("on fluid from fluid|wall: shepard, summation_density"), "{text}");
+    assert!(text.contains("on wall from fluid|wall: shepard, summation_density (from fluid)"), "{text}");
+}

@@ -8,6 +8,22 @@ fn names(plan: &Plan, ids: &[crate::ir::EqId]) -> String {
     ids.iter().map(|e| plan.equation(*e).name.as_str()).collect::<Vec<_>>().join(", ")
 }
 
+/// A pass variant's pair sums, each that sees fewer groups than the variant with its own
+/// (`continuity (from fluid)`).
+fn sums_with_their_neighbours(plan: &Plan, v: &super::PassVariant) -> String {
+    let m = &plan.model;
+    let each = v.pair_sums.iter().map(|e| {
+        let eq = plan.equation(*e);
+        let sources = eq.sources_for(v.group).intersect(v.sources);
+        if sources == v.sources {
+            eq.name.clone()
+        } else {
+            format!("{} (from {})", eq.name, m.group_names(sources))
+        }
+    });
+    each.collect::<Vec<_>>().join(", ")
+}
+
 fn bytes(plan: &Plan, fields: &[FieldId], real: usize) -> usize {
     fields.iter().filter_map(|f| plan.field_layout(*f)).map(|l| l.comps * real).sum()
 }
@@ -67,7 +83,7 @@ pub fn describe(plan: &Plan, real: usize) -> String {
                 "  on {} from {}: {}",
                 m.groups[v.group.index()].name,
                 m.group_names(v.sources),
-                names(plan, &v.pair_sums)
+                sums_with_their_neighbours(plan, v)
             );
         }
         let mut reads = p.reads.clone();
