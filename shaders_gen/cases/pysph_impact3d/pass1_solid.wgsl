@@ -4,8 +4,7 @@
 @group(0) @binding(1) var<storage, read> ints: array<u32>;
 @group(0) @binding(2) var<storage, read> params: array<f32>;
 @group(0) @binding(3) var<storage, read> info: array<i32>;
-@group(0) @binding(4) var<storage, read> grid: array<u32>;
-@group(0) @binding(5) var<storage, read> cells: array<u32>;
+@group(0) @binding(7) var<storage, read> lists: array<u32>;
 @group(0) @binding(6) var<storage, read_write> globals: array<f32>;
 const G: i32 = 0; // group solid
 fn pinf() -> f32 { return bitcast<f32>(0x7f800000u); }
@@ -34,313 +33,6 @@ fn inv(a: mat3x3<f32>) -> mat3x3<f32> {
     let r2 = cross(a[0], a[1]);
     let det = dot(a[0], r0);
     return (1.0 / det) * transpose(mat3x3<f32>(r0, r1, r2));
-}
-
-// ---- Software f64 (the CPU grid computes cells in f64; this replicates it bit for bit) ----
-// 64-bit unsigned integers are vec2<u32>(low word, high word).
-fn cl_shl(a: vec2<u32>, k: u32) -> vec2<u32> {
-    if (k == 0u) { return a; }
-    if (k >= 64u) { return vec2<u32>(0u); }
-    if (k >= 32u) { return vec2<u32>(0u, a.x << (k - 32u)); }
-    return vec2<u32>(a.x << k, (a.y << k) | (a.x >> (32u - k)));
-}
-fn cl_shr(a: vec2<u32>, k: u32) -> vec2<u32> {
-    if (k == 0u) { return a; }
-    if (k >= 64u) { return vec2<u32>(0u); }
-    if (k >= 32u) { return vec2<u32>(a.y >> (k - 32u), 0u); }
-    return vec2<u32>((a.x >> k) | (a.y << (32u - k)), a.y >> k);
-}
-// a >> k, with every bit shifted out ORed into bit 0 (the "sticky" bit of the rounding).
-fn cl_shr_jam(a: vec2<u32>, k: u32) -> vec2<u32> {
-    if (k == 0u) { return a; }
-    var lost: bool;
-    if (k >= 64u) {
-        lost = any(a != vec2<u32>(0u));
-    } else {
-        lost = any(cl_shl(a, 64u - k) != vec2<u32>(0u));
-    }
-    var r = cl_shr(a, k);
-    if (lost) { r.x = r.x | 1u; }
-    return r;
-}
-fn cl_add64(a: vec2<u32>, b: vec2<u32>) -> vec2<u32> {
-    let lo = a.x + b.x;
-    return vec2<u32>(lo, a.y + b.y + select(0u, 1u, lo < a.x));
-}
-fn cl_sub64(a: vec2<u32>, b: vec2<u32>) -> vec2<u32> {
-    return vec2<u32>(a.x - b.x, a.y - b.y - select(0u, 1u, a.x < b.x));
-}
-fn cl_lt64(a: vec2<u32>, b: vec2<u32>) -> bool {
-    return a.y < b.y || (a.y == b.y && a.x < b.x);
-}
-fn cl_clz64(a: vec2<u32>) -> u32 {
-    if (a.y != 0u) { return countLeadingZeros(a.y); }
-    return 32u + countLeadingZeros(a.x);
-}
-// The full 64-bit product of two u32.
-fn cl_mul32(a: u32, b: u32) -> vec2<u32> {
-    let a0 = a & 0xffffu;
-    let a1 = a >> 16u;
-    let b0 = b & 0xffffu;
-    let b1 = b >> 16u;
-    let p00 = a0 * b0;
-    let p01 = a0 * b1;
-    let p10 = a1 * b0;
-    let p11 = a1 * b1;
-    let mid = (p00 >> 16u) + (p01 & 0xffffu) + (p10 & 0xffffu);
-    return vec2<u32>((p00 & 0xffffu) | (mid << 16u), p11 + (p01 >> 16u) + (p10 >> 16u) + (mid >> 16u));
-}
-
-// A finite f64 is (-1)^neg * m * 2^(e - 52) with m a 53-bit integer whose bit 52 is set, or zero
-// (m = 0). inf = 1 marks an infinity (m, e unused).
-struct ClF64 {
-    neg: u32,
-    e: i32,
-    m: vec2<u32>,
-    inf: u32,
-}
-fn cl_zero() -> ClF64 {
-    return ClF64(0u, 0, vec2<u32>(0u), 0u);
-}
-fn cl_inf(neg: u32) -> ClF64 {
-    return ClF64(neg, 0, vec2<u32>(0u), 1u);
-}
-fn cl_is_zero(a: ClF64) -> bool {
-    return a.inf == 0u && a.m.x == 0u && a.m.y == 0u;
-}
-// Rounds sig * 2^(e - 62) (sig != 0 any 64-bit value, sticky bits jammed into bit 0) to a
-// 53-bit mantissa, to nearest, ties to even.
-fn cl_round(neg: u32, e0: i32, sig0: vec2<u32>) -> ClF64 {
-    var sig = sig0;
-    var e = e0;
-    if (sig.x == 0u && sig.y == 0u) { return cl_zero(); }
-    let lz = cl_clz64(sig);
-    if (lz == 0u) {
-        sig = cl_shr_jam(sig, 1u);
-        e = e + 1;
-    } else if (lz > 1u) {
-        sig = cl_shl(sig, lz - 1u);
-        e = e - i32(lz - 1u);
-    }
-    // The leading bit is bit 62: keep bits 62..10, round on bits 9..0.
-    let low = sig.x & 0x3ffu;
-    var m = cl_shr(sig, 10u);
-    if (low > 0x200u || (low == 0x200u && (m.x & 1u) == 1u)) {
-        m = cl_add64(m, vec2<u32>(1u, 0u));
-        if (m.y >= 0x200000u) {
-            m = cl_shr(m, 1u);
-            e = e + 1;
-        }
-    }
-    if (e > 1023) { return cl_inf(neg); }
-    if (e < -1022) { return ClF64(neg, 0, vec2<u32>(0u), 0u); }
-    return ClF64(neg, e, m, 0u);
-}
-// An f32 as f64 (exact). Callers pass finite values; non-finite ones give an infinity.
-fn cl_from_f32(x: f32) -> ClF64 {
-    let b = bitcast<u32>(x);
-    let neg = b >> 31u;
-    let ex = (b >> 23u) & 0xffu;
-    var mant = b & 0x7fffffu;
-    if (ex == 255u) { return cl_inf(neg); }
-    var e: i32;
-    if (ex == 0u) {
-        if (mant == 0u) { return ClF64(neg, 0, vec2<u32>(0u), 0u); }
-        // Subnormal: mant * 2^-149; normalise to a leading bit 23.
-        let s = countLeadingZeros(mant) - 8u;
-        mant = mant << s;
-        e = -126 - i32(s);
-    } else {
-        mant = mant | 0x800000u;
-        e = i32(ex) - 127;
-    }
-    // mant * 2^(e - 23) = (mant << 29) * 2^(e - 52)
-    return ClF64(neg, e, vec2<u32>(mant << 29u, mant >> 3u), 0u);
-}
-// From f64 bits (low word, high word); subnormals read as zero.
-fn cl_from_bits(b: vec2<u32>) -> ClF64 {
-    let neg = b.y >> 31u;
-    let ex = (b.y >> 20u) & 0x7ffu;
-    if (ex == 0x7ffu) { return cl_inf(neg); }
-    if (ex == 0u) { return ClF64(neg, 0, vec2<u32>(0u), 0u); }
-    return ClF64(neg, i32(ex) - 1023, vec2<u32>(b.x, (b.y & 0xfffffu) | 0x100000u), 0u);
-}
-fn cl_bits(a: ClF64) -> vec2<u32> {
-    let sign = a.neg << 31u;
-    if (a.inf != 0u) { return vec2<u32>(0u, sign | 0x7ff00000u); }
-    if (cl_is_zero(a)) { return vec2<u32>(0u, sign); }
-    return vec2<u32>(a.m.x, sign | (u32(a.e + 1023) << 20u) | (a.m.y & 0xfffffu));
-}
-// Rounded to the nearest f32 (zero below the normal f32 range).
-fn cl_to_f32(a: ClF64) -> f32 {
-    let sign = a.neg << 31u;
-    if (a.inf != 0u) { return bitcast<f32>(sign | 0x7f800000u); }
-    if (cl_is_zero(a)) { return bitcast<f32>(sign); }
-    var m = cl_shr(a.m, 29u).x;
-    let rest = a.m.x & 0x1fffffffu;
-    var e = a.e;
-    if (rest > 0x10000000u || (rest == 0x10000000u && (m & 1u) == 1u)) {
-        m = m + 1u;
-        if (m == 0x1000000u) {
-            m = 0x800000u;
-            e = e + 1;
-        }
-    }
-    if (e > 127) { return bitcast<f32>(sign | 0x7f800000u); }
-    if (e < -126) { return bitcast<f32>(sign); }
-    return bitcast<f32>(sign | (u32(e + 127) << 23u) | (m & 0x7fffffu));
-}
-fn cl_add(a: ClF64, b: ClF64) -> ClF64 {
-    if (a.inf != 0u) { return a; }
-    if (b.inf != 0u) { return b; }
-    if (cl_is_zero(a)) { return b; }
-    if (cl_is_zero(b)) { return a; }
-    // x: the operand of larger magnitude.
-    var x = a;
-    var y = b;
-    if (b.e > a.e || (b.e == a.e && cl_lt64(a.m, b.m))) {
-        x = b;
-        y = a;
-    }
-    let sx = cl_shl(x.m, 10u);
-    let sy = cl_shr_jam(cl_shl(y.m, 10u), u32(x.e - y.e));
-    if (x.neg == y.neg) { return cl_round(x.neg, x.e, cl_add64(sx, sy)); }
-    return cl_round(x.neg, x.e, cl_sub64(sx, sy));
-}
-fn cl_sub(a: ClF64, b: ClF64) -> ClF64 {
-    var nb = b;
-    nb.neg = 1u - b.neg;
-    return cl_add(a, nb);
-}
-fn cl_mul(a: ClF64, b: ClF64) -> ClF64 {
-    let neg = a.neg ^ b.neg;
-    if (a.inf != 0u || b.inf != 0u) { return cl_inf(neg); }
-    if (cl_is_zero(a) || cl_is_zero(b)) { return ClF64(neg, 0, vec2<u32>(0u), 0u); }
-    // The 106-bit product w3:w2:w1:w0 of the mantissas.
-    let p00 = cl_mul32(a.m.x, b.m.x);
-    let p01 = cl_mul32(a.m.x, b.m.y);
-    let p10 = cl_mul32(a.m.y, b.m.x);
-    let p11 = cl_mul32(a.m.y, b.m.y);
-    let t1 = cl_add64(cl_add64(vec2<u32>(p00.y, 0u), vec2<u32>(p01.x, 0u)), vec2<u32>(p10.x, 0u));
-    let t2 = cl_add64(cl_add64(cl_add64(vec2<u32>(p01.y, 0u), vec2<u32>(p10.y, 0u)), vec2<u32>(p11.x, 0u)),
-                      vec2<u32>(t1.y, 0u));
-    let w0 = p00.x;
-    let w1 = t1.x;
-    let w2 = t2.x;
-    let w3 = p11.y + t2.y;
-    // product >> 42 (64 bits, leading bit 62 or 63), the 42 bits shifted out jammed into bit 0.
-    var sig = vec2<u32>((w1 >> 10u) | (w2 << 22u), (w2 >> 10u) | (w3 << 22u));
-    if (w0 != 0u || (w1 & 0x3ffu) != 0u) { sig.x = sig.x | 1u; }
-    return cl_round(neg, a.e + b.e, sig);
-}
-// 1 / a = (2^115 / m) * 2^(-e - 63), the quotient by restoring division.
-fn cl_recip(a: ClF64) -> ClF64 {
-    if (a.inf != 0u) { return ClF64(a.neg, 0, vec2<u32>(0u), 0u); }
-    if (cl_is_zero(a)) { return cl_inf(a.neg); }
-    let m = a.m;
-    var r = vec2<u32>(0u, 0x200000u);
-    var q = vec2<u32>(0u);
-    // Integer part of 2^53 / m: 1, or 2 when m = 2^52.
-    for (var k = 0u; k < 2u; k++) {
-        if (!cl_lt64(r, m)) {
-            r = cl_sub64(r, m);
-            q = cl_add64(q, vec2<u32>(1u, 0u));
-        }
-    }
-    for (var k = 0u; k < 62u; k++) {
-        r = cl_shl(r, 1u);
-        q = cl_shl(q, 1u);
-        if (!cl_lt64(r, m)) {
-            r = cl_sub64(r, m);
-            q.x = q.x | 1u;
-        }
-    }
-    if (r.x != 0u || r.y != 0u) { q.x = q.x | 1u; }
-    return cl_round(a.neg, -a.e - 1, q);
-}
-// floor(a) as u32 for a >= 1, saturated at 0xffffffff; 0 for a < 1 (negative values included).
-fn cl_floor_u32(a: ClF64) -> u32 {
-    if (a.inf != 0u) { return select(0xffffffffu, 0u, a.neg != 0u); }
-    if (a.neg != 0u || cl_is_zero(a) || a.e < 0) { return 0u; }
-    if (a.e >= 32) { return 0xffffffffu; }
-    return cl_shr(a.m, u32(52 - a.e)).x;
-}
-// The CPU grid's `axis_cell`: floor((v - o) * inv) in f64, clamped to [0, n - 1]; a
-// non-finite coordinate goes to cell 0.
-fn cl_axis_cell(v: f32, o: f32, inv: ClF64, n: u32) -> u32 {
-    if ((bitcast<u32>(v) & 0x7f800000u) == 0x7f800000u) { return 0u; }
-    let c = cl_floor_u32(cl_mul(cl_sub(cl_from_f32(v), cl_from_f32(o)), inv));
-    return min(c, n - 1u);
-}
-
-// ---- GPU cell list accessors (backend::gpu::cells); need `grid: array<u32>` ----
-fn grid_origin() -> vec3<f32> {
-    return vec3<f32>(bitcast<f32>(grid[0]), bitcast<f32>(grid[1]), bitcast<f32>(grid[2]));
-}
-// The cell size in use, rounded to f32 (+inf for the single-cell fallback).
-fn grid_cell_size() -> f32 {
-    return bitcast<f32>(grid[3]);
-}
-// Cells per axis (1 beyond the dimension).
-fn grid_dims() -> vec3<u32> {
-    return vec3<u32>(grid[4], grid[5], grid[6]);
-}
-// The cell of point p (unused components 0), clamped to the grid; a non-finite component goes
-// to cell 0 of its axis. Bit-identical to the CPU grid (computed in software f64).
-fn cell_coords(p: vec3<f32>) -> vec3<u32> {
-    let o = grid_origin();
-    let n = grid_dims();
-    let inv = cl_from_bits(vec2<u32>(grid[10], grid[11]));
-    return vec3<u32>(cl_axis_cell(p.x, o.x, inv, n.x), cl_axis_cell(p.y, o.y, inv, n.y),
-                     cl_axis_cell(p.z, o.z, inv, n.z));
-}
-// Linear index, x fastest.
-fn cell_index(c: vec3<u32>) -> u32 {
-    let n = grid_dims();
-    return c.x + n.x * (c.y + n.y * c.z);
-}
-// A walk over the cells that may hold a particle within `radius` of point p: from `lo` to `hi`
-// (grid[14] cells on each side of p's cell `c`, clamped to the grid), less the cells that
-// `walk_skips`. `q` is p's place inside its cell, in cells; `reach2` the squared radius in cells.
-struct CellWalk {
-    c: vec3<u32>,
-    lo: vec3<u32>,
-    hi: vec3<u32>,
-    q: vec3<f32>,
-    reach2: f32,
-}
-fn walk_cells(p: vec3<f32>, radius: f32) -> CellWalk {
-    let c = cell_coords(p);
-    let n = grid_dims();
-    let w = vec3<u32>(grid[14]);
-    let cs = grid_cell_size();
-    let q = (p - grid_origin()) / cs - vec3<f32>(c);
-    // q's f32 rounding grows with the cells along an axis; the slack keeps every cell that may
-    // hold a particle within the radius (it is many times the rounding).
-    let reach = radius / cs + 1e-3 + 1e-6 * f32(max(n.x, max(n.y, n.z)));
-    return CellWalk(c, c - min(c, w), min(c + w, n - vec3<u32>(1u)), q, reach * reach);
-}
-// How many cells from the walk's point to the nearest face of cell a, along one axis.
-fn cell_gap(a: u32, c: u32, q: f32) -> f32 {
-    if (a > c) { return max(f32(a - c) - q, 0.0); }
-    if (a < c) { return max(f32(c - a - 1u) + q, 0.0); }
-    return 0.0;
-}
-// Whether every point of `cell` is beyond the walk's radius (a NaN point skips nothing).
-fn walk_skips(wk: CellWalk, cell: vec3<u32>) -> bool {
-    let g = vec3<f32>(cell_gap(cell.x, wk.c.x, wk.q.x), cell_gap(cell.y, wk.c.y, wk.q.y),
-                      cell_gap(cell.z, wk.c.z, wk.q.z));
-    return dot(g, g) > wk.reach2;
-}
-
-// ---- GPU cell list: need `cells: array<u32>` (and `grid`) ----
-// First sorted slot of cell c; cell c holds slots cell_start(c) .. cell_start(c + 1).
-fn cell_start(c: u32) -> u32 {
-    return cells[c];
-}
-// The particle in sorted slot `slot`.
-fn sorted_particle(slot: u32) -> u32 {
-    return cells[grid[8] + slot];
 }
 // kernel gaussian: W = norm / h^d · w(r/h), ∇W = norm / h^(d+1) · dw(r/h) · x_ij / r
 fn kernel_shape(R: f32) -> f32 {
@@ -598,85 +290,74 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let xi = pos3(i);
     let hi = h_of(i);
     let mirrors = u32(globals[72u]);
-    let h_max = bitcast<f32>(grid[9]);
-    for (var tr = 0u; tr < (1u << mirrors); tr++) {
+    let n_all = u32(info[0]);
+    let stride = lists[0u];
+    let list_start = 16u + n_all + i * stride;
+    for (var k_list = list_start; k_list < list_start + lists[16u + i]; k_list++) {
+        let entry = lists[k_list];
+        let j = entry & 0x3ffffffu;
+        let tr = entry >> 26u;
         var yi = xi;
         var sgn = vec3<f32>(1.0);
-        var skip = false;
-        var shifted = vec3<u32>(0u);
         for (var m = 0u; m < mirrors; m++) {
             if (((tr >> m) & 1u) == 1u) {
                 let axis = u32(globals[73u + 3u * m]);
                 let at = globals[74u + 3u * m];
                 let shift = globals[75u + 3u * m];
-                if (abs(xi[axis] - at) >= 3.0 * h_max) { skip = true; }
                 if (shift == 0.0) {
                     yi[axis] = 2.0 * at - xi[axis];
                     sgn[axis] = -sgn[axis];
                 } else {
                     yi[axis] = xi[axis] + shift;
-                    shifted[axis] += 1u;
                 }
             }
         }
-        if (skip || any(shifted > vec3<u32>(1u))) { continue; }
-        let wk = walk_cells(yi, 3.0 * h_max);
-        for (var z = wk.lo.z; z <= wk.hi.z; z++) {
-        for (var y = wk.lo.y; y <= wk.hi.y; y++) {
-        for (var x = wk.lo.x; x <= wk.hi.x; x++) {
-        if (walk_skips(wk, vec3<u32>(x, y, z))) { continue; }
-        let cell = cell_index(vec3<u32>(x, y, z));
-        for (var s = cell_start(cell); s < cell_start(cell + 1u); s++) {
-            let j = sorted_particle(s);
-            if (tr == 0u && j == i) { continue; }
-            let dxv = yi - pos3(j);
-            let r2 = dot(dxv, dxv);
-            let h_ij = 0.5 * (hi + h_of(j));
-            let rc = 3.0 * h_ij;
-            if (r2 >= rc * rc || r2 == 0.0) { continue; }
-            let x_ij = (dxv * sgn);
-            let r_ij = sqrt(r2);
-            let W_ij = kernel_w(r_ij, h_ij);
-            let gradW_ij = kernel_grad(r_ij, h_ij) * x_ij;
-            // pairsum continuity (stdlib/continuity/plain.sph:3)
-            div_v = div_v + ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * dot((v_i - ldj_v(j, sgn)), gradW_ij));
-            // pairsum velocity_gradient (stdlib/solid/strain_rate.sph:6)
-            grad_v = grad_v + outer((ldj_v(j, sgn) - v_i), ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * gradW_ij));
-            // pairsum momentum (stdlib/momentum/artificial_stress.sph:29)
-            let sig_i = (s_i - (p_i * eye()));
-            let sig_j = (ldj_s(j, sgn) - (ldj_p(j, sgn) * eye()));
-            let c_i_2 = c_i;
-            let c_j = ldj_c(j, sgn);
-            let vr = dot((v_i - ldj_v(j, sgn)), x_ij);
-            let hh = h_ij;
-            let p1 = (eta_ratio_i * hh);
-            let phi = ((hh * vr) / ((r_ij * r_ij) + (p1 * p1)));
-            let c_bar = ((c_i_2 + c_j) / 2.0);
-            let rho_bar = (0.5 * (rho_i + ldj_rho(j, sgn)));
-            let pi_ij = select(0.0, (((((-visc_a_i) * c_bar) * phi) + (visc_b_i * (phi * phi))) / rho_bar), (vr < 0.0));
-            let f = (W_ij / kernel_w_at(((dx_i + ldj_dx(j, sgn)) / 2.0), h_ij));
-            let p2 = ldj_rho(j, sgn);
-            let bracket = (((div_m(sig_i, (rho_i * rho_i)) + div_m(sig_j, (p2 * p2))) - (pi_ij * eye())) + (pow(f, art_n_i) * (R_art_i + ldj_R_art(j, sgn))));
-            dv = dv + ((ldj_m(j, sgn) * bracket) * gradW_ij);
-            // pairsum energy (stdlib/energy/solid.sph:16)
-            let sig_i_2 = (s_i - (p_i * eye()));
-            let sig_j_2 = (ldj_s(j, sgn) - (ldj_p(j, sgn) * eye()));
-            let c_i_3 = c_i;
-            let c_j_2 = ldj_c(j, sgn);
-            let vr_2 = dot((v_i - ldj_v(j, sgn)), x_ij);
-            let hh_2 = h_ij;
-            let p3 = (eta_ratio_i * hh_2);
-            let phi_2 = ((hh_2 * vr_2) / ((r_ij * r_ij) + (p3 * p3)));
-            let c_bar_2 = ((c_i_3 + c_j_2) / 2.0);
-            let rho_bar_2 = (0.5 * (rho_i + ldj_rho(j, sgn)));
-            let pi_ij_2 = select(0.0, (((((-visc_a_i) * c_bar_2) * phi_2) + (visc_b_i * (phi_2 * phi_2))) / rho_bar_2), (vr_2 < 0.0));
-            let p4 = ldj_rho(j, sgn);
-            let A = ((div_m(sig_i_2, (rho_i * rho_i)) + div_m(sig_j_2, (p4 * p4))) - (pi_ij_2 * eye()));
-            de = de + (-((0.5 * ldj_m(j, sgn)) * dot((v_i - ldj_v(j, sgn)), (A * gradW_ij))));
-            // pairsum xsph (stdlib/xsph.sph:7)
-            smooth_ = smooth_ + (W_ij * ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * (v_i - ldj_v(j, sgn))));
-        }
-        }}}
+        let dxv = yi - pos3(j);
+        let r2 = dot(dxv, dxv);
+        let h_ij = 0.5 * (hi + h_of(j));
+        let rc = 3.0 * h_ij;
+        if (r2 >= rc * rc || r2 == 0.0) { continue; }
+        let x_ij = (dxv * sgn);
+        let r_ij = sqrt(r2);
+        let W_ij = kernel_w(r_ij, h_ij);
+        let gradW_ij = kernel_grad(r_ij, h_ij) * x_ij;
+        // pairsum continuity (stdlib/continuity/plain.sph:3)
+        div_v = div_v + ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * dot((v_i - ldj_v(j, sgn)), gradW_ij));
+        // pairsum velocity_gradient (stdlib/solid/strain_rate.sph:6)
+        grad_v = grad_v + outer((ldj_v(j, sgn) - v_i), ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * gradW_ij));
+        // pairsum momentum (stdlib/momentum/artificial_stress.sph:29)
+        let sig_i = (s_i - (p_i * eye()));
+        let sig_j = (ldj_s(j, sgn) - (ldj_p(j, sgn) * eye()));
+        let c_i_2 = c_i;
+        let c_j = ldj_c(j, sgn);
+        let vr = dot((v_i - ldj_v(j, sgn)), x_ij);
+        let hh = h_ij;
+        let p1 = (eta_ratio_i * hh);
+        let phi = ((hh * vr) / ((r_ij * r_ij) + (p1 * p1)));
+        let c_bar = ((c_i_2 + c_j) / 2.0);
+        let rho_bar = (0.5 * (rho_i + ldj_rho(j, sgn)));
+        let pi_ij = select(0.0, (((((-visc_a_i) * c_bar) * phi) + (visc_b_i * (phi * phi))) / rho_bar), (vr < 0.0));
+        let f = (W_ij / kernel_w_at(((dx_i + ldj_dx(j, sgn)) / 2.0), h_ij));
+        let p2 = ldj_rho(j, sgn);
+        let bracket = (((div_m(sig_i, (rho_i * rho_i)) + div_m(sig_j, (p2 * p2))) - (pi_ij * eye())) + (pow(f, art_n_i) * (R_art_i + ldj_R_art(j, sgn))));
+        dv = dv + ((ldj_m(j, sgn) * bracket) * gradW_ij);
+        // pairsum energy (stdlib/energy/solid.sph:16)
+        let sig_i_2 = (s_i - (p_i * eye()));
+        let sig_j_2 = (ldj_s(j, sgn) - (ldj_p(j, sgn) * eye()));
+        let c_i_3 = c_i;
+        let c_j_2 = ldj_c(j, sgn);
+        let vr_2 = dot((v_i - ldj_v(j, sgn)), x_ij);
+        let hh_2 = h_ij;
+        let p3 = (eta_ratio_i * hh_2);
+        let phi_2 = ((hh_2 * vr_2) / ((r_ij * r_ij) + (p3 * p3)));
+        let c_bar_2 = ((c_i_3 + c_j_2) / 2.0);
+        let rho_bar_2 = (0.5 * (rho_i + ldj_rho(j, sgn)));
+        let pi_ij_2 = select(0.0, (((((-visc_a_i) * c_bar_2) * phi_2) + (visc_b_i * (phi_2 * phi_2))) / rho_bar_2), (vr_2 < 0.0));
+        let p4 = ldj_rho(j, sgn);
+        let A = ((div_m(sig_i_2, (rho_i * rho_i)) + div_m(sig_j_2, (p4 * p4))) - (pi_ij_2 * eye()));
+        de = de + (-((0.5 * ldj_m(j, sgn)) * dot((v_i - ldj_v(j, sgn)), (A * gradW_ij))));
+        // pairsum xsph (stdlib/xsph.sph:7)
+        smooth_ = smooth_ + (W_ij * ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * (v_i - ldj_v(j, sgn))));
     }
     // then continuity
     drho = (rho_i * div_v);
