@@ -346,9 +346,8 @@ fn plan_needed(plan: &Plan) -> BTreeMap<FieldId, GroupSet> {
             let g = GroupSet::default().with(v.group);
             for e in &v.pair_sums {
                 let eq = plan.equation(*e);
-                // At j, only the groups this equation sums over on this group (`from own`, or a
-                // `use … on G from S`, narrows the pass's).
-                let sources = eq.sources_for(v.group).intersect(v.sources);
+                // At j, only the groups this equation sums over on this group.
+                let sources = v.sources_of(eq);
                 for s in stmts_of(eq) {
                     stmt_fields(s, &mut |f, side| touch(f, if side == Side::I { g } else { sources }));
                 }

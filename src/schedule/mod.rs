@@ -163,6 +163,14 @@ pub struct PassVariant {
     pub sources: GroupSet,
 }
 
+impl PassVariant {
+    /// The groups one of its pair sums reads neighbours from on this variant's group (`from own`,
+    /// or a `use … on G from S`, narrows the variant's).
+    pub fn sources_of(&self, eq: &crate::ir::Equation) -> GroupSet {
+        eq.sources_for(self.group).intersect(self.sources)
+    }
+}
+
 /// One traversal of the neighbours of every particle, with the per-particle work fused after it.
 #[derive(Clone, Debug)]
 pub struct Pass {

@@ -14,7 +14,7 @@ fn sums_with_their_neighbours(plan: &Plan, v: &super::PassVariant) -> String {
     let m = &plan.model;
     let each = v.pair_sums.iter().map(|e| {
         let eq = plan.equation(*e);
-        let sources = eq.sources_for(v.group).intersect(v.sources);
+        let sources = v.sources_of(eq);
         if sources == v.sources {
             eq.name.clone()
         } else {
