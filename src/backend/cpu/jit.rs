@@ -583,20 +583,25 @@ impl<'a, 'b, T: Real> Emitter<'a, 'b, T> {
             };
             vals.insert(*id, v);
         }
+        // Lanes of this vector before `end`.
+        let base_lane = if lane_ty == self.ptr { base } else { self.b.ins().ireduce(lane_ty, base) };
+        let base_vec = self.b.ins().splat(self.int, base_lane);
+        let idx = self.b.ins().iadd(base_vec, iota);
+        let live = self.b.ins().icmp(IntCC::UnsignedLessThan, idx, end_vec);
         for (id, r) in spec.outputs {
             let v = match (vals.get(id), preset.get(id)) {
                 (Some(v), _) => *v,
                 (None, Some(p)) => self.b.ins().load(self.vec, Self::mem(), lane_addr, reg_addr(*p)),
                 (None, None) => unreachable!("every output is computed or preset"),
             };
+            // Lanes from `end` on keep what they hold: past a full batch they are the next
+            // register's first lanes, another particle's outputs.
+            let old = self.b.ins().load(self.vec, Self::mem(), lane_addr, reg_addr(*r));
+            let v = self.select(live, v, old);
             self.b.ins().store(Self::mem(), v, lane_addr, reg_addr(*r));
         }
         if !spec.folded.is_empty() {
             // Lanes at or past `end` contribute the identity (as `fold_partials` pads).
-            let base_lane = if lane_ty == self.ptr { base } else { self.b.ins().ireduce(lane_ty, base) };
-            let base_vec = self.b.ins().splat(self.int, base_lane);
-            let idx = self.b.ins().iadd(base_vec, iota);
-            let live = self.b.ins().icmp(IntCC::UnsignedLessThan, idx, end_vec);
             for ((id, _, r), var) in spec.folded.iter().zip(&accs) {
                 let v = match (vals.get(id), preset.get(id)) {
                     (Some(v), _) => *v,
