@@ -13,6 +13,7 @@
 //!   them with the same machinery as the model's own particle equations.
 
 mod fuse;
+pub mod halo;
 mod integrator;
 mod live;
 mod print;

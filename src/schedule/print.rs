@@ -113,6 +113,7 @@ pub fn describe(plan: &Plan, real: usize) -> String {
         );
     }
     let _ = writeln!(s, "per step: passes read {total_r} B and write {total_w} B per particle, per evaluation");
+    describe_halo(plan, real, &mut s);
     let _ = writeln!(s, "stored fields:");
     for l in &plan.layout {
         let f = m.field(l.field);
@@ -134,4 +135,25 @@ pub fn describe(plan: &Plan, real: usize) -> String {
         );
     }
     s
+}
+
+/// The halo exchanges of a step (`Plan::halo_exchanges`), with their bytes per halo particle.
+fn describe_halo(plan: &Plan, real: usize, s: &mut String) {
+    let exchanges = plan.halo_exchanges();
+    let total: usize = exchanges.iter().map(|x| bytes(plan, &x.fields, real)).sum();
+    let _ = writeln!(
+        s,
+        "halo (a run split into domains): {total} B per step per particle within reach of a domain's edge, in {} exchange(s)",
+        exchanges.len()
+    );
+    for x in &exchanges {
+        let _ = writeln!(
+            s,
+            "  evaluation {}, before pass {}: {} ({} B)",
+            x.evaluation + 1,
+            x.pass + 1,
+            field_list(plan, &x.fields),
+            bytes(plan, &x.fields, real)
+        );
+    }
 }
