@@ -133,6 +133,10 @@ enum Command {
         /// For a case: set a parameter (`${name}` in the case file): --set v_impact=250
         #[arg(long = "set", value_parser = parse_set)]
         set: Vec<(String, String)>,
+        /// For a case: split it into this many domains (as a run across processes would) and
+        /// print each one's particles and halo
+        #[arg(long, value_parser = clap::value_parser!(u32).range(1..=64))]
+        domains: Option<u32>,
     },
 }
 
@@ -147,9 +151,9 @@ pub fn main() -> i32 {
     };
     match cli.command {
         Command::Check { paths, deny_warnings } => run_check(&paths, deny_warnings),
-        Command::Plan { path, dim, integrator, precision, resolution, set } => {
+        Command::Plan { path, dim, integrator, precision, resolution, set, domains } => {
             let opts = crate::scene::Options { resolution, set, ..Default::default() };
-            run_plan(&find_input(&path), dim, &integrator, precision, &opts)
+            run_plan(&find_input(&path), dim, &integrator, precision, &opts, domains)
         }
         Command::Run {
             case,
@@ -450,7 +454,14 @@ fn run_run(case: &str, a: RunArgs) -> i32 {
     }
 }
 
-fn run_plan(path: &Path, dim: usize, integrator: &str, precision: Precision, opts: &crate::scene::Options) -> i32 {
+fn run_plan(
+    path: &Path,
+    dim: usize,
+    integrator: &str,
+    precision: Precision,
+    opts: &crate::scene::Options,
+    domains: Option<u32>,
+) -> i32 {
     let real = real_bytes(precision);
     let Some(integrator) = crate::schedule::IntegratorKind::parse(integrator) else {
         eprintln!("error: unknown integrator `{integrator}` ({})", crate::schedule::IntegratorKind::NAMES);
@@ -465,6 +476,15 @@ fn run_plan(path: &Path, dim: usize, integrator: &str, precision: Precision, opt
             Ok((scene, plan)) => {
                 eprint!("{}", scene.warnings.concat());
                 say(&plan.describe(real));
+                if let Some(parts) = domains {
+                    match crate::runner::domains_report(&scene, &plan, precision, parts as usize) {
+                        Ok(text) => say(&text),
+                        Err(e) => {
+                            eprint!("{e}");
+                            return 1;
+                        }
+                    }
+                }
                 match crate::runner::cost_estimate(&scene, &plan, precision) {
                     Ok(text) => {
                         say(&format!("cost:\n{}", text.lines().map(|l| format!("  {l}\n")).collect::<String>()));

@@ -117,6 +117,52 @@ pub fn cost_estimate(scene: &Scene, plan: &Plan, precision: Precision) -> Result
     }
 }
 
+/// The case split into `parts` domains of equal particle counts (`grid::decompose::bisect`, at
+/// the initial positions): each domain's particles, the particles of the others within reach of
+/// it (its halo), and the bytes its halo brings in a step (`Plan::halo_exchanges`).
+pub fn domains_report(scene: &Scene, plan: &Plan, precision: Precision, parts: usize) -> Result<String, RunFailure> {
+    use crate::grid::decompose::{bisect, halo_sizes};
+    let store =
+        setup::build_store::<f64>(plan, &scene.particles, &scene.materials).map_err(|e| setup_failure(scene, e))?;
+    let mut backend = CpuBackend::new(plan.clone(), store, scene.mirrors.clone()).map_err(|e| RunFailure::Run(e.0))?;
+    backend.initialise().map_err(|e| RunFailure::Run(e.0))?;
+    let field = |name: &str| -> Result<Vec<f64>, RunFailure> {
+        let f = plan.model.field_id(name).ok_or_else(|| RunFailure::Run(format!("the model has no `{name}`")))?;
+        let read = crate::backend::Backend::read(&backend, f).map_err(|e| RunFailure::Run(e.0))?;
+        read.map(|(_, v)| v).ok_or_else(|| RunFailure::Run(format!("`{name}` is not stored")))
+    };
+    let (x, h) = (field("x")?, field("h")?);
+    let dim = plan.dim;
+    let domain = bisect(&x, dim, &vec![1.0; h.len()], parts);
+    let halo = halo_sizes(&x, dim, &h, backend.support, &domain, parts);
+    let real = match precision {
+        Precision::F32 => 4,
+        Precision::F64 => 8,
+    };
+    let per_particle: usize = plan
+        .halo_exchanges()
+        .iter()
+        .flat_map(|x| x.fields.iter())
+        .filter_map(|f| plan.field_layout(*f))
+        .map(|l| l.comps * real)
+        .sum();
+    let mut out = format!(
+        "domains: {parts}, cut by recursive coordinate bisection into equal particle counts \
+         (at the initial positions; halos of {per_particle} B a particle a step)\n"
+    );
+    for (d, halo) in halo.iter().enumerate() {
+        let own = domain.iter().filter(|k| **k as usize == d).count();
+        let share = 100.0 * *halo as f64 / own.max(1) as f64;
+        let bytes = (*halo * per_particle) as f64;
+        out.push_str(&format!(
+            "  domain {}: {own} particles, {halo} in its halo ({share:.1} %), {:.1} kB of halo a step\n",
+            d + 1,
+            bytes / 1e3
+        ));
+    }
+    Ok(out)
+}
+
 fn estimate_on<T: Real>(scene: &Scene, plan: &Plan) -> Result<String, RunFailure> {
     let mut out = String::new();
     let bodies: Vec<String> = scene.bodies.iter().map(|b| format!("{} {}", b.name, b.particles.len())).collect();

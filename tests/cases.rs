@@ -1296,3 +1296,35 @@ fn poiseuille_channel_profile_is_within_its_tolerance_and_its_error_falls_with_t
     let (coarse, ci) = (error_of("poiseuille_2d", Some("coarse"), q), error_of("poiseuille_2d", None, q));
     assert!(ci.abs() <= 0.6 * coarse.abs(), "{:+.1} % at 10 across, {:+.1} % at 20", 100.0 * coarse, 100.0 * ci);
 }
+
+/// `pairsum plan CASE --domains 2` splits Sod's tube (225 particles in 1D) into two domains of
+/// 113 and 112 particles at the initial positions; each halo holds the other side's particles
+/// within a pair's cut-off of the cut, and its bytes are the halo's particles times the plan's
+/// halo bytes a particle a step.
+#[test]
+fn pairsum_plan_splits_a_case_into_domains_and_sizes_their_halos() {
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_pairsum"))
+        .args(["plan", case("sod_shock_tube").to_str().unwrap(), "--resolution", "coarse", "--domains", "2"])
+        .output()
+        .expect("runs");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = String::from_utf8(o.stdout).expect("text");
+    let per: usize = text
+        .split("halos of ")
+        .nth(1)
+        .and_then(|r| r.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no halo bytes in:\n{text}"));
+    for (d, own) in [(1, 113), (2, 112)] {
+        let line = text.lines().find(|l| l.trim_start().starts_with(&format!("domain {d}:"))).expect("domain line");
+        assert!(line.contains(&format!(": {own} particles, ")), "{line}");
+        let halo: usize = line
+            .split(" particles, ")
+            .nth(1)
+            .and_then(|r| r.split(' ').next())
+            .and_then(|n| n.parse().ok())
+            .expect("halo");
+        assert!((2..=12).contains(&halo), "a 1D cut has a few particles within reach of it: {line}");
+        assert!(line.contains(&format!("{:.1} kB", (halo * per) as f64 / 1e3)), "{line}");
+    }
+}

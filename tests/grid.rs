@@ -565,3 +565,58 @@ fn size_levels_over_a_graded_cloud_find_every_pair() {
         assert_eq!(levels.levels()[0].grid.cell_size(), alone.cell_size());
     }
 }
+
+/// Recursive coordinate bisection into 5 domains of random weights in [0.5, 1.5): each domain's
+/// weight is its share of the total to within one particle's weight per level of cuts (three).
+#[test]
+fn bisection_into_five_domains_gives_each_its_share_of_the_weight_to_a_particle_per_cut() {
+    use pairsum::grid::decompose::bisect;
+    let mut rng = XorShift(0x5eed_d0e5);
+    let (n, dim, parts) = (3000, 3, 5);
+    let x = cloud(&mut rng, n, dim, 1.0);
+    let w: Vec<f64> = (0..n).map(|_| rng.range(0.5, 1.5)).collect();
+    let domain = bisect(&x, dim, &w, parts);
+    let total: f64 = w.iter().sum();
+    for d in 0..parts {
+        let mine: f64 = w.iter().zip(&domain).filter(|(_, k)| **k as usize == d).map(|(w, _)| *w).sum();
+        let off = (mine - total / parts as f64).abs();
+        assert!(off <= 3.0 * 1.5, "domain {d}: weight {mine}, its share {}", total / parts as f64);
+    }
+}
+
+/// Two domains of a box three times longer in x than across are cut across x: every particle of
+/// the first lies at or below every particle of the second, and the first holds 501 of 1001.
+#[test]
+fn two_domains_of_a_long_box_are_cut_across_its_length() {
+    use pairsum::grid::decompose::bisect;
+    let mut rng = XorShift(0xb15ec7);
+    let n = 1001;
+    let x: Vec<f64> = (0..n).flat_map(|_| [rng.range(0.0, 3.0), rng.range(0.0, 1.0), rng.range(0.0, 1.0)]).collect();
+    let domain = bisect(&x, 3, &vec![1.0; n], 2);
+    let along = |d: u32| -> Vec<f64> { (0..n).filter(|i| domain[*i] == d).map(|i| x[3 * i]).collect() };
+    let low_max = along(0).into_iter().fold(f64::NEG_INFINITY, f64::max);
+    let high_min = along(1).into_iter().fold(f64::INFINITY, f64::min);
+    assert!(low_max <= high_min, "domain 1 reaches x = {low_max}, domain 2 starts at {high_min}");
+    // The cut comes at the first count whose weight reaches half of 1001.
+    assert_eq!(along(0).len(), 501);
+}
+
+/// The halo of each of three domains of a 2D cloud with variable h: the particles of the other
+/// domains within a pair's cut-off of one of its own, as a brute-force count finds them.
+#[test]
+fn each_domains_halo_is_what_brute_force_finds_within_the_cut_off() {
+    use pairsum::grid::decompose::{bisect, halo_sizes};
+    let mut rng = XorShift(0x4a10);
+    let (n, dim, parts) = (800, 2, 3);
+    let x = cloud(&mut rng, n, dim, 1.0);
+    let h: Vec<f64> = (0..n).map(|_| rng.range(0.01, 0.04)).collect();
+    let domain = bisect(&x, dim, &vec![1.0; n], parts);
+    let got = halo_sizes(&x, dim, &h, SUPPORT, &domain, parts);
+    for d in 0..parts as u32 {
+        let expected = (0..n)
+            .filter(|j| domain[*j] != d && (0..n).any(|i| domain[i] == d && interacts(&x, dim, &h, i, *j)))
+            .count();
+        assert_eq!(got[d as usize], expected, "domain {d}");
+        assert!(expected > 10, "domain {d}: a halo of {expected} tests little");
+    }
+}

@@ -32,6 +32,7 @@
 //! - a non-finite coordinate puts the particle in cell 0 of that axis, and a query point is clamped
 //!   to the grid, so building and querying never panic on NaN or infinite positions.
 
+pub mod decompose;
 mod geometry;
 mod levels;
 mod morton;
