@@ -477,7 +477,7 @@ fn run_plan(
                 eprint!("{}", scene.warnings.concat());
                 say(&plan.describe(real));
                 if let Some(parts) = domains {
-                    match crate::runner::domains_report(&scene, &plan, precision, parts as usize) {
+                    match crate::runner::domains_report(&scene, &plan, real, parts as usize) {
                         Ok(text) => say(&text),
                         Err(e) => {
                             eprint!("{e}");

@@ -120,7 +120,7 @@ pub fn cost_estimate(scene: &Scene, plan: &Plan, precision: Precision) -> Result
 /// The case split into `parts` domains of equal particle counts (`grid::decompose::bisect`, at
 /// the initial positions): each domain's particles, the particles of the others within reach of
 /// it (its halo), and the bytes its halo brings in a step (`Plan::halo_exchanges`).
-pub fn domains_report(scene: &Scene, plan: &Plan, precision: Precision, parts: usize) -> Result<String, RunFailure> {
+pub fn domains_report(scene: &Scene, plan: &Plan, real: usize, parts: usize) -> Result<String, RunFailure> {
     use crate::grid::decompose::{bisect, halo_sizes};
     let store =
         setup::build_store::<f64>(plan, &scene.particles, &scene.materials).map_err(|e| setup_failure(scene, e))?;
@@ -135,17 +135,7 @@ pub fn domains_report(scene: &Scene, plan: &Plan, precision: Precision, parts: u
     let dim = plan.dim;
     let domain = bisect(&x, dim, &vec![1.0; h.len()], parts);
     let halo = halo_sizes(&x, dim, &h, backend.support, &domain, parts);
-    let real = match precision {
-        Precision::F32 => 4,
-        Precision::F64 => 8,
-    };
-    let per_particle: usize = plan
-        .halo_exchanges()
-        .iter()
-        .flat_map(|x| x.fields.iter())
-        .filter_map(|f| plan.field_layout(*f))
-        .map(|l| l.comps * real)
-        .sum();
+    let per_particle = plan.halo_bytes_per_step(real);
     let mut out = format!(
         "domains: {parts}, cut by recursive coordinate bisection into equal particle counts \
          (at the initial positions; halos of {per_particle} B a particle a step)\n"

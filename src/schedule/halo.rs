@@ -71,6 +71,12 @@ impl Plan {
         out
     }
 
+    /// The bytes a step's halo exchanges bring per particle of a halo, in reals of `real` bytes.
+    pub fn halo_bytes_per_step(&self, real: usize) -> usize {
+        let fields = self.halo_exchanges().into_iter().flat_map(|x| x.fields);
+        fields.filter_map(|f| self.field_layout(f)).map(|l| l.comps * real).sum()
+    }
+
     /// The fields stage `k` writes: its updates, corrections and derived equations.
     pub fn stage_writes(&self, k: usize) -> Vec<FieldId> {
         let st = &self.stages[k];

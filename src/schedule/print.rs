@@ -140,7 +140,7 @@ pub fn describe(plan: &Plan, real: usize) -> String {
 /// The halo exchanges of a step (`Plan::halo_exchanges`), with their bytes per halo particle.
 fn describe_halo(plan: &Plan, real: usize, s: &mut String) {
     let exchanges = plan.halo_exchanges();
-    let total: usize = exchanges.iter().map(|x| bytes(plan, &x.fields, real)).sum();
+    let total = plan.halo_bytes_per_step(real);
     let _ = writeln!(
         s,
         "halo (a run split into domains): {total} B per step per particle within reach of a domain's edge, in {} exchange(s)",
