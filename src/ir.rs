@@ -638,6 +638,22 @@ pub fn walk_expr_mut(e: &mut Expr, f: &mut impl FnMut(&mut Expr)) {
     f(e);
 }
 
+/// Adds to `out` every field a statement list gives a value (`Set`), in both branches of an `if`.
+pub fn set_targets(stmts: &[Stmt], out: &mut BTreeSet<FieldId>) {
+    for s in stmts {
+        match s {
+            Stmt::Set(f, _) => {
+                out.insert(*f);
+            }
+            Stmt::If(_, a, b) => {
+                set_targets(a, out);
+                set_targets(b, out);
+            }
+            Stmt::Let(..) | Stmt::Accum(..) => {}
+        }
+    }
+}
+
 /// Visits every expression of a statement list.
 pub fn walk_stmts<'a>(stmts: &'a [Stmt], f: &mut impl FnMut(&'a Expr)) {
     for s in stmts {

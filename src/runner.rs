@@ -133,8 +133,9 @@ pub fn domains_report(scene: &Scene, plan: &Plan, real: usize, parts: usize) -> 
     };
     let (x, h) = (field("x")?, field("h")?);
     let dim = plan.dim;
-    let domain = bisect(&x, dim, &vec![1.0; h.len()], parts);
-    let halo = halo_sizes(&x, dim, &h, backend.support, &domain, parts);
+    let invalid = |e: crate::compare::CompareError| RunFailure::Run(format!("the initial particles: {e}"));
+    let domain = bisect(&x, dim, &vec![1.0; h.len()], parts).map_err(invalid)?;
+    let halo = halo_sizes(&x, dim, &h, backend.support, &domain, parts).map_err(invalid)?;
     let per_particle = plan.halo_bytes_per_step(real);
     let mut out = format!(
         "domains: {parts}, cut by recursive coordinate bisection into equal particle counts \

@@ -575,7 +575,7 @@ fn bisection_into_five_domains_gives_each_its_share_of_the_weight_to_a_particle_
     let (n, dim, parts) = (3000, 3, 5);
     let x = cloud(&mut rng, n, dim, 1.0);
     let w: Vec<f64> = (0..n).map(|_| rng.range(0.5, 1.5)).collect();
-    let domain = bisect(&x, dim, &w, parts);
+    let domain = bisect(&x, dim, &w, parts).expect("finite");
     let total: f64 = w.iter().sum();
     for d in 0..parts {
         let mine: f64 = w.iter().zip(&domain).filter(|(_, k)| **k as usize == d).map(|(w, _)| *w).sum();
@@ -592,10 +592,10 @@ fn two_domains_of_a_long_box_are_cut_across_its_length() {
     let mut rng = XorShift(0xb15ec7);
     let n = 1001;
     let x: Vec<f64> = (0..n).flat_map(|_| [rng.range(0.0, 3.0), rng.range(0.0, 1.0), rng.range(0.0, 1.0)]).collect();
-    let domain = bisect(&x, 3, &vec![1.0; n], 2);
+    let domain = bisect(&x, 3, &vec![1.0; n], 2).expect("finite");
     let along = |d: u32| -> Vec<f64> { (0..n).filter(|i| domain[*i] == d).map(|i| x[3 * i]).collect() };
-    let low_max = along(0).into_iter().fold(f64::NEG_INFINITY, f64::max);
-    let high_min = along(1).into_iter().fold(f64::INFINITY, f64::min);
+    let low_max = pairsum::compare::extremes(&along(0)).expect("finite").1;
+    let high_min = pairsum::compare::extremes(&along(1)).expect("finite").0;
     assert!(low_max <= high_min, "domain 1 reaches x = {low_max}, domain 2 starts at {high_min}");
     // The cut comes at the first count whose weight reaches half of 1001.
     assert_eq!(along(0).len(), 501);
@@ -610,8 +610,8 @@ fn each_domains_halo_is_what_brute_force_finds_within_the_cut_off() {
     let (n, dim, parts) = (800, 2, 3);
     let x = cloud(&mut rng, n, dim, 1.0);
     let h: Vec<f64> = (0..n).map(|_| rng.range(0.01, 0.04)).collect();
-    let domain = bisect(&x, dim, &vec![1.0; n], parts);
-    let got = halo_sizes(&x, dim, &h, SUPPORT, &domain, parts);
+    let domain = bisect(&x, dim, &vec![1.0; n], parts).expect("finite");
+    let got = halo_sizes(&x, dim, &h, SUPPORT, &domain, parts).expect("finite");
     for d in 0..parts as u32 {
         let expected = (0..n)
             .filter(|j| domain[*j] != d && (0..n).any(|i| domain[i] == d && interacts(&x, dim, &h, i, *j)))

@@ -3,18 +3,26 @@
 //! domain then needs of the others.
 
 use super::{Coord, Grid};
+use crate::compare::{extremes, CompareError};
 
 /// The domain (`0..parts`) of each of the `x.len() / dim` particles. The set is cut across the
 /// longest side of its bounding box where its weight splits in the ratio of the domains given to
 /// each side (⌊parts/2⌋ : ⌈parts/2⌉), and each side is cut again the same way. Deterministic:
 /// particles at one coordinate are ordered by index.
-pub fn bisect<T: Coord>(x: &[T], dim: usize, weight: &[f64], parts: usize) -> Vec<u32> {
+/// An error where a position or a weight is not finite.
+pub fn bisect<T: Coord>(x: &[T], dim: usize, weight: &[f64], parts: usize) -> Result<Vec<u32>, CompareError> {
     let n = x.len() / dim.max(1);
     assert_eq!(weight.len(), n, "one weight per particle");
+    extremes(&as_f64(x))?;
+    extremes(weight)?;
     let mut domain = vec![0u32; n];
     let mut all: Vec<u32> = (0..n as u32).collect();
     split(x, dim, weight, &mut all, 0, parts.max(1), &mut domain);
-    domain
+    Ok(domain)
+}
+
+fn as_f64<T: Coord>(values: &[T]) -> Vec<f64> {
+    values.iter().map(|v| v.to_f64()).collect()
 }
 
 fn split<T: Coord>(x: &[T], dim: usize, weight: &[f64], set: &mut [u32], first: u32, parts: usize, domain: &mut [u32]) {
@@ -52,10 +60,19 @@ fn split<T: Coord>(x: &[T], dim: usize, weight: &[f64], set: &mut [u32], first: 
 }
 
 /// Per domain, how many particles of the other domains lie within reach of one of its own:
-/// within `support · (h_i + h_j) / 2`, the cut-off of the pair.
-pub fn halo_sizes<T: Coord>(x: &[T], dim: usize, h: &[T], support: f64, domain: &[u32], parts: usize) -> Vec<usize> {
+/// within `support · (h_i + h_j) / 2`, the cut-off of the pair. An error where a position or a
+/// smoothing length is not finite.
+pub fn halo_sizes<T: Coord>(
+    x: &[T],
+    dim: usize,
+    h: &[T],
+    support: f64,
+    domain: &[u32],
+    parts: usize,
+) -> Result<Vec<usize>, CompareError> {
     let n = domain.len();
-    let h_max = h.iter().map(|v| v.to_f64()).fold(0.0, f64::max);
+    extremes(&as_f64(x))?;
+    let (_, h_max) = extremes(&as_f64(h))?;
     let grid = Grid::build(x, dim, support * h_max);
     // Bit d of `in_halo[j]`: particle j is in domain d's halo (at most 64 domains).
     assert!(parts <= 64, "at most 64 domains");
@@ -78,5 +95,5 @@ pub fn halo_sizes<T: Coord>(x: &[T], dim: usize, h: &[T], support: f64, domain: 
             }
         });
     }
-    (0..parts).map(|d| in_halo.iter().filter(|m| *m >> d & 1 == 1).count()).collect()
+    Ok((0..parts).map(|d| in_halo.iter().filter(|m| *m >> d & 1 == 1).count()).collect())
 }

@@ -4,7 +4,8 @@
 //! The plan knows both, so a halo carries nothing a pass does not read.
 
 use super::{Action, Plan};
-use crate::ir::{FieldId, Side, Stmt};
+use crate::ir::{set_targets, FieldId, Side};
+use std::collections::BTreeSet;
 
 /// The fields sent before one pass of one evaluation of a step.
 #[derive(Clone, Debug, PartialEq)]
@@ -80,26 +81,13 @@ impl Plan {
     /// The fields stage `k` writes: its updates, corrections and derived equations.
     pub fn stage_writes(&self, k: usize) -> Vec<FieldId> {
         let st = &self.stages[k];
-        let mut written = vec![];
+        let mut written = BTreeSet::new();
         for b in &st.updates {
             set_targets(&b.stmts, &mut written);
         }
         for e in st.corrections.iter().chain(&st.derived) {
             written.extend(&self.equation(*e).writes);
         }
-        written
-    }
-}
-
-fn set_targets(stmts: &[Stmt], out: &mut Vec<FieldId>) {
-    for s in stmts {
-        match s {
-            Stmt::Set(f, _) => out.push(*f),
-            Stmt::If(_, a, b) => {
-                set_targets(a, out);
-                set_targets(b, out);
-            }
-            Stmt::Let(..) | Stmt::Accum(..) => {}
-        }
+        written.into_iter().collect()
     }
 }

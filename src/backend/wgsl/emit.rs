@@ -554,7 +554,7 @@ impl<'a> Writer<'a> {
     /// Declares a variable for every field the statements set, holding its current value.
     fn declare_sets(&mut self, stmts: &[Stmt], group: Option<GroupId>) {
         let mut set = BTreeSet::new();
-        collect_sets(stmts, &mut set);
+        crate::ir::set_targets(stmts, &mut set);
         for f in set {
             if self.current.contains_key(&f) {
                 continue;
@@ -651,21 +651,6 @@ impl<'a> Writer<'a> {
             let _ = writeln!(s, "}}");
         }
         s
-    }
-}
-
-fn collect_sets(stmts: &[Stmt], out: &mut BTreeSet<FieldId>) {
-    for s in stmts {
-        match s {
-            Stmt::Set(f, _) => {
-                out.insert(*f);
-            }
-            Stmt::If(_, a, b) => {
-                collect_sets(a, out);
-                collect_sets(b, out);
-            }
-            _ => {}
-        }
     }
 }
 
@@ -993,7 +978,7 @@ fn pass_kernel(plan: &Plan, lay: &Layout, pass: usize, v: &PassVariant, cell_hel
     // tail sets give way to variables.
     for b in plan.tail_blocks(&v.tail) {
         let mut set = BTreeSet::new();
-        collect_sets(&b.stmts, &mut set);
+        crate::ir::set_targets(&b.stmts, &mut set);
         for f in set {
             if !w.stores.contains(&f) {
                 w.current.remove(&f);
