@@ -28,20 +28,32 @@ for tool in unshare:util-linux python3:python3; do
     fi
 done
 
+# The runs across processes (tests/domains.rs) need Open MPI: its `mpirun` to start ranks, and
+# its headers and libclang to build the `mpi` feature (the mpi crate's bindings). Open MPI refuses
+# to run as root, which CI does, unless told.
+if ! command -v mpirun >/dev/null || ! [ -e /usr/include/x86_64-linux-gnu/mpi/mpi.h -o -e /usr/include/mpi.h ] \
+    || ! ldconfig -p | grep -q 'libclang'; then
+    echo "scripts/test.sh: installing Open MPI (openmpi-bin, libopenmpi-dev) and libclang-dev for the MPI tests"
+    export DEBIAN_FRONTEND=noninteractive
+    as_root apt-get install -y --no-install-recommends openmpi-bin libopenmpi-dev libclang-dev \
+        || { as_root apt-get update && as_root apt-get install -y --no-install-recommends openmpi-bin libopenmpi-dev libclang-dev; }
+fi
+export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
+
 # Everything is also logged, to close with one line that counts every test run.
 log=$(mktemp)
 trap 'rm -f "$log"' EXIT
 logged() { "$@" 2>&1 | tee -a "$log"; return "${PIPESTATUS[0]}"; }
 
-logged cargo test --workspace "$@"
+logged cargo test --workspace --features mpi "$@"
 
 # With a filter or other arguments, only the tests asked for. Otherwise also what the suite above
 # neither builds nor runs:
 if [ $# -eq 0 ]; then
     # the portable lane loops (no AVX2), against the native pair code bit for bit;
-    PAIRSUM_NO_WIDE_SIMD=1 logged cargo test --test jit --test native
+    PAIRSUM_NO_WIDE_SIMD=1 logged cargo test --features mpi --test jit --test native
     # the criterion benchmarks, each run once in test mode (timings belong to `cargo bench`);
-    logged cargo test --benches
+    logged cargo test --features mpi --benches
     # the coverage-guided fuzz targets (their own workspace, fuzz/), type-checked against today's
     # API: about 2.5 min on 2 cores, where a build, whose dependencies' features differ from the
     # test suite's, takes 7 (running them needs cargo-fuzz and a nightly toolchain: fuzz/README.md).

@@ -80,6 +80,10 @@ enum Command {
         /// --convergence, of these resolutions) wrote into --out
         #[arg(long)]
         reanalyse: bool,
+        /// Split the run into this many domains, each run by a thread of this process as a rank
+        /// (the CPU backend); `mpirun -n N pairsum run CASE` runs N processes instead
+        #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1024))]
+        domains: Option<u32>,
     },
     /// List the bundled cases
     Cases,
@@ -149,7 +153,7 @@ pub fn main() -> i32 {
             return if e.use_stderr() { 2 } else { 0 };
         }
     };
-    match cli.command {
+    let code = match cli.command {
         Command::Check { paths, deny_warnings } => run_check(&paths, deny_warnings),
         Command::Plan { path, dim, integrator, precision, resolution, set, domains } => {
             let opts = crate::scene::Options { resolution, set, ..Default::default() };
@@ -172,6 +176,7 @@ pub fn main() -> i32 {
             verlet,
             convergence,
             reanalyse,
+            domains,
         } => {
             let opts = RunArgs {
                 backend,
@@ -189,6 +194,7 @@ pub fn main() -> i32 {
                 verlet,
                 convergence,
                 reanalyse,
+                domains,
             };
             run_run(&case, opts)
         }
@@ -207,7 +213,9 @@ pub fn main() -> i32 {
                 1
             }
         },
-    }
+    };
+    crate::backend::transport::finalise();
+    code
 }
 
 /// Every .sph file under the given paths, sorted.
@@ -385,10 +393,11 @@ struct RunArgs {
     verlet: Option<f64>,
     convergence: Option<String>,
     reanalyse: bool,
+    domains: Option<u32>,
 }
 
 fn run_run(case: &str, a: RunArgs) -> i32 {
-    use crate::runner::{run_file, RunFailure, RunOptions};
+    use crate::runner::{run_file, RunOptions};
     let (backend, precision) = (a.backend, a.precision);
     let path = find_case(case);
     if !path.is_file() {
@@ -414,7 +423,22 @@ fn run_run(case: &str, a: RunArgs) -> i32 {
         vtk: true,
         force: a.force,
         timing: a.timing,
+        domains: a.domains.map(|d| d as usize),
     };
+    // Under `mpirun` every rank runs the case; rank 0 writes the outputs, the others the same
+    // into a folder of their own, deleted at the end.
+    let rank = match crate::backend::transport::launched_rank() {
+        Ok(r) => r.unwrap_or(0),
+        Err(e) => {
+            eprintln!("error: {}", e.0);
+            return 1;
+        }
+    };
+    let mut opts = opts;
+    if rank > 0 {
+        opts.out = std::env::temp_dir().join(format!("pairsum-mpi-rank{rank}-{}", std::process::id()));
+        (opts.progress, opts.timing, opts.force) = (false, false, true);
+    }
     let outcome = match &a.convergence {
         None if a.reanalyse => crate::runner::reanalyse_file(&path, &opts),
         None => run_file(&path, &opts),
@@ -425,6 +449,30 @@ fn run_run(case: &str, a: RunArgs) -> i32 {
             crate::runner::run_convergence(&path, &levels, &opts, a.reanalyse)
         }
     };
+    if rank > 0 {
+        let _ = std::fs::remove_dir_all(&opts.out);
+        if let Err(e) = &outcome {
+            // An error on this rank alone would leave the others waiting: stop them all.
+            let msg = match e {
+                crate::runner::RunFailure::Input(m) | crate::runner::RunFailure::Run(m) => m,
+            };
+            eprintln!("rank {rank}: error: {}", msg.lines().next().unwrap_or_default());
+            crate::backend::transport::abort_ranks(1);
+            return 1;
+        }
+        return 0;
+    }
+    if outcome.is_err() {
+        // Print the error before the other ranks are stopped.
+        let code = report_outcome(outcome);
+        crate::backend::transport::abort_ranks(code);
+        return code;
+    }
+    report_outcome(outcome)
+}
+
+fn report_outcome(outcome: Result<crate::runner::RunOutcome, crate::runner::RunFailure>) -> i32 {
+    use crate::runner::RunFailure;
     match outcome {
         Ok(o) => {
             let r = &o.report;

@@ -344,6 +344,29 @@ impl<T: Real> Store<T> {
         }
     }
 
+    /// A store of particles taken from other stores of the same plan: `rows[k]` = (store, particle)
+    /// becomes particle k, with its whole state. The rows must be group-major; `params` is the
+    /// material table of them all.
+    pub fn gather(plan: &Plan, params: &ParamTable<T>, rows: &[(&Store<T>, usize)]) -> Store<T> {
+        let group: Vec<u32> = rows.iter().map(|(s, i)| s.group[*i]).collect();
+        let material: Vec<u32> = rows.iter().map(|(s, i)| s.material[*i]).collect();
+        debug_assert!(group.windows(2).all(|w| w[0] <= w[1]), "rows must be group-major");
+        let mut out = Store::new(plan, group, material, params.materials());
+        out.params = params.clone();
+        out.id = rows.iter().map(|(s, i)| s.id[*i]).collect();
+        for (k, (src, i)) in rows.iter().enumerate() {
+            let g = src.group[*i] as usize;
+            for (dst, from) in out.columns.iter_mut().zip(&src.columns) {
+                let (Some(dst), Some(from)) = (dst.as_mut(), from.as_ref()) else { continue };
+                if dst.has(g) {
+                    let (a, b) = (from.row(*i, g) * from.comps, dst.row(k, g) * dst.comps);
+                    dst.data[b..b + dst.comps].copy_from_slice(&from.data[a..a + from.comps]);
+                }
+            }
+        }
+        out
+    }
+
     /// Bytes of all columns.
     pub fn bytes(&self) -> usize {
         self.columns.iter().flatten().map(|c| c.data.len() * T::BYTES).sum()

@@ -2,10 +2,11 @@
 //! progress bar, checkpoints, and `report.json` / `report.md` at the end.
 
 use crate::backend::cpu::CpuBackend;
+use crate::backend::domains::Domain;
 use crate::backend::{Backend, BackendError};
 use crate::diag::{Diagnostic, Sources};
 use crate::engine::{checkpoint, setup, Engine, RunError};
-use crate::particles::Real;
+use crate::particles::{Real, Store};
 use crate::report::{self, Curve, GroupBytes, History, PointField, ResultRow, RunReport};
 use crate::scene::measure::Reader;
 use crate::scene::spec::ProfileSpec;
@@ -48,6 +49,9 @@ pub struct RunOptions {
     /// Measure where the run's time goes and write it to `timing.txt` (on the GPU, each
     /// kernel's device time where the adapter has timestamp queries).
     pub timing: bool,
+    /// Split the run into this many domains, each a thread of this process as a rank
+    /// (`backend::domains`; on the CPU backend). Under `mpirun` the ranks are MPI's instead.
+    pub domains: Option<usize>,
 }
 
 impl Default for RunOptions {
@@ -64,6 +68,7 @@ impl Default for RunOptions {
             vtk: true,
             force: false,
             timing: false,
+            domains: None,
         }
     }
 }
@@ -225,6 +230,15 @@ pub fn run_case(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailure
         crate::output_dir::remove_earlier_series(&opts.out.join("vtk"), &scene.name)
             .map_err(|e| RunFailure::Run(format!("removing the earlier run's VTK frames: {e}")))?;
     }
+    if split_ranks(opts) > 1 {
+        if opts.backend == BackendChoice::Gpu {
+            return Err(RunFailure::Input(
+                "error: a run split into domains runs on the CPU backend (each rank's own GPU is not supported yet)\n"
+                    .into(),
+            ));
+        }
+        return run_cpu_precision(scene, plan, opts);
+    }
     match opts.backend {
         BackendChoice::Cpu => run_cpu_precision(scene, plan, opts),
         BackendChoice::Gpu => match crate::backend::gpu::device::Gpu::with_timing(opts.timing) {
@@ -275,7 +289,7 @@ fn run_gpu(
         setup::build_store::<f32>(&plan, &scene.particles, &scene.materials).map_err(|e| setup_failure(&scene, e))?;
     let backend =
         crate::backend::gpu::GpuBackend::new(gpu, plan, store, &scene.mirrors).map_err(|e| RunFailure::Run(e.0))?;
-    drive(scene, backend, opts, "f32")
+    drive(scene, backend, opts, "f32", true)
 }
 
 /// A scene that cannot be set up, as an error of its case file.
@@ -283,11 +297,74 @@ fn setup_failure(scene: &Scene, e: setup::SetupError) -> RunFailure {
     RunFailure::Input(format!("{e}\n  = in the case file {}\n", scene.path.display()))
 }
 
+/// The ranks a run is split into: MPI's under `mpirun`, else `--domains`, else 1.
+fn split_ranks(opts: &RunOptions) -> usize {
+    crate::backend::transport::launched_ranks().unwrap_or(opts.domains.unwrap_or(1))
+}
+
 fn run_cpu<T: Real>(scene: Scene, plan: Plan, opts: &RunOptions) -> Result<RunOutcome, RunFailure> {
     let store =
         setup::build_store::<T>(&plan, &scene.particles, &scene.materials).map_err(|e| setup_failure(&scene, e))?;
-    let backend = CpuBackend::new(plan, store, scene.mirrors.clone()).map_err(|e| RunFailure::Run(e.0))?;
-    drive(scene, backend, opts, T::NAME)
+    if let Some(world) = crate::backend::transport::world().map_err(|e| RunFailure::Run(e.0))? {
+        let backend = Domain::new(plan, store, scene.mirrors.clone(), world).map_err(|e| RunFailure::Run(e.0))?;
+        return drive(scene, backend, opts, T::NAME, true);
+    }
+    match opts.domains {
+        Some(n) if n > 1 => run_threads::<T>(scene, plan, store, opts, n),
+        _ => {
+            let backend = CpuBackend::new(plan, store, scene.mirrors.clone()).map_err(|e| RunFailure::Run(e.0))?;
+            drive(scene, backend, opts, T::NAME, true)
+        }
+    }
+}
+
+/// A run split into `ranks` domains, each run by a thread of this process as a rank. Rank 0
+/// writes the outputs; the others run the same loop (every read of a field is collective) into
+/// a folder of their own under the system's temporary directory, which they delete at the end.
+fn run_threads<T: Real>(
+    scene: Scene,
+    plan: Plan,
+    store: Store<T>,
+    opts: &RunOptions,
+    ranks: usize,
+) -> Result<RunOutcome, RunFailure> {
+    use crate::backend::transport::Threads;
+    let mut transports = Threads::ranks(ranks).into_iter();
+    let first = transports.next().expect("at least one rank");
+    let backends = std::iter::once(first)
+        .chain(transports)
+        .map(|t| Domain::new(plan.clone(), store.clone(), scene.mirrors.clone(), Box::new(t)))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| RunFailure::Run(e.0))?;
+    let mut backends = backends.into_iter();
+    let mine = backends.next().expect("rank 0");
+    std::thread::scope(|s| {
+        let others: Vec<_> = backends
+            .enumerate()
+            .map(|(k, backend)| {
+                let path = scene.path.clone();
+                s.spawn(move || -> Result<(), RunFailure> {
+                    let (scene, _) = prepare(&path, &opts.scene)?;
+                    let out = std::env::temp_dir().join(format!("pairsum-rank{}-{}", k + 1, std::process::id()));
+                    let theirs =
+                        RunOptions { out: out.clone(), progress: false, timing: false, force: true, ..opts.clone() };
+                    let done = drive(scene, backend, &theirs, T::NAME, false);
+                    let _ = std::fs::remove_dir_all(&out);
+                    done.map(|_| ())
+                })
+            })
+            .collect();
+        let outcome = drive(scene, mine, opts, T::NAME, false);
+        for h in others {
+            match h.join() {
+                Ok(Ok(())) => {}
+                Ok(Err(e)) if outcome.is_ok() => return Err(e),
+                Ok(Err(_)) => {}
+                Err(_) => return Err(RunFailure::Run("a rank of the split run panicked".into())),
+            }
+        }
+        outcome
+    })
 }
 
 /// Everything a run records while it goes.
@@ -464,11 +541,15 @@ pub fn vtk_data(scene: &Scene, b: &dyn Reader) -> Result<(Vec<[f64; 3]>, Vec<Poi
     Ok((positions, fields))
 }
 
+/// Runs the engine over `backend` and records the run. `on_pool`: run the time loop on one of
+/// rayon's workers (not for ranks that are threads of one process: a rank waiting for the others
+/// would hold a worker they need).
 fn drive<B: Backend + Send>(
     scene: Scene,
     backend: B,
     opts: &RunOptions,
     precision: &str,
+    on_pool: bool,
 ) -> Result<RunOutcome, RunFailure> {
     let mut config = scene.config.clone();
     config.max_steps = opts.max_steps;
@@ -524,7 +605,11 @@ fn drive<B: Backend + Send>(
     // The loop runs on one of rayon's workers: from there each pass's parallel loop over its
     // chunks starts without handing off to the pool and blocking on its latch, which cost half
     // the time of an 80-particle beam (1.73 s for 3.44 s over 2,000 steps, the same histories).
-    let result = rayon::scope(|_| engine.run(&mut |e| rec.observe(e)));
+    let result = if on_pool {
+        rayon::scope(|_| engine.run(&mut |e| rec.observe(e)))
+    } else {
+        engine.run(&mut |e| rec.observe(e))
+    };
     let wall = started.elapsed().as_secs_f64();
     if let Some(pb) = &rec.progress {
         pb.finish_and_clear();

@@ -2,8 +2,10 @@
 //! wgpu. The engine drives either through `Backend`, one integrator action at a time.
 
 pub mod cpu;
+pub mod domains;
 pub mod gpu;
 pub mod timestep;
+pub mod transport;
 pub mod wgsl;
 
 use crate::ir::FieldId;

@@ -11,24 +11,70 @@ use crate::compare::{extremes, CompareError};
 /// particles at one coordinate are ordered by index.
 /// An error where a position or a weight is not finite.
 pub fn bisect<T: Coord>(x: &[T], dim: usize, weight: &[f64], parts: usize) -> Result<Vec<u32>, CompareError> {
+    Ok(bisect_with_cuts(x, dim, weight, parts)?.0)
+}
+
+/// [`bisect`]'s domains and the planes that cut them, which place any point ([`Cuts::locate`]):
+/// a plane lies halfway between the last particle of its low side and the first of its high
+/// side, so a particle at the same coordinate on both sides is placed on the high one.
+pub fn bisect_with_cuts<T: Coord>(
+    x: &[T],
+    dim: usize,
+    weight: &[f64],
+    parts: usize,
+) -> Result<(Vec<u32>, Cuts), CompareError> {
     let n = x.len() / dim.max(1);
     assert_eq!(weight.len(), n, "one weight per particle");
     extremes(&as_f64(x))?;
     extremes(weight)?;
     let mut domain = vec![0u32; n];
     let mut all: Vec<u32> = (0..n as u32).collect();
-    split(x, dim, weight, &mut all, 0, parts.max(1), &mut domain);
-    Ok(domain)
+    let cuts = split(x, dim, weight, &mut all, 0, parts.max(1), &mut domain);
+    Ok((domain, cuts))
+}
+
+/// The planes of a recursive bisection, as a tree.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Cuts {
+    Domain(u32),
+    /// Points with `p[axis] < at` are on the `low` side.
+    Plane {
+        axis: usize,
+        at: f64,
+        low: Box<Cuts>,
+        high: Box<Cuts>,
+    },
+}
+
+impl Cuts {
+    /// The domain of point `p`.
+    pub fn locate(&self, p: &[f64]) -> u32 {
+        let mut node = self;
+        loop {
+            match node {
+                Cuts::Domain(d) => return *d,
+                Cuts::Plane { axis, at, low, high } => node = if p[*axis] < *at { low } else { high },
+            }
+        }
+    }
 }
 
 fn as_f64<T: Coord>(values: &[T]) -> Vec<f64> {
     values.iter().map(|v| v.to_f64()).collect()
 }
 
-fn split<T: Coord>(x: &[T], dim: usize, weight: &[f64], set: &mut [u32], first: u32, parts: usize, domain: &mut [u32]) {
+fn split<T: Coord>(
+    x: &[T],
+    dim: usize,
+    weight: &[f64],
+    set: &mut [u32],
+    first: u32,
+    parts: usize,
+    domain: &mut [u32],
+) -> Cuts {
     if parts == 1 || set.is_empty() {
         set.iter().for_each(|i| domain[*i as usize] = first);
-        return;
+        return Cuts::Domain(first);
     }
     let coord = |i: u32, a: usize| x[i as usize * dim + a].to_f64();
     let axis = (0..dim)
@@ -54,9 +100,15 @@ fn split<T: Coord>(x: &[T], dim: usize, weight: &[f64], set: &mut [u32], first: 
         }
         running += weight[*i as usize];
     }
+    let at = match cut {
+        0 => f64::NEG_INFINITY,
+        k if k == set.len() => f64::INFINITY,
+        k => 0.5 * (coord(set[k - 1], axis) + coord(set[k], axis)),
+    };
     let (low, high) = set.split_at_mut(cut);
-    split(x, dim, weight, low, first, low_parts, domain);
-    split(x, dim, weight, high, first + low_parts as u32, parts - low_parts, domain);
+    let low = split(x, dim, weight, low, first, low_parts, domain);
+    let high = split(x, dim, weight, high, first + low_parts as u32, parts - low_parts, domain);
+    Cuts::Plane { axis, at, low: Box::new(low), high: Box::new(high) }
 }
 
 /// Per domain, how many particles of the other domains lie within reach of one of its own:

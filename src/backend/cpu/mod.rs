@@ -79,6 +79,18 @@ pub struct CpuBackend<T: Real> {
     /// The state last kept as good ([`Backend::keep`]): the columns in the store's precision,
     /// the ids and the materials, copied into buffers reused from one keep to the next.
     kept: Option<Kept<T>>,
+    /// Per model group, the nanoseconds its particles spent in neighbour passes since the last
+    /// [`take_pass_time`](Self::take_pass_time), when asked to measure it.
+    pass_time: Option<Vec<std::sync::atomic::AtomicU64>>,
+}
+
+/// What the passes of one evaluation search ([`CpuBackend::search`]).
+pub struct Search<T> {
+    x: Vec<T>,
+    h: Vec<T>,
+    grid: Option<SizeLevels>,
+    h_near: Vec<f64>,
+    h_max: f64,
 }
 
 #[derive(Default)]
@@ -528,7 +540,132 @@ impl<T: Real> CpuBackend<T> {
             store,
             lists: lists::Lists::default(),
             kept: None,
+            pass_time: None,
         })
+    }
+
+    /// Measures from now on the time each group's particles spend in neighbour passes.
+    pub fn measure_pass_time(&mut self) {
+        let groups = self.plan.model.groups.len();
+        self.pass_time = Some((0..groups).map(|_| std::sync::atomic::AtomicU64::new(0)).collect());
+    }
+
+    /// Per model group, the seconds spent in neighbour passes since the last call (zeros when
+    /// not measured).
+    pub fn take_pass_time(&mut self) -> Vec<f64> {
+        let groups = self.plan.model.groups.len();
+        match &self.pass_time {
+            Some(t) => t.iter().map(|a| a.swap(0, std::sync::atomic::Ordering::Relaxed) as f64 * 1e-9).collect(),
+            None => vec![0.0; groups],
+        }
+    }
+
+    /// The number of neighbour passes of an evaluation.
+    pub fn pass_count(&self) -> usize {
+        self.passes.len()
+    }
+
+    /// Replaces the particles (same plan and layout, sorted group-major) while keeping the
+    /// compiled programs, and runs the particle programs only on the first `active[k]` particles
+    /// of the store's k-th group range: the others (a domain's halo) are read as neighbours only.
+    /// The programs fold the fields that were constant over the store they were compiled for, so
+    /// `store` must be a subset of that one's particles (or hold the same constant values).
+    pub fn replace_particles(&mut self, mut store: Store<T>, active: &[usize]) {
+        let cols = views(&mut store);
+        for v in self.passes.iter_mut().flatten() {
+            if v.jit.as_ref().is_some_and(|jit| exec::gathered_columns(&jit.gathers, &cols).is_none()) {
+                v.jit = None;
+            }
+        }
+        drop(cols);
+        self.chunks = chunks(&store)
+            .into_iter()
+            .filter_map(|c| {
+                let k = store.ranges.iter().position(|(g, _)| g.index() == c.group)?;
+                let end = store.ranges[k].1.start + active[k];
+                (c.start < end).then(|| Chunk { len: c.len.min(end - c.start), ..c })
+            })
+            .collect();
+        self.store = store;
+        self.lists.invalidate();
+        self.kept = None;
+    }
+
+    /// The neighbour search of one evaluation: the positions and smoothing lengths it searches,
+    /// and either a grid per particle size or the kept lists brought up to date.
+    pub fn search(&mut self) -> Result<Search<T>, BackendError> {
+        let dim = self.plan.dim;
+        let h_max = self.h_max();
+        if h_max <= 0.0 || !h_max.is_finite() {
+            return Err(BackendError(format!(
+                "the largest smoothing length is {h_max}: no neighbour search is possible"
+            )));
+        }
+        super::check_periods(&self.mirrors, self.support, h_max)?;
+        let x: Vec<T> = self.positions().to_vec();
+        let h: Vec<T> = self.store.column(self.h).expect("h is stored").data.clone();
+        // Kept lists, brought up to date as the plan's search says; or a grid per particle size
+        // (`SizeLevels`), of cells of half its largest cut-off: the search visits only the cells
+        // the cut-off sphere reaches (`Grid::cell_ranges_within`), fewer candidates than the
+        // 3^dim cells of a cut-off's size.
+        let grid = if self.plan.search.keeps_lists() {
+            let inp = lists::BuildInput { x: &x, h: &h, dim, support: self.support, h_max, mirrors: &self.mirrors };
+            let store = &self.store;
+            let field = |f| store.read_f64(f).map(|(_, v)| v).unwrap_or_else(|| vec![f64::NAN; store.n]);
+            self.lists.prepare(&self.plan.search, &inp, field);
+            None
+        } else {
+            Some(SizeLevels::build(&x, dim, &h, self.support, 0.0))
+        };
+        // With graded spacing a fine particle far from the coarse ones need not search as far as
+        // the coarsest cut-off.
+        let h_near = match grid {
+            Some(_) => Grid::nearby_max(&x, dim, &h, self.support * h_max),
+            None => vec![],
+        };
+        Ok(Search { x, h, grid, h_near, h_max })
+    }
+
+    /// Pass `k` of an evaluation over every active particle, with the neighbours of `search`.
+    pub fn run_pass(&mut self, k: usize, g: Globals, search: &Search<T>) {
+        let walk = match &search.grid {
+            Some(grid) => Walk::Cells(grid),
+            None => Walk::Lists(&self.lists.of),
+        };
+        let cols = views(&mut self.store);
+        let (params, stride, offset) = (&self.store.params.values, self.store.params.stride, &self.store.params.offset);
+        let sh = Shared {
+            groups_present: self.store.ranges.len(),
+            cols: &cols,
+            params,
+            param_stride: stride,
+            param_offset: offset,
+            group: &self.store.group,
+            material: &self.store.material,
+            time: T::from_f64(g.time),
+            dt: T::from_f64(g.dt),
+        };
+        let nb = Neighbours {
+            walk,
+            x: &search.x,
+            h: &search.h,
+            dim: self.plan.dim,
+            support: T::from_f64(self.support),
+            h_near: &search.h_near,
+            h_max: search.h_max,
+            mirrors: &self.mirrors,
+        };
+        let pass = &self.passes[k];
+        let timed = self.pass_time.as_deref();
+        self.chunks.par_iter().for_each_init(Scratch::default, |scratch, chunk| {
+            if let Some(v) = pass.iter().find(|v| v.group == chunk.group) {
+                let started = timed.map(|_| std::time::Instant::now());
+                exec::run_pass_chunk(v, &sh, &nb, scratch, *chunk);
+                if let (Some(t), Some(s)) = (timed, started) {
+                    t[chunk.group].fetch_add(s.elapsed().as_nanos() as u64, std::sync::atomic::Ordering::Relaxed);
+                }
+            }
+        });
     }
 
     fn params(&self) -> (&[T], usize, &[usize]) {
@@ -609,61 +746,9 @@ impl<T: Real> Backend for CpuBackend<T> {
     }
 
     fn evaluate(&mut self, g: Globals) -> Result<(), BackendError> {
-        let dim = self.plan.dim;
-        let h_max = self.h_max();
-        if h_max <= 0.0 || !h_max.is_finite() {
-            return Err(BackendError(format!(
-                "the largest smoothing length is {h_max}: no neighbour search is possible"
-            )));
-        }
-        super::check_periods(&self.mirrors, self.support, h_max)?;
-        let x: Vec<T> = self.positions().to_vec();
-        let h: Vec<T> = self.store.column(self.h).expect("h is stored").data.clone();
-        // Kept lists, brought up to date as the plan's search says; or a grid per particle size
-        // (`SizeLevels`), of cells of half its largest cut-off: the search visits only the cells
-        // the cut-off sphere reaches (`Grid::cell_ranges_within`), fewer candidates than the
-        // 3^dim cells of a cut-off's size.
-        let keeps_lists = self.plan.search.keeps_lists();
-        let grid = if keeps_lists {
-            let inp = lists::BuildInput { x: &x, h: &h, dim, support: self.support, h_max, mirrors: &self.mirrors };
-            let store = &self.store;
-            let field = |f| store.read_f64(f).map(|(_, v)| v).unwrap_or_else(|| vec![f64::NAN; store.n]);
-            self.lists.prepare(&self.plan.search, &inp, field);
-            None
-        } else {
-            Some(SizeLevels::build(&x, dim, &h, self.support, 0.0))
-        };
-        let walk = match &grid {
-            Some(g) => Walk::Cells(g),
-            None => Walk::Lists(&self.lists.of),
-        };
-        let cols = views(&mut self.store);
-        let (params, stride, offset) = (&self.store.params.values, self.store.params.stride, &self.store.params.offset);
-        let sh = Shared {
-            groups_present: self.store.ranges.len(),
-            cols: &cols,
-            params,
-            param_stride: stride,
-            param_offset: offset,
-            group: &self.store.group,
-            material: &self.store.material,
-            time: T::from_f64(g.time),
-            dt: T::from_f64(g.dt),
-        };
-        // With graded spacing a fine particle far from the coarse ones need not search as far as
-        // the coarsest cut-off.
-        let h_near = match walk {
-            Walk::Cells(_) => Grid::nearby_max(&x, dim, &h, self.support * h_max),
-            Walk::Lists(_) => vec![],
-        };
-        let support = T::from_f64(self.support);
-        let nb = Neighbours { walk, x: &x, h: &h, dim, support, h_near: &h_near, h_max, mirrors: &self.mirrors };
-        for pass in &self.passes {
-            self.chunks.par_iter().for_each_init(Scratch::default, |scratch, chunk| {
-                if let Some(v) = pass.iter().find(|v| v.group == chunk.group) {
-                    exec::run_pass_chunk(v, &sh, &nb, scratch, *chunk);
-                }
-            });
+        let search = self.search()?;
+        for k in 0..self.passes.len() {
+            self.run_pass(k, g, &search);
         }
         Ok(())
     }
@@ -751,16 +836,7 @@ impl<T: Real> Backend for CpuBackend<T> {
     }
 
     fn snapshot(&self) -> Result<Snapshot, BackendError> {
-        Ok(Snapshot {
-            columns: self
-                .store
-                .columns
-                .iter()
-                .map(|c| c.as_ref().map(|c| c.data.iter().map(|v| v.to_f64()).collect()))
-                .collect(),
-            id: self.store.id.clone(),
-            material: self.store.material.clone(),
-        })
+        Ok(snapshot_of(&self.store))
     }
 
     fn restore(&mut self, s: &Snapshot) -> Result<(), BackendError> {
@@ -818,25 +894,43 @@ impl<T: Real> Backend for CpuBackend<T> {
     }
 
     fn first_non_finite(&mut self, fields: &[FieldId]) -> Result<Option<(usize, FieldId)>, BackendError> {
-        let mut best: Option<(usize, FieldId)> = None;
-        for f in fields {
-            let Some(c) = self.store.column(*f) else { continue };
-            for i in 0..self.store.n {
-                let g = self.store.group[i] as usize;
-                if !c.has(g) {
-                    continue;
+        Ok(first_non_finite_in(&self.store, fields))
+    }
+}
+
+/// The store's columns, ids and materials as f64.
+pub fn snapshot_of<T: Real>(store: &Store<T>) -> Snapshot {
+    Snapshot {
+        columns: store
+            .columns
+            .iter()
+            .map(|c| c.as_ref().map(|c| c.data.iter().map(|v| v.to_f64()).collect()))
+            .collect(),
+        id: store.id.clone(),
+        material: store.material.clone(),
+    }
+}
+
+/// The first particle (in store order) with a non-finite value in one of `fields`, and that field.
+pub fn first_non_finite_in<T: Real>(store: &Store<T>, fields: &[FieldId]) -> Option<(usize, FieldId)> {
+    let mut best: Option<(usize, FieldId)> = None;
+    for f in fields {
+        let Some(c) = store.column(*f) else { continue };
+        for i in 0..store.n {
+            let g = store.group[i] as usize;
+            if !c.has(g) {
+                continue;
+            }
+            let row = c.row(i, g);
+            if c.data[row * c.comps..(row + 1) * c.comps].iter().any(|v| !v.is_finite()) {
+                if best.is_none_or(|(b, _)| i < b) {
+                    best = Some((i, *f));
                 }
-                let row = c.row(i, g);
-                if c.data[row * c.comps..(row + 1) * c.comps].iter().any(|v| !v.is_finite()) {
-                    if best.is_none_or(|(b, _)| i < b) {
-                        best = Some((i, *f));
-                    }
-                    break;
-                }
+                break;
             }
         }
-        Ok(best)
     }
+    best
 }
 
 /// Lanes per batch, for reports.

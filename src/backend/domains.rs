@@ -1,0 +1,747 @@
+//! A run split into domains (issue 42): one rank's share of it. The particles are cut into boxes
+//! by recursive coordinate bisection (`grid::decompose`); a rank runs a CPU backend over the
+//! particles in its box (its own) and copies of the others' particles within reach of them (its
+//! halo). Each evaluation starts by sending every particle that left the box to the rank whose box
+//! it entered, with its whole state (migration), and by rebuilding the halos; before each later
+//! pass, a halo receives the fields that pass reads at j and an earlier pass of the evaluation
+//! wrote (`Plan::fields_read_at_j`). The passes, updates and reductions run over a rank's own
+//! particles only; the time step, the fields the engine and the runner read, the watchdog's
+//! checks and the last good state are global, so every rank takes the same decisions.
+//!
+//! Every exchange goes through a [`Transport`] and is collective: every rank makes the same calls
+//! in the same order. What travels is counted in [`Traffic`].
+
+use super::cpu::{first_non_finite_in, snapshot_of, CpuBackend};
+use super::transport::Transport;
+use super::{Backend, BackendError, Globals, Mirror, Snapshot};
+use crate::compare::largest_number;
+use crate::grid::decompose::{bisect_with_cuts, Cuts};
+use crate::ir::{FieldId, Reduce};
+use crate::particles::{ParamTable, Real, Store};
+use crate::schedule::{search::Search as Lists, Plan};
+use std::sync::Mutex;
+
+/// What a rank sent to the others, in bytes of the run's precision.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Traffic {
+    /// Whole particles that changed domain.
+    pub migration: u64,
+    /// Whole particles copied into halos when they were rebuilt.
+    pub halo_builds: u64,
+    /// Fields sent to halos before a pass.
+    pub halo_updates: u64,
+    /// Rebuilds of the halos (with migration).
+    pub rebuilds: u64,
+    /// Particles in the halo at the last rebuild.
+    pub halo_particles: usize,
+    /// New cuts, where the ranks' measured work had drifted apart.
+    pub rebalances: u64,
+    /// The largest rank's neighbour-pass time over the ranks' mean, at the last check.
+    pub imbalance: f64,
+}
+
+/// A run that cannot be split into domains (yet), and why.
+pub fn unsupported(plan: &Plan, mirrors: &[Mirror]) -> Option<String> {
+    if matches!(plan.search, Lists::Adaptive { .. }) {
+        return Some(
+            "a run split into domains rebuilds its neighbour lists when particles change domain: the adaptive \
+             search (`search = \"adaptive\"`), which keeps lists from step 0, is not supported; use \"cells\" or \
+             \"verlet\""
+                .into(),
+        );
+    }
+    if mirrors.iter().any(|m| m.shift != 0.0) {
+        return Some("a run split into domains does not support periodic sides yet".into());
+    }
+    None
+}
+
+/// A particle: one in a store here, or one that travelled as its group, material and id, then
+/// every field its group stores, in the plan's layout order.
+#[derive(Clone)]
+enum Row<'a, T> {
+    Here(&'a Store<T>, usize),
+    Sent(&'a [f64]),
+}
+
+/// Where this rank's own particles were at the last rebuild of the halos.
+struct Anchor {
+    x: Vec<[f64; 3]>,
+    h: Vec<f64>,
+    skin: f64,
+}
+
+/// The ranks are cut again when the slowest rank's neighbour-pass time exceeds the ranks' mean by
+/// this factor (checked where particles are reordered, every `reorder_every` steps).
+const REBALANCE_AT: f64 = 1.1;
+
+/// The halo's skin, as a fraction of the largest cut-off, where the plan's search keeps no lists
+/// (lists bring their own).
+const HALO_SKIN: f64 = 0.1;
+
+/// One rank of a CPU run split into domains, driven by the engine as a backend.
+pub struct Domain<T: Real> {
+    plan: Plan,
+    backend: CpuBackend<T>,
+    transport: Mutex<Box<dyn Transport>>,
+    rank: usize,
+    size: usize,
+    /// Per group range of the local store: how many of its particles this rank owns (the rest
+    /// of the range is halo).
+    owned: Vec<usize>,
+    /// Per rank: the local particles this one sends it as halo, in the order sent.
+    send: Vec<Vec<u32>>,
+    /// Per rank: where the halo particles it sends this one sit here, in the order sent.
+    recv: Vec<Vec<u32>>,
+    cuts: Cuts,
+    params: ParamTable<T>,
+    /// Every particle's group, in the order of [`Backend::read`] (group-major, then by rank).
+    groups: Vec<u32>,
+    x: FieldId,
+    h: FieldId,
+    support: f64,
+    /// Per pass: the stored fields it reads at j (with x and h).
+    read_at_j: Vec<Vec<FieldId>>,
+    /// The halo's skin, a fraction of the largest cut-off: the halo holds the particles within
+    /// the cut-off plus the skin, and is kept until a pair may have come closer by the skin.
+    skin: f64,
+    /// Since the last rebuild: this rank's own particles' positions and smoothing lengths, and
+    /// the skin's length; `None` when the next evaluation must rebuild.
+    anchor: Option<Anchor>,
+    /// This rank's own particles when the watchdog last kept the state.
+    kept: Option<Store<T>>,
+    /// Per model group: how many of its particles this rank evaluated since the last check of
+    /// the balance (particles times evaluations).
+    evaluated: Vec<f64>,
+    pub traffic: Traffic,
+}
+
+impl<T: Real> Domain<T> {
+    /// This rank's share of the particles of `store` (every rank passes the same one), split into
+    /// `transport.size()` domains of equal particle counts.
+    pub fn new(
+        plan: Plan,
+        store: Store<T>,
+        mirrors: Vec<Mirror>,
+        transport: Box<dyn Transport>,
+    ) -> Result<Domain<T>, BackendError> {
+        if let Some(why) = unsupported(&plan, &mirrors) {
+            return Err(BackendError(why));
+        }
+        let (rank, size) = (transport.rank(), transport.size());
+        if size > store.n.max(1) {
+            return Err(BackendError(format!(
+                "cannot split {} particles into {size} domains: run on at most {} ranks",
+                store.n,
+                store.n.max(1)
+            )));
+        }
+        let field = |name: &str| {
+            plan.model.field_id(name).ok_or_else(|| BackendError(format!("the model has no field `{name}`")))
+        };
+        let (x, h) = (field("x")?, field("h")?);
+        let positions = store.read_f64(x).map(|(_, v)| v).unwrap_or_default();
+        let (_, cuts) = bisect_with_cuts(&positions, plan.dim, &vec![1.0; store.n], size)
+            .map_err(|e| BackendError(format!("the initial particles cannot be split into domains: {e}")))?;
+        let read_at_j = (0..plan.passes.len()).map(|k| plan.fields_read_at_j(k)).collect();
+        let skin = match plan.search {
+            Lists::Verlet { skin } => skin,
+            _ => HALO_SKIN,
+        };
+        let mut backend = CpuBackend::new(plan.clone(), store.clone(), mirrors)?;
+        backend.measure_pass_time();
+        let support = backend.support;
+        let mut domain = Domain {
+            backend,
+            transport: Mutex::new(transport),
+            rank,
+            size,
+            owned: vec![],
+            send: vec![vec![]; size],
+            recv: vec![vec![]; size],
+            cuts,
+            params: store.params.clone(),
+            groups: store.group.clone(),
+            x,
+            h,
+            support,
+            read_at_j,
+            skin,
+            anchor: None,
+            kept: None,
+            evaluated: vec![0.0; plan.model.groups.len()],
+            traffic: Traffic::default(),
+            plan,
+        };
+        domain.take_own(&store);
+        Ok(domain)
+    }
+
+    /// This rank's own particles and its halo's, as of the last evaluation.
+    pub fn sizes(&self) -> (usize, usize) {
+        let own: usize = self.owned.iter().sum();
+        (own, self.backend.store.n - own)
+    }
+
+    fn transport(&self) -> std::sync::MutexGuard<'_, Box<dyn Transport>> {
+        self.transport.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Keeps the particles of `store` that lie in this rank's box, with no halo.
+    fn take_own(&mut self, store: &Store<T>) {
+        let rows: Vec<(&Store<T>, usize)> = (0..store.n)
+            .filter(|i| self.cuts.locate(&self.position(&Row::Here(store, *i))) as usize == self.rank)
+            .map(|i| (store, i))
+            .collect();
+        self.set_own(Store::gather(&self.plan, &self.params, &rows));
+    }
+
+    /// Replaces the local particles by `store`, all of them owned.
+    fn set_own(&mut self, store: Store<T>) {
+        self.anchor = None;
+        self.owned = store.ranges.iter().map(|(_, r)| r.len()).collect();
+        self.backend.replace_particles(store, &self.owned);
+        self.send.iter_mut().chain(&mut self.recv).for_each(Vec::clear);
+    }
+
+    /// The indices of the local particles this rank owns, in store order.
+    fn own(&self) -> Vec<usize> {
+        let ranges = &self.backend.store.ranges;
+        ranges.iter().zip(&self.owned).flat_map(|((_, r), n)| r.start..r.start + n).collect()
+    }
+
+    /// The fields a group stores, as (field, components), in the order rows carry them.
+    fn stored(&self, group: u32) -> impl Iterator<Item = (FieldId, usize)> + '_ {
+        let g = crate::ir::GroupId(group);
+        self.plan.layout.iter().filter(move |l| l.groups.contains(g)).map(|l| (l.field, l.comps))
+    }
+
+    fn row_len(&self, group: u32) -> usize {
+        3 + self.stored(group).map(|(_, c)| c).sum::<usize>()
+    }
+
+    /// Appends particle i of `store` as a travelling row.
+    fn encode(&self, store: &Store<T>, i: usize, out: &mut Vec<f64>) {
+        let g = store.group[i];
+        out.extend([g as f64, store.material[i] as f64, store.id[i] as f64]);
+        for (f, comps) in self.stored(g) {
+            let c = store.column(f).expect("a stored field has a column");
+            let row = c.row(i, g as usize);
+            out.extend(c.data[row * comps..(row + 1) * comps].iter().map(|v| v.to_f64()));
+        }
+    }
+
+    /// The rows of a message.
+    fn rows<'a>(&self, message: &'a [f64]) -> Vec<Row<'a, T>> {
+        let mut out = vec![];
+        let mut at = 0;
+        while at < message.len() {
+            let len = self.row_len(message[at] as u32);
+            out.push(Row::Sent(&message[at..at + len]));
+            at += len;
+        }
+        out
+    }
+
+    fn group_of(row: &Row<'_, T>) -> u32 {
+        match row {
+            Row::Here(s, i) => s.group[*i],
+            Row::Sent(r) => r[0] as u32,
+        }
+    }
+
+    /// Field `f`'s values in a row, if its group stores it.
+    fn value(&self, row: &Row<'_, T>, f: FieldId) -> Option<Vec<f64>> {
+        match row {
+            Row::Here(s, i) => {
+                let c = s.column(f)?;
+                let g = s.group[*i] as usize;
+                c.has(g).then(|| {
+                    c.data[c.row(*i, g) * c.comps..(c.row(*i, g) + 1) * c.comps].iter().map(|v| v.to_f64()).collect()
+                })
+            }
+            Row::Sent(r) => {
+                let mut at = 3;
+                for (field, comps) in self.stored(r[0] as u32) {
+                    if field == f {
+                        return Some(r[at..at + comps].to_vec());
+                    }
+                    at += comps;
+                }
+                None
+            }
+        }
+    }
+
+    fn position(&self, row: &Row<'_, T>) -> [f64; 3] {
+        let mut p = [0.0; 3];
+        for (a, v) in self.value(row, self.x).unwrap_or_default().into_iter().enumerate().take(3) {
+            p[a] = v;
+        }
+        p
+    }
+
+    /// A store of these rows (group-major), with their whole state.
+    fn build(&self, rows: &[Row<'_, T>]) -> Store<T> {
+        // Rows already here are copied; travelled ones are written from their values.
+        let group: Vec<u32> = rows.iter().map(Self::group_of).collect();
+        let material: Vec<u32> = rows
+            .iter()
+            .map(|r| match r {
+                Row::Here(s, i) => s.material[*i],
+                Row::Sent(v) => v[1] as u32,
+            })
+            .collect();
+        let mut out = Store::new(&self.plan, group, material, self.params.materials());
+        out.params = self.params.clone();
+        out.id = rows
+            .iter()
+            .map(|r| match r {
+                Row::Here(s, i) => s.id[*i],
+                Row::Sent(v) => v[2] as u32,
+            })
+            .collect();
+        for (k, row) in rows.iter().enumerate() {
+            let g = Self::group_of(row);
+            match row {
+                Row::Here(s, i) => {
+                    for (dst, from) in out.columns.iter_mut().zip(&s.columns) {
+                        let (Some(dst), Some(from)) = (dst.as_mut(), from.as_ref()) else { continue };
+                        if dst.has(g as usize) {
+                            let (a, b) = (from.row(*i, g as usize) * from.comps, dst.row(k, g as usize) * dst.comps);
+                            dst.data[b..b + dst.comps].copy_from_slice(&from.data[a..a + from.comps]);
+                        }
+                    }
+                }
+                Row::Sent(v) => {
+                    let mut at = 3;
+                    for (f, comps) in self.stored(g) {
+                        let c = out.column_mut(f).expect("a stored field has a column");
+                        let row = c.row(k, g as usize);
+                        for (d, s) in c.data[row * comps..(row + 1) * comps].iter_mut().zip(&v[at..at + comps]) {
+                            *d = T::from_f64(*s);
+                        }
+                        at += comps;
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    /// Migration and new halos: every particle goes to the rank whose box holds it; each rank
+    /// then receives the others' particles within the box of its own grown by the largest
+    /// cut-off, support · h_max.
+    fn rebuild(&mut self) {
+        let store = &self.backend.store;
+        let own = self.own();
+        let mut leaving = vec![vec![]; self.size];
+        let mut staying = vec![];
+        for i in own {
+            let to = self.cuts.locate(&self.position(&Row::Here(store, i))) as usize;
+            if to == self.rank {
+                staying.push(i);
+            } else {
+                self.encode(store, i, &mut leaving[to]);
+            }
+        }
+        self.traffic.migration += (leaving.iter().map(Vec::len).sum::<usize>() * T::BYTES) as u64;
+        let arrived = self.transport().exchange(leaving);
+        let mut mine: Vec<Row<'_, T>> = staying.iter().map(|i| Row::Here(store, *i)).collect();
+        for m in &arrived {
+            mine.extend(self.rows(m));
+        }
+        mine.sort_by_key(Self::group_of);
+        // The boxes, grown by the largest cut-off.
+        let h_local = mine.iter().fold(0.0, |m, r| largest_number(m, self.value(r, self.h).unwrap_or_default()));
+        let h_max = self.transport().all_reduce(&[h_local], &[Reduce::Max])[0];
+        let skin = self.skin * self.support * h_max;
+        let reach = self.support * h_max + skin;
+        let dim = self.plan.dim;
+        let mut bounds =
+            [f64::INFINITY, f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
+        for r in &mine {
+            let p = self.position(r);
+            for a in 0..dim {
+                bounds[a] = bounds[a].min(p[a] - reach);
+                bounds[3 + a] = bounds[3 + a].max(p[a] + reach);
+            }
+        }
+        let boxes = self.transport().all_gather(bounds.to_vec());
+        // Halos: each rank's own particles within another's box.
+        let mut halo_out = vec![vec![]; self.size];
+        let mut sent_rows: Vec<Vec<usize>> = vec![vec![]; self.size];
+        for (d, b) in boxes.iter().enumerate().filter(|(d, _)| *d != self.rank) {
+            for (k, r) in mine.iter().enumerate() {
+                let p = self.position(r);
+                if (0..dim).all(|a| p[a] >= b[a] && p[a] <= b[3 + a]) {
+                    sent_rows[d].push(k);
+                    match r {
+                        Row::Here(s, i) => self.encode(s, *i, &mut halo_out[d]),
+                        Row::Sent(v) => halo_out[d].extend_from_slice(v),
+                    }
+                }
+            }
+        }
+        self.traffic.halo_builds += (halo_out.iter().map(Vec::len).sum::<usize>() * T::BYTES) as u64;
+        let halo_in = self.transport().exchange(halo_out);
+        let halo: Vec<Vec<Row<'_, T>>> = halo_in.iter().map(|m| self.rows(m)).collect();
+        // The local store, group-major: per group, this rank's own particles, then the halo's by
+        // rank.
+        let mut groups: Vec<u32> = mine.iter().chain(halo.iter().flatten()).map(Self::group_of).collect();
+        groups.sort_unstable();
+        groups.dedup();
+        let mut rows: Vec<Row<'_, T>> = vec![];
+        let mut owned = vec![];
+        let mut index_of_mine = vec![0u32; mine.len()];
+        let mut recv: Vec<Vec<u32>> = vec![vec![]; self.size];
+        for g in groups {
+            let before = rows.len();
+            for (k, r) in mine.iter().enumerate().filter(|(_, r)| Self::group_of(r) == g) {
+                index_of_mine[k] = rows.len() as u32;
+                rows.push(r.clone());
+            }
+            owned.push(rows.len() - before);
+            for (s, from) in halo.iter().enumerate() {
+                for r in from.iter().filter(|r| Self::group_of(r) == g) {
+                    recv[s].push(rows.len() as u32);
+                    rows.push(r.clone());
+                }
+            }
+        }
+        // Within a group the halo comes by rank in the order sent, so the order of each rank's
+        // rows here is the order it sent them (its own rows are group-major too).
+        let new = self.build(&rows);
+        let send: Vec<Vec<u32>> = sent_rows.iter().map(|ks| ks.iter().map(|k| index_of_mine[*k]).collect()).collect();
+        self.backend.replace_particles(new, &owned);
+        (self.owned, self.send, self.recv) = (owned, send, recv);
+        let (x, h) = self.own().into_iter().map(|i| self.place(i)).unzip();
+        self.anchor = Some(Anchor { x, h, skin });
+        self.traffic.rebuilds += 1;
+        self.traffic.halo_particles = self.recv.iter().map(Vec::len).sum();
+    }
+
+    /// Local particle i's position and smoothing length.
+    fn place(&self, i: usize) -> ([f64; 3], f64) {
+        let store = &self.backend.store;
+        let g = store.group[i] as usize;
+        let (xc, hc) = (store.column(self.x).expect("x is stored"), store.column(self.h).expect("h is stored"));
+        let mut p = [0.0; 3];
+        let row = xc.row(i, g) * xc.comps;
+        for (a, v) in p.iter_mut().enumerate().take(xc.comps) {
+            *v = xc.data[row + a].to_f64();
+        }
+        (p, hc.data[hc.row(i, g)].to_f64())
+    }
+
+    /// Whether the halos must be rebuilt: never built, or a pair outside them may have come
+    /// within its cut-off (`Drift::exceeds`, over every rank's own particles).
+    fn must_rebuild(&self) -> bool {
+        let Some(a) = &self.anchor else { return true };
+        let mut drift = [0.0f64, 0.0];
+        for (k, i) in self.own().into_iter().enumerate() {
+            let (x, h) = self.place(i);
+            let d2: f64 = (0..3).map(|c| (x[c] - a.x[k][c]).powi(2)).sum();
+            drift = [largest_number(drift[0], [d2.sqrt()]), largest_number(drift[1], [h - a.h[k]])];
+            if d2.is_nan() || h.is_nan() {
+                drift[0] = f64::INFINITY;
+            }
+        }
+        let all = self.transport().all_reduce(&drift, &[Reduce::Max, Reduce::Max]);
+        crate::schedule::search::Drift { displacement: all[0], h_growth: all[1] }.exceeds(a.skin, self.support)
+    }
+
+    /// New cuts, weighted by each particle's measured cost, when the slowest rank's neighbour
+    /// passes took more than `REBALANCE_AT` times the ranks' mean since the last check. A
+    /// particle's cost is its group's pass time per particle-evaluation over all ranks. The
+    /// particles move to their new ranks at the next evaluation.
+    fn rebalance(&mut self) {
+        let time = self.backend.take_pass_time();
+        let evaluated = std::mem::replace(&mut self.evaluated, vec![0.0; time.len()]);
+        let mine: f64 = time.iter().sum();
+        let times: Vec<f64> = self.transport().all_gather(vec![mine]).concat();
+        let mean = times.iter().sum::<f64>() / times.len() as f64;
+        let slowest = times.iter().fold(0.0, |m, t| largest_number(m, [*t]));
+        self.traffic.imbalance = if mean > 0.0 { slowest / mean } else { 1.0 };
+        if self.size == 1 || self.traffic.imbalance.is_nan() || self.traffic.imbalance <= REBALANCE_AT {
+            return;
+        }
+        let sums: Vec<Reduce> = vec![Reduce::Sum; 2 * time.len()];
+        let both: Vec<f64> = time.iter().chain(&evaluated).copied().collect();
+        let total = self.transport().all_reduce(&both, &sums);
+        let (time, count) = total.split_at(time.len());
+        let mean_cost = time.iter().sum::<f64>() / count.iter().sum::<f64>().max(1.0);
+        let cost: Vec<f64> = time.iter().zip(count).map(|(t, n)| if *n > 0.0 { t / n } else { mean_cost }).collect();
+        // Every rank's own particles (position, weight), then the same cuts on every rank.
+        let mut mine = vec![];
+        for i in self.own() {
+            let (x, _) = self.place(i);
+            mine.extend(x);
+            mine.push(cost[self.backend.store.group[i] as usize]);
+        }
+        let all: Vec<f64> = self.transport().all_gather(mine).concat();
+        let dim = self.plan.dim;
+        let x: Vec<f64> = all.chunks(4).flat_map(|p| p[..dim].to_vec()).collect();
+        let weight: Vec<f64> = all.chunks(4).map(|p| p[3]).collect();
+        if let Ok((_, cuts)) = bisect_with_cuts(&x, dim, &weight, self.size) {
+            self.cuts = cuts;
+            self.traffic.rebalances += 1;
+        }
+    }
+
+    /// Sends each halo the values of `fields` of the particles it copies.
+    fn refresh_halos(&mut self, fields: &[FieldId]) {
+        let store = &self.backend.store;
+        let out: Vec<Vec<f64>> = self
+            .send
+            .iter()
+            .map(|list| {
+                let mut m = vec![];
+                for i in list {
+                    let (i, g) = (*i as usize, store.group[*i as usize] as usize);
+                    for f in fields {
+                        if let Some(c) = store.column(*f).filter(|c| c.has(g)) {
+                            m.extend(
+                                c.data[c.row(i, g) * c.comps..(c.row(i, g) + 1) * c.comps].iter().map(|v| v.to_f64()),
+                            );
+                        }
+                    }
+                }
+                m
+            })
+            .collect();
+        self.traffic.halo_updates += (out.iter().map(Vec::len).sum::<usize>() * T::BYTES) as u64;
+        let got = self.transport().exchange(out);
+        let store = &mut self.backend.store;
+        for (list, m) in self.recv.iter().zip(got) {
+            let mut next = m.into_iter();
+            for k in list {
+                let (k, g) = (*k as usize, store.group[*k as usize] as usize);
+                for f in fields {
+                    if let Some(c) = store.column_mut(*f).filter(|c| c.has(g)) {
+                        let row = c.row(k, g);
+                        for v in &mut c.data[row * c.comps..(row + 1) * c.comps] {
+                            *v = T::from_f64(next.next().unwrap_or(f64::NAN));
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// Every rank's own particles of `local` (the indices `own`), in one store in the order of
+    /// [`Backend::read`]: group-major, then by rank.
+    fn assemble(&self, local: &Store<T>, own: &[usize]) -> Store<T> {
+        let mut m = vec![];
+        for i in own {
+            self.encode(local, *i, &mut m);
+        }
+        let all = self.transport().all_gather(m);
+        let mut rows: Vec<Row<'_, T>> = all.iter().flat_map(|m| self.rows(m)).collect();
+        rows.sort_by_key(Self::group_of);
+        self.build(&rows)
+    }
+
+    /// Per rank, per model group: how many particles it owns.
+    fn counts(&self) -> Vec<Vec<usize>> {
+        let mut mine = vec![0.0; self.plan.model.groups.len()];
+        for ((g, _), n) in self.backend.store.ranges.iter().zip(&self.owned) {
+            mine[g.index()] = *n as f64;
+        }
+        self.transport().all_gather(mine).into_iter().map(|v| v.into_iter().map(|c| c as usize).collect()).collect()
+    }
+
+    /// Values `width` per own particle (from `value`), of every rank, in the order of
+    /// [`Backend::read`].
+    fn gather(&self, width: usize, value: impl Fn(&Store<T>, usize) -> Vec<f64>) -> Vec<f64> {
+        let store = &self.backend.store;
+        let mut mine = vec![];
+        for i in self.own() {
+            mine.extend(value(store, i));
+        }
+        let all = self.transport().all_gather(mine);
+        let counts = self.counts();
+        let mut at = vec![0usize; self.size];
+        let mut out = Vec::with_capacity(self.groups.len() * width);
+        for g in 0..self.plan.model.groups.len() {
+            for ((s, m), c) in all.iter().enumerate().zip(&counts) {
+                let n = c[g] * width;
+                out.extend_from_slice(&m[at[s]..at[s] + n]);
+                at[s] += n;
+            }
+        }
+        out
+    }
+}
+
+impl<T: Real> Backend for Domain<T> {
+    fn describe(&self) -> String {
+        format!("{}, rank {} of {} domains", self.backend.describe(), self.rank + 1, self.size)
+    }
+
+    fn plan(&self) -> &Plan {
+        &self.plan
+    }
+
+    fn particles(&self) -> usize {
+        self.groups.len()
+    }
+
+    fn initialise(&mut self) -> Result<(), BackendError> {
+        self.backend.initialise()
+    }
+
+    fn save(&mut self) -> Result<(), BackendError> {
+        self.backend.save()
+    }
+
+    /// Rebuilds the halos when they may miss a neighbour, else keeps them; before each pass the
+    /// halo receives what that pass reads at j and it does not hold as it is now: after a
+    /// rebuild (which sends whole particles) what an earlier pass wrote, else what the pass reads
+    /// and was not sent since the last write.
+    fn evaluate(&mut self, g: Globals) -> Result<(), BackendError> {
+        let mut fresh: Vec<FieldId> = if self.must_rebuild() {
+            self.rebuild();
+            self.plan.layout.iter().map(|l| l.field).collect()
+        } else {
+            vec![]
+        };
+        for ((g, _), n) in self.backend.store.ranges.iter().zip(&self.owned) {
+            self.evaluated[g.index()] += *n as f64;
+        }
+        let mut search = None;
+        for k in 0..self.plan.passes.len() {
+            let fields: Vec<FieldId> = self.read_at_j[k].iter().copied().filter(|f| !fresh.contains(f)).collect();
+            if !fields.is_empty() {
+                self.refresh_halos(&fields);
+            }
+            fresh.extend(&fields);
+            fresh.retain(|f| !self.plan.passes[k].writes.contains(f));
+            // The search reads the halo's positions: after the first pass's fields arrived.
+            if search.is_none() && self.backend.store.n > 0 {
+                search = Some(self.backend.search()?);
+            }
+            if let Some(search) = &search {
+                self.backend.run_pass(k, g, search);
+            }
+        }
+        Ok(())
+    }
+
+    fn reductions(&mut self, g: Globals) -> Result<Vec<f64>, BackendError> {
+        let reds = super::timestep::reductions(&self.plan.model, &self.plan.timesteps);
+        let local = self.backend.reductions(g)?;
+        let kinds: Vec<Reduce> = reds.iter().map(|(r, _)| *r).collect();
+        Ok(self.transport().all_reduce(&local, &kinds))
+    }
+
+    fn update(&mut self, stage: usize, g: Globals) -> Result<(), BackendError> {
+        self.backend.update(stage, g)
+    }
+
+    /// Cuts the ranks again where their measured work drifted apart (`REBALANCE_AT`), drops the
+    /// halo and orders this rank's own particles along the Morton curve.
+    fn reorder(&mut self) -> Result<(), BackendError> {
+        self.rebalance();
+        let own = self.own();
+        let rows: Vec<(&Store<T>, usize)> = own.iter().map(|i| (&self.backend.store, *i)).collect();
+        let store = Store::gather(&self.plan, &self.params, &rows);
+        self.set_own(store);
+        self.backend.reorder()
+    }
+
+    fn read(&self, f: FieldId) -> Result<Option<(usize, Vec<f64>)>, BackendError> {
+        let Some(l) = self.plan.layout.iter().find(|l| l.field == f) else { return Ok(None) };
+        let comps = l.comps;
+        let values =
+            self.gather(comps, |s, i| self.value(&Row::Here(s, i), f).unwrap_or_else(|| vec![f64::NAN; comps]));
+        Ok(Some((comps, values)))
+    }
+
+    fn ids(&self) -> Result<Vec<u32>, BackendError> {
+        Ok(self.gather(1, |s, i| vec![s.id[i] as f64]).into_iter().map(|v| v as u32).collect())
+    }
+
+    fn groups(&self) -> Vec<u32> {
+        self.groups.clone()
+    }
+
+    fn snapshot(&self) -> Result<Snapshot, BackendError> {
+        Ok(snapshot_of(&self.assemble(&self.backend.store, &self.own())))
+    }
+
+    fn restore(&mut self, s: &Snapshot) -> Result<(), BackendError> {
+        let mut store = Store::<T>::new(&self.plan, self.groups.clone(), s.material.clone(), self.params.materials());
+        store.params = self.params.clone();
+        store.id = s.id.clone();
+        for (c, d) in store.columns.iter_mut().zip(&s.columns) {
+            if let (Some(c), Some(d)) = (c.as_mut(), d) {
+                for (x, v) in c.data.iter_mut().zip(d) {
+                    *x = T::from_f64(*v);
+                }
+            }
+        }
+        self.take_own(&store);
+        Ok(())
+    }
+
+    fn keep(&mut self) -> Result<(), BackendError> {
+        let rows: Vec<(&Store<T>, usize)> = self.own().into_iter().map(|i| (&self.backend.store, i)).collect();
+        self.kept = Some(Store::gather(&self.plan, &self.params, &rows));
+        Ok(())
+    }
+
+    fn kept(&self) -> Result<Snapshot, BackendError> {
+        let kept = self.kept.as_ref().ok_or_else(|| BackendError("no state was kept".into()))?;
+        Ok(snapshot_of(&self.assemble(kept, &(0..kept.n).collect::<Vec<_>>())))
+    }
+
+    fn restore_kept(&mut self) -> Result<(), BackendError> {
+        let kept = self.kept.clone().ok_or_else(|| BackendError("no state was kept".into()))?;
+        self.set_own(kept);
+        Ok(())
+    }
+
+    fn search_stats(&self) -> crate::schedule::SearchStats {
+        self.backend.search_stats()
+    }
+
+    /// What this rank (rank 0 writes it) held and sent, per step.
+    fn timing(&self, steps: u64) -> Option<String> {
+        let (own, t) = (self.sizes().0, &self.traffic);
+        let per = |b: u64| b as f64 / steps.max(1) as f64 / 1e3;
+        Some(format!(
+            "rank {} of {}: {own} particles of its own, {} in its halo at the last evaluation; sent per \
+             step (kB, {} B a value): {:.1} migrating, {:.1} rebuilding halos ({} rebuilds), {:.1} updating halos \
+             before a pass; {} rebalances, the slowest rank's passes {:.2}× the mean at the last check\n",
+            self.rank + 1,
+            self.size,
+            t.halo_particles,
+            T::BYTES,
+            per(t.migration),
+            per(t.halo_builds),
+            t.rebuilds,
+            per(t.halo_updates),
+            t.rebalances,
+            t.imbalance
+        ))
+    }
+
+    fn first_non_finite(&mut self, fields: &[FieldId]) -> Result<Option<(usize, FieldId)>, BackendError> {
+        // This rank's first, as an index in the global order, then the least over the ranks.
+        let rows: Vec<(&Store<T>, usize)> = self.own().into_iter().map(|i| (&self.backend.store, i)).collect();
+        let mine = Store::gather(&self.plan, &self.params, &rows);
+        let counts = self.counts();
+        let local = first_non_finite_in(&mine, fields).map(|(i, f)| {
+            let g = mine.group[i] as usize;
+            let in_group = i - mine.ranges.iter().find(|(gr, _)| gr.index() == g).map_or(0, |(_, r)| r.start);
+            let before: usize = counts.iter().map(|c| c[..g].iter().sum::<usize>()).sum::<usize>()
+                + counts[..self.rank].iter().map(|c| c[g]).sum::<usize>();
+            (before + in_group, f)
+        });
+        let code = local.map_or([f64::INFINITY, 0.0], |(i, f)| [i as f64, f.index() as f64]);
+        let all = self.transport().all_gather(code.to_vec());
+        let best = all.iter().filter(|c| c[0].is_finite()).min_by(|a, b| a[0].total_cmp(&b[0]));
+        Ok(best.map(|c| (c[0] as usize, FieldId(c[1] as u32))))
+    }
+}
