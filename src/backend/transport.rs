@@ -4,7 +4,7 @@
 //! Values travel as f64 (an f32 run's values convert exactly).
 
 use crate::ir::Reduce;
-use std::sync::{Arc, Barrier, Mutex};
+use std::sync::{Arc, Condvar, Mutex};
 
 /// One rank's end of a transport.
 pub trait Transport: Send {
@@ -35,7 +35,9 @@ pub trait Transport: Send {
     }
 }
 
-/// The ranks as threads of one process, exchanging through shared mailboxes.
+/// The ranks as threads of one process, exchanging through shared mailboxes. A rank that stops
+/// (returns or panics) while the others still exchange makes them panic instead of waiting for
+/// it forever.
 pub struct Threads {
     rank: usize,
     size: usize,
@@ -43,17 +45,57 @@ pub struct Threads {
 }
 
 struct Mailboxes {
+    state: Mutex<Exchange>,
+    turned: Condvar,
+}
+
+struct Exchange {
     /// `slots[to][from]`.
-    slots: Mutex<Vec<Vec<Vec<f64>>>>,
-    barrier: Barrier,
+    slots: Vec<Vec<Vec<f64>>>,
+    /// Ranks waiting for the others in this round, and the rounds completed.
+    arrived: usize,
+    round: u64,
+    /// A rank has stopped: no round can complete.
+    broken: bool,
 }
 
 impl Threads {
     /// The `size` ends of one transport, one per thread.
     pub fn ranks(size: usize) -> Vec<Threads> {
-        let shared =
-            Arc::new(Mailboxes { slots: Mutex::new(vec![vec![vec![]; size]; size]), barrier: Barrier::new(size) });
+        let state = Exchange { slots: vec![vec![vec![]; size]; size], arrived: 0, round: 0, broken: false };
+        let shared = Arc::new(Mailboxes { state: Mutex::new(state), turned: Condvar::new() });
         (0..size).map(|rank| Threads { rank, size, shared: shared.clone() }).collect()
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, Exchange> {
+        self.shared.state.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Waits until every rank has arrived here.
+    fn wait_for_all<'a>(
+        &'a self,
+        mut state: std::sync::MutexGuard<'a, Exchange>,
+    ) -> std::sync::MutexGuard<'a, Exchange> {
+        let round = state.round;
+        state.arrived += 1;
+        if state.arrived == self.size {
+            state.arrived = 0;
+            state.round += 1;
+            self.shared.turned.notify_all();
+            return state;
+        }
+        while state.round == round {
+            assert!(!state.broken, "another rank of this split run stopped before this exchange");
+            state = self.shared.turned.wait(state).unwrap_or_else(|e| e.into_inner());
+        }
+        state
+    }
+}
+
+impl Drop for Threads {
+    fn drop(&mut self) {
+        self.lock().broken = true;
+        self.shared.turned.notify_all();
     }
 }
 
@@ -67,18 +109,15 @@ impl Transport for Threads {
     }
 
     fn exchange(&mut self, out: Vec<Vec<f64>>) -> Vec<Vec<f64>> {
-        {
-            let mut slots = self.shared.slots.lock().expect("a rank panicked");
-            for (to, v) in out.into_iter().enumerate() {
-                slots[to][self.rank] = v;
-            }
+        let mut state = self.lock();
+        assert!(!state.broken, "another rank of this split run stopped before this exchange");
+        for (to, v) in out.into_iter().enumerate() {
+            state.slots[to][self.rank] = v;
         }
-        self.shared.barrier.wait();
-        let got = std::mem::replace(
-            &mut self.shared.slots.lock().expect("a rank panicked")[self.rank],
-            vec![vec![]; self.size],
-        );
-        self.shared.barrier.wait();
+        let mut state = self.wait_for_all(state);
+        let got = std::mem::replace(&mut state.slots[self.rank], vec![vec![]; self.size]);
+        // No rank writes the next round's messages before every rank has taken this one's.
+        drop(self.wait_for_all(state));
         got
     }
 }

@@ -110,8 +110,9 @@ pub fn write_stores<T: Real>(
 
 pub struct Shared<'a, T> {
     pub cols: &'a [Option<ColView<T>>],
-    /// How many groups have particles (a pass reading from all of them skips the group test).
-    pub groups_present: usize,
+    /// Bit g: group g has particles in the store (a pass that sums over all of them skips the
+    /// group test).
+    pub groups_present: u64,
     pub params: &'a [T],
     pub param_stride: usize,
     pub param_offset: &'a [usize],
@@ -122,6 +123,22 @@ pub struct Shared<'a, T> {
 }
 
 impl<'a, T: Real> Shared<'a, T> {
+    /// What the programs over `store` read besides their lanes, at the clock `g`; `cols` are the
+    /// store's column views.
+    pub fn of(store: &'a Store<T>, cols: &'a [Option<ColView<T>>], g: crate::backend::Globals) -> Shared<'a, T> {
+        Shared {
+            groups_present: store.ranges.iter().fold(0, |m, (g, _)| m | 1 << g.index()),
+            cols,
+            params: &store.params.values,
+            param_stride: store.params.stride,
+            param_offset: &store.params.offset,
+            group: &store.group,
+            material: &store.material,
+            time: T::from_f64(g.time),
+            dt: T::from_f64(g.dt),
+        }
+    }
+
     pub fn ctx(
         &self,
         temps: &'a [Option<ColView<T>>],
@@ -262,7 +279,7 @@ pub fn run_pass_chunk<T: Real>(
     }
     // Lanes hold the neighbours of several particles of the chunk one after another, so that the
     // cost of running an operation is shared by more pairs; `segs` marks whose lanes are whose.
-    let all_sources = (0..64).filter(|g| v.sources >> g & 1 == 1).count() >= sh_groups(sh);
+    let all_sources = sh.groups_present & !v.sources == 0;
     let jit_cols = v.jit.as_ref().and_then(|jit| gathered_columns(&jit.gathers, sh.cols));
     let mut w = Writer {
         jit_cols: jit_cols.as_deref(),
@@ -463,10 +480,6 @@ pub fn gathered_columns<T>(fields: &[crate::ir::FieldId], cols: &[Option<ColView
             Some(c.ptr.wrapping_offset(c.shared? * c.comps as isize) as *const T)
         })
         .collect()
-}
-
-fn sh_groups<T>(sh: &Shared<T>) -> usize {
-    sh.groups_present
 }
 
 /// Adds the neighbours of particle i (and of its mirror images) to the batch: x_ij, r_ij, h_ij.

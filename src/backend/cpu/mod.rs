@@ -633,18 +633,7 @@ impl<T: Real> CpuBackend<T> {
             None => Walk::Lists(&self.lists.of),
         };
         let cols = views(&mut self.store);
-        let (params, stride, offset) = (&self.store.params.values, self.store.params.stride, &self.store.params.offset);
-        let sh = Shared {
-            groups_present: self.store.ranges.len(),
-            cols: &cols,
-            params,
-            param_stride: stride,
-            param_offset: offset,
-            group: &self.store.group,
-            material: &self.store.material,
-            time: T::from_f64(g.time),
-            dt: T::from_f64(g.dt),
-        };
+        let sh = Shared::of(&self.store, &cols, g);
         let nb = Neighbours {
             walk,
             x: &search.x,
@@ -668,25 +657,10 @@ impl<T: Real> CpuBackend<T> {
         });
     }
 
-    fn params(&self) -> (&[T], usize, &[usize]) {
-        (&self.store.params.values, self.store.params.stride, &self.store.params.offset)
-    }
-
     /// Runs a per-group particle program over every chunk in parallel.
     fn run_programs(&mut self, programs: &[Option<Program<T>>], g: Globals) {
         let cols = views(&mut self.store);
-        let (params, stride, offset) = self.params();
-        let sh = Shared {
-            groups_present: self.store.ranges.len(),
-            cols: &cols,
-            params,
-            param_stride: stride,
-            param_offset: offset,
-            group: &self.store.group,
-            material: &self.store.material,
-            time: T::from_f64(g.time),
-            dt: T::from_f64(g.dt),
-        };
+        let sh = Shared::of(&self.store, &cols, g);
         self.chunks.par_iter().for_each_init(Scratch::default, |scratch, chunk| {
             if let Some(p) = &programs[chunk.group] {
                 exec::run_particle(p, &sh, scratch, *chunk);
@@ -761,18 +735,7 @@ impl<T: Real> Backend for CpuBackend<T> {
         let reds = timestep::reductions(&self.plan.model, &self.plan.timesteps);
         let identity: Vec<f64> = reds.iter().map(|(r, _)| r.identity()).collect();
         let cols = views(&mut self.store);
-        let (params, stride, offset) = (&self.store.params.values, self.store.params.stride, &self.store.params.offset);
-        let sh = Shared {
-            groups_present: self.store.ranges.len(),
-            cols: &cols,
-            params,
-            param_stride: stride,
-            param_offset: offset,
-            group: &self.store.group,
-            material: &self.store.material,
-            time: T::from_f64(g.time),
-            dt: T::from_f64(g.dt),
-        };
+        let sh = Shared::of(&self.store, &cols, g);
         let programs = &self.reductions;
         // Per chunk partial results, combined in chunk order: the same on any thread count.
         let partials: Vec<Vec<f64>> = self
