@@ -32,7 +32,7 @@ done
 # its headers and libclang to build the `mpi` feature (the mpi crate's bindings). Open MPI refuses
 # to run as root, which CI does, unless told.
 if ! command -v mpirun >/dev/null || ! [ -e /usr/include/x86_64-linux-gnu/mpi/mpi.h -o -e /usr/include/mpi.h ] \
-    || ! ldconfig -p | grep -q 'libclang'; then
+    || ! ldconfig -p | grep -Eq 'libclang(-[0-9.]+)?\.so'; then
     echo "scripts/test.sh: installing Open MPI (openmpi-bin, libopenmpi-dev) and libclang-dev for the MPI tests"
     export DEBIAN_FRONTEND=noninteractive
     as_root apt-get install -y --no-install-recommends openmpi-bin libopenmpi-dev libclang-dev \
