@@ -452,7 +452,10 @@ fn run_run(case: &str, a: RunArgs) -> i32 {
     if rank > 0 {
         let _ = std::fs::remove_dir_all(&opts.out);
         if let Err(e) = &outcome {
-            // An error on this rank alone would leave the others waiting: stop them all.
+            // An error every rank meets (an instability) is rank 0's to report, and its abort
+            // ends this process; an error on this rank alone would leave the others waiting:
+            // report it and stop them all.
+            std::thread::sleep(std::time::Duration::from_secs(2));
             let msg = match e {
                 crate::runner::RunFailure::Input(m) | crate::runner::RunFailure::Run(m) => m,
             };
