@@ -355,16 +355,22 @@ impl<T: Real> Store<T> {
         out.params = params.clone();
         out.id = rows.iter().map(|(s, i)| s.id[*i]).collect();
         for (k, (src, i)) in rows.iter().enumerate() {
-            let g = src.group[*i] as usize;
-            for (dst, from) in out.columns.iter_mut().zip(&src.columns) {
-                let (Some(dst), Some(from)) = (dst.as_mut(), from.as_ref()) else { continue };
-                if dst.has(g) {
-                    let (a, b) = (from.row(*i, g) * from.comps, dst.row(k, g) * dst.comps);
-                    dst.data[b..b + dst.comps].copy_from_slice(&from.data[a..a + from.comps]);
-                }
-            }
+            out.copy_state(k, src, *i);
         }
         out
+    }
+
+    /// Copies every field of particle `i` of `src` (a store of the same plan, the same group)
+    /// into particle k.
+    pub fn copy_state(&mut self, k: usize, src: &Store<T>, i: usize) {
+        let g = src.group[i] as usize;
+        for (dst, from) in self.columns.iter_mut().zip(&src.columns) {
+            let (Some(dst), Some(from)) = (dst.as_mut(), from.as_ref()) else { continue };
+            if dst.has(g) {
+                let (a, b) = (from.row(i, g) * from.comps, dst.row(k, g) * dst.comps);
+                dst.data[b..b + dst.comps].copy_from_slice(&from.data[a..a + from.comps]);
+            }
+        }
     }
 
     /// Bytes of all columns.

@@ -304,15 +304,7 @@ impl<T: Real> Domain<T> {
         for (k, row) in rows.iter().enumerate() {
             let g = Self::group_of(row);
             match row {
-                Row::Here(s, i) => {
-                    for (dst, from) in out.columns.iter_mut().zip(&s.columns) {
-                        let (Some(dst), Some(from)) = (dst.as_mut(), from.as_ref()) else { continue };
-                        if dst.has(g as usize) {
-                            let (a, b) = (from.row(*i, g as usize) * from.comps, dst.row(k, g as usize) * dst.comps);
-                            dst.data[b..b + dst.comps].copy_from_slice(&from.data[a..a + from.comps]);
-                        }
-                    }
-                }
+                Row::Here(s, i) => out.copy_state(k, s, *i),
                 Row::Sent(v) => {
                     let mut at = 3;
                     for (f, comps) in self.stored(g) {
@@ -544,28 +536,34 @@ impl<T: Real> Domain<T> {
 
     /// Per rank, per model group: how many particles it owns.
     fn counts(&self) -> Vec<Vec<usize>> {
+        let all = self.transport().all_gather(self.own_counts());
+        all.into_iter().map(|v| v.into_iter().map(|c| c as usize).collect()).collect()
+    }
+
+    /// Per model group: how many particles this rank owns.
+    fn own_counts(&self) -> Vec<f64> {
         let mut mine = vec![0.0; self.plan.model.groups.len()];
         for ((g, _), n) in self.backend.store.ranges.iter().zip(&self.owned) {
             mine[g.index()] = *n as f64;
         }
-        self.transport().all_gather(mine).into_iter().map(|v| v.into_iter().map(|c| c as usize).collect()).collect()
+        mine
     }
 
     /// Values `width` per own particle (from `value`), of every rank, in the order of
-    /// [`Backend::read`].
+    /// [`Backend::read`], in one collective: each rank's message leads with its counts per group.
     fn gather(&self, width: usize, value: impl Fn(&Store<T>, usize) -> Vec<f64>) -> Vec<f64> {
         let store = &self.backend.store;
-        let mut mine = vec![];
+        let groups = self.plan.model.groups.len();
+        let mut mine = self.own_counts();
         for i in self.own() {
             mine.extend(value(store, i));
         }
         let all = self.transport().all_gather(mine);
-        let counts = self.counts();
-        let mut at = vec![0usize; self.size];
+        let mut at = vec![groups; self.size];
         let mut out = Vec::with_capacity(self.groups.len() * width);
-        for g in 0..self.plan.model.groups.len() {
-            for ((s, m), c) in all.iter().enumerate().zip(&counts) {
-                let n = c[g] * width;
+        for g in 0..groups {
+            for (s, m) in all.iter().enumerate() {
+                let n = m[g] as usize * width;
                 out.extend_from_slice(&m[at[s]..at[s] + n]);
                 at[s] += n;
             }

@@ -122,21 +122,6 @@ impl Transport for Threads {
     }
 }
 
-/// One process alone: every exchange returns what it sent itself.
-pub struct Alone;
-
-impl Transport for Alone {
-    fn rank(&self) -> usize {
-        0
-    }
-    fn size(&self) -> usize {
-        1
-    }
-    fn exchange(&mut self, out: Vec<Vec<f64>>) -> Vec<Vec<f64>> {
-        out
-    }
-}
-
 /// The number of ranks `mpirun` (Open MPI's or MPICH's) started this process among, if it did.
 pub fn launched_ranks() -> Option<usize> {
     ["OMPI_COMM_WORLD_SIZE", "PMI_SIZE"].iter().find_map(|v| std::env::var(v).ok()?.parse().ok())

@@ -560,11 +560,6 @@ impl<T: Real> CpuBackend<T> {
         }
     }
 
-    /// The number of neighbour passes of an evaluation.
-    pub fn pass_count(&self) -> usize {
-        self.passes.len()
-    }
-
     /// Replaces the particles (same plan and layout, sorted group-major) while keeping the
     /// compiled programs, and runs the particle programs only on the first `active[k]` particles
     /// of the store's k-th group range: the others (a domain's halo) are read as neighbours only.
