@@ -425,8 +425,8 @@ fn run_run(case: &str, a: RunArgs) -> i32 {
         timing: a.timing,
         domains: a.domains.map(|d| d as usize),
     };
-    // Under `mpirun` every rank runs the case; rank 0 writes the outputs, the others the same
-    // into a folder of their own, deleted at the end.
+    // Under `mpirun` every rank runs the case; rank 0 writes the outputs, the others only their
+    // pieces of the VTK snapshots into the same folder.
     let rank = match crate::backend::transport::launched_rank() {
         Ok(r) => r.unwrap_or(0),
         Err(e) => {
@@ -436,8 +436,7 @@ fn run_run(case: &str, a: RunArgs) -> i32 {
     };
     let mut opts = opts;
     if rank > 0 {
-        opts.out = std::env::temp_dir().join(format!("pairsum-mpi-rank{rank}-{}", std::process::id()));
-        (opts.progress, opts.timing, opts.force) = (false, false, true);
+        (opts.progress, opts.timing) = (false, false);
     }
     let outcome = match &a.convergence {
         None if a.reanalyse => crate::runner::reanalyse_file(&path, &opts),
@@ -450,7 +449,6 @@ fn run_run(case: &str, a: RunArgs) -> i32 {
         }
     };
     if rank > 0 {
-        let _ = std::fs::remove_dir_all(&opts.out);
         if let Err(e) = &outcome {
             // An error every rank meets (an instability) is rank 0's to report, and its abort
             // ends this process; an error on this rank alone would leave the others waiting:

@@ -50,18 +50,34 @@ pub fn claim_run_dir(dir: &Path, force: bool) -> Result<bool, Refused> {
 }
 
 /// Removes the snapshots an earlier run of the series `basename` wrote into `vtk_dir`: the
-/// `.vtu` files its `.pvd` lists, nothing else. Call it only on a directory that was pairsum's
-/// before this run ([`claim_run_dir`]), before a fresh series starts there.
+/// `.vtu` files its `.pvd` lists, and the `.pvtu` files of a run split into domains with the
+/// pieces each lists; nothing else. Call it only on a directory that was pairsum's before this
+/// run ([`claim_run_dir`]), before a fresh series starts there.
 pub fn remove_earlier_series(vtk_dir: &Path, basename: &str) -> io::Result<()> {
     let Ok(pvd) = std::fs::read_to_string(vtk_dir.join(format!("{basename}.pvd"))) else { return Ok(()) };
     let prefix = format!("{basename}_");
-    for file in pvd.split("file=\"").skip(1).filter_map(|rest| rest.split('"').next()) {
-        let ours = file.starts_with(&prefix) && file.ends_with(".vtu") && !file.contains(['/', '\\']);
-        if ours && vtk_dir.join(file).is_file() {
-            std::fs::remove_file(vtk_dir.join(file))?;
+    let ours = |file: &str, ext: &str| file.starts_with(&prefix) && file.ends_with(ext) && !file.contains(['/', '\\']);
+    let remove = |file: &str| match vtk_dir.join(file) {
+        path if path.is_file() => std::fs::remove_file(path),
+        _ => Ok(()),
+    };
+    for file in listed(&pvd, "file") {
+        if ours(file, ".pvtu") {
+            let pvtu = std::fs::read_to_string(vtk_dir.join(file)).unwrap_or_default();
+            listed(&pvtu, "Source").filter(|piece| ours(piece, ".vtu")).try_for_each(remove)?;
+            remove(file)?;
+        } else if ours(file, ".vtu") {
+            remove(file)?;
         }
     }
     Ok(())
+}
+
+/// The values of every attribute `key` in an XML text, unescaped only as far as pairsum's own
+/// file names need (they have no quotes).
+fn listed<'a>(xml: &'a str, key: &str) -> impl Iterator<Item = &'a str> {
+    let pattern = format!("{key}=\"");
+    xml.split(pattern.as_str()).skip(1).filter_map(|rest| rest.split('"').next()).collect::<Vec<_>>().into_iter()
 }
 
 /// Whether `path` is a WGSL file pairsum generated.
@@ -188,6 +204,27 @@ mod tests {
         assert_eq!(std::fs::read_to_string(d.join("notes.txt")).unwrap(), "mine");
         // Marked now: claimed again without --force.
         claim_run_dir(&d, false).unwrap();
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    /// An earlier split run's `.pvtu` frames go with the pieces they list; a file the `.pvd`
+    /// does not reach is kept, even when named like a piece.
+    #[test]
+    fn an_earlier_split_series_is_removed_with_its_pieces_and_nothing_else() {
+        let d = tmp("pieces");
+        std::fs::create_dir_all(&d).unwrap();
+        let mut series = crate::report::Series::new(&d, "bar").unwrap();
+        for rank in [1, 0] {
+            series.continue_after(vec![]);
+            series.add_piece(0.0, (rank, 2), &[[0.0; 3]], &[]).unwrap();
+        }
+        std::fs::write(d.join("bar_000000_7.vtu"), "mine").unwrap();
+        std::fs::write(d.join("notes.pvtu"), "mine").unwrap();
+        remove_earlier_series(&d, "bar").unwrap();
+        let mut left: Vec<String> =
+            std::fs::read_dir(&d).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+        left.sort();
+        assert_eq!(left, ["bar.pvd", "bar_000000_7.vtu", "notes.pvtu"]);
         std::fs::remove_dir_all(&d).unwrap();
     }
 

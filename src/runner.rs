@@ -224,7 +224,7 @@ fn human_seconds(s: f64) -> String {
 pub fn run_case(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailure> {
     let (scene, plan) = prepare(path, &opts.scene)?;
     eprint!("{}", scene.warnings.concat());
-    let ours = claim_out(opts)?;
+    let ours = leads() && claim_out(opts)?;
     if ours && opts.vtk && opts.restart.is_none() {
         // A fresh series: an earlier run's frames past this one's last would be left beside it.
         crate::output_dir::remove_earlier_series(&opts.out.join("vtk"), &scene.name)
@@ -297,6 +297,12 @@ fn setup_failure(scene: &Scene, e: setup::SetupError) -> RunFailure {
     RunFailure::Input(format!("{e}\n  = in the case file {}\n", scene.path.display()))
 }
 
+/// Whether this process writes a run's files: a single process, or rank 0 under `mpirun` (the
+/// others write only their pieces of the VTK snapshots, [`Recorder::write_vtk`]).
+fn leads() -> bool {
+    crate::backend::transport::launched_rank().ok().flatten().unwrap_or(0) == 0
+}
+
 /// The ranks a run is split into: MPI's under `mpirun`, else `--domains`, else 1.
 fn split_ranks(opts: &RunOptions) -> usize {
     crate::backend::transport::launched_ranks().unwrap_or(opts.domains.unwrap_or(1))
@@ -319,8 +325,8 @@ fn run_cpu<T: Real>(scene: Scene, plan: Plan, opts: &RunOptions) -> Result<RunOu
 }
 
 /// A run split into `ranks` domains, each run by a thread of this process as a rank. Rank 0
-/// writes the outputs; the others run the same loop (every read of a field is collective) into
-/// a folder of their own under the system's temporary directory, which they delete at the end.
+/// writes the outputs; the others run the same loop (every read of a field is collective) and
+/// write only their pieces of the VTK snapshots.
 fn run_threads<T: Real>(
     scene: Scene,
     plan: Plan,
@@ -340,17 +346,12 @@ fn run_threads<T: Real>(
     let mine = backends.next().expect("rank 0");
     std::thread::scope(|s| {
         let others: Vec<_> = backends
-            .enumerate()
-            .map(|(k, backend)| {
+            .map(|backend| {
                 let path = scene.path.clone();
                 s.spawn(move || -> Result<(), RunFailure> {
                     let (scene, _) = prepare(&path, &opts.scene)?;
-                    let out = std::env::temp_dir().join(format!("pairsum-rank{}-{}", k + 1, std::process::id()));
-                    let theirs =
-                        RunOptions { out: out.clone(), progress: false, timing: false, force: true, ..opts.clone() };
-                    let done = drive(scene, backend, &theirs, T::NAME, false);
-                    let _ = std::fs::remove_dir_all(&out);
-                    done.map(|_| ())
+                    let theirs = RunOptions { progress: false, timing: false, ..opts.clone() };
+                    drive(scene, backend, &theirs, T::NAME, false).map(|_| ())
                 })
             })
             .collect();
@@ -378,6 +379,10 @@ struct Recorder<'a> {
     next_profile: Vec<usize>,
     progress: Option<indicatif::ProgressBar>,
     started: Instant,
+    /// Whether this rank writes the run's files: a run in one piece or rank 0 of a split run. The
+    /// other ranks take part in every collective read and write only their pieces of the VTK
+    /// snapshots.
+    leads: bool,
 }
 
 /// What a run has recorded so far, kept in its checkpoints so that a restarted run reports the
@@ -442,14 +447,18 @@ impl Recorder<'_> {
         }
         for (k, p) in self.scene.profiles.iter().enumerate() {
             while p.times.get(self.next_profile[k]).is_some_and(|t| reached(e.time, *t)) {
-                write_profile(self.scene, p, self.next_profile[k], &now, &self.opts.out)
-                    .map_err(|err| format!("profile `{}`: {err}", p.name))?;
+                let columns = profile_columns(self.scene, p, &now);
+                if self.leads {
+                    columns
+                        .and_then(|c| write_profile(p, self.next_profile[k], &c, &self.opts.out))
+                        .map_err(|err| format!("profile `{}`: {err}", p.name))?;
+                }
                 self.next_profile[k] += 1;
             }
         }
         if let Some(interval) = self.scene.output_interval {
             if e.time >= self.next_output - 1e-12 * interval {
-                self.write_vtk(&now, e.time)?;
+                self.write_vtk(&e.backend, &now, e.time)?;
                 self.next_output += interval;
             }
         }
@@ -468,17 +477,30 @@ impl Recorder<'_> {
     /// Writes `histories.csv` up to this step, then `checkpoint.bin`: a run killed at any time
     /// leaves histories at least as far as its last checkpoint.
     fn checkpoint<B: Backend>(&self, e: &Engine<B>) -> Result<(), String> {
+        if !self.leads {
+            // The checkpoint holds the whole state, gathered from every rank.
+            return e.backend.snapshot().map(|_| ()).map_err(|err| err.0);
+        }
         report::write_histories_csv(&self.opts.out, &history_plots(self.scene, &self.histories))
             .map_err(|err| format!("writing histories.csv with a checkpoint: {err}"))?;
         checkpoint::write(e, &self.record_so_far(), &self.opts.out.join("checkpoint.bin"))
             .map_err(|err| format!("writing a checkpoint: {err} (the last one written, if any, is kept)"))
     }
 
-    fn write_vtk(&mut self, b: &dyn Reader, time: f64) -> Result<(), String> {
+    /// A snapshot of the particles (`now`: the backend read at this moment). A run split into
+    /// domains writes it as a partitioned data set: each rank its own particles as a piece,
+    /// rank 0 the `.pvtu` that joins them, with nothing gathered.
+    fn write_vtk<B: Backend>(&mut self, backend: &B, now: &dyn Reader, time: f64) -> Result<(), String> {
         let Some(series) = &mut self.series else { return Ok(()) };
-        let (positions, fields) = vtk_data(self.scene, b).map_err(|e| e.0)?;
-        series.add(time, &positions, &fields).map_err(|e| format!("writing VTK: {e}"))?;
-        Ok(())
+        let written = match backend.rank() {
+            Some(rank) => vtk_data(self.scene, &measure::Own(backend))
+                .map_err(|e| e.0)
+                .and_then(|(x, fields)| series.add_piece(time, rank, &x, &fields).map_err(|e| e.to_string())),
+            None => vtk_data(self.scene, now)
+                .map_err(|e| e.0)
+                .and_then(|(x, fields)| series.add(time, &x, &fields).map_err(|e| e.to_string())),
+        };
+        written.map(|_| ()).map_err(|e| format!("writing VTK: {e}"))
     }
 }
 
@@ -487,9 +509,9 @@ fn reached(time: f64, at: f64) -> bool {
     time >= at * (1.0 - 1e-12)
 }
 
-/// Writes `profiles/<name>_<k>.csv`: the selected particles' coordinates, id, body and fields now,
-/// sorted along the profile's axis.
-fn write_profile(scene: &Scene, p: &ProfileSpec, k: usize, b: &dyn Reader, out: &Path) -> Result<(), String> {
+/// A profile's columns now: the selected particles' coordinates, id, body and fields, sorted
+/// along the profile's axis.
+fn profile_columns(scene: &Scene, p: &ProfileSpec, b: &dyn Reader) -> Result<Vec<(String, Vec<f64>)>, String> {
     let dim = b.plan().dim;
     let x = measure::positions(b).map_err(|e| e.0)?.unwrap_or_default();
     let ids = b.ids().map_err(|e| e.0)?;
@@ -516,10 +538,15 @@ fn write_profile(scene: &Scene, p: &ProfileSpec, k: usize, b: &dyn Reader, out: 
             columns.push((name, rows.iter().map(|k| data[k * comps + c]).collect()));
         }
     }
+    Ok(columns)
+}
+
+/// Writes `profiles/<name>_<k>.csv`.
+fn write_profile(p: &ProfileSpec, k: usize, columns: &[(String, Vec<f64>)], out: &Path) -> Result<(), String> {
     let dir = out.join("profiles");
     std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let path = dir.join(format!("{}_{k}.csv", p.name));
-    crate::output_dir::write_atomic(&path, report::csv::profile_csv(&columns).as_bytes())
+    crate::output_dir::write_atomic(&path, report::csv::profile_csv(columns).as_bytes())
         .map_err(|e| format!("{}: {e}", path.display()))
 }
 
@@ -554,6 +581,9 @@ fn drive<B: Backend + Send>(
     let mut config = scene.config.clone();
     config.max_steps = opts.max_steps;
     let mut engine = Engine::new(backend, config);
+    let leads = engine.backend.rank().is_none_or(|(rank, _)| rank == 0);
+    // Rank 0 has claimed the output folder before the others write their first piece into it.
+    engine.backend.synchronise();
     engine.initialise().map_err(|e| RunFailure::Run(e.to_string()))?;
     let cannot_restart = |e: &dyn std::fmt::Display| {
         let file = opts.restart.as_deref().unwrap_or(Path::new("")).display();
@@ -588,6 +618,7 @@ fn drive<B: Backend + Send>(
         next_profile: vec![0; scene.profiles.len()],
         progress,
         started: Instant::now(),
+        leads,
     };
     match record.filter(|r| !r.is_empty()) {
         // The checkpoint was written after its step was observed.
@@ -620,7 +651,8 @@ fn drive<B: Backend + Send>(
             if scene.output_interval.is_none()
                 || rec.series.as_ref().is_some_and(|s| s.entries().last().is_none_or(|(t, _)| *t < engine.time))
             {
-                rec.write_vtk(&engine.backend, engine.time).map_err(RunFailure::Run)?;
+                let now = measure::Moment::new(&engine.backend);
+                rec.write_vtk(&engine.backend, &now, engine.time).map_err(RunFailure::Run)?;
             }
             // A run that checkpoints ends with one, so that `--restart` with a later
             // `--end-time` extends it.
@@ -636,8 +668,11 @@ fn drive<B: Backend + Send>(
                 .restore(&u.last_good)
                 .and_then(|()| vtk_data(&scene, &engine.backend))
                 .map_err(|e| e.0)
-                .and_then(|(positions, fields)| {
-                    report::write_vtu(&path, &positions, &fields).map_err(|e| format!("{}: {e}", path.display()))
+                .and_then(|(positions, fields)| match leads {
+                    true => {
+                        report::write_vtu(&path, &positions, &fields).map_err(|e| format!("{}: {e}", path.display()))
+                    }
+                    false => Ok(()),
                 });
             failure = Some(match kept {
                 Ok(()) => format!("{}; written to {}", RunError::Unstable(u), path.display()),
@@ -647,7 +682,7 @@ fn drive<B: Backend + Send>(
         Err(e) => failure = Some(e.to_string()),
     }
     let steps = engine.step - start_step;
-    if opts.timing {
+    if opts.timing && leads {
         write_timing(&opts.out, &engine, steps, wall).map_err(RunFailure::Run)?;
     }
     let mut report = make_report(&scene, &engine, &rec.histories, wall, steps, precision, failure.as_deref());
@@ -657,7 +692,7 @@ fn drive<B: Backend + Send>(
             start_time
         ));
     }
-    let written = report::write(&opts.out, &report);
+    let written = if leads { report::write(&opts.out, &report) } else { Ok(()) };
     match (failure, written) {
         (Some(f), Ok(())) => {
             let report = opts.out.join("report.md");
@@ -785,7 +820,9 @@ pub fn run_study(path: &Path, opts: &RunOptions, reanalyse: bool) -> Result<RunO
     use crate::scene::study;
     let PreparedStudy { study: st, runs, .. } = prepare_study(path, opts)?;
     // Reanalysing writes the study's report too: the folder is claimed as a run claims it.
-    claim_out(opts)?;
+    if leads() {
+        claim_out(opts)?;
+    }
     let mut outcomes: Vec<(study::RunSpec, RunOutcome)> = vec![];
     for (r, o) in runs {
         let outcome = if reanalyse {
@@ -918,7 +955,9 @@ pub fn run_study(path: &Path, opts: &RunOptions, reanalyse: bool) -> Result<RunO
         end_time: first.end_time,
         tables: vec![],
     };
-    report::write(&opts.out, &report).map_err(|e| RunFailure::Run(format!("writing the report: {e}")))?;
+    if leads() {
+        report::write(&opts.out, &report).map_err(|e| RunFailure::Run(format!("writing the report: {e}")))?;
+    }
     Ok(RunOutcome { report, out: opts.out.clone(), histories: vec![] })
 }
 
@@ -1083,7 +1122,9 @@ pub fn run_convergence(
         )));
     }
     // Reanalysing writes the study's report too: the folder is claimed as a run claims it.
-    claim_out(opts)?;
+    if leads() {
+        claim_out(opts)?;
+    }
     let mut reports = vec![];
     let mut notes = vec![];
     for level in levels {
@@ -1127,7 +1168,9 @@ pub fn run_convergence(
         tables: c.tables,
         ..finest
     };
-    report::write(&opts.out, &report).map_err(|e| RunFailure::Run(format!("writing the report: {e}")))?;
+    if leads() {
+        report::write(&opts.out, &report).map_err(|e| RunFailure::Run(format!("writing the report: {e}")))?;
+    }
     Ok(RunOutcome { report, out: opts.out.clone(), histories: vec![] })
 }
 

@@ -303,23 +303,77 @@ fn histories_differ(a: &[Vec<f64>], b: &[Vec<f64>]) -> f64 {
     worst
 }
 
-/// The whole command line: `pairsum run --domains 2` and `mpirun -n 2` / `-n 4 pairsum run` give
-/// the single process's probe histories (60 steps of the hypervelocity impact) within 1e-12,
-/// and rank 0 alone writes the outputs.
-#[test]
-fn mpirun_on_two_and_four_ranks_and_domains_2_give_the_single_process_histories_within_1e_12() {
-    let dir = tempdir("mpirun");
-    let one = run_binary(&dir.join("one"), None, &[]);
-    let threads = run_binary(&dir.join("threads"), None, &["--domains", "2"]);
-    assert!(histories_differ(&one, &threads) <= 1e-12, "--domains 2: {}", histories_differ(&one, &threads));
-    for n in [2, 4] {
-        let out = dir.join(format!("mpi{n}"));
-        let mpi = run_binary(&out, Some(n), &[]);
-        let d = histories_differ(&one, &mpi);
-        assert!(d <= 1e-12, "mpirun -n {n}: the histories differ by {d:e}");
-        let report = std::fs::read_to_string(out.join("report.md")).expect("report");
-        assert!(report.contains(&format!("rank 1 of {n} domains")), "{report}");
+/// The last VTK snapshot a run wrote (a `.vtu`, or a split run's pieces joined through their
+/// `.pvtu`): its file name and, per array (the positions as `Points`), the values sorted by id.
+fn last_frame(out: &Path) -> (String, Fields<Vec<f64>>) {
+    let vtk = out.join("vtk");
+    let pvd = std::fs::read_to_string(vtk.join("hypervelocity_impact.pvd")).expect("the series' .pvd");
+    let file = pvd.rsplit("file=\"").next().and_then(|f| f.split('"').next()).expect("a snapshot").to_string();
+    let data = match file.ends_with(".pvtu") {
+        true => pairsum::report::read_pvtu(&vtk.join(&file)),
+        false => pairsum::report::read_vtu(&vtk.join(&file)),
+    };
+    let data = data.unwrap_or_else(|e| panic!("{file}: {e}"));
+    let id = &data.fields.iter().find(|f| f.name == "id").expect("ids").data;
+    let mut order: Vec<usize> = (0..id.len()).collect();
+    order.sort_by(|a, b| id[*a].total_cmp(&id[*b]));
+    let points = pairsum::report::PointField::vector("Points", &data.positions);
+    let sorted = std::iter::once(&points).chain(&data.fields).map(|f| {
+        let values = order.iter().flat_map(|k| f.data[k * f.comps..(k + 1) * f.comps].iter().copied());
+        (f.name.clone(), values.collect())
+    });
+    (file, sorted.collect())
+}
+
+/// The largest difference between two snapshots' arrays over each array's largest magnitude (a
+/// NaN where the other has a number counts as infinite).
+fn frames_differ(a: &Fields<Vec<f64>>, b: &Fields<Vec<f64>>) -> f64 {
+    assert_eq!(a.iter().map(|f| &f.0).collect::<Vec<_>>(), b.iter().map(|f| &f.0).collect::<Vec<_>>());
+    let mut worst = 0.0f64;
+    for ((name, x), (_, y)) in a.iter().zip(b) {
+        assert_eq!(x.len(), y.len(), "{name}: another number of values");
+        let scale = y.iter().filter(|v| v.is_finite()).fold(0.0f64, |m, v| m.max(v.abs())).max(1e-300);
+        for (u, v) in x.iter().zip(y) {
+            let d = if u.is_nan() && v.is_nan() { 0.0 } else { (u - v).abs() / scale };
+            worst = if d.is_nan() { f64::INFINITY } else { worst.max(d) };
+        }
     }
+    worst
+}
+
+/// The whole command line: `pairsum run --domains 2` and `mpirun -n 2` / `-n 4 pairsum run` give
+/// the single process's probe histories (60 steps of the hypervelocity impact) within 1e-12;
+/// rank 0 alone writes the outputs, each rank its piece of the VTK snapshots, which joined
+/// through their `.pvtu` give the single process's last snapshot within 1e-12 of each array's
+/// magnitude; no rank leaves a folder behind in the temporary directory.
+#[test]
+fn mpirun_on_two_and_four_ranks_and_domains_2_give_the_single_process_histories_and_snapshots_within_1e_12() {
+    let dir = tempdir("mpirun");
+    let left_behind = || {
+        let d = std::fs::read_dir(std::env::temp_dir()).expect("the temporary directory");
+        d.flatten().filter(|e| e.file_name().to_string_lossy().starts_with("pairsum-mpi-rank")).count()
+    };
+    let before = left_behind();
+    let one = run_binary(&dir.join("one"), None, &[]);
+    let (one_file, one_frame) = last_frame(&dir.join("one"));
+    assert!(one_file.ends_with(".vtu"), "{one_file}");
+    let split = [("--domains 2", None, dir.join("threads")), ("mpirun -n 2", Some(2), dir.join("mpi2"))];
+    for (what, ranks, out) in split.into_iter().chain([("mpirun -n 4", Some(4), dir.join("mpi4"))]) {
+        let extra: &[&str] = if ranks.is_none() { &["--domains", "2"] } else { &[] };
+        let histories = run_binary(&out, ranks, extra);
+        let d = histories_differ(&one, &histories);
+        assert!(d <= 1e-12, "{what}: the histories differ by {d:e}");
+        let report = std::fs::read_to_string(out.join("report.md")).expect("report");
+        let n = ranks.unwrap_or(2);
+        assert!(report.contains(&format!("rank 1 of {n} domains")), "{what}: {report}");
+        let (file, frame) = last_frame(&out);
+        assert_eq!(file, one_file.replace(".vtu", ".pvtu"), "{what}");
+        let pieces = (0..n).filter(|r| out.join("vtk").join(file.replace(".pvtu", &format!("_{r}.vtu"))).is_file());
+        assert_eq!(pieces.count(), n, "{what}: a piece per rank");
+        let d = frames_differ(&frame, &one_frame);
+        assert!(d <= 1e-12, "{what}: the last snapshot differs by {d:e} of an array's magnitude");
+    }
+    assert_eq!(left_behind(), before, "a rank left a folder in the temporary directory");
 }
 
 /// A rank that dies (killed here, as a crash would end it) stops the run: `mpirun` ends every

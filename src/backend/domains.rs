@@ -664,6 +664,26 @@ impl<T: Real> Backend for Domain<T> {
         self.groups.clone()
     }
 
+    fn rank(&self) -> Option<(usize, usize)> {
+        Some((self.rank, self.size))
+    }
+
+    fn synchronise(&self) {
+        self.transport().all_gather(vec![]);
+    }
+
+    fn read_own(&self, f: FieldId) -> Result<Option<(usize, Vec<f64>)>, BackendError> {
+        let Some(l) = self.plan.layout.iter().find(|l| l.field == f) else { return Ok(None) };
+        let store = &self.backend.store;
+        let nan = || vec![f64::NAN; l.comps];
+        let values = self.own().into_iter().flat_map(|i| self.value(&Row::Here(store, i), f).unwrap_or_else(nan));
+        Ok(Some((l.comps, values.collect())))
+    }
+
+    fn ids_own(&self) -> Result<Vec<u32>, BackendError> {
+        Ok(self.own().into_iter().map(|i| self.backend.store.id[i]).collect())
+    }
+
     fn snapshot(&self) -> Result<Snapshot, BackendError> {
         Ok(snapshot_of(&self.assemble(&self.backend.store, &self.own())))
     }

@@ -102,6 +102,22 @@ pub trait Backend {
     fn read(&self, f: FieldId) -> Result<Option<(usize, Vec<f64>)>, BackendError>;
     /// Each particle's index at creation, in the current order.
     fn ids(&self) -> Result<Vec<u32>, BackendError>;
+    /// In a run split into domains ([`domains`]): this rank and the number of ranks. `None` for a
+    /// run in one piece.
+    fn rank(&self) -> Option<(usize, usize)> {
+        None
+    }
+    /// Waits for every rank of a split run (none to wait for otherwise).
+    fn synchronise(&self) {}
+    /// [`read`](Self::read) over this rank's own particles only, without the other ranks (the
+    /// pieces of a partitioned VTK snapshot); every particle in a run in one piece.
+    fn read_own(&self, f: FieldId) -> Result<Option<(usize, Vec<f64>)>, BackendError> {
+        self.read(f)
+    }
+    /// [`ids`](Self::ids) of this rank's own particles, in the order of [`read_own`](Self::read_own).
+    fn ids_own(&self) -> Result<Vec<u32>, BackendError> {
+        self.ids()
+    }
     /// Each particle's group, in the current order.
     fn groups(&self) -> Vec<u32>;
     fn snapshot(&self) -> Result<Snapshot, BackendError>;

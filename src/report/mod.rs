@@ -23,7 +23,7 @@ use std::io;
 use std::path::Path;
 
 pub use json::{Curve, GroupBytes, History, ResultRow, RunReport};
-pub use vtk::{read_vtu, write_vtu, PointField, Series, VtuData};
+pub use vtk::{pvtu_pieces, read_pvtu, read_vtu, write_vtu, PointField, Series, VtuData};
 
 /// Writes `dir/report.json`, `dir/report.md`, `dir/histories.csv` (when there are time
 /// histories) and, for every history, `dir/<name>.svg` (see

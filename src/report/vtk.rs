@@ -93,6 +93,15 @@ const SYM_TENSOR_NAMES: [&str; 6] = ["XX", "YY", "ZZ", "XY", "YZ", "XZ"];
 const TENSOR_NAMES: [&str; 9] = ["XX", "XY", "XZ", "YX", "YY", "YZ", "ZX", "ZY", "ZZ"];
 const VTK_VERTEX: u8 = 1;
 
+/// The names of a field's components, by their count: a symmetric or a full tensor's.
+fn component_names(comps: usize) -> &'static [&'static str] {
+    match comps {
+        6 => &SYM_TENSOR_NAMES,
+        9 => &TENSOR_NAMES,
+        _ => &[],
+    }
+}
+
 /// Writes one snapshot as a VTK XML unstructured grid (`.vtu`): one `VTK_VERTEX` cell per
 /// particle, with `fields` as point data. Fails with `InvalidInput` (and writes nothing) if a
 /// field's length is not `positions.len() * comps`, a field has zero components or an empty name,
@@ -124,12 +133,7 @@ fn write_vtu_to(w: &mut dyn Write, positions: &[[f64; 3]], fields: &[PointField]
     }
     writeln!(w, ">")?;
     for f in fields {
-        let names: &[&str] = match f.comps {
-            6 => &SYM_TENSOR_NAMES,
-            9 => &TENSOR_NAMES,
-            _ => &[],
-        };
-        write_f64_array(w, &f.name, f.comps, names, &f.data)?;
+        write_f64_array(w, &f.name, f.comps, component_names(f.comps), &f.data)?;
     }
     writeln!(w, "      </PointData>")?;
     writeln!(w, "      <CellData>\n      </CellData>")?;
@@ -444,12 +448,109 @@ impl Series {
         Ok(path)
     }
 
+    /// Writes snapshot number `entries().len()` at `time` of a run split into `ranks` domains:
+    /// this rank's particles as the piece `basename_NNNNNN_RANK.vtu`, and on rank 0 the
+    /// `basename_NNNNNN.pvtu` that joins the pieces into one data set, then the `.pvd`. Every rank
+    /// calls it with its own particles; the series' entries name the `.pvtu`. Returns the path of
+    /// the piece.
+    pub fn add_piece(
+        &mut self,
+        time: f64,
+        (rank, ranks): (usize, usize),
+        positions: &[[f64; 3]],
+        fields: &[PointField],
+    ) -> io::Result<PathBuf> {
+        if !time.is_finite() {
+            return Err(invalid(format!("snapshot time {time} is not finite")));
+        }
+        let frame = format!("{}_{:06}", self.basename, self.entries.len());
+        let piece = |r: usize| format!("{frame}_{r}.vtu");
+        let path = self.dir.join(piece(rank));
+        write_vtu(&path, positions, fields)?;
+        let name = format!("{frame}.pvtu");
+        if rank == 0 {
+            let pieces: Vec<String> = (0..ranks).map(piece).collect();
+            write_atomic(&self.dir.join(&name), pvtu_text(fields, &pieces).as_bytes())?;
+        }
+        self.entries.push((time, name));
+        if rank == 0 {
+            self.finish()?;
+        }
+        Ok(path)
+    }
+
     /// (Re)writes the `.pvd` collection listing every snapshot so far; returns its path.
     pub fn finish(&self) -> io::Result<PathBuf> {
         let path = self.pvd_path();
         write_atomic(&path, pvd_text(&self.entries).as_bytes())?;
         Ok(path)
     }
+}
+
+/// The text of a `.pvtu` file joining `pieces` (`.vtu` files beside it, each written by
+/// [`write_vtu`] with `fields`, in that order) into one data set.
+fn pvtu_text(fields: &[PointField], pieces: &[String]) -> String {
+    let mut s = String::from(
+        "<?xml version=\"1.0\"?>\n<VTKFile type=\"PUnstructuredGrid\" version=\"1.0\" byte_order=\"LittleEndian\" \
+         header_type=\"UInt64\">\n  <PUnstructuredGrid GhostLevel=\"0\">\n    <PPointData",
+    );
+    for (attr, comps) in [("Scalars", 1), ("Vectors", 3), ("Tensors", 9)] {
+        if let Some(f) = fields.iter().find(|f| f.comps == comps) {
+            s.push_str(&format!(" {attr}=\"{}\"", xml_escape(&f.name)));
+        }
+    }
+    s.push_str(">\n");
+    for f in fields {
+        s.push_str(&format!(
+            "      <PDataArray type=\"Float64\" Name=\"{}\" NumberOfComponents=\"{}\"",
+            xml_escape(&f.name),
+            f.comps
+        ));
+        for (i, c) in component_names(f.comps).iter().enumerate() {
+            s.push_str(&format!(" ComponentName{i}=\"{c}\""));
+        }
+        s.push_str("/>\n");
+    }
+    s.push_str("    </PPointData>\n    <PPoints>\n      <PDataArray type=\"Float64\" Name=\"Points\" NumberOfComponents=\"3\"/>\n    </PPoints>\n");
+    s.push_str("    <PCells>\n      <PDataArray type=\"Int64\" Name=\"connectivity\"/>\n      <PDataArray type=\"Int64\" Name=\"offsets\"/>\n      <PDataArray type=\"UInt8\" Name=\"types\"/>\n    </PCells>\n");
+    for p in pieces {
+        s.push_str(&format!("    <Piece Source=\"{}\"/>\n", xml_escape(p)));
+    }
+    s.push_str("  </PUnstructuredGrid>\n</VTKFile>\n");
+    s
+}
+
+/// The pieces a `.pvtu` file names (its `<Piece Source=...>`), in order.
+pub fn pvtu_pieces(text: &str) -> Vec<String> {
+    text.split("<Piece ").skip(1).filter_map(|tag| attr(&format!(" {}", &tag[..tag.find('>')?]), "Source")).collect()
+}
+
+/// Reads back a `.pvtu` file written by [`Series::add_piece`]: its pieces joined in order.
+pub fn read_pvtu(path: &Path) -> io::Result<VtuData> {
+    let text = std::fs::read_to_string(path)?;
+    let dir = path.parent().unwrap_or(Path::new(""));
+    let mut all: Option<VtuData> = None;
+    for piece in pvtu_pieces(&text) {
+        let p = read_vtu(&dir.join(&piece))?;
+        let Some(a) = all.as_mut() else {
+            all = Some(p);
+            continue;
+        };
+        let points = a.positions.len() as i64;
+        if p.fields.len() != a.fields.len() || p.fields.iter().zip(&a.fields).any(|(f, g)| f.name != g.name) {
+            let bad = format!("{}: piece `{piece}` holds other fields than the first piece", path.display());
+            return Err(io::Error::new(io::ErrorKind::InvalidData, bad));
+        }
+        a.positions.extend(p.positions);
+        for (f, g) in a.fields.iter_mut().zip(p.fields) {
+            f.data.extend(g.data);
+        }
+        a.cell_types.extend(p.cell_types);
+        a.connectivity.extend(p.connectivity.iter().map(|c| c + points));
+        let end = a.offsets.last().copied().unwrap_or(0);
+        a.offsets.extend(p.offsets.iter().map(|o| o + end));
+    }
+    all.ok_or_else(|| io::Error::new(io::ErrorKind::InvalidData, format!("{}: no pieces", path.display())))
 }
 
 /// The text of a `.pvd` collection of `(time, file)` entries.
@@ -619,6 +720,40 @@ mod tests {
         let text = std::fs::read_to_string(&path).unwrap();
         assert!(text.contains("Name=\"a&lt;b&gt; &amp; &quot;c&quot; &apos;d&apos;\""), "{text}");
         assert_eq!(read_vtu(&path).unwrap().fields, vec![PointField::scalar(name, vec![4.0])]);
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    /// Two ranks' pieces (one of them empty) join through the `.pvtu` into the particles of both,
+    /// in rank order, with the cells renumbered; only rank 0 writes the `.pvtu` and the `.pvd`.
+    #[test]
+    fn pieces_of_two_ranks_read_back_through_the_pvtu_as_one_data_set() {
+        let dir = tmpdir("pieces");
+        let (pos, fields) = sample();
+        let mut ranks: Vec<Series> = (0..2).map(|_| Series::new(&dir, "plate").unwrap()).collect();
+        let part = |f: &PointField, r: std::ops::Range<usize>| {
+            PointField::new(f.name.clone(), f.comps, f.data[r.start * f.comps..r.end * f.comps].to_vec())
+        };
+        for (time, split) in [(0.0, 1), (0.5, 3)] {
+            for (rank, series) in ranks.iter_mut().enumerate().rev() {
+                let mine = if rank == 0 { 0..split } else { split..pos.len() };
+                let f: Vec<PointField> = fields.iter().map(|f| part(f, mine.clone())).collect();
+                series.add_piece(time, (rank, 2), &pos[mine], &f).unwrap();
+            }
+        }
+        assert_eq!(ranks[0].entries(), ranks[1].entries());
+        let pvd = std::fs::read_to_string(ranks[0].pvd_path()).unwrap();
+        assert!(pvd.contains("file=\"plate_000001.pvtu\""), "{pvd}");
+        let pvtu = dir.join("plate_000001.pvtu");
+        assert_eq!(pvtu_pieces(&std::fs::read_to_string(&pvtu).unwrap()), ["plate_000001_0.vtu", "plate_000001_1.vtu"]);
+        for frame in ["plate_000000.pvtu", "plate_000001.pvtu"] {
+            let whole = read_pvtu(&dir.join(frame)).unwrap();
+            assert_eq!(whole.positions, pos, "{frame}");
+            for (a, b) in whole.fields.iter().zip(&fields) {
+                assert!(a.name == b.name && a.comps == b.comps && same(&a.data, &b.data), "{frame}: {}", a.name);
+            }
+            assert_eq!(whole.connectivity, [0, 1, 2]);
+            assert_eq!(whole.offsets, [1, 2, 3]);
+        }
         std::fs::remove_dir_all(&dir).ok();
     }
 

@@ -188,6 +188,23 @@ impl<B: Backend> Reader for Moment<'_, B> {
     }
 }
 
+/// A rank's own particles of a run split into domains, read without the other ranks
+/// ([`Backend::read_own`]): what the rank writes as its piece of a VTK snapshot. Every particle
+/// of a run in one piece.
+pub struct Own<'a, B: Backend>(pub &'a B);
+
+impl<B: Backend> Reader for Own<'_, B> {
+    fn plan(&self) -> &Plan {
+        self.0.plan()
+    }
+    fn read(&self, f: FieldId) -> Result<Option<Column>, BackendError> {
+        Ok(self.0.read_own(f)?.map(Rc::new))
+    }
+    fn ids(&self) -> Result<Rc<Vec<u32>>, BackendError> {
+        Ok(Rc::new(self.0.ids_own()?))
+    }
+}
+
 /// Each particle's body, in the backend's current order.
 fn bodies_now(scene: &Scene, ids: &[u32]) -> Vec<u32> {
     ids.iter().map(|i| scene.particles.body[*i as usize]).collect()
