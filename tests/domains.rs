@@ -9,7 +9,7 @@ use common::*;
 use pairsum::backend::cpu::CpuBackend;
 use pairsum::backend::domains::{Domain, Traffic};
 use pairsum::backend::transport::Threads;
-use pairsum::backend::Backend;
+use pairsum::backend::{Backend, FieldReduction};
 use pairsum::engine::setup::build_store;
 use pairsum::engine::Engine;
 use pairsum::runner::prepare;
@@ -40,19 +40,25 @@ fn fields<B: Backend>(b: &B) -> Fields<Vec<f64>> {
 }
 
 /// `steps` steps of the case at its CI resolution, undivided and on `ranks` threads as ranks;
-/// per watched field, the largest difference relative to the field's largest magnitude; and each
-/// rank's own and halo particles and traffic at the end.
-fn split_against_whole(name: &str, ranks: usize, steps: usize) -> (Fields<f64>, RankSizes) {
+/// what `whole` reads of the undivided run's backend, and what `rank` reads of each rank's.
+fn run_both<W, R: Send>(
+    name: &str,
+    ranks: usize,
+    steps: usize,
+    whole: impl FnOnce(&Engine<CpuBackend<f64>>) -> W,
+    rank: impl Fn(&Engine<Domain<f64>>) -> R + Sync,
+) -> (W, Vec<R>) {
     let opts = pairsum::scene::Options { resolution: Some("ci".into()), ..Default::default() };
     let (scene, plan) = prepare(&case(name), &opts).unwrap_or_else(|e| panic!("{name}: {e}"));
     let store = build_store::<f64>(&plan, &scene.particles, &scene.materials).expect("store");
-    let whole = CpuBackend::new(plan.clone(), store.clone(), scene.mirrors.clone()).expect("cpu");
-    let mut a = Engine::new(whole, scene.config.clone());
+    let undivided = CpuBackend::new(plan.clone(), store.clone(), scene.mirrors.clone()).expect("cpu");
+    let mut a = Engine::new(undivided, scene.config.clone());
     a.initialise().expect("init");
     for k in 0..steps {
         a.step().unwrap_or_else(|e| panic!("{name}: undivided step {k}: {e}"));
     }
-    let results: Vec<RankResult> = std::thread::scope(|s| {
+    let rank = &rank;
+    let results = std::thread::scope(|s| {
         let handles: Vec<_> = Threads::ranks(ranks)
             .into_iter()
             .map(|t| {
@@ -65,19 +71,32 @@ fn split_against_whole(name: &str, ranks: usize, steps: usize) -> (Fields<f64>, 
                     for k in 0..steps {
                         b.step().unwrap_or_else(|e| panic!("{name}: split step {k}: {e}"));
                     }
-                    let f = fields(&b.backend);
-                    (b.time, f, b.backend.sizes(), b.backend.traffic)
+                    rank(&b)
                 })
             })
             .collect();
         handles.into_iter().map(|h| h.join().expect("a rank panicked")).collect()
     });
+    (whole(&a), results)
+}
+
+/// `steps` steps of the case at its CI resolution, undivided and on `ranks` threads as ranks;
+/// per watched field, the largest difference relative to the field's largest magnitude; and each
+/// rank's own and halo particles and traffic at the end.
+fn split_against_whole(name: &str, ranks: usize, steps: usize) -> (Fields<f64>, RankSizes) {
+    let ((whole_time, whole), results): (_, Vec<RankResult>) = run_both(
+        name,
+        ranks,
+        steps,
+        |a| (a.time, fields(&a.backend)),
+        |b| (b.time, fields(&b.backend), b.backend.sizes(), b.backend.traffic),
+    );
     let (time, split, _, _) = &results[0];
     for (_, other, _, _) in &results[1..] {
         assert_eq!(other, split, "{name}: every rank reads the same global fields");
     }
-    let mut out = vec![("time".to_string(), (a.time - time).abs() / a.time.max(f64::MIN_POSITIVE))];
-    for ((field, x), (_, y)) in fields(&a.backend).iter().zip(split) {
+    let mut out = vec![("time".to_string(), (whole_time - time).abs() / whole_time.max(f64::MIN_POSITIVE))];
+    for ((field, x), (_, y)) in whole.iter().zip(split) {
         assert_eq!(x.len(), y.len(), "{name}: `{field}` has another particle count");
         let scale = pairsum::compare::extremes(x).map(|(lo, hi)| lo.abs().max(hi.abs())).unwrap_or(f64::NAN);
         let diff = pairsum::compare::max_abs_diff(x, y).unwrap_or_else(|e| panic!("{name}: `{field}`: {e}"));
@@ -160,6 +179,123 @@ fn two_ranks_of_unequal_work_are_cut_again_by_measured_cost_and_keep_the_fields(
     assert!(ranks.iter().all(|r| r.1.rebalances == 1), "{ranks:?}");
     let (a, b) = (ranks[0].0 .0 as f64, ranks[1].0 .0 as f64);
     assert!((a - b).abs() > 0.1 * (a + b) / 2.0, "the counts stayed equal: {ranks:?}");
+}
+
+/// The probes' reductions a test asks for: a component of field `v` (2: the last, along which
+/// the projectile flies and the water falls) or its length, reduced each way, over every
+/// particle or the even ids.
+const PROBED: [(Option<usize>, &str); 7] = [
+    (Some(2), "min"),
+    (Some(0), "max"),
+    (Some(2), "abs_max"),
+    (Some(2), "sum"),
+    (Some(0), "mean"),
+    (None, "mean"),
+    (None, "max"),
+];
+
+/// A component of [`PROBED`] in `dim` dimensions.
+fn probed_component(component: Option<usize>, dim: usize) -> Option<usize> {
+    component.map(|c| c.min(dim - 1))
+}
+
+/// Per probe of [`PROBED`] (over every particle, then the even ids): the value and the tolerance
+/// of a reduction computed from values within 1e-12 of the field's magnitude.
+fn probed_from_fields(b: &CpuBackend<f64>) -> Vec<(f64, f64)> {
+    let (comps, v) = b.read(b.plan().model.field_id("v").expect("v")).expect("read").expect("stored");
+    let ids = b.ids().expect("ids");
+    let mut out = vec![];
+    for even in [false, true] {
+        for (component, reduce) in PROBED {
+            let component = probed_component(component, b.plan().dim);
+            let values: Vec<f64> = (0..ids.len())
+                .filter(|k| !even || ids[*k].is_multiple_of(2))
+                .map(|k| &v[k * comps..(k + 1) * comps])
+                .map(|v| component.map_or_else(|| v.iter().map(|a| a * a).sum::<f64>().sqrt(), |c| v[c]))
+                .collect();
+            assert!(values.iter().all(|x| x.is_finite()), "v is not finite everywhere");
+            let largest = values.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+            let (n, sum) = (values.len() as f64, values.iter().sum::<f64>());
+            let value = match reduce {
+                "min" => values.iter().fold(f64::INFINITY, |m, x| m.min(*x)),
+                "max" => values.iter().fold(f64::NEG_INFINITY, |m, x| m.max(*x)),
+                "abs_max" => largest,
+                "sum" => sum,
+                _ => sum / n,
+            };
+            out.push((value, 1e-12 * largest * if reduce == "sum" { n } else { 1.0 }));
+        }
+    }
+    out
+}
+
+/// The watchdog's values from the fields, computed here: the largest speed, `Σ m (½|v|² + e −
+/// g·x)`, `Σ |m (½|v|² + e − g·x)|` and `Σ ½ m |v|²`.
+fn watch_from_fields(b: &CpuBackend<f64>) -> [f64; 4] {
+    let plan = b.plan();
+    let read = |name: &str| b.read(plan.model.field_id(name).expect(name)).expect("read").expect("stored");
+    let ((cv, v), (cx, x), (_, m)) = (read("v"), read("x"), read("m"));
+    let e = plan.model.field_id("e").map(|_| read("e").1);
+    let g = plan.scene_params.iter().find(|p| p.role == pairsum::schedule::SceneRole::Gravity).map(|p| &p.value);
+    let mut out = [0.0f64; 4];
+    for i in 0..m.len() {
+        let s2: f64 = v[i * cv..(i + 1) * cv].iter().map(|a| a * a).sum();
+        assert!(s2.is_finite(), "particle {i}'s speed is {s2}");
+        let gx: f64 = g.map_or(0.0, |g| x[i * cx..(i + 1) * cx].iter().zip(g).map(|(a, b)| a * b).sum());
+        let energy = m[i] * (0.5 * s2 + e.as_ref().map_or(0.0, |e| e[i]) - gx);
+        out = [out[0].max(s2.sqrt()), out[1] + energy, out[2] + energy.abs(), out[3] + 0.5 * m[i] * s2];
+    }
+    out
+}
+
+/// Probes of a field and the watchdog's values on a split run are reduced on each rank and then
+/// over the ranks (two or four numbers a rank instead of the field): after 20 steps of the
+/// hypervelocity impact (internal energy, no gravity) and the dam break (gravity) on two and
+/// three ranks, every rank gets the same values, within 1e-12 of the reductions computed here
+/// from the undivided run's fields (for a sum, of n times the largest term).
+#[test]
+fn probes_and_the_watchdog_reduced_on_each_rank_give_the_undivided_values_within_1e_12() {
+    for (name, ranks) in [("hypervelocity_impact", 2), ("dam_break_2d", 3)] {
+        let (whole, split) = run_both(
+            name,
+            ranks,
+            20,
+            |a| (probed_from_fields(&a.backend), watch_from_fields(&a.backend)),
+            |b| {
+                let select: Vec<bool> = (0..b.backend.particles()).map(|i| i % 2 == 0).collect();
+                let probed = [None, Some(&select[..])].into_iter().flat_map(|select| {
+                    PROBED.map(|(component, reduce)| {
+                        let component = probed_component(component, b.backend.plan().dim);
+                        let field = b.backend.plan().model.field_id("v").expect("v");
+                        let r = FieldReduction { field, component, reduce, select };
+                        b.backend.reduce_field(&r).expect("reduce").expect("reduced by the ranks")
+                    })
+                });
+                let w = b.backend.watch_values().expect("watch").expect("reduced by the ranks");
+                (probed.collect::<Vec<_>>(), [w.max_speed, w.energy, w.energy_magnitude, w.kinetic])
+            },
+        );
+        for (k, other) in split.iter().enumerate() {
+            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&other.0), bits(&split[0].0), "{name}: rank {k} reduced otherwise");
+            assert_eq!(other.1.map(f64::to_bits), split[0].1.map(f64::to_bits), "{name}: rank {k}");
+        }
+        let (probed, watch) = &split[0];
+        for (k, ((value, tolerance), got)) in whole.0.iter().zip(probed).enumerate() {
+            let (component, reduce) = PROBED[k % PROBED.len()];
+            let d = (got - value).abs();
+            assert!(d <= *tolerance, "{name}: {reduce} of v{component:?} (probe {k}): {got} against {value}");
+        }
+        let [speed, energy, magnitude, kinetic] = whole.1;
+        for (what, got, value, scale) in [
+            ("the largest speed", watch[0], speed, speed),
+            ("the energy", watch[1], energy, magnitude),
+            ("the energy's magnitude", watch[2], magnitude, magnitude),
+            ("the kinetic energy", watch[3], kinetic, kinetic),
+        ] {
+            assert!((got - value).abs() <= 1e-12 * scale, "{name}: {what}: {got} against {value}");
+        }
+    }
 }
 
 /// Two bars in 1D flying apart at 1000 and 1300 m/s on four ranks whose boxes are cut where the

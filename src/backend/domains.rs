@@ -13,12 +13,13 @@
 
 use super::cpu::{first_non_finite_in, snapshot_of, CpuBackend};
 use super::transport::Transport;
-use super::{Backend, BackendError, Globals, Mirror, Snapshot};
+use super::{Backend, BackendError, FieldReduction, Globals, Mirror, Snapshot, WatchValues};
 use crate::compare::largest_number;
 use crate::grid::decompose::{bisect_with_cuts, Cuts};
 use crate::ir::{FieldId, Reduce};
 use crate::particles::{ParamTable, Real, Store};
-use crate::schedule::{search::Search as Lists, Plan};
+use crate::scene::max_keeping_nan;
+use crate::schedule::{search::Search as Lists, Plan, SceneRole};
 use std::sync::Mutex;
 
 /// What a rank sent to the others, in bytes of the run's precision.
@@ -682,6 +683,76 @@ impl<T: Real> Backend for Domain<T> {
 
     fn ids_own(&self) -> Result<Vec<u32>, BackendError> {
         Ok(self.own().into_iter().map(|i| self.backend.store.id[i]).collect())
+    }
+
+    fn reduces_probes(&self) -> bool {
+        true
+    }
+
+    /// Reduced over this rank's own particles, then over the ranks in rank order: two numbers
+    /// travel per rank instead of the field.
+    fn reduce_field(&self, r: &FieldReduction) -> Result<Option<f64>, BackendError> {
+        let Some((comps, values)) = self.read_own(r.field)? else { return Ok(Some(f64::NAN)) };
+        let ids = self.ids_own()?;
+        let picked = (0..ids.len()).filter(|k| r.select.is_none_or(|s| s[ids[*k] as usize])).map(|k| {
+            let v = &values[k * comps..(k + 1) * comps];
+            r.component.map_or_else(|| v.iter().map(|a| a * a).sum::<f64>().sqrt(), |c| v[c])
+        });
+        let (mut count, mut value) = (0.0, if r.reduce == "min" { f64::INFINITY } else { f64::NEG_INFINITY });
+        for v in picked.filter(|v| !v.is_nan()) {
+            count += 1.0;
+            value = match r.reduce {
+                "min" => value.min(v),
+                "max" => value.max(v),
+                "abs_max" => value.max(v.abs()),
+                _ if count == 1.0 => v,
+                _ => value + v,
+            };
+        }
+        let all = self.transport().all_gather(vec![value, count]);
+        let present = all.iter().filter(|p| p[1] > 0.0);
+        let total: f64 = all.iter().map(|p| p[1]).sum();
+        Ok(Some(match r.reduce {
+            _ if total == 0.0 => f64::NAN,
+            "min" => present.fold(f64::INFINITY, |m, p| m.min(p[0])),
+            "max" | "abs_max" => present.fold(f64::NEG_INFINITY, |m, p| m.max(p[0])),
+            "sum" => present.map(|p| p[0]).sum(),
+            _ => present.map(|p| p[0]).sum::<f64>() / total,
+        }))
+    }
+
+    /// The watchdog's reductions over this rank's own particles, then over the ranks in rank
+    /// order, in f64: the engine reads the fields only near a bound.
+    fn watch_values(&self) -> Result<Option<WatchValues>, BackendError> {
+        let model = &self.plan.model;
+        let own = |name: &str| model.field_id(name).map_or(Ok(None), |f| self.read_own(f));
+        let (Some((cv, v)), Some((cx, x))) = (own("v")?, own("x")?) else { return Ok(None) };
+        let m = own("m")?.map(|(_, m)| m);
+        let scalar = |f: &FieldId| model.field(*f).ty.shape == crate::ir::Shape::Scalar;
+        let e = match model.field_id("e").filter(scalar) {
+            Some(f) => self.read_own(f)?.map(|(_, e)| e),
+            None => None,
+        };
+        let gravity = self.plan.scene_params.iter().find(|p| p.role == SceneRole::Gravity).map(|p| &p.value);
+        let mut mine = [f64::NEG_INFINITY, 0.0, 0.0, 0.0];
+        for i in 0..v.len() / cv.max(1) {
+            let s2: f64 = v[i * cv..(i + 1) * cv].iter().map(|a| a * a).sum();
+            mine[0] = max_keeping_nan(mine[0], [s2.sqrt()]);
+            let m = m.as_ref().map_or(f64::NAN, |m| m[i]);
+            let fall: f64 = gravity.map_or(0.0, |g| x[i * cx..(i + 1) * cx].iter().zip(g).map(|(a, b)| a * b).sum());
+            let energy = m * (0.5 * s2 + e.as_ref().map_or(0.0, |e| e[i]) - fall);
+            mine[1] += energy;
+            mine[2] += energy.abs();
+            mine[3] += 0.5 * m * s2;
+        }
+        let all = self.transport().all_gather(mine.to_vec());
+        let sum = |k: usize| all.iter().map(|p| p[k]).sum::<f64>();
+        Ok(Some(WatchValues {
+            max_speed: max_keeping_nan(0.0, all.iter().map(|p| p[0])),
+            energy: sum(1),
+            energy_magnitude: sum(2),
+            kinetic: sum(3),
+        }))
     }
 
     fn snapshot(&self) -> Result<Snapshot, BackendError> {
