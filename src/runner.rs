@@ -3,10 +3,11 @@
 
 use crate::backend::cpu::CpuBackend;
 use crate::backend::domains::Domain;
+use crate::backend::transport::Transport;
 use crate::backend::{Backend, BackendError};
 use crate::diag::{Diagnostic, Sources};
 use crate::engine::{checkpoint, setup, Engine, RunError};
-use crate::particles::{Real, Store};
+use crate::particles::Real;
 use crate::report::{self, Curve, GroupBytes, History, PointField, ResultRow, RunReport};
 use crate::scene::measure::Reader;
 use crate::scene::spec::ProfileSpec;
@@ -309,63 +310,77 @@ fn split_ranks(opts: &RunOptions) -> usize {
 }
 
 fn run_cpu<T: Real>(scene: Scene, plan: Plan, opts: &RunOptions) -> Result<RunOutcome, RunFailure> {
-    let store =
-        setup::build_store::<T>(&plan, &scene.particles, &scene.materials).map_err(|e| setup_failure(&scene, e))?;
     if let Some(world) = crate::backend::transport::world().map_err(|e| RunFailure::Run(e.0))? {
-        let backend = Domain::new(plan, store, scene.mirrors.clone(), world).map_err(|e| RunFailure::Run(e.0))?;
+        let backend = domain::<T>(&scene, plan, world)?;
         return drive(scene, backend, opts, T::NAME, true);
     }
-    match opts.domains {
-        Some(n) if n > 1 => run_threads::<T>(scene, plan, store, opts, n),
-        _ => {
-            let backend = CpuBackend::new(plan, store, scene.mirrors.clone()).map_err(|e| RunFailure::Run(e.0))?;
-            drive(scene, backend, opts, T::NAME, true)
-        }
+    if let Some(n) = opts.domains.filter(|n| *n > 1) {
+        return run_threads::<T>(scene, plan, opts, n);
     }
+    let store =
+        setup::build_store::<T>(&plan, &scene.particles, &scene.materials).map_err(|e| setup_failure(&scene, e))?;
+    let backend = CpuBackend::new(plan, store, scene.mirrors.clone()).map_err(|e| RunFailure::Run(e.0))?;
+    drive(scene, backend, opts, T::NAME, true)
+}
+
+/// This rank's domain of a run split over `transport`: every rank cuts the scene's particles
+/// alike and builds the store of its own share only, so that no rank ever holds every particle's
+/// state.
+fn domain<T: Real>(scene: &Scene, plan: Plan, transport: Box<dyn Transport>) -> Result<Domain<T>, RunFailure> {
+    let input = &scene.particles;
+    let (rank, size) = (transport.rank(), transport.size());
+    let (cuts, own) =
+        Domain::<T>::share(&plan, &input.x, rank, size).map_err(|e| RunFailure::Input(format!("error: {e}\n")))?;
+    let store =
+        setup::build_store_of::<T>(&plan, input, &scene.materials, &own).map_err(|e| setup_failure(scene, e))?;
+    let mut groups = input.group.clone();
+    groups.sort_unstable();
+    Domain::of_own(plan, store, groups, cuts, scene.mirrors.clone(), transport).map_err(|e| RunFailure::Run(e.0))
 }
 
 /// A run split into `ranks` domains, each run by a thread of this process as a rank. Rank 0
 /// writes the outputs; the others run the same loop (every read of a field is collective) and
-/// write only their pieces of the VTK snapshots.
-fn run_threads<T: Real>(
-    scene: Scene,
-    plan: Plan,
-    store: Store<T>,
-    opts: &RunOptions,
-    ranks: usize,
-) -> Result<RunOutcome, RunFailure> {
+/// write only their pieces of the VTK snapshots. A rank that fails alone (a setup error in its
+/// share) leaves the others waiting on a transport it dropped, which stops them: the run reports
+/// the first error a rank returned.
+fn run_threads<T: Real>(scene: Scene, plan: Plan, opts: &RunOptions, ranks: usize) -> Result<RunOutcome, RunFailure> {
     use crate::backend::transport::Threads;
-    let mut transports = Threads::ranks(ranks).into_iter();
-    let first = transports.next().expect("at least one rank");
-    let backends = std::iter::once(first)
-        .chain(transports)
-        .map(|t| Domain::new(plan.clone(), store.clone(), scene.mirrors.clone(), Box::new(t)))
-        .collect::<Result<Vec<_>, _>>()
-        .map_err(|e| RunFailure::Run(e.0))?;
-    let mut backends = backends.into_iter();
-    let mine = backends.next().expect("rank 0");
-    std::thread::scope(|s| {
-        let others: Vec<_> = backends
-            .map(|backend| {
-                let path = scene.path.clone();
-                s.spawn(move || -> Result<(), RunFailure> {
-                    let (scene, _) = prepare(&path, &opts.scene)?;
-                    let theirs = RunOptions { progress: false, timing: false, ..opts.clone() };
-                    drive(scene, backend, &theirs, T::NAME, false).map(|_| ())
+    let path = scene.path.clone();
+    let mut first = Some((scene, plan.clone()));
+    let results: Vec<_> = std::thread::scope(|s| {
+        let handles: Vec<_> = Threads::ranks(ranks)
+            .into_iter()
+            .map(|t| {
+                let (mine, plan, path) = (first.take(), plan.clone(), path.clone());
+                s.spawn(move || -> Result<Option<RunOutcome>, RunFailure> {
+                    let leads = mine.is_some();
+                    let (scene, plan) = match mine {
+                        Some(prepared) => prepared,
+                        None => (prepare(&path, &opts.scene)?.0, plan),
+                    };
+                    let backend = domain::<T>(&scene, plan, Box::new(t))?;
+                    let theirs = if leads {
+                        opts.clone()
+                    } else {
+                        RunOptions { progress: false, timing: false, ..opts.clone() }
+                    };
+                    let outcome = drive(scene, backend, &theirs, T::NAME, false)?;
+                    Ok(leads.then_some(outcome))
                 })
             })
             .collect();
-        let outcome = drive(scene, mine, opts, T::NAME, false);
-        for h in others {
-            match h.join() {
-                Ok(Ok(())) => {}
-                Ok(Err(e)) if outcome.is_ok() => return Err(e),
-                Ok(Err(_)) => {}
-                Err(_) => return Err(RunFailure::Run("a rank of the split run panicked".into())),
-            }
+        handles.into_iter().map(|h| h.join()).collect()
+    });
+    let mut outcome = None;
+    for r in results {
+        match r {
+            Ok(Ok(Some(o))) => outcome = Some(o),
+            Ok(Ok(None)) => {}
+            Ok(Err(e)) => return Err(e),
+            Err(_) => {}
         }
-        outcome
-    })
+    }
+    outcome.ok_or_else(|| RunFailure::Run("a rank of the split run panicked".into()))
 }
 
 /// Everything a run records while it goes.

@@ -181,6 +181,52 @@ fn two_ranks_of_unequal_work_are_cut_again_by_measured_cost_and_keep_the_fields(
     assert!((a - b).abs() > 0.1 * (a + b) / 2.0, "the counts stayed equal: {ranks:?}");
 }
 
+/// A rank builds the store of its own share of the scene only (`setup::build_store_of`): over
+/// three ranks of the Børvik plate and its projectile (two groups, two materials) the shares
+/// hold every particle once, each with its scene index as id and the undivided store's values of
+/// every stored field, bit for bit.
+#[test]
+fn the_ranks_shares_built_from_the_scene_hold_every_particle_once_with_the_undivided_values() {
+    let opts = pairsum::scene::Options { resolution: Some("ci".into()), ..Default::default() };
+    let (scene, plan) = prepare(&case("borvik_perforation"), &opts).expect("case");
+    let whole = build_store::<f64>(&plan, &scene.particles, &scene.materials).expect("store");
+    let row_of: std::collections::HashMap<u32, usize> = whole.id.iter().enumerate().map(|(i, id)| (*id, i)).collect();
+    let mut seen = vec![0; whole.n];
+    for rank in 0..3 {
+        let (_, own) = Domain::<f64>::share(&plan, &scene.particles.x, rank, 3).expect("share");
+        let part = pairsum::engine::setup::build_store_of::<f64>(&plan, &scene.particles, &scene.materials, &own)
+            .expect("share's store");
+        assert_eq!(part.n, own.len());
+        for i in 0..part.n {
+            seen[part.id[i] as usize] += 1;
+            let j = row_of[&part.id[i]];
+            assert_eq!(
+                (part.group[i], part.material[i]),
+                (whole.group[j], whole.material[j]),
+                "particle {}",
+                part.id[i]
+            );
+            for l in &plan.layout {
+                let (a, b) = (part.column(l.field).expect("column"), whole.column(l.field).expect("column"));
+                let g = part.group[i] as usize;
+                if !b.has(g) {
+                    continue;
+                }
+                let (ra, rb) = (a.row(i, g), b.row(j, g));
+                let bits = |c: &[f64]| c.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+                assert_eq!(
+                    bits(&a.data[ra * l.comps..(ra + 1) * l.comps]),
+                    bits(&b.data[rb * l.comps..(rb + 1) * l.comps]),
+                    "particle {}, `{}`",
+                    part.id[i],
+                    plan.model.field(l.field).name
+                );
+            }
+        }
+    }
+    assert!(seen.iter().all(|n| *n == 1), "a particle is in no share or in two");
+}
+
 /// The probes' reductions a test asks for: a component of field `v` (2: the last, along which
 /// the projectile flies and the water falls) or its length, reduced each way, over every
 /// particle or the even ids.

@@ -11,7 +11,7 @@
 //! Every exchange goes through a [`Transport`] and is collective: every rank makes the same calls
 //! in the same order. What travels is counted in [`Traffic`].
 
-use super::cpu::{first_non_finite_in, snapshot_of, CpuBackend};
+use super::cpu::{first_non_finite_in, known, lower::Known, snapshot_of, CpuBackend};
 use super::transport::Transport;
 use super::{Backend, BackendError, FieldReduction, Globals, Mirror, Snapshot, WatchValues};
 use crate::compare::largest_number;
@@ -80,6 +80,18 @@ const REBALANCE_AT: f64 = 1.1;
 /// (lists bring their own).
 const HALO_SKIN: f64 = 0.1;
 
+/// The model's field `name`.
+fn field(plan: &Plan, name: &str) -> Result<FieldId, BackendError> {
+    plan.model.field_id(name).ok_or_else(|| BackendError(format!("the model has no field `{name}`")))
+}
+
+/// A position of `dim ≤ 3` coordinates as three.
+fn pad(x: &[f64]) -> [f64; 3] {
+    let mut p = [0.0; 3];
+    p[..x.len()].copy_from_slice(x);
+    p
+}
+
 /// One rank of a CPU run split into domains, driven by the engine as a backend.
 pub struct Domain<T: Real> {
     plan: Plan,
@@ -126,30 +138,61 @@ impl<T: Real> Domain<T> {
         mirrors: Vec<Mirror>,
         transport: Box<dyn Transport>,
     ) -> Result<Domain<T>, BackendError> {
+        let x = field(&plan, "x")?;
+        let positions = store.read_f64(x).map(|(_, v)| v).unwrap_or_default();
+        let positions: Vec<[f64; 3]> = positions.chunks(plan.dim.max(1)).map(pad).collect();
+        let (cuts, own) = Self::share(&plan, &positions, transport.rank(), transport.size())?;
+        let rows: Vec<(&Store<T>, usize)> = own.into_iter().map(|i| (&store, i)).collect();
+        let mine = Store::gather(&plan, &store.params, &rows);
+        Self::of_own(plan, mine, store.group.clone(), cuts, mirrors, transport)
+    }
+
+    /// How the particles at `positions` (in the scene's order, the same on every rank) are cut
+    /// into `size` domains of equal counts, and the indices of those in domain `rank`, ascending.
+    pub fn share(
+        plan: &Plan,
+        positions: &[[f64; 3]],
+        rank: usize,
+        size: usize,
+    ) -> Result<(Cuts, Vec<usize>), BackendError> {
+        if size > positions.len().max(1) {
+            return Err(BackendError(format!(
+                "cannot split {} particles into {size} domains: run on at most {} ranks",
+                positions.len(),
+                positions.len().max(1)
+            )));
+        }
+        let flat: Vec<f64> = positions.iter().flat_map(|p| p[..plan.dim].to_vec()).collect();
+        let (_, cuts) = bisect_with_cuts(&flat, plan.dim, &vec![1.0; positions.len()], size)
+            .map_err(|e| BackendError(format!("the initial particles cannot be split into domains: {e}")))?;
+        let own = (0..positions.len()).filter(|i| cuts.locate(&positions[*i]) as usize == rank).collect();
+        Ok((cuts, own))
+    }
+
+    /// Rank `transport.rank()` of a run split by `cuts`, holding `own`, its share of the
+    /// particles, whose groups are `groups` (every particle's, ascending). The programs fold only
+    /// the values every rank's share agrees on (the one collective here).
+    pub fn of_own(
+        plan: Plan,
+        own: Store<T>,
+        groups: Vec<u32>,
+        cuts: Cuts,
+        mirrors: Vec<Mirror>,
+        mut transport: Box<dyn Transport>,
+    ) -> Result<Domain<T>, BackendError> {
         if let Some(why) = unsupported(&plan, &mirrors) {
             return Err(BackendError(why));
         }
         let (rank, size) = (transport.rank(), transport.size());
-        if size > store.n.max(1) {
-            return Err(BackendError(format!(
-                "cannot split {} particles into {size} domains: run on at most {} ranks",
-                store.n,
-                store.n.max(1)
-            )));
-        }
-        let field = |name: &str| {
-            plan.model.field_id(name).ok_or_else(|| BackendError(format!("the model has no field `{name}`")))
-        };
-        let (x, h) = (field("x")?, field("h")?);
-        let positions = store.read_f64(x).map(|(_, v)| v).unwrap_or_default();
-        let (_, cuts) = bisect_with_cuts(&positions, plan.dim, &vec![1.0; store.n], size)
-            .map_err(|e| BackendError(format!("the initial particles cannot be split into domains: {e}")))?;
+        let (x, h) = (field(&plan, "x")?, field(&plan, "h")?);
         let read_at_j = (0..plan.passes.len()).map(|k| plan.fields_read_at_j(k)).collect();
         let skin = match plan.search {
             Lists::Verlet { skin } => skin,
             _ => HALO_SKIN,
         };
-        let mut backend = CpuBackend::new(plan.clone(), store.clone(), mirrors)?;
+        let parts: Vec<Known> =
+            transport.all_gather(known(&plan, &own).encode()).iter().map(|k| Known::decode(k)).collect();
+        let mut backend = CpuBackend::with_known(plan.clone(), own.clone(), mirrors, Known::agreed(&parts))?;
         backend.measure_pass_time();
         let support = backend.support;
         let mut domain = Domain {
@@ -161,8 +204,8 @@ impl<T: Real> Domain<T> {
             send: vec![vec![]; size],
             recv: vec![vec![]; size],
             cuts,
-            params: store.params.clone(),
-            groups: store.group.clone(),
+            params: own.params.clone(),
+            groups,
             x,
             h,
             support,
@@ -174,7 +217,7 @@ impl<T: Real> Domain<T> {
             traffic: Traffic::default(),
             plan,
         };
-        domain.take_own(&store);
+        domain.set_own(own);
         Ok(domain)
     }
 

@@ -44,6 +44,24 @@ impl ParticleInput {
     pub fn groups(&self) -> GroupSet {
         self.group.iter().fold(GroupSet::default(), |s, g| s.with(GroupId(*g)))
     }
+
+    /// The particles at `keep` (indices into these), in that order.
+    pub fn subset(&self, keep: &[usize]) -> ParticleInput {
+        fn pick<V: Clone>(v: &[V], keep: &[usize]) -> Vec<V> {
+            keep.iter().map(|k| v[*k].clone()).collect()
+        }
+        ParticleInput {
+            x: pick(&self.x, keep),
+            v: pick(&self.v, keep),
+            vol: pick(&self.vol, keep),
+            dx: pick(&self.dx, keep),
+            body: pick(&self.body, keep),
+            part: keep.iter().map(|k| self.part.get(*k).copied().unwrap_or(-1)).collect(),
+            group: pick(&self.group, keep),
+            material: pick(&self.material, keep),
+            initial: self.initial.clone(),
+        }
+    }
 }
 
 /// The values a material binds, by parameter (others take their defaults).
@@ -249,6 +267,22 @@ pub fn group_order(input: &ParticleInput) -> Vec<u32> {
     let mut perm: Vec<u32> = (0..input.len() as u32).collect();
     perm.sort_by_key(|&i| input.group[i as usize]);
     perm
+}
+
+/// [`build_store`] of the particles at `keep` (ascending indices into `input`) only: a rank's
+/// share of a run split into domains, which never holds the others'. Each particle keeps its index
+/// in `input` as its id. A parameter left unbound is found only where a particle needs it.
+pub fn build_store_of<T: Real>(
+    plan: &Plan,
+    input: &ParticleInput,
+    materials: &[MaterialInput],
+    keep: &[usize],
+) -> Result<Store<T>, SetupError> {
+    let mut store = build_store(plan, &input.subset(keep), materials)?;
+    for id in &mut store.id {
+        *id = keep[*id as usize] as u32;
+    }
+    Ok(store)
 }
 
 /// Builds the store: particles in group order, scene fields set, parameters resolved.

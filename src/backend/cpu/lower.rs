@@ -362,6 +362,49 @@ pub struct Known {
     pub fields: Vec<Option<Vec<f64>>>,
 }
 
+impl Known {
+    /// What every one of `parts` knows alike (the ranks of a split run, each over its share).
+    pub fn agreed(parts: &[Known]) -> Known {
+        let agree = |entries: &dyn Fn(&Known) -> &Vec<Option<Vec<f64>>>| {
+            let first = parts.first().map(entries).cloned().unwrap_or_default();
+            let same = |k: usize| parts.iter().all(|p| entries(p)[k] == first[k]);
+            first.iter().enumerate().map(|(k, v)| v.clone().filter(|_| same(k))).collect()
+        };
+        Known { params: agree(&|k| &k.params), fields: agree(&|k| &k.fields) }
+    }
+
+    /// As numbers: per parameter, then per field, a count of values (−1 for unknown) and the
+    /// values.
+    pub fn encode(&self) -> Vec<f64> {
+        let mut out = vec![self.params.len() as f64];
+        for v in self.params.iter().chain(&self.fields) {
+            match v {
+                Some(v) => out.extend(std::iter::once(v.len() as f64).chain(v.iter().copied())),
+                None => out.push(-1.0),
+            }
+        }
+        out
+    }
+
+    /// What [`encode`](Self::encode) wrote.
+    pub fn decode(numbers: &[f64]) -> Known {
+        let params = numbers[0] as usize;
+        let (mut at, mut all) = (1, vec![]);
+        while at < numbers.len() {
+            let len = numbers[at];
+            at += 1;
+            if len < 0.0 {
+                all.push(None);
+                continue;
+            }
+            all.push(Some(numbers[at..at + len as usize].to_vec()));
+            at += len as usize;
+        }
+        let fields = all.split_off(params.min(all.len()));
+        Known { params: all, fields }
+    }
+}
+
 pub struct Lowerer<'a> {
     pub model: &'a Model,
     known: &'a Known,

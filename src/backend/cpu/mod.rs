@@ -124,7 +124,9 @@ fn particle_program<T: Real>(plan: &Plan, known: &Known, g: usize, blocks: &[Blo
 }
 
 /// The parameters and fields that are constants of the run (see [`lower::Known`]).
-fn known<T: Real>(plan: &Plan, store: &Store<T>) -> lower::Known {
+/// The values the programs fold: the parameters every material of `store` binds alike, and the
+/// fields nothing writes that every particle of `store` holds alike.
+pub fn known<T: Real>(plan: &Plan, store: &Store<T>) -> lower::Known {
     lower::Known { params: known_params(&plan.model, store), fields: known_fields(plan, store) }
 }
 
@@ -447,7 +449,19 @@ impl<T: Real> CpuBackend<T> {
 
     /// Compiles every block of the plan for every group present. The store must hold the
     /// particles (sorted group-major) with the scene's fields and the material parameters set.
-    pub fn new(plan: Plan, mut store: Store<T>, mirrors: Vec<Mirror>) -> Result<CpuBackend<T>, BackendError> {
+    pub fn new(plan: Plan, store: Store<T>, mirrors: Vec<Mirror>) -> Result<CpuBackend<T>, BackendError> {
+        let known = known(&plan, &store);
+        Self::with_known(plan, store, mirrors, known)
+    }
+
+    /// As [`new`](Self::new), with the values the programs fold given (a rank of a split run
+    /// holds a share of the particles and folds only what every rank's share agrees on).
+    pub fn with_known(
+        plan: Plan,
+        mut store: Store<T>,
+        mirrors: Vec<Mirror>,
+        known: Known,
+    ) -> Result<CpuBackend<T>, BackendError> {
         let x = plan.model.field_id("x").ok_or_else(|| BackendError("the model has no position field `x`".into()))?;
         let h = plan.model.field_id("h").ok_or_else(|| BackendError("the model has no smoothing length `h`".into()))?;
         let n_groups = plan.model.groups.len();
@@ -455,7 +469,6 @@ impl<T: Real> CpuBackend<T> {
         let per_group = |f: &dyn Fn(usize) -> Option<Program<T>>| -> Vec<Option<Program<T>>> {
             (0..n_groups).map(|g| if present.contains(&g) { f(g) } else { None }).collect()
         };
-        let known = known(&plan, &store);
         let mut passes: Vec<Vec<Variant<T>>> = plan
             .passes
             .iter()
