@@ -42,7 +42,7 @@ pub struct Traffic {
 }
 
 /// A run that cannot be split into domains (yet), and why.
-pub fn unsupported(plan: &Plan, mirrors: &[Mirror]) -> Option<String> {
+pub fn unsupported(plan: &Plan) -> Option<String> {
     if matches!(plan.search, Lists::Adaptive { .. }) {
         return Some(
             "a run split into domains rebuilds its neighbour lists when particles change domain: the adaptive \
@@ -50,9 +50,6 @@ pub fn unsupported(plan: &Plan, mirrors: &[Mirror]) -> Option<String> {
              \"verlet\""
                 .into(),
         );
-    }
-    if mirrors.iter().any(|m| m.shift != 0.0) {
-        return Some("a run split into domains does not support periodic sides yet".into());
     }
     None
 }
@@ -79,6 +76,22 @@ const REBALANCE_AT: f64 = 1.1;
 /// The halo's skin, as a fraction of the largest cut-off, where the plan's search keeps no lists
 /// (lists bring their own).
 const HALO_SKIN: f64 = 0.1;
+
+/// Every combination of no move and a move by ± the period along each periodic axis of
+/// `mirrors` (`[0, 0, 0]` alone where none is periodic).
+fn periodic_moves(mirrors: &[Mirror]) -> Vec<[f64; 3]> {
+    let mut moves = vec![[0.0; 3]];
+    for m in mirrors.iter().filter(|m| m.shift > 0.0) {
+        moves = moves.iter().flat_map(|v| [0.0, m.shift, -m.shift].map(|d| with(*v, m.axis, d))).collect();
+    }
+    moves
+}
+
+/// `v` with `d` added along `axis`.
+fn with(mut v: [f64; 3], axis: usize, d: f64) -> [f64; 3] {
+    v[axis] += d;
+    v
+}
 
 /// The model's field `name`.
 fn field(plan: &Plan, name: &str) -> Result<FieldId, BackendError> {
@@ -118,6 +131,10 @@ pub struct Domain<T: Real> {
     /// The halo's skin, a fraction of the largest cut-off: the halo holds the particles within
     /// the cut-off plus the skin, and is kept until a pair may have come closer by the skin.
     skin: f64,
+    /// Every move across the periodic sides, none and both ways along each periodic axis: a
+    /// particle whose move lies within a rank's reach is a neighbour of that rank's particles
+    /// across the sides (the CPU backend makes the images).
+    periodic_moves: Vec<[f64; 3]>,
     /// Since the last rebuild: this rank's own particles' positions and smoothing lengths, and
     /// the skin's length; `None` when the next evaluation must rebuild.
     anchor: Option<Anchor>,
@@ -180,7 +197,7 @@ impl<T: Real> Domain<T> {
         mirrors: Vec<Mirror>,
         mut transport: Box<dyn Transport>,
     ) -> Result<Domain<T>, BackendError> {
-        if let Some(why) = unsupported(&plan, &mirrors) {
+        if let Some(why) = unsupported(&plan) {
             return Err(BackendError(why));
         }
         let (rank, size) = (transport.rank(), transport.size());
@@ -190,6 +207,7 @@ impl<T: Real> Domain<T> {
             Lists::Verlet { skin } => skin,
             _ => HALO_SKIN,
         };
+        let periodic_moves = periodic_moves(&mirrors);
         let parts: Vec<Known> =
             transport.all_gather(known(&plan, &own).encode()).iter().map(|k| Known::decode(k)).collect();
         let mut backend = CpuBackend::with_known(plan.clone(), own.clone(), mirrors, Known::agreed(&parts))?;
@@ -211,6 +229,7 @@ impl<T: Real> Domain<T> {
             support,
             read_at_j,
             skin,
+            periodic_moves,
             anchor: None,
             kept: None,
             evaluated: vec![0.0; plan.model.groups.len()],
@@ -410,7 +429,8 @@ impl<T: Real> Domain<T> {
         for (d, b) in boxes.iter().enumerate().filter(|(d, _)| *d != self.rank) {
             for (k, r) in mine.iter().enumerate() {
                 let p = self.position(r);
-                if (0..dim).all(|a| p[a] >= b[a] && p[a] <= b[3 + a]) {
+                let within = |m: &[f64; 3]| (0..dim).all(|a| p[a] + m[a] >= b[a] && p[a] + m[a] <= b[3 + a]);
+                if self.periodic_moves.iter().any(within) {
                     sent_rows[d].push(k);
                     match r {
                         Row::Here(s, i) => self.encode(s, *i, &mut halo_out[d]),
