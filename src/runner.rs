@@ -123,11 +123,12 @@ pub fn cost_estimate(scene: &Scene, plan: &Plan, precision: Precision) -> Result
     }
 }
 
-/// The case split into `parts` domains of equal particle counts (`grid::decompose::bisect`, at
-/// the initial positions): each domain's particles, the particles of the others within reach of
-/// it (its halo), and the bytes its halo brings in a step (`Plan::halo_exchanges`).
+/// The case split into `parts` domains of equal particle counts as a run splits it (the cut
+/// planes of `grid::decompose::bisect_with_cuts` at the initial positions, a particle on a plane
+/// on its high side): each domain's particles, the particles of the others within reach of it
+/// (its halo), and the bytes its halo brings in a step (`Plan::halo_exchanges`).
 pub fn domains_report(scene: &Scene, plan: &Plan, real: usize, parts: usize) -> Result<String, RunFailure> {
-    use crate::grid::decompose::{bisect, halo_sizes};
+    use crate::grid::decompose::{bisect_with_cuts, halo_sizes};
     let store =
         setup::build_store::<f64>(plan, &scene.particles, &scene.materials).map_err(|e| setup_failure(scene, e))?;
     let mut backend = CpuBackend::new(plan.clone(), store, scene.mirrors.clone()).map_err(|e| RunFailure::Run(e.0))?;
@@ -140,12 +141,14 @@ pub fn domains_report(scene: &Scene, plan: &Plan, real: usize, parts: usize) -> 
     let (x, h) = (field("x")?, field("h")?);
     let dim = plan.dim;
     let invalid = |e: crate::compare::CompareError| RunFailure::Run(format!("the initial particles: {e}"));
-    let domain = bisect(&x, dim, &vec![1.0; h.len()], parts).map_err(invalid)?;
+    let (_, cuts) = bisect_with_cuts(&x, dim, &vec![1.0; h.len()], parts).map_err(invalid)?;
+    let domain: Vec<u32> = x.chunks(dim).map(|p| cuts.locate(p)).collect();
     let halo = halo_sizes(&x, dim, &h, backend.support, &domain, parts).map_err(invalid)?;
     let per_particle = plan.halo_bytes_per_step(real);
     let mut out = format!(
-        "domains: {parts}, cut by recursive coordinate bisection into equal particle counts \
-         (at the initial positions; halos of {per_particle} B a particle a step)\n"
+        "domains: {parts}, cut as a run cuts them, by recursive coordinate bisection at equal particle counts \
+         (at the initial positions; a particle on a cut goes to its high side; halos of {per_particle} B a \
+         particle a step)\n"
     );
     for (d, halo) in halo.iter().enumerate() {
         let own = domain.iter().filter(|k| **k as usize == d).count();
