@@ -348,6 +348,21 @@ fn probes_and_the_watchdog_reduced_on_each_rank_give_the_undivided_values_within
     }
 }
 
+/// `colliding_bars_1d` with its bars flying the same way at 1000 and 1300 m/s, and `tables`
+/// (TOML) added before its resolutions, written into `dir`.
+fn fast_bars(dir: &Path, tables: &str) -> std::path::PathBuf {
+    let text = std::fs::read_to_string(case("colliding_bars_1d")).expect("case");
+    let text = text
+        .replace("velocity = [\"1 m/s\"]", "velocity = [\"1000 m/s\"]")
+        .replace("velocity = [\"-1 m/s\"]", "velocity = [\"1300 m/s\"]")
+        .replace("[resolutions]", &format!("{tables}\n[resolutions]"));
+    assert_eq!(text.matches("00 m/s").count(), 2, "the case's velocities changed: update this test");
+    assert!(text.contains(&format!("{tables}\n[resolutions]")), "the case has no [resolutions]: update this test");
+    let path = dir.join("fast_bars.toml");
+    std::fs::write(&path, text).expect("write");
+    path
+}
+
 /// Periodic sides across ranks: a rank's halo holds the others' particles within its reach
 /// across the sides too (the CPU backend makes the images), and a particle that leaves through a
 /// side comes back on the rank of the other side. 20 steps of the Poiseuille channel (periodic
@@ -357,15 +372,7 @@ fn probes_and_the_watchdog_reduced_on_each_rank_give_the_undivided_values_within
 /// magnitude.
 #[test]
 fn periodic_sides_across_ranks_give_the_undivided_fields_within_1e_12_of_their_magnitude() {
-    let dir = tempdir("periodic");
-    let text = std::fs::read_to_string(case("colliding_bars_1d")).expect("case");
-    let text = text
-        .replace("velocity = [\"1 m/s\"]", "velocity = [\"1000 m/s\"]")
-        .replace("velocity = [\"-1 m/s\"]", "velocity = [\"1300 m/s\"]")
-        .replace("[resolutions]", "[periodic]\nx = [-0.05, 0.052]\n\n[resolutions]");
-    assert_eq!(text.matches("00 m/s").count() + text.matches("[periodic]").count(), 3, "update this test");
-    let bars = dir.join("periodic_bars.toml");
-    std::fs::write(&bars, text).expect("write");
+    let bars = fast_bars(&tempdir("periodic"), "[periodic]\nx = [-0.05, 0.052]\n");
     let bars = bars.display().to_string();
     for (name, ranks, steps) in [("poiseuille_2d", 2, 20), ("poiseuille_2d", 4, 20), ("dam_break_3d", 2, 20)]
         .into_iter()
@@ -394,14 +401,7 @@ fn periodic_sides_across_ranks_give_the_undivided_fields_within_1e_12_of_their_m
 /// is present once.
 #[test]
 fn a_fast_body_that_changes_ranks_every_few_steps_loses_and_duplicates_no_particle() {
-    let dir = tempdir("fast_bars");
-    let text = std::fs::read_to_string(case("colliding_bars_1d")).expect("case");
-    let text = text
-        .replace("velocity = [\"1 m/s\"]", "velocity = [\"1000 m/s\"]")
-        .replace("velocity = [\"-1 m/s\"]", "velocity = [\"1300 m/s\"]");
-    assert_eq!(text.matches("00 m/s").count(), 2, "the case's velocities changed: update this test");
-    let path = dir.join("fast_bars.toml");
-    std::fs::write(&path, text).expect("write");
+    let path = fast_bars(&tempdir("fast_bars"), "");
     let opts = pairsum::scene::Options { resolution: Some("ci".into()), ..Default::default() };
     let (scene, plan) = prepare(&path, &opts).unwrap_or_else(|e| panic!("{e}"));
     let store = build_store::<f64>(&plan, &scene.particles, &scene.materials).expect("store");
