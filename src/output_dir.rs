@@ -61,23 +61,17 @@ pub fn remove_earlier_series(vtk_dir: &Path, basename: &str) -> io::Result<()> {
         path if path.is_file() => std::fs::remove_file(path),
         _ => Ok(()),
     };
-    for file in listed(&pvd, "file") {
+    for file in pvd.split("file=\"").skip(1).filter_map(|rest| rest.split('"').next()) {
         if ours(file, ".pvtu") {
             let pvtu = std::fs::read_to_string(vtk_dir.join(file)).unwrap_or_default();
-            listed(&pvtu, "Source").filter(|piece| ours(piece, ".vtu")).try_for_each(remove)?;
+            let pieces = crate::report::pvtu_pieces(&pvtu);
+            pieces.iter().filter(|piece| ours(piece, ".vtu")).try_for_each(|piece| remove(piece))?;
             remove(file)?;
         } else if ours(file, ".vtu") {
             remove(file)?;
         }
     }
     Ok(())
-}
-
-/// The values of every attribute `key` in an XML text, unescaped only as far as pairsum's own
-/// file names need (they have no quotes).
-fn listed<'a>(xml: &'a str, key: &str) -> impl Iterator<Item = &'a str> {
-    let pattern = format!("{key}=\"");
-    xml.split(pattern.as_str()).skip(1).filter_map(|rest| rest.split('"').next()).collect::<Vec<_>>().into_iter()
 }
 
 /// Whether `path` is a WGSL file pairsum generated.

@@ -15,11 +15,12 @@ use super::cpu::{first_non_finite_in, known, lower::Known, snapshot_of, CpuBacke
 use super::transport::Transport;
 use super::{Backend, BackendError, FieldReduction, Globals, Mirror, Snapshot, WatchValues};
 use crate::compare::largest_number;
+use crate::engine::watchdog::{gravity, Motion};
 use crate::grid::decompose::{bisect_with_cuts, Cuts};
 use crate::ir::{FieldId, Reduce};
 use crate::particles::{ParamTable, Real, Store};
 use crate::scene::max_keeping_nan;
-use crate::schedule::{search::Search as Lists, Plan, SceneRole};
+use crate::schedule::{search::Search as Lists, Plan};
 use std::sync::Mutex;
 
 /// What a rank sent to the others, in bytes of the run's precision.
@@ -784,31 +785,12 @@ impl<T: Real> Backend for Domain<T> {
         }))
     }
 
-    /// The watchdog's reductions over this rank's own particles, then over the ranks in rank
-    /// order, in f64: the engine reads the fields only near a bound.
+    /// The watchdog's reductions over this rank's own particles (`watchdog::Motion`), then over
+    /// the ranks in rank order, in f64: the engine reads the fields only near a bound.
     fn watch_values(&self) -> Result<Option<WatchValues>, BackendError> {
-        let model = &self.plan.model;
-        let own = |name: &str| model.field_id(name).map_or(Ok(None), |f| self.read_own(f));
-        let (Some((cv, v)), Some((cx, x))) = (own("v")?, own("x")?) else { return Ok(None) };
-        let m = own("m")?.map(|(_, m)| m);
-        let scalar = |f: &FieldId| model.field(*f).ty.shape == crate::ir::Shape::Scalar;
-        let e = match model.field_id("e").filter(scalar) {
-            Some(f) => self.read_own(f)?.map(|(_, e)| e),
-            None => None,
-        };
-        let gravity = self.plan.scene_params.iter().find(|p| p.role == SceneRole::Gravity).map(|p| &p.value);
-        let mut mine = [f64::NEG_INFINITY, 0.0, 0.0, 0.0];
-        for i in 0..v.len() / cv.max(1) {
-            let s2: f64 = v[i * cv..(i + 1) * cv].iter().map(|a| a * a).sum();
-            mine[0] = max_keeping_nan(mine[0], [s2.sqrt()]);
-            let m = m.as_ref().map_or(f64::NAN, |m| m[i]);
-            let fall: f64 = gravity.map_or(0.0, |g| x[i * cx..(i + 1) * cx].iter().zip(g).map(|(a, b)| a * b).sum());
-            let energy = m * (0.5 * s2 + e.as_ref().map_or(0.0, |e| e[i]) - fall);
-            mine[1] += energy;
-            mine[2] += energy.abs();
-            mine[3] += 0.5 * m * s2;
-        }
-        let all = self.transport().all_gather(mine.to_vec());
+        let Some(motion) = Motion::read_with(&self.plan, |f| self.read_own(f))? else { return Ok(None) };
+        let w = motion.watch_values(&gravity(&self.plan, motion.dim));
+        let all = self.transport().all_gather(vec![w.max_speed, w.energy, w.energy_magnitude, w.kinetic]);
         let sum = |k: usize| all.iter().map(|p| p[k]).sum::<f64>();
         Ok(Some(WatchValues {
             max_speed: max_keeping_nan(0.0, all.iter().map(|p| p[0])),

@@ -34,26 +34,52 @@ pub struct Motion {
     pub dim: usize,
 }
 
-fn column<B: Backend>(b: &B, f: Option<FieldId>) -> Result<Option<(usize, Vec<f64>)>, BackendError> {
-    match f {
-        Some(f) => b.read(f),
-        None => Ok(None),
-    }
-}
+/// A field as a backend reads it (`n × comps` values), or `None` where it is not stored.
+type Column = Result<Option<(usize, Vec<f64>)>, BackendError>;
 
 impl Motion {
     /// Reads speeds, positions, masses and internal energies; `None` when the plan stores no `v` or
     /// `x`.
     pub fn read<B: Backend>(b: &B) -> Result<Option<Motion>, BackendError> {
-        let model = &b.plan().model;
+        Self::read_with(b.plan(), |f| b.read(f))
+    }
+
+    /// As [`read`](Self::read), with each field from `read` (a rank's own particles).
+    pub fn read_with(plan: &Plan, read: impl Fn(FieldId) -> Column) -> Result<Option<Motion>, BackendError> {
+        let model = &plan.model;
+        let column = |f: Option<FieldId>| f.map_or(Ok(None), &read);
         let id = |name: &str| model.field_id(name);
-        let (Some((cv, v)), Some((cx, x))) = (column(b, id("v"))?, column(b, id("x"))?) else {
+        let (Some((cv, v)), Some((cx, x))) = (column(id("v"))?, column(id("x"))?) else {
             return Ok(None);
         };
-        let m = column(b, id("m"))?.map(|(_, m)| m);
+        let m = column(id("m"))?.map(|(_, m)| m);
         let speed = v.chunks(cv.max(1)).map(|u| u.iter().map(|a| a * a).sum::<f64>().sqrt()).collect();
-        let e = column(b, id("e").filter(|f| model.field(*f).ty.shape == crate::ir::Shape::Scalar))?.map(|(_, e)| e);
+        let e = column(id("e").filter(|f| model.field(*f).ty.shape == crate::ir::Shape::Scalar))?.map(|(_, e)| e);
         Ok(Some(Motion { m, speed, x, e, dim: cx.max(1) }))
+    }
+
+    /// The watchdog's reductions over these particles, as a backend that reduces them itself
+    /// gives them (NaN energies without masses).
+    pub fn watch_values(&self, gravity: &[f64]) -> WatchValues {
+        let m = self.m.clone().unwrap_or_else(|| vec![f64::NAN; self.speed.len()]);
+        let each = |i: usize| self.particle_energy(m[i], gravity, i).abs();
+        WatchValues {
+            max_speed: max_keeping_nan(0.0, self.speed.iter().copied()),
+            energy: self.energy(&m, gravity),
+            energy_magnitude: (0..m.len()).map(each).sum(),
+            kinetic: self.kinetic(&m),
+        }
+    }
+
+    /// `m (½|v|² + e − g·x)` of particle i.
+    fn particle_energy(&self, m: f64, g: &[f64], i: usize) -> f64 {
+        let e = self.e.as_ref().map_or(0.0, |e| e[i]);
+        m * (0.5 * self.speed[i] * self.speed[i] + e - self.along(g, i))
+    }
+
+    /// `g·x` of particle i.
+    fn along(&self, g: &[f64], i: usize) -> f64 {
+        self.x[i * self.dim..(i + 1) * self.dim].iter().zip(g).map(|(a, b)| a * b).sum()
     }
 
     /// The fastest particle (a NaN speed counts as the fastest) and its speed.
@@ -85,9 +111,14 @@ impl Motion {
 
     /// Kinetic + internal + gravity's potential energy (`−Σ m g·x`).
     fn energy(&self, m: &[f64], g: &[f64]) -> f64 {
-        let dot = |i: usize| self.x[i * self.dim..(i + 1) * self.dim].iter().zip(g).map(|(a, b)| a * b).sum::<f64>();
-        self.kinetic(m) + self.internal(m, false) - Self::mass_weighted(m, dot)
+        self.kinetic(m) + self.internal(m, false) - Self::mass_weighted(m, |i| self.along(g, i))
     }
+}
+
+/// The case's gravity, `dim` components (zeros without gravity).
+pub fn gravity(plan: &Plan, dim: usize) -> Vec<f64> {
+    let g = plan.scene_params.iter().find(|p| p.role == SceneRole::Gravity);
+    g.map_or(vec![0.0; dim], |p| p.value.clone())
 }
 
 /// The watchdog's bounds for one run.
@@ -114,11 +145,7 @@ impl Bounds {
     /// The bounds from the state at t = 0 and the first time step.
     pub fn new(plan: &Plan, at_start: &Motion, h: &[f64], dt0: f64, end_time: f64, factors: (f64, f64)) -> Bounds {
         let (speed_factor, energy_factor) = factors;
-        let gravity = plan
-            .scene_params
-            .iter()
-            .find(|p| p.role == SceneRole::Gravity)
-            .map_or(vec![0.0; at_start.dim], |p| p.value.clone());
+        let gravity = gravity(plan, at_start.dim);
         let g = gravity.iter().map(|a| a * a).sum::<f64>().sqrt();
         // g·x of each particle (largest at the lowest), and the scene's height along gravity.
         let along: Vec<f64> =

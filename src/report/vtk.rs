@@ -93,6 +93,16 @@ const SYM_TENSOR_NAMES: [&str; 6] = ["XX", "YY", "ZZ", "XY", "YZ", "XZ"];
 const TENSOR_NAMES: [&str; 9] = ["XX", "XY", "XZ", "YX", "YY", "YZ", "ZX", "ZY", "ZZ"];
 const VTK_VERTEX: u8 = 1;
 
+/// The point data's active attributes: the first field of one, three and nine components as
+/// ` Scalars="…" Vectors="…" Tensors="…"`.
+fn active_attributes(fields: &[PointField]) -> String {
+    let first = |comps: usize| fields.iter().find(|f| f.comps == comps);
+    [("Scalars", 1), ("Vectors", 3), ("Tensors", 9)]
+        .into_iter()
+        .filter_map(|(attr, comps)| first(comps).map(|f| format!(" {attr}=\"{}\"", xml_escape(&f.name))))
+        .collect()
+}
+
 /// The names of a field's components, by their count: a symmetric or a full tensor's.
 fn component_names(comps: usize) -> &'static [&'static str] {
     match comps {
@@ -124,14 +134,7 @@ fn write_vtu_to(w: &mut dyn Write, positions: &[[f64; 3]], fields: &[PointField]
     writeln!(w, "  <UnstructuredGrid>")?;
     writeln!(w, "    <Piece NumberOfPoints=\"{n}\" NumberOfCells=\"{n}\">")?;
 
-    let first = |comps: usize| fields.iter().find(|f| f.comps == comps).map(|f| xml_escape(&f.name));
-    write!(w, "      <PointData")?;
-    for (attr, comps) in [("Scalars", 1), ("Vectors", 3), ("Tensors", 9)] {
-        if let Some(name) = first(comps) {
-            write!(w, " {attr}=\"{name}\"")?;
-        }
-    }
-    writeln!(w, ">")?;
+    writeln!(w, "      <PointData{}>", active_attributes(fields))?;
     for f in fields {
         write_f64_array(w, &f.name, f.comps, component_names(f.comps), &f.data)?;
     }
@@ -494,11 +497,7 @@ fn pvtu_text(fields: &[PointField], pieces: &[String]) -> String {
         "<?xml version=\"1.0\"?>\n<VTKFile type=\"PUnstructuredGrid\" version=\"1.0\" byte_order=\"LittleEndian\" \
          header_type=\"UInt64\">\n  <PUnstructuredGrid GhostLevel=\"0\">\n    <PPointData",
     );
-    for (attr, comps) in [("Scalars", 1), ("Vectors", 3), ("Tensors", 9)] {
-        if let Some(f) = fields.iter().find(|f| f.comps == comps) {
-            s.push_str(&format!(" {attr}=\"{}\"", xml_escape(&f.name)));
-        }
-    }
+    s.push_str(&active_attributes(fields));
     s.push_str(">\n");
     for f in fields {
         s.push_str(&format!(
