@@ -477,6 +477,13 @@ fn report_outcome(outcome: Result<crate::runner::RunOutcome, crate::runner::RunF
     match outcome {
         Ok(o) => {
             let r = &o.report;
+            if let Some((n, secs, _, dir)) = crate::backend::cpu::ccode::build_stats().filter(|s| s.0 > 0) {
+                let programs = if n == 1 { "pair program" } else { "pair programs" };
+                eprintln!(
+                    "{n} {programs} compiled by the C compiler in {secs:.1} s, kept in {} for later runs",
+                    dir.display()
+                );
+            }
             eprintln!(
                 "{}: {} particles, {} steps in {:.2} s on {} ({:.3e} particle-steps/s)",
                 r.case, r.particles, r.steps, r.wall_s, r.backend, r.particle_steps_per_s

@@ -20,6 +20,13 @@ pub struct Env {
     pub no_wide_simd: bool,
     /// `PAIRSUM_NO_JIT`: the CPU backend runs its neighbour loops as closures, not native code.
     pub no_jit: bool,
+    /// `PAIRSUM_NATIVE`: `cranelift` keeps the CPU backend's pair programs on Cranelift instead of
+    /// the machine's C compiler.
+    pub native: Option<String>,
+    /// `CC`: the C compiler for the pair programs (else `cc`).
+    pub cc: Option<String>,
+    /// `PAIRSUM_CACHE`: where compiled pair programs are kept.
+    pub cache: Option<PathBuf>,
     /// `PAIRSUM_GPU_MEMORY_LIMIT`: bytes the GPU backend may use (tests its out-of-memory path).
     pub gpu_memory_limit: Option<u64>,
     /// `PAIRSUM_WGSL_FAULT`: breaks the first generated kernel (tests the path of a rejected module).
@@ -42,6 +49,9 @@ impl Env {
             debug: var("PAIRSUM_DEBUG").map(|v| if v == "2" { 2 } else { 1 }).unwrap_or(0),
             no_wide_simd: var("PAIRSUM_NO_WIDE_SIMD").is_some(),
             no_jit: var("PAIRSUM_NO_JIT").is_some(),
+            native: var("PAIRSUM_NATIVE"),
+            cc: var("CC"),
+            cache: var("PAIRSUM_CACHE").map(PathBuf::from),
             gpu_memory_limit: var("PAIRSUM_GPU_MEMORY_LIMIT").and_then(|v| v.parse().ok()),
             wgsl_fault: var("PAIRSUM_WGSL_FAULT").is_some(),
             gpu_cells_per_cutoff: var("PAIRSUM_GPU_CELLS_PER_CUTOFF"),

@@ -5,6 +5,8 @@
 
 mod common;
 use common::*;
+use pairsum::backend::cpu::ccode;
+use pairsum::backend::cpu::jit::NativeKind;
 use pairsum::backend::cpu::CpuBackend;
 use pairsum::backend::Backend;
 use pairsum::engine::setup::build_store;
@@ -17,26 +19,51 @@ fn case(name: &str) -> std::path::PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("cases").join(format!("{name}.toml"))
 }
 
-/// `steps` steps of the case at its CI resolution with native pair programs and with closures;
-/// returns how many pass variants ran natively, of how many.
+/// The backend with native pair programs from each generator: the machine's C compiler (256-bit
+/// vectors, `backend/cpu/ccode.rs`) where it answers, and Cranelift (128-bit, `jit.rs`).
+fn natives<T: Real>(
+    plan: &pairsum::schedule::Plan,
+    store: &pairsum::particles::Store<T>,
+    mirrors: &[pairsum::backend::Mirror],
+) -> Vec<(&'static str, CpuBackend<T>)> {
+    let build = || CpuBackend::new(plan.clone(), store.clone(), mirrors.to_vec()).expect("cpu");
+    let cranelift = ccode::without_c(build);
+    assert_eq!(cranelift.passes_made_by(NativeKind::C), 0, "a C program with the C path off");
+    let mut out = vec![];
+    if ccode::enabled() {
+        let c = build();
+        // Every program Cranelift runs, C runs (they share the graph and the unsupported list).
+        assert_eq!(c.passes_made_by(NativeKind::C), cranelift.native_passes().0, "C compiles what Cranelift does");
+        out.push(("C", c));
+    }
+    out.push(("Cranelift", cranelift));
+    out
+}
+
+/// `steps` steps of the case at its CI resolution with native pair programs from each generator
+/// and with closures; returns how many pass variants ran natively, of how many.
 fn native_equals_closures<T: Real>(name: &str, steps: usize) -> (usize, usize) {
     let opts = pairsum::scene::Options { resolution: Some("ci".into()), ..Default::default() };
     let (scene, plan) = prepare(&case(name), &opts).unwrap_or_else(|e| panic!("{name}: {e}"));
     let store = build_store::<T>(&plan, &scene.particles, &scene.materials).expect("store");
-    let native = CpuBackend::new(plan.clone(), store.clone(), scene.mirrors.clone()).expect("cpu");
-    let counts = native.native_passes();
+    let natives = natives(&plan, &store, &scene.mirrors);
+    let counts = natives[0].1.native_passes();
     let closures = CpuBackend::new(plan.clone(), store, scene.mirrors.clone()).expect("cpu").without_jit();
     assert_eq!(closures.native_passes().0, 0);
-    let mut a = Engine::new(native, scene.config.clone());
     let mut b = Engine::new(closures, scene.config.clone());
-    a.initialise().expect("init");
     b.initialise().expect("init");
     for k in 0..steps {
-        a.step().unwrap_or_else(|e| panic!("{name}: native step {k}: {e}"));
         b.step().unwrap_or_else(|e| panic!("{name}: closure step {k}: {e}"));
     }
-    assert_eq!(a.time.to_bits(), b.time.to_bits(), "{name}: the clocks differ");
-    assert_same_bits(&a.backend, &b.backend, &format!("{name} ({})", T::NAME));
+    for (label, native) in natives {
+        let mut a = Engine::new(native, scene.config.clone());
+        a.initialise().expect("init");
+        for k in 0..steps {
+            a.step().unwrap_or_else(|e| panic!("{name}: {label} step {k}: {e}"));
+        }
+        assert_eq!(a.time.to_bits(), b.time.to_bits(), "{name}: the clocks differ ({label})");
+        assert_same_bits(&a.backend, &b.backend, &format!("{name} ({}, {label})", T::NAME));
+    }
     counts
 }
 
@@ -138,15 +165,16 @@ fn native_pair_programs_equal_the_closures_on_jittered_clouds_with_variable_h() 
             }
             let plan = Plan::build(&m, &scene(&m, dim, &[], IntegratorKind::Euler), None).expect("plan");
             let store = build_store::<f64>(&plan, &inp, &[mat(&m)]).expect("store");
-            let mut a = CpuBackend::new(plan.clone(), store.clone(), vec![]).expect("cpu");
-            assert_eq!(a.native_passes().0, a.native_passes().1, "{name}: every pass native");
-            let mut b = CpuBackend::new(plan.clone(), store, vec![]).expect("cpu").without_jit();
-            a.initialise().expect("init");
+            let mut b = CpuBackend::new(plan.clone(), store.clone(), vec![]).expect("cpu").without_jit();
             b.initialise().expect("init");
             let g = Globals { time: 0.0, dt: 1e-7 };
-            a.evaluate(g).expect("native");
             b.evaluate(g).expect("closures");
-            assert_same_bits(&a, &b, &format!("{name} {dim}D, native code against closures"));
+            for (label, mut a) in natives(&plan, &store, &[]) {
+                assert_eq!(a.native_passes().0, a.native_passes().1, "{name}: every pass native");
+                a.initialise().expect("init");
+                a.evaluate(g).expect("native");
+                assert_same_bits(&a, &b, &format!("{name} {dim}D, {label} code against closures"));
+            }
         }
     }
 }
@@ -190,26 +218,29 @@ fn native_pair_programs_gather_a_field_that_one_of_two_mixed_groups_stores() {
         }
     }
     let store = build_store::<f64>(&plan, &inp, &scene.materials).expect("store");
-    let mut a = CpuBackend::new(plan.clone(), store.clone(), vec![]).expect("cpu");
-    assert_eq!(a.native_passes().0, a.native_passes().1, "every pass native");
-    let mut b = CpuBackend::new(plan.clone(), store, vec![]).expect("cpu").without_jit();
-    a.initialise().expect("init");
+    let mut b = CpuBackend::new(plan.clone(), store.clone(), vec![]).expect("cpu").without_jit();
     b.initialise().expect("init");
     // Damage from none to failed (a fifth of the particles), so that a row read from the wrong
     // base shows.
-    let mut snap = a.snapshot().expect("snapshot");
+    let mut snap = b.snapshot().expect("snapshot");
     let damage = snap.columns[d.index()].as_mut().expect("D is stored on the target");
     for v in damage.iter_mut() {
         let r = rnd(&mut seed);
         *v = if r < 0.2 { 1.0 } else { r };
     }
-    a.restore(&snap).expect("restore");
     b.restore(&snap).expect("restore");
     let g = Globals { time: 0.0, dt: 1e-8 };
-    a.evaluate(g).expect("native");
     b.evaluate(g).expect("closures");
     assert!(!plan.watched_fields().is_empty());
-    assert_same_bits(&a, &b, "mixed groups, native against closures");
+    let mut natives = natives(&plan, &store, &[]);
+    for (label, a) in &mut natives {
+        assert_eq!(a.native_passes().0, a.native_passes().1, "every pass native ({label})");
+        a.initialise().expect("init");
+        a.restore(&snap).expect("restore");
+        a.evaluate(g).expect("native");
+        assert_same_bits(a, &b, &format!("mixed groups, {label} against closures"));
+    }
+    let a = &natives[0].1;
     // The damage reached the sums: some watched field differs from a cloud without it.
     let mut c =
         CpuBackend::new(plan.clone(), build_store::<f64>(&plan, &inp, &scene.materials).expect("store"), vec![])
@@ -221,7 +252,51 @@ fn native_pair_programs_gather_a_field_that_one_of_two_mixed_groups_stores() {
         // Compared as bits over the particles that store the field: a NaN (`field_by_id`'s value
         // for a particle that does not) would make any two vectors unequal.
         let bits = |b: &CpuBackend<f64>| stored_field(b, field).1.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
-        bits(&a) != bits(&c)
+        bits(a) != bits(&c)
     });
     assert!(changed, "the damage changes none of the sums");
+}
+
+/// The C path is on wherever the C compiler answers (`$CC`, else `cc`), so that the comparisons
+/// above cover it on every machine that builds pairsum; without a compiler they cover Cranelift.
+#[test]
+fn pair_programs_are_compiled_as_c_wherever_a_c_compiler_answers() {
+    let cc = std::env::var("CC").ok().filter(|v| !v.is_empty()).unwrap_or_else(|| "cc".into());
+    let answers = std::process::Command::new(&cc).arg("--version").output().is_ok_and(|o| o.status.success());
+    let off =
+        std::env::var("PAIRSUM_NATIVE").is_ok_and(|v| v == "cranelift") || std::env::var("PAIRSUM_NO_JIT").is_ok();
+    assert_eq!(ccode::enabled(), answers && !off, "`{cc} --version` answers: {answers}");
+    assert!(!ccode::without_c(ccode::enabled), "the C path off on this thread");
+}
+
+/// Where the C compiler is missing, a run keeps Cranelift's code and its results: the histories
+/// of `rings_2d` after 40 steps are byte for byte those of the C path, the summary line says
+/// which code ran, and a fresh cache says what compiling cost.
+#[test]
+fn a_run_without_a_c_compiler_keeps_cranelifts_code_and_the_same_histories() {
+    let dir = std::env::temp_dir().join(format!("pairsum-jit-fallback-{}", std::process::id()));
+    let run = |cc: &str, out: &str| {
+        let out = dir.join(out);
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_pairsum"))
+            .args(["run", "rings_2d", "--resolution", "ci", "--max-steps", "40", "--backend", "cpu", "--out"])
+            .arg(&out)
+            .env("CC", cc)
+            .env("PAIRSUM_CACHE", dir.join("cache"))
+            .output()
+            .expect("pairsum runs");
+        let err = String::from_utf8_lossy(&o.stderr).into_owned();
+        assert!(o.status.success(), "{err}");
+        (err, std::fs::read(out.join("histories.csv")).expect("histories.csv"))
+    };
+    let (c_log, c) = run("cc", "c");
+    let (k_log, k) = run("/nonexistent/cc", "cranelift");
+    if ccode::enabled() {
+        assert!(c_log.contains("C pair code)"), "{c_log}");
+        assert!(c_log.contains("1 pair program compiled by the C compiler in"), "{c_log}");
+    }
+    assert!(k_log.contains("Cranelift pair code)"), "{k_log}");
+    assert!(!k_log.contains("compiled by the C compiler"), "{k_log}");
+    assert!(c.len() > 100, "histories of 40 steps");
+    assert!(c == k, "the histories differ between C and Cranelift code");
+    let _ = std::fs::remove_dir_all(&dir);
 }

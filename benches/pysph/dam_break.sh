@@ -85,13 +85,16 @@ pysph --max-steps 1 >/dev/null 2>&1
 # REPS rounds, each running every configuration once in turn, so that a slow spell of the machine
 # falls on all of them alike; each configuration keeps its fastest round.
 min() { awk -v a="$1" -v b="$2" 'BEGIN { print (a == "" || b + 0 < a + 0) ? b : a }'; }
-pysph_s="" t64="" t32="" t64h="" t64p=""
+pysph_s="" t64="" t64k="" t32="" t64h="" t64p=""
 for r in $(seq 1 "$REPS"); do
     read -r pysph_n pysph_nf s < <(pysph_timed "$r")
     pysph_s=$(min "$pysph_s" "$s")
-    read -r n64 nf64 s < <(pairsum "f64, native pair programs (round $r)" dam_break_2d --precision f64 --set boundary=dbc)
+    read -r n64 nf64 s < <(pairsum "f64, C pair programs (round $r)" dam_break_2d --precision f64 --set boundary=dbc)
     t64=$(min "$t64" "$s")
-    read -r _ _ s < <(pairsum "f32, native pair programs (round $r)" dam_break_2d --precision f32 --set boundary=dbc)
+    read -r _ _ s < <(PAIRSUM_NATIVE=cranelift pairsum "f64, Cranelift pair programs (round $r)" dam_break_2d \
+        --precision f64 --set boundary=dbc)
+    t64k=$(min "$t64k" "$s")
+    read -r _ _ s < <(pairsum "f32, C pair programs (round $r)" dam_break_2d --precision f32 --set boundary=dbc)
     t32=$(min "$t32" "$s")
     read -r _ _ s < <(pairsum "f64, one evaluation per step (round $r)" dam_break_2d --precision f64 --set boundary=dbc \
         --set integrator=symplectic_pec)
@@ -125,6 +128,7 @@ echo "µs/p-step: per particle-step over all particles; µs/fluid-step: per flui
 echo "                                    total  fluid  steps time [s]   µs/p-step  µs/fluid-step   µs/p-eval"
 row "PySPH 1.0b2 WCSPH (OpenMP, f64)" "$pysph_n" "$pysph_nf" "$pysph_s" "$ev_pysph"
 row "pairsum CPU f64, DBC, h = 1.5 dx" "$n64" "$nf64" "$t64" "$ev_pairsum"
+row "pairsum CPU f64, DBC, Cranelift" "$n64" "$nf64" "$t64k" "$ev_pairsum"
 row "pairsum CPU f32, DBC, h = 1.5 dx" "$n64" "$nf64" "$t32" "$ev_pairsum"
 row "pairsum CPU f64, symplectic_pec" "$n64" "$nf64" "$t64p" "$STEPS"
 [ -n "$t64h" ] && row "pairsum CPU f64, DBC, h = 1.3 dx" "$n64" "$nf64" "$t64h" "$ev_pairsum"
@@ -141,6 +145,7 @@ if [ -n "$t64h" ]; then
 fi
 echo "PySPH / pairsum f64 with one evaluation per step (symplectic_pec), per particle-step: $(ratio "$p_pysph" "$(per "$t64p" "$n64" "$STEPS")")×"
 echo "pairsum f64 / f32:                             $(ratio "$t64" "$t32")×"
+echo "pairsum Cranelift / C pair code, f64:          $(ratio "$t64k" "$t64")×"
 cat <<EOF
 
 What differs (the compared figure is time per particle-step; read the per-evaluation line with it):

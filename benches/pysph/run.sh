@@ -9,7 +9,8 @@
 # Times exclude set-up on both sides: PySPH's "Run took" (after its code generation and a warm-up
 # run that compiles it), pairsum's stepping time (after the case is built and compiled).
 # Prints per particle-step times and the ratios: PySPH / pairsum (f64), f64 / f32, and the
-# native (JIT) pair programs against the closures; then `pairsum bench`'s generated/hand-written.
+# pair programs compiled as C (256-bit vectors) against Cranelift's (128-bit) and the closures; then
+# `pairsum bench`'s generated/hand-written.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 STEPS=${STEPS:-50}
@@ -42,28 +43,32 @@ pairsum() {
     sed -n 's/^pysph_impact3d: \([0-9]*\) particles, [0-9]* steps in \([0-9.]*\) s.*/\1 \2/p' "$WORK/run.log"
 }
 EXTRA=(--precision f64)
-read -r n64 t64 < <(pairsum "f64, native pair programs" env)
+read -r n64 t64 < <(pairsum "f64, C pair programs" env)
 read -r _ t64c < <(pairsum "f64, closures" env PAIRSUM_NO_JIT=1)
+read -r _ t64k < <(pairsum "f64, Cranelift pair programs" env PAIRSUM_NATIVE=cranelift)
 EXTRA=(--precision f32)
-read -r _ t32 < <(pairsum "f32, native pair programs" env)
+read -r _ t32 < <(pairsum "f32, C pair programs" env)
 
 per() { awk -v t="$1" -v n="$2" -v s="$STEPS" 'BEGIN { printf "%.2f", 1e6 * t / (n * s) }'; }
 ratio() { awk -v a="$1" -v b="$2" 'BEGIN { printf "%.2f", a / b }'; }
 p_pysph=$(per "$pysph_s" "$pysph_n")
 p64=$(per "$t64" "$n64")
 p64c=$(per "$t64c" "$n64")
+p64k=$(per "$t64k" "$n64")
 p32=$(per "$t32" "$n64")
 echo
 echo "PySPH impact3d, $STEPS steps, $THREADS threads, $(uname -m), $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs)"
 printf '%-36s %10s %10s %14s\n' "" particles "time [s]" "µs/particle-step"
 printf '%-36s %10s %10s %14s\n' "PySPH 1.0b2 (OpenMP)" "$pysph_n" "$pysph_s" "$p_pysph"
-printf '%-36s %10s %10s %14s\n' "pairsum CPU f64 (native pair code)" "$n64" "$t64" "$p64"
+printf '%-36s %10s %10s %14s\n' "pairsum CPU f64 (C pair code)" "$n64" "$t64" "$p64"
+printf '%-36s %10s %10s %14s\n' "pairsum CPU f64 (Cranelift pair code)" "$n64" "$t64k" "$p64k"
 printf '%-36s %10s %10s %14s\n' "pairsum CPU f64 (closures)" "$n64" "$t64c" "$p64c"
-printf '%-36s %10s %10s %14s\n' "pairsum CPU f32 (native pair code)" "$n64" "$t32" "$p32"
+printf '%-36s %10s %10s %14s\n' "pairsum CPU f32 (C pair code)" "$n64" "$t32" "$p32"
 echo
 echo "PySPH / pairsum f64:            $(ratio "$p_pysph" "$p64")×"
 echo "PySPH / pairsum f32:            $(ratio "$p_pysph" "$p32")×"
 echo "pairsum f64 / f32:              $(ratio "$p64" "$p32")×"
-echo "closures / native pair code:    $(ratio "$p64c" "$p64")×"
+echo "closures / C pair code:         $(ratio "$p64c" "$p64")×"
+echo "Cranelift / C pair code:        $(ratio "$p64k" "$p64")×"
 echo
 RAYON_NUM_THREADS=$THREADS "$PAIRSUM" bench --particles 37000 --reps 3

@@ -36,7 +36,7 @@ use std::collections::HashMap;
 /// the pair program on lanes `start..end` of the frame — the neighbours of one particle —, with
 /// that particle's own values at `dest` (its lane of the dest program's frame) and its
 /// accumulators at `slots`.
-type PairFn<T> = unsafe extern "C" fn(
+pub(super) type PairFn<T> = unsafe extern "C" fn(
     *mut T,
     *const u32,
     *const *const T,
@@ -55,32 +55,66 @@ type PairFn<T> = unsafe extern "C" fn(
 /// The JIT's vectors: 128 bits (Cranelift's x86 backend has no wider ones).
 pub const VECTOR_BYTES: usize = 16;
 
-/// Lanes of the JIT's vectors for reals of type T: the partial sums of a batch fold with this
-/// period on both paths (see [`fold_partials`]).
+/// The period of a batch's partial sums, in bytes of lanes: 256 bits, the widest vectors the
+/// native code runs on (the C path's on AVX2). Every path folds with this period, so the
+/// closures, Cranelift's 128-bit code and the C path's 256-bit code stay bit-identical.
+pub const FOLD_BYTES: usize = 32;
+
+/// Lanes of the JIT's vectors for reals of type T.
 pub fn width<T: Real>() -> usize {
     VECTOR_BYTES / T::BYTES
 }
 
-/// Folds lanes into `slot` as the native code does: `width` interleaved partial results (lane k
-/// into partial k mod width, padded with the identity to whole vectors), combined pairwise, then
-/// into the slot. The closures fold with it too, so both paths stay bit-identical.
+/// The partial sums of a batch for reals of type T (4 f64, 8 f32): lane k of a particle's
+/// neighbours goes into partial k mod this (see [`fold_partials`]).
+pub fn fold_lanes<T: Real>() -> usize {
+    FOLD_BYTES / T::BYTES
+}
+
+/// `op(a, b)` of a reduction, as every path computes it.
 #[inline]
-pub fn fold_partials<T: Real>(reduce: Reduce, slot: T, lanes: &[T]) -> T {
-    let w = width::<T>();
-    let op = |a: T, b: T| match reduce {
+pub fn reduce_op<T: Real>(reduce: Reduce, a: T, b: T) -> T {
+    match reduce {
         Reduce::Sum => a + b,
         Reduce::Min => lane_min(a, b),
         Reduce::Max => lane_max(a, b),
-    };
+    }
+}
+
+/// Combines partials pairwise, neighbours first: ((p0 p1) (p2 p3)) ((p4 p5) (p6 p7)).
+#[inline]
+pub fn fold_tree<T: Real>(reduce: Reduce, p: &[T]) -> T {
+    if p.len() == 1 {
+        return p[0];
+    }
+    let half = p.len() / 2;
+    reduce_op(reduce, fold_tree(reduce, &p[..half]), fold_tree(reduce, &p[half..]))
+}
+
+/// Folds lanes into `slot` as the native code does: [`fold_lanes`] interleaved partial results
+/// (lane k into partial k mod that, padded with the identity to whole periods), combined
+/// pairwise ([`fold_tree`]), then into the slot. The closures fold with it too, so every path
+/// stays bit-identical.
+#[inline]
+pub fn fold_partials<T: Real>(reduce: Reduce, slot: T, lanes: &[T]) -> T {
+    let w = fold_lanes::<T>();
     let id = T::from_f64(reduce.identity());
-    let mut p = [id; 4];
+    let mut p = [id; 8];
     let whole = lanes.len().div_ceil(w) * w;
     for k in 0..whole {
         let x = if k < lanes.len() { lanes[k] } else { id };
-        p[k % w] = op(p[k % w], x);
+        p[k % w] = reduce_op(reduce, p[k % w], x);
     }
-    let h = if w == 2 { op(p[0], p[1]) } else { op(op(p[0], p[1]), op(p[2], p[3])) };
-    op(slot, h)
+    reduce_op(reduce, slot, fold_tree(reduce, &p[..w]))
+}
+
+/// Which code generator made a pair program.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub enum NativeKind {
+    /// Cranelift, 128-bit vectors (this module).
+    Cranelift,
+    /// The machine's C compiler, 256-bit vectors ([`super::ccode`]).
+    C,
 }
 
 /// A compiled pair program.
@@ -88,11 +122,15 @@ pub struct JitPair<T> {
     func: PairFn<T>,
     /// The fields it gathers at j, in the order of the column pointers it expects.
     pub gathers: Vec<FieldId>,
+    pub kind: NativeKind,
     _code: Code,
 }
 
-/// The module owning the generated code; freed with the program.
-struct Code(Option<JITModule>);
+/// What owns the generated code; freed with the program.
+enum Code {
+    Cranelift(Option<Box<JITModule>>),
+    Library(#[allow(dead_code)] libloading::Library),
+}
 
 // SAFETY: the module is only touched on drop; the code it owns is immutable and re-entrant.
 unsafe impl Send for Code {}
@@ -100,14 +138,26 @@ unsafe impl Sync for Code {}
 
 impl Drop for Code {
     fn drop(&mut self) {
-        if let Some(m) = self.0.take() {
-            // SAFETY: the function pointer into this memory is dropped with the JitPair.
-            unsafe { m.free_memory() };
+        if let Code::Cranelift(m) = self {
+            if let Some(m) = m.take() {
+                // SAFETY: the function pointer into this memory is dropped with the JitPair.
+                unsafe { m.free_memory() };
+            }
         }
     }
 }
 
 impl<T: Real> JitPair<T> {
+    /// A program whose code is `func` in the shared library `lib`.
+    pub(super) fn from_library(
+        func: PairFn<T>,
+        gathers: Vec<FieldId>,
+        lib: libloading::Library,
+        kind: NativeKind,
+    ) -> Self {
+        JitPair { func, gathers, kind, _code: Code::Library(lib) }
+    }
+
     /// Runs the program on lanes `lanes` of the frame, the neighbours of one particle, and folds
     /// them into its accumulators. `cols[k]` points at row 0 of `gathers[k]`'s column; `sign`
     /// holds the per-axis mirror signs (3 × LANES) when the program was compiled with them;
@@ -176,15 +226,16 @@ pub struct PairSpec<'a> {
 
 /// Zeros that a neighbour reads for a field its group does not store: the rows of the widest
 /// field (a 3 × 3 tensor) at most.
-static ZERO_ROW: [u64; 9] = [0; 9];
+pub(super) static ZERO_ROW: [u64; 9] = [0; 9];
 
 /// Whether the JIT is on (it is unless `PAIRSUM_NO_JIT` is set or the host has no backend).
 pub fn enabled() -> bool {
     !crate::config::env().no_jit && cranelift_native::builder().is_ok()
 }
 
-/// Compiles the pair program, or says why not.
-pub fn compile_pair<T: Real>(spec: &PairSpec) -> Result<JitPair<T>, String> {
+/// Whether native code can run the program: every node is one it emits, and every partly stored
+/// column fits the zero row.
+pub(super) fn check(spec: &PairSpec) -> Result<(), String> {
     for (f, _) in spec.partial {
         if crate::ir::components(spec.model.field(*f).ty.shape, spec.dim) > ZERO_ROW.len() {
             return Err(format!("`{}` is wider than the zero row", spec.model.field(*f).name));
@@ -193,6 +244,12 @@ pub fn compile_pair<T: Real>(spec: &PairSpec) -> Result<JitPair<T>, String> {
     for id in spec.nodes {
         supported(&spec.graph.nodes[*id as usize])?;
     }
+    Ok(())
+}
+
+/// Compiles the pair program, or says why not.
+pub fn compile_pair<T: Real>(spec: &PairSpec) -> Result<JitPair<T>, String> {
+    check(spec)?;
     let mut flags = settings::builder();
     flags.set("opt_level", "speed").map_err(|e| e.to_string())?;
     flags.set("use_colocated_libcalls", "false").map_err(|e| e.to_string())?;
@@ -226,13 +283,13 @@ pub fn compile_pair<T: Real>(spec: &PairSpec) -> Result<JitPair<T>, String> {
     let code = module.get_finalized_function(id);
     // SAFETY: the function was declared with exactly this signature (C calling convention).
     let func = unsafe { std::mem::transmute::<*const u8, PairFn<T>>(code) };
-    Ok(JitPair { func, gathers, _code: Code(Some(module)) })
+    Ok(JitPair { func, gathers, kind: NativeKind::Cranelift, _code: Code::Cranelift(Some(Box::new(module))) })
 }
 
 /// The nodes in the order the outputs demand them (a depth-first post-order from each output,
 /// operands before their users, the deeper operand first), so that a value is computed just
 /// before it is used and the registers hold few values at a time.
-fn demand_order(spec: &PairSpec) -> Vec<Id> {
+pub(super) fn demand_order(spec: &PairSpec) -> Vec<Id> {
     let g = spec.graph;
     // Register need of each subtree (Sethi–Ullman), to visit the hungrier operand first.
     let mut need: HashMap<Id, u32> = HashMap::new();
@@ -405,15 +462,22 @@ impl<'a, 'b, T: Real> Emitter<'a, 'b, T> {
             let v = self.b.ins().splat(self.vec, x);
             vals.insert(*id, v);
         }
-        // The accumulators, one vector each, starting at the identity.
-        let accs: Vec<Variable> = spec
+        // The accumulators: per folded value, one vector for each set of the fold's partials
+        // (`fold_lanes` / `width`), starting at the identity. An iteration folds into the first
+        // and rotates them, so iteration i's lanes land in set i mod sets, as `fold_partials`.
+        let sets = fold_lanes::<T>() / self.width;
+        let accs: Vec<Vec<Variable>> = spec
             .folded
             .iter()
             .map(|(_, _, r)| {
-                let var = self.b.declare_var(self.vec);
-                let id = self.splat(r.identity());
-                self.b.def_var(var, id);
-                var
+                (0..sets)
+                    .map(|_| {
+                        let var = self.b.declare_var(self.vec);
+                        let id = self.splat(r.identity());
+                        self.b.def_var(var, id);
+                        var
+                    })
+                    .collect()
             })
             .collect();
         // Lane k of a vector is lane base + k of the frame; iota = (0, 1, …).
@@ -610,25 +674,37 @@ impl<'a, 'b, T: Real> Emitter<'a, 'b, T> {
                 };
                 let identity = self.splat(r.identity());
                 let v = self.select(live, v, identity);
-                let acc = self.b.use_var(*var);
+                let acc = self.b.use_var(var[0]);
                 let acc = self.combine(*r, acc, v);
-                self.b.def_var(*var, acc);
+                for k in 1..sets {
+                    let next = self.b.use_var(var[k]);
+                    self.b.def_var(var[k - 1], next);
+                }
+                self.b.def_var(var[sets - 1], acc);
             }
         }
         let next = self.b.ins().iadd_imm_s(base, self.width as i64);
         self.b.ins().jump(head, &[next.into()]);
 
         self.b.switch_to_block(exit);
+        // After n iterations, variable k holds set (k + n) mod sets (sets is 1 or 2).
+        assert!(sets <= 2, "the fold rotates at most two sets");
+        let n = self.b.ins().isub(end, start);
+        let n = self.b.ins().iadd_imm_s(n, self.width as i64 - 1);
+        let n = self.b.ins().ushr_imm_u(n, self.width.trailing_zeros() as i64);
+        let odd = self.b.ins().band_imm_s(n, 1);
         for ((_, slot, r), var) in spec.folded.iter().zip(&accs) {
-            let acc = self.b.use_var(*var);
-            let lanes: Vec<Value> = (0..self.width).map(|k| self.b.ins().extractlane(acc, k as u8)).collect();
-            let h = if self.width == 2 {
-                self.combine(*r, lanes[0], lanes[1])
+            let vars: Vec<Value> = var.iter().map(|v| self.b.use_var(*v)).collect();
+            let ordered: Vec<Value> = if sets == 2 {
+                vec![self.b.ins().select(odd, vars[1], vars[0]), self.b.ins().select(odd, vars[0], vars[1])]
             } else {
-                let a = self.combine(*r, lanes[0], lanes[1]);
-                let b = self.combine(*r, lanes[2], lanes[3]);
-                self.combine(*r, a, b)
+                vars
             };
+            let mut lanes: Vec<Value> = vec![];
+            for acc in ordered {
+                lanes.extend((0..self.width).map(|k| self.b.ins().extractlane(acc, k as u8)));
+            }
+            let h = self.fold_tree(*r, &lanes);
             let off = (slot * T::BYTES) as i32;
             let old = self.b.ins().load(self.real, Self::mem(), slots, off);
             let new = self.combine(*r, old, h);
@@ -657,6 +733,16 @@ impl<'a, 'b, T: Real> Emitter<'a, 'b, T> {
                 }
             }
         }
+    }
+
+    /// [`fold_tree`] of scalars: pairwise, neighbours first.
+    fn fold_tree(&mut self, r: Reduce, p: &[Value]) -> Value {
+        if p.len() == 1 {
+            return p[0];
+        }
+        let half = p.len() / 2;
+        let (a, b) = (self.fold_tree(r, &p[..half]), self.fold_tree(r, &p[half..]));
+        self.combine(r, a, b)
     }
 
     /// `row` when j's group is in `set`, else the address of [`ZERO_ROW`] (never j's row: a

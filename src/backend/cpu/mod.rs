@@ -2,6 +2,7 @@
 //! over batches of lanes (`program`), and run over the particle store in parallel chunks with the
 //! cell list as the neighbour iterator (`exec`).
 
+pub mod ccode;
 mod exec;
 pub mod jit;
 pub mod lists;
@@ -405,13 +406,27 @@ fn compile_variant<T: Real>(
                 param_offset: &params.offset,
                 partial: &partial,
             };
-            jit::compile_pair::<T>(&spec)
-                .map_err(|why| {
-                    if crate::config::env().debug >= 1 {
-                        eprintln!("pass on group {g}: closures, not native code ({why})");
-                    }
-                })
-                .ok()
+            let debug = crate::config::env().debug >= 1;
+            let c = if ccode::enabled() {
+                ccode::compile_pair::<T>(&spec)
+                    .map_err(|why| {
+                        if debug {
+                            eprintln!("pass on group {g}: Cranelift, not C ({why})");
+                        }
+                    })
+                    .ok()
+            } else {
+                None
+            };
+            c.or_else(|| {
+                jit::compile_pair::<T>(&spec)
+                    .map_err(|why| {
+                        if debug {
+                            eprintln!("pass on group {g}: closures, not native code ({why})");
+                        }
+                    })
+                    .ok()
+            })
         })
         .flatten();
     let tail = particle_program(plan, known, g, &plan.tail_blocks(&v.tail));
@@ -445,6 +460,26 @@ impl<T: Real> CpuBackend<T> {
     pub fn native_passes(&self) -> (usize, usize) {
         let all = self.passes.iter().flatten();
         (all.clone().filter(|v| v.jit.is_some()).count(), all.count())
+    }
+
+    /// How many pass variants run as native code made by `kind`.
+    pub fn passes_made_by(&self, kind: jit::NativeKind) -> usize {
+        self.passes.iter().flatten().filter(|v| v.jit.as_ref().is_some_and(|j| j.kind == kind)).count()
+    }
+
+    /// What runs the neighbour loops: "C pair code", or the count of each where they differ.
+    fn pair_code(&self) -> String {
+        let (native, all) = self.native_passes();
+        let kinds = [
+            (self.passes_made_by(jit::NativeKind::C), "C"),
+            (self.passes_made_by(jit::NativeKind::Cranelift), "Cranelift"),
+            (all - native, "closures"),
+        ];
+        let used: Vec<_> = kinds.iter().filter(|(n, _)| *n > 0).collect();
+        match used.as_slice() {
+            [(_, name)] => format!("{name} pair code"),
+            _ => format!("pair code: {}", used.iter().map(|(n, k)| format!("{n} {k}")).collect::<Vec<_>>().join(", ")),
+        }
     }
 
     /// Compiles every block of the plan for every group present. The store must hold the
@@ -690,7 +725,7 @@ impl<T: Real> CpuBackend<T> {
 
 impl<T: Real> Backend for CpuBackend<T> {
     fn describe(&self) -> String {
-        format!("cpu ({}, {} threads)", T::NAME, rayon::current_num_threads())
+        format!("cpu ({}, {} threads, {})", T::NAME, rayon::current_num_threads(), self.pair_code())
     }
 
     fn plan(&self) -> &Plan {
