@@ -362,7 +362,7 @@ pub fn run(sizes: &[usize], reps: usize) -> Result<String, String> {
         ));
     }
     out.push_str(
-        "(generated: native pair programs (JIT); closures: the same programs as closures; both include their cell-list build, \
+        "(generated: native pair programs (C, or Cranelift without a C compiler); closures: the same programs as closures; both include their cell-list build, \
          and the hand-written step adds the same build; one evaluation per step)\n",
     );
     Ok(out)

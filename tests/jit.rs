@@ -1,7 +1,10 @@
-//! The CPU backend's native pair programs (Cranelift, `backend/cpu/jit.rs`) against its closures:
-//! the same operations in the same order, so every stored field must agree bit for bit after
-//! several steps of every bundled case, in f64 and in f32. Also checks that the native code is
-//! actually used (a program that fell back to closures would make the comparison empty).
+//! The CPU backend's native pair programs against its closures, from both generators: C over
+//! 256-bit vectors (`backend/cpu/ccode.rs`, where a C compiler answers) and Cranelift over
+//! 128-bit ones (`backend/cpu/jit.rs`). The same operations in the same order and the same fold
+//! of the sums, so every stored field must agree bit for bit after several steps of every bundled
+//! case, in f64 and in f32. Also checks that the native code is actually used (a program that
+//! fell back to closures would make the comparison empty), and what a run without a C compiler
+//! does.
 
 mod common;
 use common::*;

@@ -77,11 +77,15 @@ fn a_compensated_vec_sum_in_native_code_equals_the_plain_sum_to_rounding() {
     let inp = input(dim, lattice(dim, 12, 0.01), 0.01);
     let mat = material(&m, &[("rho0", vec![1000.0]), ("h_ratio", vec![2.1])]);
     let sc = scene(&m, dim, &["v_plain", "v_kahan"], IntegratorKind::Euler);
-    let mut b = backend::<f64>(&m, &sc, &inp, &[mat], vec![]);
-    assert!(b.native_passes().0 >= 1, "the pair sums did not run as native code");
-    b.evaluate(Globals::default()).expect("evaluate");
-    let (_, plain) = field_by_id(&b, "v_plain");
-    let (_, kahan) = field_by_id(&b, "v_kahan");
-    let d = max_rel_diff("compensated against plain", &kahan, &plain);
-    assert!(d < 1e-14, "a compensated vec sum differs from the plain one by {d:e} (relative)");
+    // Native code from each generator: C where a C compiler answers, and Cranelift.
+    let c = backend::<f64>(&m, &sc, &inp, &[mat.clone()], vec![]);
+    let cranelift = pairsum::backend::cpu::ccode::without_c(|| backend::<f64>(&m, &sc, &inp, &[mat], vec![]));
+    for (label, mut b) in [("C or Cranelift", c), ("Cranelift", cranelift)] {
+        assert!(b.native_passes().0 >= 1, "the pair sums did not run as native code ({label})");
+        b.evaluate(Globals::default()).expect("evaluate");
+        let (_, plain) = field_by_id(&b, "v_plain");
+        let (_, kahan) = field_by_id(&b, "v_kahan");
+        let d = max_rel_diff("compensated against plain", &kahan, &plain);
+        assert!(d < 1e-14, "{label}: a compensated vec sum differs from the plain one by {d:e} (relative)");
+    }
 }
