@@ -78,7 +78,7 @@ fn a_compensated_vec_sum_in_native_code_equals_the_plain_sum_to_rounding() {
     let mat = material(&m, &[("rho0", vec![1000.0]), ("h_ratio", vec![2.1])]);
     let sc = scene(&m, dim, &["v_plain", "v_kahan"], IntegratorKind::Euler);
     // Native code from each generator: C where a C compiler answers, and Cranelift.
-    let c = backend::<f64>(&m, &sc, &inp, &[mat.clone()], vec![]);
+    let c = backend::<f64>(&m, &sc, &inp, std::slice::from_ref(&mat), vec![]);
     let cranelift = pairsum::backend::cpu::ccode::without_c(|| backend::<f64>(&m, &sc, &inp, &[mat], vec![]));
     for (label, mut b) in [("C or Cranelift", c), ("Cranelift", cranelift)] {
         assert!(b.native_passes().0 >= 1, "the pair sums did not run as native code ({label})");
