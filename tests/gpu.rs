@@ -508,7 +508,22 @@ fn hydrostatic_tank_with_dynamic_boundary_particles_on_the_gpu_matches_the_cpu()
 
 #[test]
 fn hydrostatic_tank_with_adami_walls_on_the_gpu_matches_the_cpu() {
-    case_matches_cpu("hydrostatic_tank", &[("boundary", "adami")], 300, &["rho", "p_over_rho2"], 2e-3);
+    let path = Path::new(&case("hydrostatic_tank")).to_path_buf();
+    let (cpu, gpu) = run_both(&path, &[("boundary", "adami")], 300);
+    // A wall particle with no fluid particle in its support has no pressure to extrapolate (0).
+    // The first fluid particle enters at the support's edge, where the wall's pressure jumps to
+    // that particle's while its force on the fluid (∝ ∇W, 0 there) does not; one distance
+    // rounded otherwise can put it on either side. Such particles (exactly one backend's 0) are
+    // counted, the others compared.
+    let (_, a) = stored_field(&cpu.backend, "p_over_rho2");
+    let (_, b) = stored_field(&gpu.backend, "p_over_rho2");
+    assert_eq!(a.len(), b.len(), "p_over_rho2 on as many particles");
+    let at_edge = a.iter().zip(&b).filter(|(x, y)| (**x == 0.0) != (**y == 0.0)).count();
+    assert!(at_edge <= 2, "{at_edge} wall particles have a fluid particle in their support on one backend only");
+    let (x, y): (Vec<f64>, Vec<f64>) = a.iter().zip(&b).filter(|(x, y)| (**x == 0.0) == (**y == 0.0)).unzip();
+    let d = max_rel_diff("p_over_rho2 after 300 steps, CPU against GPU", &x, &y);
+    assert!(d <= 2e-3, "p_over_rho2 after 300 steps: CPU and GPU differ by {d:e} of its largest value");
+    engines_match(&path, (cpu, gpu), 300, &["rho"], 2e-3);
 }
 
 // PySPH's impact3d (its own model file, Monaghan's artificial stress in principal axes): 40 of
@@ -541,11 +556,24 @@ fn dam_break_with_one_evaluation_per_step_on_the_gpu_matches_the_cpu() {
 // The lattice spring model: 1200 steps (0.056 s) of the cantilever as the tip load grows. The
 // springs' forces come from stretches of 1e-7 to 1e-5 m between positions of up to 0.5 m, which
 // f32 resolves to 3e-8 m: the displacements (x − x0) are compared, relative to the largest, and
-// not the velocities, which are that rounding's time derivative.
+// not the velocities, which are that rounding's time derivative. How far f32 may move them is
+// measured in the same test, by the CPU in f64: the CPU's f32 run lies about 3e-3 of the largest
+// displacement from it (the GPU's about 2e-3), and the GPU must lie within twice that spread of
+// both CPU runs.
 
 #[test]
-fn lattice_spring_cantilever_on_the_gpu_matches_the_cpu_in_displacement() {
-    let (cpu, gpu) = run_both(Path::new(&case("cantilever_lsm")), &[], 1200);
+fn lattice_spring_cantilever_on_the_gpu_matches_the_cpu_within_twice_the_f32_spread_in_displacement() {
+    use pairsum::engine::Engine;
+    let path = Path::new(&case("cantilever_lsm")).to_path_buf();
+    let (cpu, gpu) = run_both(&path, &[], 1200);
+    let (scene, plan) = pairsum::runner::prepare(&path, &pairsum::scene::Options::default()).expect("case");
+    let store = build_store::<f64>(&plan, &scene.particles, &scene.materials).expect("store");
+    let mut cpu64 =
+        Engine::new(CpuBackend::new(plan, store, scene.mirrors.clone()).expect("cpu"), scene.config.clone());
+    cpu64.initialise().expect("init");
+    for k in 0..1200 {
+        cpu64.step().unwrap_or_else(|e| panic!("f64 step {k}: {e}"));
+    }
     // The displacement of every particle that stores `x0` (`field_by_id` reads NaN for the others,
     // on both backends alike; a NaN that a backend computed makes the two lengths differ).
     let displacement = |b: &dyn Fn(&str) -> Vec<f64>| -> Vec<f64> {
@@ -553,10 +581,15 @@ fn lattice_spring_cantilever_on_the_gpu_matches_the_cpu_in_displacement() {
     };
     let a = displacement(&|f| field_by_id(&cpu.backend, f).1);
     let b = displacement(&|f| field_by_id(&gpu.backend, f).1);
+    let c = displacement(&|f| field_by_id(&cpu64.backend, f).1);
     let largest = max_abs("CPU displacement", &a);
     assert!(largest > 1e-4, "the tip has moved only {largest} m");
+    let spread = max_rel_diff("displacement, CPU f32 against f64", &a, &c);
+    assert!(spread > 0.0 && spread < 1e-2, "f32 moves the displacements by {spread:e} of the largest");
     let d = max_rel_diff("displacement, CPU against GPU", &a, &b);
-    assert!(d <= 2e-3, "displacements differ by {d:e} of the largest ({largest} m)");
+    assert!(d <= 2.0 * spread, "displacements differ by {d:e} of the largest ({largest} m), f32's spread {spread:e}");
+    let d64 = max_rel_diff("displacement, GPU against CPU f64", &b, &c);
+    assert!(d64 <= 2.0 * spread, "the GPU's displacements lie {d64:e} from f64's, f32's spread {spread:e}");
 }
 
 // The lattice-spring body in water: 200 steps (0.04 s) of the hull settling into the water while
