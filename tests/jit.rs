@@ -272,11 +272,12 @@ fn pair_programs_are_compiled_as_c_wherever_a_c_compiler_answers() {
     assert!(!ccode::without_c(ccode::enabled), "the C path off on this thread");
 }
 
-/// Where the C compiler is missing, a run keeps Cranelift's code and its results: the histories
-/// of `rings_2d` after 40 steps are byte for byte those of the C path, the summary line says
-/// which code ran, and a fresh cache says what compiling cost.
+/// Where the C compiler is missing, or answers but fails, a run keeps Cranelift's code and its
+/// results: the histories of `rings_2d` after 40 steps are byte for byte those of the C path, the
+/// summary line says which code ran, a failing compiler is warned of, and a fresh cache says what
+/// compiling cost.
 #[test]
-fn a_run_without_a_c_compiler_keeps_cranelifts_code_and_the_same_histories() {
+fn a_run_without_a_working_c_compiler_keeps_cranelifts_code_and_the_same_histories() {
     let dir = std::env::temp_dir().join(format!("pairsum-jit-fallback-{}", std::process::id()));
     let run = |cc: &str, out: &str| {
         let out = dir.join(out);
@@ -293,6 +294,17 @@ fn a_run_without_a_c_compiler_keeps_cranelifts_code_and_the_same_histories() {
     };
     let (c_log, c) = run("cc", "c");
     let (k_log, k) = run("/nonexistent/cc", "cranelift");
+    // A compiler that answers `--version` but fails to compile: Cranelift again, with a warning.
+    std::fs::create_dir_all(&dir).expect("scratch folder");
+    let broken = dir.join("broken-cc");
+    std::fs::write(&broken, "#!/bin/sh\n[ \"$1\" = --version ] && { echo broken 1.0; exit 0; }\necho no >&2; exit 1\n")
+        .expect("write the broken compiler");
+    use std::os::unix::fs::PermissionsExt;
+    std::fs::set_permissions(&broken, std::fs::Permissions::from_mode(0o755)).expect("chmod");
+    let (b_log, b) = run(broken.to_str().expect("path"), "broken");
+    assert!(b_log.contains("warning: the C compiler failed on a pair program"), "{b_log}");
+    assert!(b_log.contains("Cranelift pair code)"), "{b_log}");
+    assert!(b == k, "the histories differ between a failed C compile and Cranelift");
     if ccode::enabled() {
         assert!(c_log.contains("C pair code)"), "{c_log}");
         assert!(c_log.contains("1 pair program compiled by the C compiler in"), "{c_log}");

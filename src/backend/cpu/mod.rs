@@ -410,8 +410,16 @@ fn compile_variant<T: Real>(
             let c = if ccode::enabled() {
                 ccode::compile_pair::<T>(&spec)
                     .map_err(|why| {
+                        // A compiler that answers but fails is worth a word once: the run is slower.
+                        static TOLD: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
                         if debug {
                             eprintln!("pass on group {g}: Cranelift, not C ({why})");
+                        } else if !TOLD.swap(true, std::sync::atomic::Ordering::Relaxed) {
+                            let first = why.lines().next().unwrap_or_default();
+                            eprintln!(
+                                "warning: the C compiler failed on a pair program ({first}); Cranelift's code runs \
+                                 instead (PAIRSUM_DEBUG=1 says more, PAIRSUM_NATIVE=cranelift keeps it quiet)"
+                            );
                         }
                     })
                     .ok()
