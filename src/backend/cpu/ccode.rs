@@ -510,13 +510,7 @@ void pair(R *frame, const unsigned *jp, const R *const *cols, size_t start, size
         let (ln2_hi, ln2_lo) = (self.splat(k.ln2_hi), self.splat(k.ln2_lo));
         let r = self.let_("const V", format!("{x} - {nf} * {ln2_hi}"));
         let r = self.let_("const V", format!("{r} - {nf} * {ln2_lo}"));
-        let c = k.coeffs;
-        let mut p = self.splat(c[c.len() - 1]);
-        for ci in c[..c.len() - 1].iter().rev() {
-            let ci = self.splat(*ci);
-            let m = self.let_("const V", format!("{p} * {r}"));
-            p = self.let_("const V", format!("{m} + {ci}"));
-        }
+        let p = self.horner(k.coeffs, &r);
         let magic_int = self.splat_int(self.int_bits(k.magic));
         let n = self.let_("const I", format!("(I){t} - {magic_int}"));
         let zero = self.splat(0.0);
@@ -528,6 +522,17 @@ void pair(R *frame, const unsigned *jp, const R *const *cols, size_t start, size
         let e2 = self.let_("const I", format!("(I)((U)({bias} - {m}) << {})", k.mantissa));
         let y = self.let_("const V", format!("{p} * (V){e1}"));
         self.let_("const V", format!("{y} * (V){e2}"))
+    }
+
+    /// c[0] + x (c[1] + x (…)), from the last coefficient in: a multiplication, then an addition.
+    fn horner(&mut self, c: &[f64], x: &str) -> String {
+        let mut p = self.splat(c[c.len() - 1]);
+        for ci in c[..c.len() - 1].iter().rev() {
+            let ci = self.splat(*ci);
+            let m = self.let_("const V", format!("{p} * {x}"));
+            p = self.let_("const V", format!("{m} + {ci}"));
+        }
+        p
     }
 
     /// `math::ln_f64` / `ln_f32`, operation for operation (as the JIT's `ln`).
@@ -551,13 +556,7 @@ void pair(R *frame, const unsigned *jp, const R *const *cols, size_t start, size
         let d = self.let_("const V", format!("{two} + {f}"));
         let s = self.let_("const V", format!("{f} / {d}"));
         let wv = self.let_("const V", format!("{s} * {s}"));
-        let lg = k.lg;
-        let mut r = self.splat(lg[lg.len() - 1]);
-        for c in lg[..lg.len() - 1].iter().rev() {
-            let c = self.splat(*c);
-            let m = self.let_("const V", format!("{r} * {wv}"));
-            r = self.let_("const V", format!("{m} + {c}"));
-        }
+        let r = self.horner(k.lg, &wv);
         let r = self.let_("const V", format!("{r} * {wv}"));
         let hf = self.let_("const V", format!("{half} * {f}"));
         let hfsq = self.let_("const V", format!("{hf} * {f}"));
