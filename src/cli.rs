@@ -477,7 +477,7 @@ fn report_outcome(outcome: Result<crate::runner::RunOutcome, crate::runner::RunF
     match outcome {
         Ok(o) => {
             let r = &o.report;
-            if let Some((n, secs, _, dir)) = crate::backend::cpu::ccode::build_stats().filter(|s| s.0 > 0) {
+            if let Some((n, secs, dir)) = crate::backend::cpu::ccode::build_stats().filter(|s| s.0 > 0) {
                 let programs = if n == 1 { "pair program" } else { "pair programs" };
                 eprintln!(
                     "{n} {programs} compiled by the C compiler in {secs:.1} s, kept in {} for later runs",

@@ -19,7 +19,7 @@
 //! be made). The cache holds only files this module wrote (`pair-HASH.so`, about 20 kB each);
 //! deleting it costs one compile per program on the next run.
 
-use super::jit::{fold_lanes, JitPair, NativeKind, PairFn, PairSpec, ZERO_ROW};
+use super::jit::{fold_lanes, pairwise, JitPair, NativeKind, PairFn, PairSpec, ZERO_ROW};
 use super::lower::{Bin, Id, Node, Un};
 use super::math::{ExpConsts, LnConsts};
 use super::program::{sign_axes, LANES};
@@ -57,9 +57,10 @@ fn compiler() -> Option<&'static Compiler> {
         let version = String::from_utf8_lossy(&out.stdout).lines().next().unwrap_or("").to_string();
         let identity = format!("{version}\n{}\n{}", FLAGS.join(" "), processor());
         // A cache that cannot be made (a read-only home) moves to the temporary directory.
-        let cache = Some(cache_dir(env))
-            .filter(|d| std::fs::create_dir_all(d).is_ok())
-            .unwrap_or_else(|| std::env::temp_dir().join("pairsum-cache"));
+        let cache = cache_dir(env)
+            .into_iter()
+            .chain([std::env::temp_dir().join("pairsum-cache")])
+            .find(|d| std::fs::create_dir_all(d).is_ok())?;
         Some(Compiler { program, identity, cache })
     })
     .as_ref()
@@ -92,32 +93,24 @@ fn processor() -> String {
     format!("{}\n{}\n{}", std::env::consts::ARCH, line("model name"), line("flags"))
 }
 
-fn cache_dir(env: &crate::config::Env) -> PathBuf {
-    if let Some(d) = &env.cache {
-        return d.clone();
-    }
-    let home = std::env::var_os("XDG_CACHE_HOME")
-        .filter(|v| !v.is_empty())
-        .map(PathBuf::from)
-        .or_else(|| std::env::var_os("HOME").filter(|v| !v.is_empty()).map(|h| PathBuf::from(h).join(".cache")));
-    match home {
-        Some(h) => h.join("pairsum"),
-        None => std::env::temp_dir().join("pairsum-cache"),
-    }
+/// `PAIRSUM_CACHE`, else `$XDG_CACHE_HOME/pairsum`, else `~/.cache/pairsum`.
+fn cache_dir(env: &crate::config::Env) -> Option<PathBuf> {
+    let var = |name: &str| std::env::var_os(name).filter(|v| !v.is_empty()).map(PathBuf::from);
+    env.cache
+        .clone()
+        .or_else(|| var("XDG_CACHE_HOME").or_else(|| var("HOME").map(|h| h.join(".cache"))).map(|c| c.join("pairsum")))
 }
 
-/// Pair programs compiled by the C compiler in this process, and the time it took (ns); those
-/// found in the cache.
+/// Pair programs compiled by the C compiler in this process, and the time it took (ns).
 static COMPILED: AtomicUsize = AtomicUsize::new(0);
 static COMPILE_NS: AtomicU64 = AtomicU64::new(0);
-static CACHED: AtomicUsize = AtomicUsize::new(0);
 
-/// What this process has asked of the C compiler so far: (programs compiled, seconds, programs
-/// found in the cache, the cache's directory).
-pub fn build_stats() -> Option<(usize, f64, usize, &'static Path)> {
+/// What this process has asked of the C compiler so far: (programs compiled, seconds, the
+/// cache's directory).
+pub fn build_stats() -> Option<(usize, f64, &'static Path)> {
     let c = compiler()?;
     let secs = COMPILE_NS.load(Ordering::Relaxed) as f64 * 1e-9;
-    Some((COMPILED.load(Ordering::Relaxed), secs, CACHED.load(Ordering::Relaxed), &c.cache))
+    Some((COMPILED.load(Ordering::Relaxed), secs, &c.cache))
 }
 
 /// Compiles the pair program as C, or says why not.
@@ -150,11 +143,9 @@ fn build(cc: &Compiler, source: &str) -> Result<libloading::Library, String> {
     if lib.is_file() {
         // SAFETY: a library this function wrote; loading runs no initialisers of ours.
         if let Ok(l) = unsafe { libloading::Library::new(&lib) } {
-            CACHED.fetch_add(1, Ordering::Relaxed);
             return Ok(l);
         }
     }
-    std::fs::create_dir_all(&cc.cache).map_err(|e| format!("{}: {e}", cc.cache.display()))?;
     let tag = format!("{}-{:?}", std::process::id(), std::thread::current().id()).replace(['(', ')'], "");
     let c_file = cc.cache.join(format!("{name}.{tag}.c"));
     let tmp = cc.cache.join(format!("{name}.{tag}.so"));
@@ -296,14 +287,7 @@ impl<'a, T: Real> Printer<'a, T> {
     fn print(mut self) -> (String, Vec<FieldId>) {
         let spec = self.spec;
         let w = self.w();
-        let mut gathers: Vec<FieldId> = vec![];
-        for id in spec.nodes {
-            if let Node::Load { field, side: Side::J, .. } = spec.graph.nodes[*id as usize] {
-                if !gathers.contains(&field) {
-                    gathers.push(field);
-                }
-            }
-        }
+        let gathers = super::jit::gathered_fields(spec);
         let one = self.splat(1.0);
         let zero = self.splat(0.0);
         let mut vals: HashMap<Id, String> = HashMap::new();
@@ -448,7 +432,7 @@ impl<'a, T: Real> Printer<'a, T> {
         let mut tail = String::new();
         for ((_, slot, r), acc) in spec.folded.iter().zip(&accs) {
             let lanes: Vec<String> = (0..w).map(|k| format!("{acc}[{k}]")).collect();
-            let h = tree(*r, &lanes);
+            let h = pairwise(&lanes, &mut |a, b| scalar_combine(*r, &a, &b));
             let _ = writeln!(tail, "    slots[{slot}] = {};", scalar_combine(*r, &format!("slots[{slot}]"), &h));
         }
         let real = if T::BYTES == 8 { "double" } else { "float" };
@@ -595,13 +579,4 @@ fn scalar_combine(r: Reduce, a: &str, b: &str) -> String {
         Reduce::Min => format!("(({a}) != ({a}) || ({b}) < ({a}) ? ({b}) : ({a}))"),
         Reduce::Max => format!("(({a}) != ({a}) || ({b}) > ({a}) ? ({b}) : ({a}))"),
     }
-}
-
-/// `jit::fold_tree` of scalar expressions.
-fn tree(r: Reduce, p: &[String]) -> String {
-    if p.len() == 1 {
-        return p[0].clone();
-    }
-    let half = p.len() / 2;
-    scalar_combine(r, &tree(r, &p[..half]), &tree(r, &p[half..]))
 }

@@ -81,14 +81,21 @@ pub fn reduce_op<T: Real>(reduce: Reduce, a: T, b: T) -> T {
     }
 }
 
-/// Combines partials pairwise, neighbours first: ((p0 p1) (p2 p3)) ((p4 p5) (p6 p7)).
-#[inline]
-pub fn fold_tree<T: Real>(reduce: Reduce, p: &[T]) -> T {
+/// Combines partials pairwise with `op`, neighbours first: ((p0 p1) (p2 p3)) ((p4 p5) (p6 p7)).
+/// Every path's fold takes this order: on values, on Cranelift's values, on C expressions.
+pub fn pairwise<V: Clone>(p: &[V], op: &mut impl FnMut(V, V) -> V) -> V {
     if p.len() == 1 {
-        return p[0];
+        return p[0].clone();
     }
     let half = p.len() / 2;
-    reduce_op(reduce, fold_tree(reduce, &p[..half]), fold_tree(reduce, &p[half..]))
+    let (a, b) = (pairwise(&p[..half], op), pairwise(&p[half..], op));
+    op(a, b)
+}
+
+/// [`pairwise`] with a reduction's operation.
+#[inline]
+pub fn fold_tree<T: Real>(reduce: Reduce, p: &[T]) -> T {
+    pairwise(p, &mut |a, b| reduce_op(reduce, a, b))
 }
 
 /// Folds lanes into `slot` as the native code does: [`fold_lanes`] interleaved partial results
@@ -286,6 +293,19 @@ pub fn compile_pair<T: Real>(spec: &PairSpec) -> Result<JitPair<T>, String> {
     Ok(JitPair { func, gathers, kind: NativeKind::Cranelift, _code: Code::Cranelift(Some(Box::new(module))) })
 }
 
+/// The fields the program reads at j, in the order of the column pointers native code takes.
+pub(super) fn gathered_fields(spec: &PairSpec) -> Vec<FieldId> {
+    let mut gathers: Vec<FieldId> = vec![];
+    for id in spec.nodes {
+        if let Node::Load { field, side: Side::J, .. } = spec.graph.nodes[*id as usize] {
+            if !gathers.contains(&field) {
+                gathers.push(field);
+            }
+        }
+    }
+    gathers
+}
+
 /// The nodes in the order the outputs demand them (a depth-first post-order from each output,
 /// operands before their users, the deeper operand first), so that a value is computed just
 /// before it is used and the registers hold few values at a time.
@@ -445,14 +465,7 @@ impl<'a, 'b, T: Real> Emitter<'a, 'b, T> {
         let zero = self.splat(0.0);
         let time = self.b.ins().splat(self.vec, time);
         let dt = self.b.ins().splat(self.vec, dt);
-        let mut gathers: Vec<FieldId> = vec![];
-        for id in spec.nodes {
-            if let Node::Load { field, side: Side::J, .. } = spec.graph.nodes[*id as usize] {
-                if !gathers.contains(&field) {
-                    gathers.push(field);
-                }
-            }
-        }
+        let gathers = gathered_fields(spec);
         let col_ptrs: Vec<Value> = (0..gathers.len())
             .map(|k| self.b.ins().load(self.ptr, Self::mem(), cols, (k * self.ptr.bytes() as usize) as i32))
             .collect();
@@ -704,7 +717,7 @@ impl<'a, 'b, T: Real> Emitter<'a, 'b, T> {
             for acc in ordered {
                 lanes.extend((0..self.width).map(|k| self.b.ins().extractlane(acc, k as u8)));
             }
-            let h = self.fold_tree(*r, &lanes);
+            let h = pairwise(&lanes, &mut |a, b| self.combine(*r, a, b));
             let off = (slot * T::BYTES) as i32;
             let old = self.b.ins().load(self.real, Self::mem(), slots, off);
             let new = self.combine(*r, old, h);
@@ -733,16 +746,6 @@ impl<'a, 'b, T: Real> Emitter<'a, 'b, T> {
                 }
             }
         }
-    }
-
-    /// [`fold_tree`] of scalars: pairwise, neighbours first.
-    fn fold_tree(&mut self, r: Reduce, p: &[Value]) -> Value {
-        if p.len() == 1 {
-            return p[0];
-        }
-        let half = p.len() / 2;
-        let (a, b) = (self.fold_tree(r, &p[..half]), self.fold_tree(r, &p[half..]));
-        self.combine(r, a, b)
     }
 
     /// `row` when j's group is in `set`, else the address of [`ZERO_ROW`] (never j's row: a
