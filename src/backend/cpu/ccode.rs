@@ -16,7 +16,7 @@
 //! Where the compiler is missing or fails, the pass keeps the JIT (`PAIRSUM_DEBUG=1` says why).
 //! `PAIRSUM_NATIVE=cranelift` turns this path off; `PAIRSUM_CACHE` moves the cache (else
 //! `$XDG_CACHE_HOME/pairsum` or `~/.cache/pairsum`, or the temporary directory where that cannot
-//! be made). The cache holds only files this module wrote (`pair-HASH.so`, about 20 kB each);
+//! be made). The cache holds only files this module wrote (`pair-HASH.so`, about 16 kB each);
 //! deleting it costs one compile per program on the next run.
 
 use super::jit::{fold_lanes, pairwise, JitPair, NativeKind, PairFn, PairSpec, ZERO_ROW};
