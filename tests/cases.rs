@@ -1081,8 +1081,9 @@ fn taylor_bar_final_length_and_foot_diameter_are_within_their_tolerances_at_4_pa
 }
 
 /// The copper Taylor bar (linear hardening, no heating, a converged finite-element reference) at
-/// 0.8 mm: its final length and foot diameter within the case's bounds, and their pinned figures
-/// (+11.4 % and −29.4 %: docs/results/taylor_bar_copper_convergence/ has 0.533 and 0.4 mm).
+/// 0.8 mm with kernels that follow the deformation (solid/shaped_kernel.sph): its final length and
+/// foot diameter within the case's bounds, and their pinned figures (+1.5 % and −13.1 %;
+/// docs/results/taylor_bar_copper_shaped_convergence/ has 0.533 and 0.4 mm).
 #[test]
 fn copper_taylor_bar_final_length_and_foot_diameter_are_within_their_tolerances_at_4_particles_across_the_radius() {
     run_and_check("taylor_bar_copper", Precision::F64);
