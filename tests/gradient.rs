@@ -122,14 +122,7 @@ fn shaped_kernels_follow_a_squeeze_keep_the_velocity_gradient_exact_and_stop_at_
         "rho0 = \"1000 kg/m^3\"",
         "rho0 = \"1000 kg/m^3\"\nc0 = \"10 m/s\"\nbulk = \"1e5 Pa\"\nrate = \"100 1/s\"\nh_ratio = 1.3",
     );
-    std::fs::write(dir.join("case.toml"), case).unwrap();
-    let opts = pairsum::runner::RunOptions {
-        backend: pairsum::runner::BackendChoice::Cpu,
-        out: dir.join("out"),
-        vtk: false,
-        ..Default::default()
-    };
-    let outcome = pairsum::runner::run_case(&dir.join("case.toml"), &opts).unwrap_or_else(|e| panic!("{e}"));
+    let outcome = common::run_case_text_on_cpu(&dir, &case);
     let last = |probe: &str| -> f64 {
         let points = &outcome.histories.iter().find(|(n, _)| n == probe).expect("probe").1;
         assert!(points.iter().all(|(_, v)| v.is_finite()), "{probe}: {points:?}");

@@ -128,14 +128,7 @@ field = "p"
     )
     .replace("rho0 = \"1000 kg/m^3\"", "rho0 = \"1000 kg/m^3\"\nE = \"1 GPa\"\nnu = 0.3")
     .replace("group = \"metal\"", "group = \"solid\"");
-    std::fs::write(dir.join("case.toml"), case).unwrap();
-    let opts = pairsum::runner::RunOptions {
-        backend: pairsum::runner::BackendChoice::Cpu,
-        out: dir.join("out"),
-        vtk: false,
-        ..Default::default()
-    };
-    let outcome = pairsum::runner::run_case(&dir.join("case.toml"), &opts).unwrap_or_else(|e| panic!("{e}"));
+    let outcome = common::run_case_text_on_cpu(&dir, &case);
     let history = |name: &str| outcome.histories.iter().find(|(n, _)| n == name).expect("probe").1.clone();
     let (by_expression, measured) = (history("by_expression"), history("measured"));
     assert!(by_expression.len() > 10 && by_expression.len() == measured.len());

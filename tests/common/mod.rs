@@ -305,3 +305,16 @@ reduce = "max"
 }
 
 pub const BOTH_AXES: &str = "[periodic]\nx = [0, \"0.2 m\"]\ny = [0, \"0.2 m\"]";
+
+/// `case` written as `dir/case.toml` and run on the CPU backend without VTK output (into
+/// `dir/out`); the run's outcome, its probes' histories among it.
+pub fn run_case_text_on_cpu(dir: &Path, case: &str) -> pairsum::runner::RunOutcome {
+    std::fs::write(dir.join("case.toml"), case).expect("case.toml");
+    let opts = pairsum::runner::RunOptions {
+        backend: pairsum::runner::BackendChoice::Cpu,
+        out: dir.join("out"),
+        vtk: false,
+        ..Default::default()
+    };
+    pairsum::runner::run_case(&dir.join("case.toml"), &opts).unwrap_or_else(|e| panic!("{e}"))
+}
