@@ -114,6 +114,22 @@ fn ldj_rho(j: u32, sgn: vec3<f32>) -> f32 {
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
+fn ld_h(i: u32) -> f32 {
+    let b = u32(info[9 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_h(i: u32, v: f32) {
+    let b = u32(info[9 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_c(i: u32) -> f32 {
+    let b = u32(info[11 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_c(i: u32, v: f32) {
+    let b = u32(info[11 + G] + i32(i) * 1);
+    data[b] = v;
+}
 fn ld_s(i: u32) -> mat3x3<f32> {
     let b = u32(info[12 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
@@ -229,20 +245,28 @@ fn st_dkernel_shape(i: u32, v: mat3x3<f32>) {
     data[b + 7u] = v[1][2];
     data[b + 8u] = v[2][2];
 }
+fn ld_compression(i: u32) -> f32 {
+    let b = u32(info[24 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_compression(i: u32, v: f32) {
+    let b = u32(info[24 + G] + i32(i) * 1);
+    data[b] = v;
+}
 fn ld_drho(i: u32) -> f32 {
-    let b = u32(info[25 + G] + i32(i) * 1);
+    let b = u32(info[26 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho(i: u32, v: f32) {
-    let b = u32(info[25 + G] + i32(i) * 1);
+    let b = u32(info[26 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_ds(i: u32) -> mat3x3<f32> {
-    let b = u32(info[26 + G] + i32(i) * 6);
+    let b = u32(info[27 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_ds(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[26 + G] + i32(i) * 6);
+    let b = u32(info[27 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -353,10 +377,14 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // then jaumann
     var ds_i: mat3x3<f32> = ld_ds(i);
     ds_i = (((2.0 * prm_G(i)) * dev(edot)) + sym(((ld_s(i) * transpose(spin)) + (spin * ld_s(i)))));
+    // then compressive_share
+    var compression_i: f32 = ld_compression(i);
+    compression_i = (abs(trace(edot)) / ((abs(trace(edot)) + frob(dev(edot))) + ((0.01 * ld_c(i)) / ld_h(i))));
     st_edot(i, edot);
     st_spin(i, spin);
     st_L_inv(i, L_inv);
     st_dkernel_shape(i, dkernel_shape);
+    st_compression(i, compression_i);
     st_drho(i, drho_i);
     st_ds(i, ds_i);
 }

@@ -114,19 +114,6 @@ fn ldj_rho(j: u32, sgn: vec3<f32>) -> f32 {
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
-fn ld_h(i: u32) -> f32 {
-    let b = u32(info[9 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_h(i: u32, v: f32) {
-    let b = u32(info[9 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ldj_h(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[9u];
-    let b = u32(base + i32(j) * 1);
-    return data[b];
-}
 fn ld_p(i: u32) -> f32 {
     let b = u32(info[10 + G] + i32(i) * 1);
     return data[b];
@@ -168,24 +155,6 @@ fn st_s(i: u32, v: mat3x3<f32>) {
 }
 fn ldj_s(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
     let base = info[12u];
-    let b = u32(base + i32(j) * 6);
-    return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u])), sgn);
-}
-fn ld_edot(i: u32) -> mat3x3<f32> {
-    let b = u32(info[13 + G] + i32(i) * 6);
-    return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
-}
-fn st_edot(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[13 + G] + i32(i) * 6);
-    data[b] = v[0][0];
-    data[b + 1u] = v[1][0];
-    data[b + 2u] = v[2][0];
-    data[b + 3u] = v[1][1];
-    data[b + 4u] = v[2][1];
-    data[b + 5u] = v[2][2];
-}
-fn ldj_edot(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
-    let base = info[13u];
     let b = u32(base + i32(j) * 6);
     return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u])), sgn);
 }
@@ -236,12 +205,25 @@ fn st_L_inv(i: u32, v: mat3x3<f32>) {
     data[b + 7u] = v[1][2];
     data[b + 8u] = v[2][2];
 }
+fn ld_compression(i: u32) -> f32 {
+    let b = u32(info[24 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_compression(i: u32, v: f32) {
+    let b = u32(info[24 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ldj_compression(j: u32, sgn: vec3<f32>) -> f32 {
+    let base = info[24u];
+    let b = u32(base + i32(j) * 1);
+    return data[b];
+}
 fn ld_dv(i: u32) -> vec3<f32> {
-    let b = u32(info[24 + G] + i32(i) * 3);
+    let b = u32(info[25 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_dv(i: u32, v: vec3<f32>) {
-    let b = u32(info[24 + G] + i32(i) * 3);
+    let b = u32(info[25 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
@@ -281,14 +263,13 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let dx_i = ld_dx(i);
     let body_i = ld_body(i);
     let rho_i = ld_rho(i);
-    let h_i = ld_h(i);
     let p_i = ld_p(i);
     let c_i = ld_c(i);
     let s_i = ld_s(i);
-    let edot_i = ld_edot(i);
     let kernel_metric_i = ld_kernel_metric(i);
     let kernel_norm_i = ld_kernel_norm(i);
     let L_inv_i = ld_L_inv(i);
+    let compression_i = ld_compression(i);
     let xi = pos3(i);
     let hi = h_of(i);
     let mirrors = u32(globals[72u]);
@@ -352,13 +333,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let vr = dot((v_i - ldj_v(j, sgn)), x_ij);
             let p1 = (eta_ratio_i * hh);
             let phi = ((hh * vr) / ((r_ij * r_ij) + (p1 * p1)));
-            let e = edot_i;
-            let c_k = c_i;
-            let h_k = h_i;
-            let e_2 = ldj_edot(j, sgn);
-            let c_k_2 = ldj_c(j, sgn);
-            let h_k_2 = ldj_h(j, sgn);
-            let share = (((abs(trace(e)) / ((abs(trace(e)) + frob(dev(e))) + ((0.01 * c_k) / h_k))) + (abs(trace(e_2)) / ((abs(trace(e_2)) + frob(dev(e_2))) + ((0.01 * c_k_2) / h_k_2)))) / 2.0);
+            let share = (0.5 * (compression_i + ldj_compression(j, sgn)));
             let pi_ij = (share * select(0.0, ((((((-visc_a_i) * (c_i + ldj_c(j, sgn))) / 2.0) * phi) + (visc_b_i * (phi * phi))) / (0.5 * (rho_i + ldj_rho(j, sgn)))), (vr < 0.0)));
             let p2 = ldj_rho(j, sgn);
             dv = dv + ((ldj_m(j, sgn) * ((div_m(sig_i, (rho_i * rho_i)) + div_m(sig_j, (p2 * p2))) - (pi_ij * eye()))) * (L_inv_i * g));

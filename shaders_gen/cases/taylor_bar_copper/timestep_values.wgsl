@@ -66,7 +66,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     if (i >= n) { return; }
     let t = globals[0u];
     let dt = globals[1u];
-    let scratch = u32(info[34]);
+    let scratch = u32(info[35]);
     data[scratch + 0u * n + i] = (prm_C_cfl(i) * ld_h_short(i));
     data[scratch + 1u * n + i] = (prm_c0(i) + length(ld_v(i)));
 }
