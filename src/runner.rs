@@ -528,35 +528,45 @@ fn reached(time: f64, at: f64) -> bool {
 }
 
 /// A profile's columns now: the selected particles' coordinates, id, body and fields, sorted
-/// along the profile's axis.
+/// along the profile's axis (then by id). Each rank of a split run selects among its own
+/// particles, and the selected rows of every rank are gathered.
 fn profile_columns(scene: &Scene, p: &ProfileSpec, b: &dyn Reader) -> Result<Vec<(String, Vec<f64>)>, String> {
-    let dim = b.plan().dim;
-    let x = measure::positions(b).map_err(|e| e.0)?.unwrap_or_default();
-    let ids = b.ids().map_err(|e| e.0)?;
+    let (dim, model) = (b.plan().dim, &b.plan().model);
+    let x = measure::own_positions(b).map_err(|e| e.0)?.unwrap_or_default();
+    let ids = b.ids_own().map_err(|e| e.0)?;
     let inside = match &p.region {
         Some(r) => crate::scene::geometry::inside(r, dim, &x).map_err(|e| e.to_string())?,
         None => vec![true; x.len()],
     };
     let body = |k: usize| scene.particles.body[ids[k] as usize] as usize;
-    let mut rows: Vec<usize> = (0..x.len()).filter(|k| inside[*k] && p.body.is_none_or(|b| body(*k) == b)).collect();
-    rows.sort_by(|a, c| x[*a][p.along].total_cmp(&x[*c][p.along]));
-    let mut columns: Vec<(String, Vec<f64>)> = (0..dim)
-        .map(|a| (format!("{} [m]", crate::ir::AXIS_NAMES[a]), rows.iter().map(|k| x[*k][a]).collect()))
-        .collect();
-    columns.push(("id".into(), rows.iter().map(|k| ids[*k] as f64).collect()));
-    columns.push(("body".into(), rows.iter().map(|k| body(*k) as f64).collect()));
-    let model = &b.plan().model;
+    let rows: Vec<usize> = (0..x.len()).filter(|k| inside[*k] && p.body.is_none_or(|b| body(*k) == b)).collect();
+    let mut names: Vec<String> = (0..dim).map(|a| format!("{} [m]", crate::ir::AXIS_NAMES[a])).collect();
+    names.extend(["id".to_string(), "body".to_string()]);
+    let mut values: Vec<Vec<f64>> =
+        vec![rows.iter().flat_map(|k| x[*k][..dim].iter().copied().chain([ids[*k] as f64, body(*k) as f64])).collect()];
     for f in &p.fields {
         let field = model.field(*f);
-        let Some(column) = b.read(*f).map_err(|e| e.0)? else { continue };
+        let Some(column) = b.read_own(*f).map_err(|e| e.0)? else { continue };
         let (comps, data) = (column.0, &column.1);
         for (c, suffix) in crate::ir::component_names(field.ty.shape, dim).iter().enumerate() {
             let name = if suffix.is_empty() { field.name.clone() } else { format!("{}.{suffix}", field.name) };
             let name = if field.ty.unit.is_one() { name } else { format!("{name} [{}]", field.ty.unit.label()) };
-            columns.push((name, rows.iter().map(|k| data[k * comps + c]).collect()));
+            names.push(name);
+            values.push(rows.iter().map(|k| data[k * comps + c]).collect());
         }
     }
-    Ok(columns)
+    // Row by row: this rank's rows, then every rank's.
+    let width = names.len();
+    let mine: Vec<f64> = (0..rows.len())
+        .flat_map(|r| {
+            values[0][r * (dim + 2)..(r + 1) * (dim + 2)].iter().chain(values[1..].iter().map(move |v| &v[r]))
+        })
+        .copied()
+        .collect();
+    let all = b.all_gather(mine).concat();
+    let mut table: Vec<&[f64]> = all.chunks(width).collect();
+    table.sort_by(|a, c| a[p.along].total_cmp(&c[p.along]).then(a[dim].total_cmp(&c[dim])));
+    Ok(names.into_iter().enumerate().map(|(k, name)| (name, table.iter().map(|row| row[k]).collect())).collect())
 }
 
 /// Writes `profiles/<name>_<k>.csv`.

@@ -9,10 +9,12 @@ use common::*;
 use pairsum::backend::cpu::CpuBackend;
 use pairsum::backend::domains::{Domain, Traffic};
 use pairsum::backend::transport::Threads;
-use pairsum::backend::{Backend, FieldReduction};
+use pairsum::backend::Backend;
 use pairsum::engine::setup::build_store;
 use pairsum::engine::Engine;
 use pairsum::runner::prepare;
+use pairsum::scene::measure::{evaluate, Moment};
+use pairsum::scene::spec::{Pick, ProbeKind, ProbeSpec, ProbeValue};
 use std::path::Path;
 
 /// A bundled case by name, or a case file by its path.
@@ -298,31 +300,66 @@ fn watch_from_fields(b: &CpuBackend<f64>) -> [f64; 4] {
     out
 }
 
-/// Probes of a field and the watchdog's values on a split run are reduced on each rank and then
-/// over the ranks (two or four numbers a rank instead of the field): after 20 steps of the
-/// hypervelocity impact (internal energy, no gravity) and the dam break (gravity) on two and
-/// three ranks, every rank gets the same values, within 1e-12 of the reductions computed here
-/// from the undivided run's fields (for a sum, of n times the largest term).
+/// The probes [`PROBED`] of `v` (over every particle, then the even ids), as a case would write
+/// them, then the same field's largest first component located along the last axis, the largest
+/// von Mises stress of `s` where the model has it, and the case's own probes.
+fn probes_of(scene: &pairsum::scene::Scene, plan: &pairsum::schedule::Plan) -> Vec<ProbeSpec> {
+    let v = plan.model.field_id("v").expect("v");
+    let probe = |select: Option<Vec<bool>>, value: ProbeValue, pick: Pick, reduce: &str, locate: Option<usize>| {
+        let kind = ProbeKind::Field { select, value, pick, reduce: reduce.into(), locate };
+        ProbeSpec { name: format!("{reduce} {pick:?}"), kind, relative: false, unit: String::new(), every: 1 }
+    };
+    let even: Vec<bool> = (0..scene.particles.x.len()).map(|i| i % 2 == 0).collect();
+    let mut out = vec![];
+    for select in [None, Some(even)] {
+        for (component, reduce) in PROBED {
+            let pick = probed_component(component, plan.dim).map_or(Pick::Norm, Pick::Component);
+            out.push(probe(select.clone(), ProbeValue::Field(v), pick, reduce, None));
+        }
+    }
+    out.push(probe(None, ProbeValue::Field(v), Pick::Component(0), "max", Some(plan.dim - 1)));
+    if let Some(s) = plan.model.field_id("s") {
+        out.push(probe(None, ProbeValue::Field(s), Pick::VonMises, "max", None));
+    }
+    out.extend(scene.probes.iter().cloned());
+    out
+}
+
+/// Every probe's value now.
+fn evaluated<B: Backend>(probes: &[ProbeSpec], scene: &pairsum::scene::Scene, b: &B) -> Vec<f64> {
+    let now = Moment::new(b);
+    probes.iter().map(|p| evaluate(p, scene, &now).unwrap_or_else(|e| panic!("probe `{}`: {e}", p.name))).collect()
+}
+
+/// Probes, measures and the watchdog's values on a split run are reduced over each rank's own
+/// particles and then merged over the ranks (a few numbers a rank instead of the field; the
+/// debris cloud's particles for its percentiles): after 60 steps of the hypervelocity impact
+/// (internal energy, no gravity; the crater and the debris cloud measured), 20 of the dam break
+/// (gravity), 20 of the copper Taylor bar (probes of expressions) and 20 of the Børvik plate (the
+/// plug's speed, zero while the projectile is in the plate), on two and three ranks,
+/// every rank gets the same values. The reductions of `v` are within 1e-12 of those computed
+/// here from the undivided run's fields (for a sum, of n times the largest term), every other
+/// probe within 1e-12 of the undivided run's value, and the watchdog's values within 1e-12.
 #[test]
-fn probes_and_the_watchdog_reduced_on_each_rank_give_the_undivided_values_within_1e_12() {
-    for (name, ranks) in [("hypervelocity_impact", 2), ("dam_break_2d", 3)] {
+fn probes_measures_and_the_watchdog_reduced_on_each_rank_give_the_undivided_values_within_1e_12() {
+    let cases = [
+        ("hypervelocity_impact", 2, 60),
+        ("dam_break_2d", 3, 20),
+        ("taylor_bar_copper", 2, 20),
+        ("borvik_perforation", 2, 20),
+    ];
+    for (name, ranks, steps) in cases {
+        let opts = pairsum::scene::Options { resolution: Some("ci".into()), ..Default::default() };
+        let (scene, plan) = prepare(&case(name), &opts).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let probes = probes_of(&scene, &plan);
         let (whole, split) = run_both(
             name,
             ranks,
-            20,
-            |a| (probed_from_fields(&a.backend), watch_from_fields(&a.backend)),
+            steps,
+            |a| (probed_from_fields(&a.backend), evaluated(&probes, &scene, &a.backend), watch_from_fields(&a.backend)),
             |b| {
-                let select: Vec<bool> = (0..b.backend.particles()).map(|i| i % 2 == 0).collect();
-                let probed = [None, Some(&select[..])].into_iter().flat_map(|select| {
-                    PROBED.map(|(component, reduce)| {
-                        let component = probed_component(component, b.backend.plan().dim);
-                        let field = b.backend.plan().model.field_id("v").expect("v");
-                        let r = FieldReduction { field, component, reduce, select };
-                        b.backend.reduce_field(&r).expect("reduce").expect("reduced by the ranks")
-                    })
-                });
                 let w = b.backend.watch_values().expect("watch").expect("reduced by the ranks");
-                (probed.collect::<Vec<_>>(), [w.max_speed, w.energy, w.energy_magnitude, w.kinetic])
+                (evaluated(&probes, &scene, &b.backend), [w.max_speed, w.energy, w.energy_magnitude, w.kinetic])
             },
         );
         for (k, other) in split.iter().enumerate() {
@@ -336,7 +373,14 @@ fn probes_and_the_watchdog_reduced_on_each_rank_give_the_undivided_values_within
             let d = (got - value).abs();
             assert!(d <= *tolerance, "{name}: {reduce} of v{component:?} (probe {k}): {got} against {value}");
         }
-        let [speed, energy, magnitude, kinetic] = whole.1;
+        let mut measured = 0;
+        for (p, (got, value)) in probes.iter().zip(probed.iter().zip(&whole.1)).skip(whole.0.len()) {
+            assert_eq!(got.is_nan(), value.is_nan(), "{name}: `{}`: {got} against {value}", p.name);
+            assert!((got - value).abs() <= 1e-12 * value.abs(), "{name}: `{}`: {got} against {value}", p.name);
+            measured += usize::from(!value.is_nan());
+        }
+        assert_eq!(measured, probes.len() - whole.0.len(), "{name}: a probe has no value");
+        let [speed, energy, magnitude, kinetic] = whole.2;
         for (what, got, value, scale) in [
             ("the largest speed", watch[0], speed, speed),
             ("the energy", watch[1], energy, magnitude),
@@ -599,6 +643,48 @@ fn mpirun_on_two_and_four_ranks_and_domains_2_give_the_single_process_histories_
         assert!(d <= 1e-12, "{what}: the last snapshot differs by {d:e} of an array's magnitude");
     }
     assert_eq!(left_behind(), before, "a rank left a folder in the temporary directory");
+}
+
+/// A profile of a split run is each rank's selected rows gathered and sorted along the axis:
+/// the Sod tube on `--domains 2` writes both profiles with the single process's rows (the same
+/// ids in the same order) and values within 1e-12 of each column's largest magnitude.
+#[test]
+fn a_profile_of_a_run_on_two_domains_has_the_single_process_rows_within_1e_12() {
+    let dir = tempdir("profiles");
+    let bin = env!("CARGO_BIN_EXE_pairsum");
+    let run = |out: &Path, extra: &[&str]| {
+        let args = ["run", "sod_shock_tube", "--backend", "cpu", "--quiet", "--force", "--out"];
+        let done = std::process::Command::new(bin).args(args).arg(out).args(extra).output().expect("pairsum");
+        assert!(done.status.success(), "{}", String::from_utf8_lossy(&done.stderr));
+    };
+    run(&dir.join("one"), &[]);
+    run(&dir.join("two"), &["--domains", "2"]);
+    let table = |run: &str, k: usize| {
+        let text = std::fs::read_to_string(dir.join(run).join(format!("profiles/tube_{k}.csv"))).expect("a profile");
+        let mut lines = text.lines();
+        let header = lines.next().expect("a header").to_string();
+        let rows: Vec<Vec<f64>> = lines.map(|l| l.split(',').map(|v| v.parse().expect("a number")).collect()).collect();
+        (header, rows)
+    };
+    for k in 0..2 {
+        let ((header, one), (header2, two)) = (table("one", k), table("two", k));
+        assert_eq!(header, header2);
+        assert!(one.len() > 100, "profile {k}: {} rows", one.len());
+        assert_eq!(one.len(), two.len(), "profile {k}: another number of rows");
+        let id = header.split(',').position(|c| c == "id").expect("an id column");
+        for c in 0..one[0].len() {
+            let scale = one.iter().fold(0.0f64, |m, r| m.max(r[c].abs()));
+            for (r, (a, b)) in one.iter().zip(&two).enumerate() {
+                assert_eq!(a[id], b[id], "profile {k}, row {r}: another particle");
+                assert!(
+                    (a[c] - b[c]).abs() <= 1e-12 * scale,
+                    "profile {k}, row {r}, column {c}: {} against {}",
+                    b[c],
+                    a[c]
+                );
+            }
+        }
+    }
 }
 
 /// A rank that dies (killed here, as a crash would end it) stops the run: `mpirun` ends every

@@ -13,7 +13,7 @@
 
 use super::cpu::{first_non_finite_in, known, lower::Known, snapshot_of, CpuBackend};
 use super::transport::Transport;
-use super::{Backend, BackendError, FieldReduction, Globals, Mirror, Snapshot, WatchValues};
+use super::{Backend, BackendError, Globals, Mirror, Snapshot, WatchValues};
 use crate::compare::largest_number;
 use crate::engine::watchdog::{gravity, Motion};
 use crate::grid::decompose::{bisect_with_cuts, Cuts};
@@ -733,8 +733,8 @@ impl<T: Real> Backend for Domain<T> {
         Some((self.rank, self.size))
     }
 
-    fn synchronise(&self) {
-        self.transport().all_gather(vec![]);
+    fn all_gather(&self, part: Vec<f64>) -> Vec<Vec<f64>> {
+        self.transport().all_gather(part)
     }
 
     fn read_own(&self, f: FieldId) -> Result<Option<(usize, Vec<f64>)>, BackendError> {
@@ -749,40 +749,11 @@ impl<T: Real> Backend for Domain<T> {
         Ok(self.own().into_iter().map(|i| self.backend.store.id[i]).collect())
     }
 
+    /// The watchdog's values ([`watch_values`](Backend::watch_values)) are reduced on each rank;
+    /// probes are reduced by `scene::measure` over each rank's own particles and merged through
+    /// [`all_gather`](Backend::all_gather).
     fn reduces_probes(&self) -> bool {
         true
-    }
-
-    /// Reduced over this rank's own particles, then over the ranks in rank order: two numbers
-    /// travel per rank instead of the field.
-    fn reduce_field(&self, r: &FieldReduction) -> Result<Option<f64>, BackendError> {
-        let Some((comps, values)) = self.read_own(r.field)? else { return Ok(Some(f64::NAN)) };
-        let ids = self.ids_own()?;
-        let picked = (0..ids.len()).filter(|k| r.select.is_none_or(|s| s[ids[*k] as usize])).map(|k| {
-            let v = &values[k * comps..(k + 1) * comps];
-            r.component.map_or_else(|| v.iter().map(|a| a * a).sum::<f64>().sqrt(), |c| v[c])
-        });
-        let (mut count, mut value) = (0.0, if r.reduce == "min" { f64::INFINITY } else { f64::NEG_INFINITY });
-        for v in picked.filter(|v| !v.is_nan()) {
-            count += 1.0;
-            value = match r.reduce {
-                "min" => value.min(v),
-                "max" => value.max(v),
-                "abs_max" => value.max(v.abs()),
-                _ if count == 1.0 => v,
-                _ => value + v,
-            };
-        }
-        let all = self.transport().all_gather(vec![value, count]);
-        let present = all.iter().filter(|p| p[1] > 0.0);
-        let total: f64 = all.iter().map(|p| p[1]).sum();
-        Ok(Some(match r.reduce {
-            _ if total == 0.0 => f64::NAN,
-            "min" => present.fold(f64::INFINITY, |m, p| m.min(p[0])),
-            "max" | "abs_max" => present.fold(f64::NEG_INFINITY, |m, p| m.max(p[0])),
-            "sum" => present.map(|p| p[0]).sum(),
-            _ => present.map(|p| p[0]).sum::<f64>() / total,
-        }))
     }
 
     /// The watchdog's reductions over this rank's own particles (`watchdog::Motion`), then over

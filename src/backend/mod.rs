@@ -55,6 +55,107 @@ pub struct FieldReduction<'a> {
     pub select: Option<&'a [bool]>,
 }
 
+/// A probe's reduction over some of the particles: what it has reduced so far and how many values
+/// that took. NaN values (a group that does not store the field) are left out. Parts merge in any
+/// grouping, so the host, each rank of a split run and the GPU reduce by this one rule: a rank
+/// reduces its own particles, the ranks' parts merge in rank order, and [`value`](Self::value)
+/// is the probe's value (NaN when no value was taken).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Partial {
+    kind: Reduction,
+    value: f64,
+    count: f64,
+}
+
+/// The reductions a probe may ask for (`reduce` in case files).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Reduction {
+    Min,
+    Max,
+    AbsMax,
+    Sum,
+    Mean,
+}
+
+impl Partial {
+    /// Nothing reduced yet by `reduce` (`min`, `max`, `abs_max`, `sum`; anything else is `mean`).
+    pub fn new(reduce: &str) -> Partial {
+        let kind = match reduce {
+            "min" => Reduction::Min,
+            "max" => Reduction::Max,
+            "abs_max" => Reduction::AbsMax,
+            "sum" => Reduction::Sum,
+            _ => Reduction::Mean,
+        };
+        let value = match kind {
+            Reduction::Min => f64::INFINITY,
+            Reduction::Max | Reduction::AbsMax => f64::NEG_INFINITY,
+            Reduction::Sum | Reduction::Mean => 0.0,
+        };
+        Partial { kind, value, count: 0.0 }
+    }
+
+    /// `reduce` of `values`.
+    pub fn of(reduce: &str, values: impl IntoIterator<Item = f64>) -> Partial {
+        values.into_iter().fold(Partial::new(reduce), Partial::taking)
+    }
+
+    /// A part reduced elsewhere (on the device, by another rank) from its value and count.
+    pub fn from_parts(reduce: &str, value: f64, count: f64) -> Partial {
+        Partial { value, count, ..Partial::new(reduce) }
+    }
+
+    /// The value and the count, to send to the other ranks.
+    pub fn parts(&self) -> [f64; 2] {
+        [self.value, self.count]
+    }
+
+    /// This part with `v` taken in (left out if NaN).
+    pub fn taking(self, v: f64) -> Partial {
+        if v.is_nan() {
+            return self;
+        }
+        let value = match self.kind {
+            Reduction::Min => self.value.min(v),
+            Reduction::Max => self.value.max(v),
+            Reduction::AbsMax => self.value.max(v.abs()),
+            Reduction::Sum | Reduction::Mean => self.value + v,
+        };
+        Partial { value, count: self.count + 1.0, ..self }
+    }
+
+    /// Both parts reduced as one.
+    pub fn merge(self, other: Partial) -> Partial {
+        if other.count == 0.0 {
+            return self;
+        }
+        if self.count == 0.0 {
+            return other;
+        }
+        let value = match self.kind {
+            Reduction::Min => self.value.min(other.value),
+            Reduction::Max | Reduction::AbsMax => self.value.max(other.value),
+            Reduction::Sum | Reduction::Mean => self.value + other.value,
+        };
+        Partial { value, count: self.count + other.count, ..self }
+    }
+
+    /// Every rank's [`parts`](Self::parts) (this one's among them), merged in order.
+    pub fn merge_all(self, parts: &[Vec<f64>]) -> Partial {
+        let none = Partial { value: 0.0, count: 0.0, ..self };
+        parts.iter().fold(none, |all, p| all.merge(Partial { value: p[0], count: p[1], ..self }))
+    }
+
+    /// The probe's value: NaN when no value was taken; the sum over the count for a mean.
+    pub fn value(&self) -> f64 {
+        match self.kind {
+            _ if self.count == 0.0 => f64::NAN,
+            Reduction::Mean => self.value / self.count,
+            _ => self.value,
+        }
+    }
+}
+
 /// The watchdog's reductions over the particles that store `x`, `v` and `m` (see
 /// [`crate::engine::watchdog`]), in the backend's precision.
 #[derive(Debug, Clone, Copy)]
@@ -108,7 +209,14 @@ pub trait Backend {
         None
     }
     /// Waits for every rank of a split run (none to wait for otherwise).
-    fn synchronise(&self) {}
+    fn synchronise(&self) {
+        self.all_gather(vec![]);
+    }
+    /// Every rank's `part`, in rank order: a collective, which every rank of a split run calls
+    /// alike; `[part]` in a run in one piece.
+    fn all_gather(&self, part: Vec<f64>) -> Vec<Vec<f64>> {
+        vec![part]
+    }
     /// [`read`](Self::read) over this rank's own particles only, without the other ranks (the
     /// pieces of a partitioned VTK snapshot); every particle in a run in one piece.
     fn read_own(&self, f: FieldId) -> Result<Option<(usize, Vec<f64>)>, BackendError> {

@@ -3,7 +3,7 @@
 
 use super::max_keeping_nan;
 use super::spec::{Pick, ProbeKind, ProbeSpec, ProbeValue, ResultSpec, Scene};
-use crate::backend::{Backend, BackendError, FieldReduction, WatchValues};
+use crate::backend::{Backend, BackendError, FieldReduction, Partial, WatchValues};
 use crate::ir::FieldId;
 use crate::ir::{component_indices, Shape};
 use crate::schedule::Plan;
@@ -103,11 +103,25 @@ pub struct History {
 pub type Column = Rc<(usize, Vec<f64>)>;
 
 /// What probes, profiles and output read of the particles: the plan, fields and ids, in the
-/// backend's current order.
+/// backend's current order. In a run split into domains, `read` and `ids` gather every rank's
+/// particles; a probe reduces its rank's own ones (`read_own`, `ids_own`) and merges the ranks'
+/// parts (`all_gather`), so that a few numbers travel instead of the field.
 pub trait Reader {
     fn plan(&self) -> &Plan;
     fn read(&self, f: FieldId) -> Result<Option<Column>, BackendError>;
     fn ids(&self) -> Result<Rc<Vec<u32>>, BackendError>;
+    /// [`read`](Self::read) over this rank's own particles (every particle in a run in one piece).
+    fn read_own(&self, f: FieldId) -> Result<Option<Column>, BackendError> {
+        self.read(f)
+    }
+    /// [`ids`](Self::ids) of this rank's own particles, in the order of [`read_own`](Self::read_own).
+    fn ids_own(&self) -> Result<Rc<Vec<u32>>, BackendError> {
+        self.ids()
+    }
+    /// Every rank's `part`, in rank order ([`Backend::all_gather`]): every rank calls it alike.
+    fn all_gather(&self, part: Vec<f64>) -> Vec<Vec<f64>> {
+        vec![part]
+    }
     /// A probe's reduction where the backend computes it itself ([`Backend::reduce_field`]).
     fn reduce_field(&self, r: &FieldReduction) -> Result<Option<f64>, BackendError> {
         let _ = r;
@@ -130,6 +144,15 @@ impl<B: Backend> Reader for B {
     fn ids(&self) -> Result<Rc<Vec<u32>>, BackendError> {
         Ok(Rc::new(Backend::ids(self)?))
     }
+    fn read_own(&self, f: FieldId) -> Result<Option<Column>, BackendError> {
+        Ok(Backend::read_own(self, f)?.map(Rc::new))
+    }
+    fn ids_own(&self) -> Result<Rc<Vec<u32>>, BackendError> {
+        Ok(Rc::new(Backend::ids_own(self)?))
+    }
+    fn all_gather(&self, part: Vec<f64>) -> Vec<Vec<f64>> {
+        Backend::all_gather(self, part)
+    }
     fn reduce_field(&self, r: &FieldReduction) -> Result<Option<f64>, BackendError> {
         Backend::reduce_field(self, r)
     }
@@ -146,15 +169,44 @@ impl<B: Backend> Reader for B {
 /// probes, profiles and outputs read them (on the GPU every read waits for the device).
 pub struct Moment<'a, B: Backend> {
     backend: &'a B,
-    fields: RefCell<HashMap<FieldId, Option<Column>>>,
+    /// By field and whether of this rank's own particles only.
+    fields: RefCell<HashMap<(FieldId, bool), Option<Column>>>,
     ids: OnceCell<Rc<Vec<u32>>>,
+    ids_own: OnceCell<Rc<Vec<u32>>>,
     motion: OnceCell<Option<WatchValues>>,
 }
 
 impl<'a, B: Backend> Moment<'a, B> {
     pub fn new(backend: &'a B) -> Self {
-        Moment { backend, fields: RefCell::new(HashMap::new()), ids: OnceCell::new(), motion: OnceCell::new() }
+        Moment {
+            backend,
+            fields: RefCell::new(HashMap::new()),
+            ids: OnceCell::new(),
+            ids_own: OnceCell::new(),
+            motion: OnceCell::new(),
+        }
     }
+
+    /// Field `f` (of the own particles only if `own`), read from the backend the first time; a
+    /// run in one piece owns every particle, and reads each field once.
+    fn column(&self, f: FieldId, own: bool) -> Result<Option<Column>, BackendError> {
+        let own = own && self.backend.rank().is_some();
+        if let Some(column) = self.fields.borrow().get(&(f, own)) {
+            return Ok(column.clone());
+        }
+        let column = if own { Reader::read_own(self.backend, f)? } else { Reader::read(self.backend, f)? };
+        self.fields.borrow_mut().insert((f, own), column.clone());
+        Ok(column)
+    }
+}
+
+/// `cell`'s value, computed by `make` the first time.
+fn cached<T: Clone>(cell: &OnceCell<T>, make: impl FnOnce() -> Result<T, BackendError>) -> Result<T, BackendError> {
+    if let Some(v) = cell.get() {
+        return Ok(v.clone());
+    }
+    let v = make()?;
+    Ok(cell.get_or_init(|| v).clone())
 }
 
 impl<B: Backend> Reader for Moment<'_, B> {
@@ -162,29 +214,28 @@ impl<B: Backend> Reader for Moment<'_, B> {
         self.backend.plan()
     }
     fn read(&self, f: FieldId) -> Result<Option<Column>, BackendError> {
-        if let Some(column) = self.fields.borrow().get(&f) {
-            return Ok(column.clone());
-        }
-        let column = Reader::read(self.backend, f)?;
-        self.fields.borrow_mut().insert(f, column.clone());
-        Ok(column)
+        self.column(f, false)
     }
     fn ids(&self) -> Result<Rc<Vec<u32>>, BackendError> {
-        if let Some(ids) = self.ids.get() {
-            return Ok(ids.clone());
+        cached(&self.ids, || Reader::ids(self.backend))
+    }
+    fn read_own(&self, f: FieldId) -> Result<Option<Column>, BackendError> {
+        self.column(f, true)
+    }
+    fn ids_own(&self) -> Result<Rc<Vec<u32>>, BackendError> {
+        match self.backend.rank() {
+            Some(_) => cached(&self.ids_own, || Reader::ids_own(self.backend)),
+            None => self.ids(),
         }
-        let ids = Reader::ids(self.backend)?;
-        Ok(self.ids.get_or_init(|| ids).clone())
+    }
+    fn all_gather(&self, part: Vec<f64>) -> Vec<Vec<f64>> {
+        Backend::all_gather(self.backend, part)
     }
     fn reduce_field(&self, r: &FieldReduction) -> Result<Option<f64>, BackendError> {
         Backend::reduce_field(self.backend, r)
     }
     fn motion(&self) -> Result<Option<WatchValues>, BackendError> {
-        if let Some(m) = self.motion.get() {
-            return Ok(*m);
-        }
-        let m = Reader::motion(self.backend)?;
-        Ok(*self.motion.get_or_init(|| m))
+        cached(&self.motion, || Reader::motion(self.backend))
     }
 }
 
@@ -213,17 +264,25 @@ fn bodies_now(scene: &Scene, ids: &[u32]) -> Vec<u32> {
 /// Positions in the backend's current order.
 pub fn positions(b: &dyn Reader) -> Result<Option<Vec<[f64; 3]>>, BackendError> {
     let Some(x) = b.plan().model.field_id("x") else { return Ok(None) };
-    let Some(column) = b.read(x)? else { return Ok(None) };
+    Ok(b.read(x)?.map(|column| padded(&column)))
+}
+
+/// The positions of this rank's own particles ([`Reader::read_own`]).
+pub fn own_positions(b: &dyn Reader) -> Result<Option<Vec<[f64; 3]>>, BackendError> {
+    let Some(x) = b.plan().model.field_id("x") else { return Ok(None) };
+    Ok(b.read_own(x)?.map(|column| padded(&column)))
+}
+
+/// A column of positions as three coordinates each.
+fn padded(column: &Column) -> Vec<[f64; 3]> {
     let (c, v) = (column.0, &column.1);
-    Ok(Some(
-        (0..v.len() / c)
-            .map(|k| {
-                let mut p = [0.0; 3];
-                p[..c].copy_from_slice(&v[k * c..(k + 1) * c]);
-                p
-            })
-            .collect(),
-    ))
+    (0..v.len() / c)
+        .map(|k| {
+            let mut p = [0.0; 3];
+            p[..c].copy_from_slice(&v[k * c..(k + 1) * c]);
+            p
+        })
+        .collect()
 }
 
 /// The value of a probe now (NaN where it has none); an error only when the backend fails.
@@ -238,16 +297,16 @@ pub fn evaluate(p: &ProbeSpec, scene: &Scene, b: &dyn Reader) -> Result<f64, Bac
             };
             let (comps, values) = (column.0, &column.1);
             let dim = b.plan().dim;
-            let ids = b.ids()?;
-            // The selected particles' values, NaN left out, without collecting them unless the
-            // extreme's position is asked for.
+            let ids = b.ids_own()?;
+            // This rank's selected particles' values, NaN left out, without collecting them
+            // unless the extreme's position is asked for.
             let selected = (0..ids.len())
                 .filter(|k| select.as_ref().is_none_or(|s| s[ids[*k] as usize]))
                 .map(|k| (k, picked(*pick, shape, dim, &values[k * comps..(k + 1) * comps])))
                 .filter(|(_, v)| !v.is_nan());
             match locate {
                 Some(axis) => locate_extreme(reduce, &selected.collect::<Vec<_>>(), *axis, b),
-                None => Ok(reduce_values(reduce, selected.map(|p| p.1))),
+                None => Ok(merged(b, Partial::of(reduce, selected.map(|p| p.1))).value()),
             }
         }
         ProbeKind::Measure(m) => measure(*m, scene, b),
@@ -278,9 +337,10 @@ fn reduced_by_backend(
     }
 }
 
-/// Every particle's value of a probe's field or expression (`comps` numbers each, in the backend's
-/// order), and its shape; `None` where a field it reads is not stored. An expression is evaluated
-/// only for the particles `select` picks (by scene index); the others get zeros, never read.
+/// Every particle's value of a probe's field or expression (`comps` numbers each), of this rank's
+/// own particles in the backend's order ([`Reader::read_own`]), and its shape; `None` where a field
+/// it reads is not stored. An expression is evaluated only for the particles `select` picks (by
+/// scene index); the others get zeros, never read.
 fn probed_values(
     value: &ProbeValue,
     select: Option<&[bool]>,
@@ -289,15 +349,15 @@ fn probed_values(
 ) -> Result<Option<(Column, Shape)>, BackendError> {
     let plan = b.plan();
     let e = match value {
-        ProbeValue::Field(f) => return Ok(b.read(*f)?.map(|c| (c, plan.model.field(*f).ty.shape))),
+        ProbeValue::Field(f) => return Ok(b.read_own(*f)?.map(|c| (c, plan.model.field(*f).ty.shape))),
         ProbeValue::Expression(e) => e,
     };
     let mut fields = crate::engine::setup::HostFields::new();
     for f in value.fields() {
-        let Some(column) = b.read(f)? else { return Ok(None) };
+        let Some(column) = b.read_own(f)? else { return Ok(None) };
         fields.insert(f, (column.0, column.1.clone()));
     }
-    let ids = b.ids()?;
+    let ids = b.ids_own()?;
     let mut materials = crate::engine::setup::resolved_materials(plan, &scene.materials);
     let comps = crate::ir::components(e.ty.shape, plan.dim);
     let mut out = vec![0.0; ids.len() * comps];
@@ -339,32 +399,27 @@ fn picked(pick: Pick, shape: Shape, dim: usize, v: &[f64]) -> f64 {
     }
 }
 
-/// The `axis` coordinate of the particle where the reduction is reached.
+/// The `axis` coordinate of the particle where the reduction is reached: each rank's extreme among
+/// `values` (its own particles', by index in its own order), then the ranks' extreme (the last
+/// of equal ones, as within a rank).
 fn locate_extreme(reduce: &str, values: &[(usize, f64)], axis: usize, b: &dyn Reader) -> Result<f64, BackendError> {
     let key = |v: f64| match reduce {
         "min" => -v,
         "abs_max" => v.abs(),
         _ => v,
     };
-    let Some(&(k, _)) = values.iter().max_by(|p, q| key(p.1).total_cmp(&key(q.1))) else { return Ok(f64::NAN) };
-    Ok(positions(b)?.map(|x| x[k][axis]).unwrap_or(f64::NAN))
+    let best = values.iter().max_by(|p, q| key(p.1).total_cmp(&key(q.1)));
+    let mine = match best {
+        Some(&(k, v)) => vec![key(v), own_positions(b)?.map_or(f64::NAN, |x| x[k][axis])],
+        None => vec![],
+    };
+    let all = b.all_gather(mine);
+    Ok(all.iter().filter(|p| p.len() == 2).max_by(|p, q| p[0].total_cmp(&q[0])).map_or(f64::NAN, |p| p[1]))
 }
 
-fn reduce_values(reduce: &str, v: impl Iterator<Item = f64>) -> f64 {
-    let mut n = 0usize;
-    let v = v.inspect(|_| n += 1);
-    // A NaN anywhere makes min, max and abs_max NaN, as it makes the sum and the mean.
-    let r = match reduce {
-        "min" => -max_keeping_nan(f64::NEG_INFINITY, v.map(|x| -x)),
-        "max" => max_keeping_nan(f64::NEG_INFINITY, v),
-        "abs_max" => max_keeping_nan(0.0, v.map(|x| x.abs())),
-        _ => v.sum::<f64>(),
-    };
-    match (n, reduce) {
-        (0, _) => f64::NAN,
-        (_, "min" | "max" | "abs_max" | "sum") => r,
-        _ => r / n as f64,
-    }
+/// Every rank's part of a reduction, merged in rank order.
+fn merged(b: &dyn Reader, mine: Partial) -> Partial {
+    mine.merge_all(&b.all_gather(mine.parts().to_vec()))
 }
 
 /// A measure of the particles' positions (in the backend's order) and each one's body.
@@ -372,10 +427,17 @@ type AtPositions<'a> = dyn Fn(&[[f64; 3]], &[u32]) -> Result<f64, BackendError> 
 
 fn measure(m: Measure, scene: &Scene, b: &dyn Reader) -> Result<f64, BackendError> {
     let (dim, dx) = (b.plan().dim, scene.dx);
-    // Where the particles are and which body each is in, read only by the measures that need them.
+    // Where the particles are and which body each is in, read only by the measures that need
+    // them: every rank's particles, for the measures that compare neighbours or order them along
+    // an axis (gathered whole in a split run), ...
     let placed = |f: &AtPositions| {
         let Some(x) = positions(b)? else { return Ok(f64::NAN) };
         f(&x, &bodies_now(scene, &b.ids()?))
+    };
+    // ... and this rank's own, for those that merge the ranks' parts.
+    let own = |f: &AtPositions| {
+        let Some(x) = own_positions(b)? else { return Ok(f64::NAN) };
+        f(&x, &bodies_now(scene, &b.ids_own()?))
     };
     Ok(match m {
         // Both are among the watchdog's reductions where the backend reduces them itself.
@@ -395,17 +457,17 @@ fn measure(m: Measure, scene: &Scene, b: &dyn Reader) -> Result<f64, BackendErro
         Measure::FrontPosition => placed(&|x, which| front_position(x, &drivers(scene, which, b)?, b))?,
         Measure::MinPairDistance => placed(&|x, _| Ok(spacing_extremes(x, b)?.0))?,
         Measure::MaxNeighbourGap => placed(&|x, _| Ok(spacing_extremes(x, b)?.1))?,
-        Measure::CraterDiameter => placed(&|x, which| Ok(crater_diameter(x, which, scene, None)))?,
+        Measure::CraterDiameter => own(&|x, which| Ok(crater_diameter(x, which, scene, None, b)))?,
         Measure::IntactCraterDiameter => {
-            placed(&|x, which| Ok(crater_diameter(x, which, scene, damage(b)?.as_deref())))?
+            own(&|x, which| Ok(crater_diameter(x, which, scene, damage(b)?.as_deref(), b)))?
         }
-        Measure::DebrisLength => placed(&|x, _| Ok(debris(x, scene).0))?,
-        Measure::DebrisWidth => placed(&|x, _| Ok(debris(x, scene).1))?,
-        Measure::DebrisLengthToWidth => placed(&|x, _| {
-            let (l, w) = debris(x, scene);
+        Measure::DebrisLength => own(&|x, _| Ok(debris(x, scene, b).0))?,
+        Measure::DebrisWidth => own(&|x, _| Ok(debris(x, scene, b).1))?,
+        Measure::DebrisLengthToWidth => own(&|x, _| {
+            let (l, w) = debris(x, scene, b);
             Ok(l / w)
         })?,
-        Measure::PlugVelocity => placed(&|x, which| plug_velocity(x, which, scene, b))?,
+        Measure::PlugVelocity => own(&|x, which| plug_velocity(x, which, scene, b))?,
     })
 }
 
@@ -413,14 +475,16 @@ fn measure(m: Measure, scene: &Scene, b: &dyn Reader) -> Result<f64, BackendErro
 /// mean velocity along the impact axis of the plate's particles now beyond both the plate's
 /// initial rear face (by more than Δx) and the projectile's nose. Whether the plug leaves whole
 /// or breaks up and spreads sideways, that is the plate material ahead of the projectile; zero
-/// while there is none (below the ballistic limit, or before the plug leaves).
+/// while there is none (below the ballistic limit, or before the plug leaves). `x` and `body` are
+/// this rank's own particles; the nose and the mean are taken over the ranks.
 fn plug_velocity(x: &[[f64; 3]], body: &[u32], scene: &Scene, b: &dyn Reader) -> Result<f64, BackendError> {
     let (Some(axis), Some(plate)) = (Axis::of(scene), scene.bodies.get(1)) else { return Ok(f64::NAN) };
     let Some(vf) = b.plan().model.field_id("v") else { return Ok(f64::NAN) };
-    let Some(column) = b.read(vf)? else { return Ok(f64::NAN) };
+    let Some(column) = b.read_own(vf)? else { return Ok(f64::NAN) };
     let (c, v) = (column.0, &column.1);
     let rear = max_keeping_nan(f64::NEG_INFINITY, plate.particles.clone().map(|k| axis.coords(scene.particles.x[k]).0));
-    let nose = max_keeping_nan(f64::NEG_INFINITY, (0..x.len()).filter(|k| body[*k] == 0).map(|k| axis.coords(x[k]).0));
+    let mine = max_keeping_nan(f64::NEG_INFINITY, (0..x.len()).filter(|k| body[*k] == 0).map(|k| axis.coords(x[k]).0));
+    let nose = max_keeping_nan(f64::NEG_INFINITY, b.all_gather(vec![mine]).into_iter().map(|p| p[0]));
     if nose.is_nan() {
         return Ok(f64::NAN);
     }
@@ -429,10 +493,10 @@ fn plug_velocity(x: &[[f64; 3]], body: &[u32], scene: &Scene, b: &dyn Reader) ->
         .filter(|k| body[*k] == 1 && axis.coords(x[*k]).0 > beyond)
         .map(|k| (0..c).map(|d| v[k * c + d] * axis.dir[d]).sum::<f64>())
         .collect();
-    if speeds.is_empty() {
-        return Ok(0.0);
-    }
-    Ok(speeds.iter().sum::<f64>() / speeds.len() as f64)
+    // A NaN speed makes the mean NaN.
+    let parts = b.all_gather(vec![speeds.iter().sum(), speeds.len() as f64]);
+    let (sum, count) = parts.iter().fold((0.0, 0.0), |(s, n), p| (s + p[0], n + p[1]));
+    Ok(if count == 0.0 { 0.0 } else { sum / count })
 }
 
 /// Over every particle, relative to its own spacing Δx_i: the least distance to another particle
@@ -520,11 +584,18 @@ impl Axis {
 /// lipped material still counts, and ejected material does not). The crater's radius is where the
 /// ring's share of its initial count first reaches one half, interpolated between rings.
 /// Given the damage `D` of every particle, only the intact ones (`D < 1`) count: a failed particle
-/// carries no tension, so it is loose fragments that a recovered plate would not hold.
-fn crater_diameter(x: &[[f64; 3]], body: &[u32], scene: &Scene, damage: Option<&[f64]>) -> f64 {
+/// carries no tension, so it is loose fragments that a recovered plate would not hold. `x`, `body`
+/// and the damage are this rank's own particles; the rings' counts are summed over the ranks.
+fn crater_diameter(x: &[[f64; 3]], body: &[u32], scene: &Scene, damage: Option<&[f64]>, b: &dyn Reader) -> f64 {
     let (Some(axis), Some(plate)) = (Axis::of(scene), scene.bodies.get(1)) else { return f64::NAN };
     let initial: Vec<[f64; 3]> = plate.particles.clone().map(|k| scene.particles.x[k]).collect();
-    hole_diameter(&axis, &initial, plate_now(x, body, damage), scene.dx)
+    let Some(rings) = Rings::new(&axis, &initial, scene.dx) else { return f64::NAN };
+    let mine = rings.count(plate_now(x, body, damage));
+    let mut now = vec![0.0; mine.len()];
+    for part in b.all_gather(mine) {
+        now.iter_mut().zip(part).for_each(|(n, p)| *n += p);
+    }
+    rings.diameter(&now)
 }
 
 /// Where the second body's particles are now, only the intact ones (`D < 1`) given the damage.
@@ -533,54 +604,89 @@ fn plate_now<'a>(x: &'a [[f64; 3]], body: &'a [u32], damage: Option<&'a [f64]>) 
     (0..x.len()).filter(move |k| body[*k] == 1 && intact(*k)).map(|k| x[k])
 }
 
-/// The damage `D` of every particle, or none where the model has no damage (nothing has failed).
+/// The damage `D` of this rank's own particles, or none where the model has no damage (nothing
+/// has failed).
 fn damage(b: &dyn Reader) -> Result<Option<Vec<f64>>, BackendError> {
     let Some(d) = b.plan().model.field_id("D") else { return Ok(None) };
-    Ok(b.read(d)?.map(|d| d.1.clone()))
+    Ok(b.read_own(d)?.map(|d| d.1.clone()))
 }
 
-/// [`crater_diameter`] of a plate whose particles were at `initial` and are now at `now`.
+/// The rings of [`crater_diameter`]: a plate's slab and its material per ring at t = 0.
+struct Rings<'a> {
+    axis: &'a Axis,
+    width: f64,
+    /// The slab along the axis where material counts, the plate's initial one widened by its
+    /// thickness on each side.
+    slab: (f64, f64),
+    r_max: f64,
+    before: Vec<f64>,
+}
+
+impl<'a> Rings<'a> {
+    /// The rings of width `width` of a plate whose particles were at `initial`; `None` where the
+    /// plate has no particles.
+    fn new(axis: &'a Axis, initial: &[[f64; 3]], width: f64) -> Option<Rings<'a>> {
+        let initial: Vec<(f64, f64)> = initial.iter().map(|p| axis.coords(*p)).collect();
+        let (lo, hi) = initial.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, p| (a.0.min(p.0), a.1.max(p.0)));
+        let r_max = max_keeping_nan(0.0, initial.iter().map(|p| p.1));
+        if r_max.is_nan() {
+            return None;
+        }
+        let n = (r_max / width).ceil() as usize + 1;
+        let mut before = vec![0.0; n];
+        for p in &initial {
+            before[((p.1 / width) as usize).min(n - 1)] += 1.0;
+        }
+        let t = hi - lo;
+        Some(Rings { axis, width, slab: (lo - t, hi + t), r_max, before })
+    }
+
+    /// How many of the points `now` lie in each ring, within the slab.
+    fn count(&self, now: impl Iterator<Item = [f64; 3]>) -> Vec<f64> {
+        let n = self.before.len();
+        let mut after = vec![0.0; n];
+        for p in now {
+            let (s, r) = self.axis.coords(p);
+            if s >= self.slab.0 && s <= self.slab.1 && r < self.r_max {
+                after[((r / self.width) as usize).min(n - 1)] += 1.0;
+            }
+        }
+        after
+    }
+
+    /// The hole's diameter, given the count now in each ring.
+    fn diameter(&self, after: &[f64]) -> f64 {
+        let share: Vec<f64> = self.before.iter().zip(after).map(|(b, a)| if *b > 0.0 { a / b } else { 1.0 }).collect();
+        match share.iter().position(|s| *s >= 0.5) {
+            Some(0) => 0.0,
+            Some(k) => {
+                // Ring k − 1 (centre (k − ½)Δx) is below one half, ring k (centre (k + ½)Δx) above.
+                let (a, c) = (share[k - 1], share[k]);
+                2.0 * self.width * (k as f64 - 0.5 + (0.5 - a) / (c - a))
+            }
+            None => f64::NAN,
+        }
+    }
+}
+
+/// [`crater_diameter`] of a plate whose particles were at `initial` and are now at `now`, in a
+/// run in one piece.
+#[cfg(test)]
 fn hole_diameter(axis: &Axis, initial: &[[f64; 3]], now: impl Iterator<Item = [f64; 3]>, ring: f64) -> f64 {
-    let initial: Vec<(f64, f64)> = initial.iter().map(|p| axis.coords(*p)).collect();
-    let (lo, hi) = initial.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, p| (a.0.min(p.0), a.1.max(p.0)));
-    let t = hi - lo;
-    let r_max = max_keeping_nan(0.0, initial.iter().map(|p| p.1));
-    if r_max.is_nan() {
-        return f64::NAN;
-    }
-    let n = (r_max / ring).ceil() as usize + 1;
-    let mut before = vec![0.0; n];
-    for p in &initial {
-        before[((p.1 / ring) as usize).min(n - 1)] += 1.0;
-    }
-    let mut after = vec![0.0; n];
-    for p in now {
-        let (s, r) = axis.coords(p);
-        if s >= lo - t && s <= hi + t && r < r_max {
-            after[((r / ring) as usize).min(n - 1)] += 1.0;
-        }
-    }
-    let share: Vec<f64> = before.iter().zip(&after).map(|(b, a)| if *b > 0.0 { a / b } else { 1.0 }).collect();
-    match share.iter().position(|s| *s >= 0.5) {
-        Some(0) => 0.0,
-        Some(k) => {
-            // Ring k − 1 (centre (k − ½)Δx) is below one half, ring k (centre (k + ½)Δx) above.
-            let (a, c) = (share[k - 1], share[k]);
-            2.0 * ring * (k as f64 - 0.5 + (0.5 - a) / (c - a))
-        }
-        None => f64::NAN,
-    }
+    Rings::new(axis, initial, ring).map_or(f64::NAN, |r| r.diameter(&r.count(now)))
 }
 
 /// The debris cloud behind the plate: every particle more than Δx beyond the second body's
 /// initial rear face (along the impact axis). Its length is how far beyond the rear face it
 /// reaches, its width twice its reach from the axis, both as the 99th percentile over its
-/// particles so that a few stray particles do not set them.
-fn debris(x: &[[f64; 3]], scene: &Scene) -> (f64, f64) {
+/// particles so that a few stray particles do not set them. `x` is this rank's own particles;
+/// the ranks' debris particles are gathered (the cloud's, not the whole scene's).
+fn debris(x: &[[f64; 3]], scene: &Scene, b: &dyn Reader) -> (f64, f64) {
     let (Some(axis), Some(plate)) = (Axis::of(scene), scene.bodies.get(1)) else { return (f64::NAN, f64::NAN) };
     let rear = max_keeping_nan(f64::NEG_INFINITY, plate.particles.clone().map(|k| axis.coords(scene.particles.x[k]).0));
-    let (mut along, mut across): (Vec<f64>, Vec<f64>) =
-        x.iter().map(|p| axis.coords(*p)).filter(|(s, _)| *s > rear + scene.dx).map(|(s, r)| (s - rear, r)).unzip();
+    let mine = x.iter().map(|p| axis.coords(*p)).filter(|(s, _)| *s > rear + scene.dx).flat_map(|(s, r)| [s - rear, r]);
+    let cloud: Vec<f64> = b.all_gather(mine.collect()).concat();
+    let (mut along, mut across): (Vec<f64>, Vec<f64>) = cloud.chunks(2).map(|p| (p[0], p[1])).unzip();
     if along.len() < 10 {
         return (f64::NAN, f64::NAN);
     }
@@ -788,16 +894,21 @@ mod tests {
     use super::*;
 
     #[test]
-    fn a_nan_among_the_values_makes_every_extreme_nan() {
-        let v = [1.0, f64::NAN, -3.0];
-        for reduce in ["min", "max", "abs_max", "sum", "mean"] {
-            assert!(reduce_values(reduce, v.into_iter()).is_nan(), "{reduce}");
+    fn a_probe_leaves_nan_values_out_and_its_parts_merge_to_the_whole_reduction() {
+        let v = [1.0, f64::NAN, -3.0, 2.5, -0.5];
+        for (reduce, whole) in [("min", -3.0), ("max", 2.5), ("abs_max", 3.0), ("sum", 0.0), ("mean", 0.0)] {
+            assert_eq!(Partial::of(reduce, v).value(), whole, "{reduce}");
+            // Split anywhere, the parts merged (through their numbers, as ranks send them) give the same.
+            for cut in 0..=v.len() {
+                let parts = [Partial::of(reduce, v[..cut].to_vec()), Partial::of(reduce, v[cut..].to_vec())];
+                let sent: Vec<Vec<f64>> = parts.iter().map(|p| p.parts().to_vec()).collect();
+                assert_eq!(parts[0].merge_all(&sent).value(), whole, "{reduce} cut at {cut}");
+            }
+            assert!(Partial::of(reduce, [f64::NAN]).value().is_nan(), "{reduce} of no value");
+            assert!(Partial::of(reduce, []).merge_all(&[vec![f64::INFINITY, 0.0]]).value().is_nan(), "{reduce}");
         }
+        assert_eq!(Partial::of("mean", [1.0, -3.0]).value(), -1.0);
         assert!(max_keeping_nan(0.0, [2.0, f64::NAN, 5.0]).is_nan(), "a NaN speed among finite ones");
-        assert_eq!(reduce_values("min", [1.0, -3.0].into_iter()), -3.0);
-        assert_eq!(reduce_values("abs_max", [1.0, -3.0].into_iter()), 3.0);
-        assert_eq!(reduce_values("mean", [1.0, -3.0].into_iter()), -1.0);
-        assert!(reduce_values("max", std::iter::empty()).is_nan());
         assert_eq!(max_keeping_nan(0.0, [2.0, 5.0]), 5.0);
     }
 

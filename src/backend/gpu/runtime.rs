@@ -718,12 +718,7 @@ impl Backend for GpuBackend {
         self.reducer.record(&self.gpu, &mut encoder, op, &self.data, out, n, &self.globals, slot);
         self.reducer.record(&self.gpu, &mut encoder, ReduceOp::Sum, &self.data, out + n, n, &self.globals, slot + 1);
         let v: Vec<f32> = self.read_globals(encoder, gl::WATCH, 2).map_err(failed("reducing a probe"))?;
-        let (value, count) = (v[0] as f64, v[1] as f64);
-        Ok(Some(match r.reduce {
-            _ if count == 0.0 => f64::NAN,
-            "min" | "max" | "abs_max" | "sum" => value,
-            _ => value / count,
-        }))
+        Ok(Some(crate::backend::Partial::from_parts(r.reduce, v[0] as f64, v[1] as f64).value()))
     }
 
     fn watch_values(&self) -> Result<Option<crate::backend::WatchValues>, BackendError> {
