@@ -335,9 +335,9 @@ fn evaluated<B: Backend>(probes: &[ProbeSpec], scene: &pairsum::scene::Scene, b:
 /// particles and then merged over the ranks (a few numbers a rank instead of the field; the
 /// debris cloud's particles for its percentiles): after 60 steps of the hypervelocity impact
 /// (internal energy, no gravity; the crater and the debris cloud measured), 20 of the dam break
-/// (gravity), 20 of the copper Taylor bar (probes of expressions) and 20 of the Børvik plate (the
-/// plug's speed, zero while the projectile is in the plate), on two and three ranks,
-/// every rank gets the same values. The reductions of `v` are within 1e-12 of those computed
+/// (gravity), 20 of the copper Taylor bar (probes of expressions), 20 of the Børvik plate (the
+/// plug's speed, zero while the projectile is in the plate) and 40 of the elastic wave (its
+/// front), on two and three ranks, every rank gets the same values. The reductions of `v` are within 1e-12 of those computed
 /// here from the undivided run's fields (for a sum, of n times the largest term), every other
 /// probe within 1e-12 of the undivided run's value, and the watchdog's values within 1e-12.
 #[test]
@@ -347,6 +347,7 @@ fn probes_measures_and_the_watchdog_reduced_on_each_rank_give_the_undivided_valu
         ("dam_break_2d", 3, 20),
         ("taylor_bar_copper", 2, 20),
         ("borvik_perforation", 2, 20),
+        ("elastic_wave", 3, 40),
     ];
     for (name, ranks, steps) in cases {
         let opts = pairsum::scene::Options { resolution: Some("ci".into()), ..Default::default() };

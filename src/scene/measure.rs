@@ -454,7 +454,7 @@ fn measure(m: Measure, scene: &Scene, b: &dyn Reader) -> Result<f64, BackendErro
         // Particles of the first two bodies closer than Δx/2 to a particle of the other body.
         Measure::Interpenetrated => placed(&|x, which| Ok(interbody(x, which, dim, dx).1 as f64))?,
         // Where a wave front driven by the first moving constraint, or the first body, has got to.
-        Measure::FrontPosition => placed(&|x, which| front_position(x, &drivers(scene, which, b)?, b))?,
+        Measure::FrontPosition => own(&|x, which| front_position(x, &drivers(scene, which, b)?, b))?,
         Measure::MinPairDistance => placed(&|x, _| Ok(spacing_extremes(x, b)?.0))?,
         Measure::MaxNeighbourGap => placed(&|x, _| Ok(spacing_extremes(x, b)?.1))?,
         Measure::CraterDiameter => own(&|x, which| Ok(crater_diameter(x, which, scene, None, b)))?,
@@ -705,7 +705,7 @@ fn drivers(scene: &Scene, body: &[u32], b: &dyn Reader) -> Result<Vec<bool>, Bac
     let first_body = || body.iter().map(|w| *w == 0).collect();
     Ok(match moving.map(|c| c.target) {
         Some(Target::Body(k)) => body.iter().map(|w| *w as usize == k).collect(),
-        Some(Target::Part(k)) => match b.plan().model.field_id("part").map(|f| b.read(f)).transpose()?.flatten() {
+        Some(Target::Part(k)) => match b.plan().model.field_id("part").map(|f| b.read_own(f)).transpose()?.flatten() {
             Some(part) => part.1.iter().map(|p| *p == k as f64).collect(),
             None => first_body(),
         },
@@ -715,29 +715,44 @@ fn drivers(scene: &Scene, body: &[u32], b: &dyn Reader) -> Result<Vec<bool>, Bac
 
 /// Where a wave front has got to: along the first axis, the position at which the speed falls
 /// through half the drivers' mean speed, interpolated linearly between the last particle above
-/// and the next one below (particles ordered by position).
+/// and the next one below (particles ordered by position, then by id). `x` and `driving` are this
+/// rank's own particles; the drivers' mean, the last particle above and the next one are each
+/// found over the ranks (three numbers a rank each).
 fn front_position(x: &[[f64; 3]], driving: &[bool], b: &dyn Reader) -> Result<f64, BackendError> {
     let Some(v) = b.plan().model.field_id("v") else { return Ok(f64::NAN) };
-    let Some(column) = b.read(v)? else { return Ok(f64::NAN) };
+    let Some(column) = b.read_own(v)? else { return Ok(f64::NAN) };
     let (c, v) = (column.0, &column.1);
+    let ids = b.ids_own()?;
     let speed: Vec<f64> =
         (0..x.len()).map(|k| v[k * c..(k + 1) * c].iter().map(|u| u * u).sum::<f64>().sqrt()).collect();
     let driver: Vec<f64> = (0..x.len()).filter(|k| driving[*k]).map(|k| speed[k]).collect();
-    if driver.is_empty() {
+    let parts = b.all_gather(vec![driver.iter().sum(), driver.len() as f64]);
+    let (sum, count) = parts.iter().fold((0.0, 0.0), |(s, n), p| (s + p[0], n + p[1]));
+    if count == 0.0 {
         return Ok(f64::NAN);
     }
-    let half = 0.5 * driver.iter().sum::<f64>() / driver.len() as f64;
-    let mut order: Vec<usize> = (0..x.len()).collect();
-    order.sort_by(|a, b| x[*a][0].total_cmp(&x[*b][0]));
-    let last_above = order.iter().rposition(|k| speed[*k] > half);
-    Ok(match last_above {
-        Some(p) if p + 1 < order.len() => {
-            let (a, b) = (order[p], order[p + 1]);
-            let t = (speed[a] - half) / (speed[a] - speed[b]);
-            x[a][0] + t * (x[b][0] - x[a][0])
+    let half = 0.5 * sum / count;
+    // A particle as (position, id, speed), ordered by position, then id.
+    let row = |k: usize| [x[k][0], ids[k] as f64, speed[k]];
+    let order = |p: &[f64], q: &[f64]| p[0].total_cmp(&q[0]).then(p[1].total_cmp(&q[1]));
+    let extreme = |mine: Option<[f64; 3]>, last: bool| {
+        let all = b.all_gather(mine.map_or(vec![], |r| r.to_vec()));
+        let rows = all.into_iter().filter(|r| r.len() == 3);
+        if last {
+            rows.max_by(|p, q| order(p, q))
+        } else {
+            rows.min_by(|p, q| order(p, q))
         }
-        Some(p) => x[order[p]][0],
-        None => f64::NAN,
+    };
+    let above = (0..x.len()).filter(|k| speed[*k] > half).map(row).max_by(|p, q| order(p, q));
+    let Some(a) = extreme(above, true) else { return Ok(f64::NAN) };
+    let after = (0..x.len()).map(row).filter(|r| order(r, &a).is_gt()).min_by(|p, q| order(p, q));
+    Ok(match extreme(after, false) {
+        Some(n) => {
+            let t = (a[2] - half) / (a[2] - n[2]);
+            a[0] + t * (n[0] - a[0])
+        }
+        None => a[0],
     })
 }
 
