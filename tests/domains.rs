@@ -173,6 +173,33 @@ fn two_and_four_ranks_give_the_undivided_fields_within_1e_12_of_their_magnitude(
     assert!(sizes.iter().any(|s| s.1.halo_updates > 0), "{sizes:?}");
 }
 
+/// A halo's copy of a particle carries its group, material and id and the fields some pass reads
+/// at j, not its whole state: on four ranks, the Børvik plate's halos built once at the start
+/// take between the fewest and the most bytes a group's copy can have, times the copies received,
+/// and less than the smallest whole particle would (the fields compared within 1e-12 of the
+/// undivided run above show that nothing the passes read was left behind).
+#[test]
+fn a_halo_copy_carries_only_the_fields_the_passes_read_at_j() {
+    let opts = pairsum::scene::Options { resolution: Some("ci".into()), ..Default::default() };
+    let (_, plan) = prepare(&case("borvik_perforation"), &opts).expect("the case");
+    let read: Vec<_> = (0..plan.passes.len()).flat_map(|k| plan.fields_read_at_j(k)).collect();
+    let groups = 0..plan.model.groups.len() as u32;
+    let bytes = |g: u32, halo: bool| {
+        let stored = plan.layout.iter().filter(|l| l.groups.contains(pairsum::ir::GroupId(g)));
+        8 * (3 + stored.filter(|l| !halo || read.contains(&l.field)).map(|l| l.comps).sum::<usize>())
+    };
+    let copy: Vec<usize> = groups.clone().map(|g| bytes(g, true)).collect();
+    let whole = groups.map(|g| bytes(g, false)).min().expect("a group");
+    let (fewest, most) = (*copy.iter().min().expect("a group"), *copy.iter().max().expect("a group"));
+    assert!(most < whole, "a copy of {most} B is no smaller than a whole particle's {whole} B");
+    let (_, sizes) = split_against_whole("borvik_perforation", 4, 0);
+    assert!(sizes.iter().all(|s| s.1.rebuilds == 1), "{sizes:?}");
+    let sent: u64 = sizes.iter().map(|s| s.1.halo_builds).sum();
+    let copies: usize = sizes.iter().map(|s| s.1.halo_particles).sum();
+    let range = (copies * fewest) as u64..=(copies * most) as u64;
+    assert!(range.contains(&sent), "{sent} B sent for {copies} copies of {fewest}–{most} B (whole: {whole} B)");
+}
+
 /// The dam break cut in two by particle count gives one rank the water and the other mostly
 /// walls, which take continuity from the water only: at the first check (step 25) the measured
 /// pass times differ by more than 10 %, the ranks are cut again by each group's measured cost per

@@ -2,7 +2,9 @@
 //! by recursive coordinate bisection (`grid::decompose`); a rank runs a CPU backend over the
 //! particles in its box (its own) and copies of the others' particles within reach of them (its
 //! halo). Each evaluation starts by sending every particle that left the box to the rank whose box
-//! it entered, with its whole state (migration), and by rebuilding the halos; before each later
+//! it entered, with its whole state (migration), and by rebuilding the halos, whose copies carry
+//! only the fields some pass reads at j (the rest of a particle's state is never read there);
+//! before each later
 //! pass, a halo receives the fields that pass reads at j and an earlier pass of the evaluation
 //! wrote (`Plan::fields_read_at_j`). The passes, updates and reductions run over a rank's own
 //! particles only; the time step, the fields the engine and the runner read, the watchdog's
@@ -28,7 +30,7 @@ use std::sync::Mutex;
 pub struct Traffic {
     /// Whole particles that changed domain.
     pub migration: u64,
-    /// Whole particles copied into halos when they were rebuilt.
+    /// Particles copied into halos when they were rebuilt (the fields some pass reads at j).
     pub halo_builds: u64,
     /// Fields sent to halos before a pass.
     pub halo_updates: u64,
@@ -56,11 +58,13 @@ pub fn unsupported(plan: &Plan) -> Option<String> {
 }
 
 /// A particle: one in a store here, or one that travelled as its group, material and id, then
-/// every field its group stores, in the plan's layout order.
+/// the fields it carries of those its group stores, in the plan's layout order: every one for a
+/// particle that changed rank (`Sent`), those a pass reads at j for a halo's copy (`Halo`).
 #[derive(Clone)]
 enum Row<'a, T> {
     Here(&'a Store<T>, usize),
     Sent(&'a [f64]),
+    Halo(&'a [f64]),
 }
 
 /// Where this rank's own particles were at the last rebuild of the halos.
@@ -129,6 +133,9 @@ pub struct Domain<T: Real> {
     support: f64,
     /// Per pass: the stored fields it reads at j (with x and h).
     read_at_j: Vec<Vec<FieldId>>,
+    /// What a halo's copy of a particle holds: the fields some pass reads at j, in layout order.
+    /// The others are never read there, and do not travel.
+    halo_fields: Vec<FieldId>,
     /// The halo's skin, a fraction of the largest cut-off: the halo holds the particles within
     /// the cut-off plus the skin, and is kept until a pair may have come closer by the skin.
     skin: f64,
@@ -203,7 +210,9 @@ impl<T: Real> Domain<T> {
         }
         let (rank, size) = (transport.rank(), transport.size());
         let (x, h) = (field(&plan, "x")?, field(&plan, "h")?);
-        let read_at_j = (0..plan.passes.len()).map(|k| plan.fields_read_at_j(k)).collect();
+        let read_at_j: Vec<Vec<FieldId>> = (0..plan.passes.len()).map(|k| plan.fields_read_at_j(k)).collect();
+        let halo_fields: Vec<FieldId> =
+            plan.layout.iter().map(|l| l.field).filter(|f| read_at_j.iter().flatten().any(|r| r == f)).collect();
         let skin = match plan.search {
             Lists::Verlet { skin } => skin,
             _ => HALO_SKIN,
@@ -229,6 +238,7 @@ impl<T: Real> Domain<T> {
             h,
             support,
             read_at_j,
+            halo_fields,
             skin,
             periodic_moves,
             anchor: None,
@@ -274,34 +284,46 @@ impl<T: Real> Domain<T> {
         ranges.iter().zip(&self.owned).flat_map(|((_, r), n)| r.start..r.start + n).collect()
     }
 
-    /// The fields a group stores, as (field, components), in the order rows carry them.
-    fn stored(&self, group: u32) -> impl Iterator<Item = (FieldId, usize)> + '_ {
+    /// The fields a group stores, as (field, components), in the order rows carry them: every
+    /// one, or for a halo's copy only those some pass reads at j.
+    fn stored(&self, group: u32, halo: bool) -> impl Iterator<Item = (FieldId, usize)> + '_ {
         let g = crate::ir::GroupId(group);
-        self.plan.layout.iter().filter(move |l| l.groups.contains(g)).map(|l| (l.field, l.comps))
+        let carried = move |f: &FieldId| !halo || self.halo_fields.contains(f);
+        self.plan.layout.iter().filter(move |l| l.groups.contains(g) && carried(&l.field)).map(|l| (l.field, l.comps))
     }
 
-    fn row_len(&self, group: u32) -> usize {
-        3 + self.stored(group).map(|(_, c)| c).sum::<usize>()
+    fn row_len(&self, group: u32, halo: bool) -> usize {
+        3 + self.stored(group, halo).map(|(_, c)| c).sum::<usize>()
     }
 
-    /// Appends particle i of `store` as a travelling row.
+    /// Appends particle i of `store` as a travelling row, with every field its group stores.
     fn encode(&self, store: &Store<T>, i: usize, out: &mut Vec<f64>) {
         let g = store.group[i];
         out.extend([g as f64, store.material[i] as f64, store.id[i] as f64]);
-        for (f, comps) in self.stored(g) {
+        for (f, comps) in self.stored(g, false) {
             let c = store.column(f).expect("a stored field has a column");
             let row = c.row(i, g as usize);
             out.extend(c.data[row * comps..(row + 1) * comps].iter().map(|v| v.to_f64()));
         }
     }
 
-    /// The rows of a message.
-    fn rows<'a>(&self, message: &'a [f64]) -> Vec<Row<'a, T>> {
+    /// Appends a halo's copy of `row`: the fields some pass reads at j.
+    fn encode_halo(&self, row: &Row<'_, T>, out: &mut Vec<f64>) {
+        let g = Self::group_of(row);
+        out.extend([g as f64, Self::material_of(row) as f64, Self::id_of(row) as f64]);
+        for (f, _) in self.stored(g, true) {
+            out.extend(self.value(row, f).expect("a stored field has values"));
+        }
+    }
+
+    /// The rows of a message of whole particles, or of a halo's copies.
+    fn rows<'a>(&self, message: &'a [f64], halo: bool) -> Vec<Row<'a, T>> {
         let mut out = vec![];
         let mut at = 0;
         while at < message.len() {
-            let len = self.row_len(message[at] as u32);
-            out.push(Row::Sent(&message[at..at + len]));
+            let len = self.row_len(message[at] as u32, halo);
+            let row = &message[at..at + len];
+            out.push(if halo { Row::Halo(row) } else { Row::Sent(row) });
             at += len;
         }
         out
@@ -310,7 +332,21 @@ impl<T: Real> Domain<T> {
     fn group_of(row: &Row<'_, T>) -> u32 {
         match row {
             Row::Here(s, i) => s.group[*i],
-            Row::Sent(r) => r[0] as u32,
+            Row::Sent(r) | Row::Halo(r) => r[0] as u32,
+        }
+    }
+
+    fn material_of(row: &Row<'_, T>) -> u32 {
+        match row {
+            Row::Here(s, i) => s.material[*i],
+            Row::Sent(r) | Row::Halo(r) => r[1] as u32,
+        }
+    }
+
+    fn id_of(row: &Row<'_, T>) -> u32 {
+        match row {
+            Row::Here(s, i) => s.id[*i],
+            Row::Sent(r) | Row::Halo(r) => r[2] as u32,
         }
     }
 
@@ -324,9 +360,9 @@ impl<T: Real> Domain<T> {
                     c.data[c.row(*i, g) * c.comps..(c.row(*i, g) + 1) * c.comps].iter().map(|v| v.to_f64()).collect()
                 })
             }
-            Row::Sent(r) => {
+            Row::Sent(r) | Row::Halo(r) => {
                 let mut at = 3;
-                for (field, comps) in self.stored(r[0] as u32) {
+                for (field, comps) in self.stored(r[0] as u32, matches!(row, Row::Halo(_))) {
                     if field == f {
                         return Some(r[at..at + comps].to_vec());
                     }
@@ -345,33 +381,22 @@ impl<T: Real> Domain<T> {
         p
     }
 
-    /// A store of these rows (group-major), with their whole state.
+    /// A store of these rows (group-major), with the state they carry (a halo's copy, what the
+    /// passes read at j; the rest of its row stays as a new store has it, never read).
     fn build(&self, rows: &[Row<'_, T>]) -> Store<T> {
         // Rows already here are copied; travelled ones are written from their values.
         let group: Vec<u32> = rows.iter().map(Self::group_of).collect();
-        let material: Vec<u32> = rows
-            .iter()
-            .map(|r| match r {
-                Row::Here(s, i) => s.material[*i],
-                Row::Sent(v) => v[1] as u32,
-            })
-            .collect();
+        let material: Vec<u32> = rows.iter().map(Self::material_of).collect();
         let mut out = Store::new(&self.plan, group, material, self.params.materials());
         out.params = self.params.clone();
-        out.id = rows
-            .iter()
-            .map(|r| match r {
-                Row::Here(s, i) => s.id[*i],
-                Row::Sent(v) => v[2] as u32,
-            })
-            .collect();
+        out.id = rows.iter().map(Self::id_of).collect();
         for (k, row) in rows.iter().enumerate() {
             let g = Self::group_of(row);
             match row {
                 Row::Here(s, i) => out.copy_state(k, s, *i),
-                Row::Sent(v) => {
+                Row::Sent(v) | Row::Halo(v) => {
                     let mut at = 3;
-                    for (f, comps) in self.stored(g) {
+                    for (f, comps) in self.stored(g, matches!(row, Row::Halo(_))) {
                         let c = out.column_mut(f).expect("a stored field has a column");
                         let row = c.row(k, g as usize);
                         for (d, s) in c.data[row * comps..(row + 1) * comps].iter_mut().zip(&v[at..at + comps]) {
@@ -405,7 +430,7 @@ impl<T: Real> Domain<T> {
         let arrived = self.transport().exchange(leaving);
         let mut mine: Vec<Row<'_, T>> = staying.iter().map(|i| Row::Here(store, *i)).collect();
         for m in &arrived {
-            mine.extend(self.rows(m));
+            mine.extend(self.rows(m, false));
         }
         mine.sort_by_key(Self::group_of);
         // The boxes, grown by the largest cut-off.
@@ -433,16 +458,13 @@ impl<T: Real> Domain<T> {
                 let within = |m: &[f64; 3]| (0..dim).all(|a| p[a] + m[a] >= b[a] && p[a] + m[a] <= b[3 + a]);
                 if self.periodic_moves.iter().any(within) {
                     sent_rows[d].push(k);
-                    match r {
-                        Row::Here(s, i) => self.encode(s, *i, &mut halo_out[d]),
-                        Row::Sent(v) => halo_out[d].extend_from_slice(v),
-                    }
+                    self.encode_halo(r, &mut halo_out[d]);
                 }
             }
         }
         self.traffic.halo_builds += (halo_out.iter().map(Vec::len).sum::<usize>() * T::BYTES) as u64;
         let halo_in = self.transport().exchange(halo_out);
-        let halo: Vec<Vec<Row<'_, T>>> = halo_in.iter().map(|m| self.rows(m)).collect();
+        let halo: Vec<Vec<Row<'_, T>>> = halo_in.iter().map(|m| self.rows(m, true)).collect();
         // The local store, group-major: per group, this rank's own particles, then the halo's by
         // rank.
         let mut groups: Vec<u32> = mine.iter().chain(halo.iter().flatten()).map(Self::group_of).collect();
@@ -594,7 +616,7 @@ impl<T: Real> Domain<T> {
             self.encode(local, *i, &mut m);
         }
         let all = self.transport().all_gather(m);
-        let mut rows: Vec<Row<'_, T>> = all.iter().flat_map(|m| self.rows(m)).collect();
+        let mut rows: Vec<Row<'_, T>> = all.iter().flat_map(|m| self.rows(m, false)).collect();
         rows.sort_by_key(Self::group_of);
         self.build(&rows)
     }
@@ -660,12 +682,12 @@ impl<T: Real> Backend for Domain<T> {
 
     /// Rebuilds the halos when they may miss a neighbour, else keeps them; before each pass the
     /// halo receives what that pass reads at j and it does not hold as it is now: after a
-    /// rebuild (which sends whole particles) what an earlier pass wrote, else what the pass reads
+    /// rebuild (which sends what the passes read at j) what an earlier pass wrote, else what the pass reads
     /// and was not sent since the last write.
     fn evaluate(&mut self, g: Globals) -> Result<(), BackendError> {
         let mut fresh: Vec<FieldId> = if self.must_rebuild() {
             self.rebuild();
-            self.plan.layout.iter().map(|l| l.field).collect()
+            self.halo_fields.clone()
         } else {
             vec![]
         };
