@@ -40,8 +40,9 @@ def estimate(case):
         halo = halo_particles(n, case["dim"], layers, case.get("thickness"))
         work = n + SEARCH_SHARE * halo
         compute = work * case["ns_per_particle_step"] * 1e-9 / (CORES_PER_NODE * THREAD_EFFICIENCY)
-        # Kept halos: the plan's bytes each step; whole particles at a rebuild.
-        bytes_step = halo * (case["halo_bytes"] + case["state_bytes"] / case["steps_per_rebuild"])
+        # Kept halos: the plan's bytes each step; at a rebuild a copy of each halo particle (the
+        # fields the passes read at j).
+        bytes_step = halo * (case["halo_bytes"] + case["copy_bytes"] / case["steps_per_rebuild"])
         neighbours = 26 if case["dim"] == 3 and case.get("thickness") is None else 8
         messages = (case["exchanges"] + 2 / case["steps_per_rebuild"]) * neighbours
         comm = bytes_step / BANDWIDTH + messages * LATENCY
@@ -61,7 +62,9 @@ CASES = [
         "ns_per_particle_step": 8900.0,
         "reach_spacings": 2 * 1.3,  # support 2, h = 1.3 dx
         "halo_bytes": 304,  # pairsum plan borvik_perforation: 4 exchanges a step
-        "state_bytes": 608,
+        # A halo copy: group, material, id and the fields read at j, 200-208 B (tests/domains.rs,
+        # a_halo_copy_carries_only_the_fields_the_passes_read_at_j; a whole particle is 584-608 B).
+        "copy_bytes": 208,
         "exchanges": 4,
         "steps_per_rebuild": 6,  # measured: 16 rebuilds in 100 steps on 2 ranks
     },
@@ -74,7 +77,9 @@ CASES = [
         "ns_per_particle_step": 791.0,
         "reach_spacings": 2 * 1.5,
         "halo_bytes": 112,
-        "state_bytes": 152,
+        # A halo copy: group, material, id, x, v, m, rho, h, p_over_rho2, c (a whole particle: 152 B
+        # and the saved state).
+        "copy_bytes": 96,
         "exchanges": 2,
         "steps_per_rebuild": 25,  # measured: 4 in 100 steps, each after a reorder
     },
@@ -85,9 +90,9 @@ def main():
     print(
         f"assumed: {CORES_PER_NODE} cores a node at {THREAD_EFFICIENCY:.0%} thread efficiency, one rank a node, "
         f"{BANDWIDTH * 8 / 1e9:.0f} Gb/s and {LATENCY * 1e6:.0f} µs a message, no overlap of computing and sending, "
-        f"a rank's search also walks its halo ({SEARCH_SHARE:.0%} of a particle's step), probes reduced on each rank "
-        "(today every field a probe reads is gathered to every rank); efficiency: the compute of a rank's own "
-        "particles over the whole step"
+        f"a rank's search also walks its halo ({SEARCH_SHARE:.0%} of a particle's step), probes and measures reduced "
+        "on each rank (as they are but the four measures that compare neighbours); efficiency: the compute of a "
+        "rank's own particles over the whole step"
     )
     for case in CASES:
         print(f"\n{case['name']}")
