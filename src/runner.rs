@@ -542,27 +542,26 @@ fn profile_columns(scene: &Scene, p: &ProfileSpec, b: &dyn Reader) -> Result<Vec
     let rows: Vec<usize> = (0..x.len()).filter(|k| inside[*k] && p.body.is_none_or(|b| body(*k) == b)).collect();
     let mut names: Vec<String> = (0..dim).map(|a| format!("{} [m]", crate::ir::AXIS_NAMES[a])).collect();
     names.extend(["id".to_string(), "body".to_string()]);
-    let mut values: Vec<Vec<f64>> =
-        vec![rows.iter().flat_map(|k| x[*k][..dim].iter().copied().chain([ids[*k] as f64, body(*k) as f64])).collect()];
+    // Each field's component: the column and which component.
+    let mut fields = vec![];
     for f in &p.fields {
         let field = model.field(*f);
         let Some(column) = b.read_own(*f).map_err(|e| e.0)? else { continue };
-        let (comps, data) = (column.0, &column.1);
         for (c, suffix) in crate::ir::component_names(field.ty.shape, dim).iter().enumerate() {
             let name = if suffix.is_empty() { field.name.clone() } else { format!("{}.{suffix}", field.name) };
             let name = if field.ty.unit.is_one() { name } else { format!("{name} [{}]", field.ty.unit.label()) };
             names.push(name);
-            values.push(rows.iter().map(|k| data[k * comps + c]).collect());
+            fields.push((column.clone(), c));
         }
     }
     // Row by row: this rank's rows, then every rank's.
     let width = names.len();
-    let mine: Vec<f64> = (0..rows.len())
-        .flat_map(|r| {
-            values[0][r * (dim + 2)..(r + 1) * (dim + 2)].iter().chain(values[1..].iter().map(move |v| &v[r]))
-        })
-        .copied()
-        .collect();
+    let row = |k: usize| {
+        let at = [ids[k] as f64, body(k) as f64];
+        let values = fields.iter().map(move |(column, c)| column.1[k * column.0 + c]);
+        x[k][..dim].iter().copied().chain(at).chain(values)
+    };
+    let mine: Vec<f64> = rows.iter().flat_map(|k| row(*k)).collect();
     let all = b.all_gather(mine).concat();
     let mut table: Vec<&[f64]> = all.chunks(width).collect();
     table.sort_by(|a, c| a[p.along].total_cmp(&c[p.along]).then(a[dim].total_cmp(&c[dim])));

@@ -410,16 +410,35 @@ fn locate_extreme(reduce: &str, values: &[(usize, f64)], axis: usize, b: &dyn Re
     };
     let best = values.iter().max_by(|p, q| key(p.1).total_cmp(&key(q.1)));
     let mine = match best {
-        Some(&(k, v)) => vec![key(v), own_positions(b)?.map_or(f64::NAN, |x| x[k][axis])],
-        None => vec![],
+        Some(&(k, v)) => Some(vec![key(v), own_positions(b)?.map_or(f64::NAN, |x| x[k][axis])]),
+        None => None,
     };
-    let all = b.all_gather(mine);
-    Ok(all.iter().filter(|p| p.len() == 2).max_by(|p, q| p[0].total_cmp(&q[0])).map_or(f64::NAN, |p| p[1]))
+    Ok(greatest(b, mine, |p, q| p[0].total_cmp(&q[0])).map_or(f64::NAN, |p| p[1]))
 }
 
 /// Every rank's part of a reduction, merged in rank order.
 fn merged(b: &dyn Reader, mine: Partial) -> Partial {
     mine.merge_all(&b.all_gather(mine.parts().to_vec()))
+}
+
+/// Every rank's `mine`, summed element by element in rank order.
+fn summed(b: &dyn Reader, mine: Vec<f64>) -> Vec<f64> {
+    let mut total = vec![0.0; mine.len()];
+    for part in b.all_gather(mine) {
+        total.iter_mut().zip(part).for_each(|(t, p)| *t += p);
+    }
+    total
+}
+
+/// The greatest by `order` of every rank's row `mine` (the last of equal ones); `None` where no
+/// rank has one.
+fn greatest(
+    b: &dyn Reader,
+    mine: Option<Vec<f64>>,
+    order: impl Fn(&[f64], &[f64]) -> std::cmp::Ordering,
+) -> Option<Vec<f64>> {
+    let all = b.all_gather(mine.unwrap_or_default());
+    all.into_iter().filter(|r| !r.is_empty()).max_by(|p, q| order(p, q))
 }
 
 /// A measure of the particles' positions (in the backend's order) and each one's body.
@@ -494,8 +513,8 @@ fn plug_velocity(x: &[[f64; 3]], body: &[u32], scene: &Scene, b: &dyn Reader) ->
         .map(|k| (0..c).map(|d| v[k * c + d] * axis.dir[d]).sum::<f64>())
         .collect();
     // A NaN speed makes the mean NaN.
-    let parts = b.all_gather(vec![speeds.iter().sum(), speeds.len() as f64]);
-    let (sum, count) = parts.iter().fold((0.0, 0.0), |(s, n), p| (s + p[0], n + p[1]));
+    let plug = summed(b, vec![speeds.iter().sum(), speeds.len() as f64]);
+    let (sum, count) = (plug[0], plug[1]);
     Ok(if count == 0.0 { 0.0 } else { sum / count })
 }
 
@@ -590,12 +609,7 @@ fn crater_diameter(x: &[[f64; 3]], body: &[u32], scene: &Scene, damage: Option<&
     let (Some(axis), Some(plate)) = (Axis::of(scene), scene.bodies.get(1)) else { return f64::NAN };
     let initial: Vec<[f64; 3]> = plate.particles.clone().map(|k| scene.particles.x[k]).collect();
     let Some(rings) = Rings::new(&axis, &initial, scene.dx) else { return f64::NAN };
-    let mine = rings.count(plate_now(x, body, damage));
-    let mut now = vec![0.0; mine.len()];
-    for part in b.all_gather(mine) {
-        now.iter_mut().zip(part).for_each(|(n, p)| *n += p);
-    }
-    rings.diameter(&now)
+    rings.diameter(&summed(b, rings.count(plate_now(x, body, damage))))
 }
 
 /// Where the second body's particles are now, only the intact ones (`D < 1`) given the damage.
@@ -726,8 +740,8 @@ fn front_position(x: &[[f64; 3]], driving: &[bool], b: &dyn Reader) -> Result<f6
     let speed: Vec<f64> =
         (0..x.len()).map(|k| v[k * c..(k + 1) * c].iter().map(|u| u * u).sum::<f64>().sqrt()).collect();
     let driver: Vec<f64> = (0..x.len()).filter(|k| driving[*k]).map(|k| speed[k]).collect();
-    let parts = b.all_gather(vec![driver.iter().sum(), driver.len() as f64]);
-    let (sum, count) = parts.iter().fold((0.0, 0.0), |(s, n), p| (s + p[0], n + p[1]));
+    let drivers = summed(b, vec![driver.iter().sum(), driver.len() as f64]);
+    let (sum, count) = (drivers[0], drivers[1]);
     if count == 0.0 {
         return Ok(f64::NAN);
     }
@@ -735,19 +749,10 @@ fn front_position(x: &[[f64; 3]], driving: &[bool], b: &dyn Reader) -> Result<f6
     // A particle as (position, id, speed), ordered by position, then id.
     let row = |k: usize| [x[k][0], ids[k] as f64, speed[k]];
     let order = |p: &[f64], q: &[f64]| p[0].total_cmp(&q[0]).then(p[1].total_cmp(&q[1]));
-    let extreme = |mine: Option<[f64; 3]>, last: bool| {
-        let all = b.all_gather(mine.map_or(vec![], |r| r.to_vec()));
-        let rows = all.into_iter().filter(|r| r.len() == 3);
-        if last {
-            rows.max_by(|p, q| order(p, q))
-        } else {
-            rows.min_by(|p, q| order(p, q))
-        }
-    };
     let above = (0..x.len()).filter(|k| speed[*k] > half).map(row).max_by(|p, q| order(p, q));
-    let Some(a) = extreme(above, true) else { return Ok(f64::NAN) };
+    let Some(a) = greatest(b, above.map(Vec::from), order) else { return Ok(f64::NAN) };
     let after = (0..x.len()).map(row).filter(|r| order(r, &a).is_gt()).min_by(|p, q| order(p, q));
-    Ok(match extreme(after, false) {
+    Ok(match greatest(b, after.map(Vec::from), |p, q| order(q, p)) {
         Some(n) => {
             let t = (a[2] - half) / (a[2] - n[2]);
             a[0] + t * (n[0] - a[0])
