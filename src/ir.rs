@@ -377,13 +377,8 @@ pub enum Builtin {
     Sqrt,
     Exp,
     Ln,
-    Sin,
-    Cos,
-    /// The arc cosine, in radians, of a value in [−1, 1].
-    Acos,
-    Sinh,
-    Cosh,
-    Tanh,
+    /// A function of one dimensionless scalar from the table of [`Elementary`] functions.
+    Elementary(Elementary),
     Abs,
     Min,
     Max,
@@ -400,37 +395,98 @@ pub enum Builtin {
     Vector,
 }
 
+/// Every builtin but the elementary functions, with its name in the language and its arity (None:
+/// two or more).
+const BUILTINS: [(Builtin, &str, Option<usize>); 21] = [
+    (Builtin::Dot, "dot", Some(2)),
+    (Builtin::Outer, "outer", Some(2)),
+    (Builtin::DDot, "ddot", Some(2)),
+    (Builtin::Sym, "sym", Some(1)),
+    (Builtin::Skew, "skew", Some(1)),
+    (Builtin::Dev, "dev", Some(1)),
+    (Builtin::Trace, "trace", Some(1)),
+    (Builtin::Transpose, "transpose", Some(1)),
+    (Builtin::Norm, "norm", Some(1)),
+    (Builtin::Inv, "inv", Some(1)),
+    (Builtin::Det, "det", Some(1)),
+    (Builtin::Sqrt, "sqrt", Some(1)),
+    (Builtin::Exp, "exp", Some(1)),
+    (Builtin::Ln, "ln", Some(1)),
+    (Builtin::Abs, "abs", Some(1)),
+    (Builtin::Min, "min", None),
+    (Builtin::Max, "max", None),
+    (Builtin::Diag, "diag", Some(1)),
+    (Builtin::KernelAt, "W_at", Some(2)),
+    (Builtin::KernelGradAt, "gradW_at", Some(2)),
+    (Builtin::Vector, "vec", None),
+];
+
 impl Builtin {
     pub fn name(self) -> &'static str {
         match self {
-            Builtin::Dot => "dot",
-            Builtin::Outer => "outer",
-            Builtin::Sym => "sym",
-            Builtin::Skew => "skew",
-            Builtin::Dev => "dev",
-            Builtin::Trace => "trace",
-            Builtin::Transpose => "transpose",
-            Builtin::Norm => "norm",
-            Builtin::DDot => "ddot",
-            Builtin::Inv => "inv",
-            Builtin::Det => "det",
-            Builtin::Sqrt => "sqrt",
-            Builtin::Exp => "exp",
-            Builtin::Ln => "ln",
-            Builtin::Sin => "sin",
-            Builtin::Cos => "cos",
-            Builtin::Acos => "acos",
-            Builtin::Sinh => "sinh",
-            Builtin::Cosh => "cosh",
-            Builtin::Tanh => "tanh",
-            Builtin::Abs => "abs",
-            Builtin::Min => "min",
-            Builtin::Max => "max",
-            Builtin::Diag => "diag",
-            Builtin::KernelAt => "W_at",
-            Builtin::KernelGradAt => "gradW_at",
-            Builtin::Vector => "vec",
+            Builtin::Elementary(e) => e.name(),
+            b => BUILTINS.iter().find(|(c, ..)| *c == b).map(|(_, name, _)| *name).expect("every builtin is listed"),
         }
+    }
+
+    /// The builtin called `name`, with its arity (None: two or more).
+    pub fn by_name(name: &str) -> Option<(Builtin, Option<usize>)> {
+        let listed = BUILTINS.iter().find(|(_, n, _)| *n == name).map(|(b, _, arity)| (*b, *arity));
+        listed.or_else(|| Elementary::by_name(name).map(|e| (Builtin::Elementary(e), Some(1))))
+    }
+
+    /// Every builtin's name.
+    pub fn names() -> impl Iterator<Item = &'static str> {
+        BUILTINS.iter().map(|(_, name, _)| *name).chain(ELEMENTARY.iter().map(|e| e.name))
+    }
+}
+
+/// An elementary function of one dimensionless scalar, with a dimensionless value (applied to a
+/// vec or tensor, to each component): a row of [`ELEMENTARY`]. Adding one is adding its row:
+/// the checker, the host's evaluator, the CPU's closures and C code and the WGSL take it from
+/// there (Cranelift's pair code leaves a program that calls one to the C code or the closures).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct Elementary(u8);
+
+/// A row of the table of elementary functions: the name (the language's, WGSL's and C's, whose
+/// f32 version appends `f`) and the Rust function for each precision, which the host and the
+/// CPU's closures call and which are C's libm functions of the same name.
+pub struct ElementaryFn {
+    pub name: &'static str,
+    pub f64: fn(f64) -> f64,
+    pub f32: fn(f32) -> f32,
+}
+
+/// Angles are in radians; the inverse functions' domains are C's (`asin` and `acos` of a value in
+/// [−1, 1]).
+pub const ELEMENTARY: [ElementaryFn; 9] = [
+    ElementaryFn { name: "sin", f64: f64::sin, f32: f32::sin },
+    ElementaryFn { name: "cos", f64: f64::cos, f32: f32::cos },
+    ElementaryFn { name: "tan", f64: f64::tan, f32: f32::tan },
+    ElementaryFn { name: "asin", f64: f64::asin, f32: f32::asin },
+    ElementaryFn { name: "acos", f64: f64::acos, f32: f32::acos },
+    ElementaryFn { name: "atan", f64: f64::atan, f32: f32::atan },
+    ElementaryFn { name: "sinh", f64: f64::sinh, f32: f32::sinh },
+    ElementaryFn { name: "cosh", f64: f64::cosh, f32: f32::cosh },
+    ElementaryFn { name: "tanh", f64: f64::tanh, f32: f32::tanh },
+];
+
+impl Elementary {
+    pub fn by_name(name: &str) -> Option<Elementary> {
+        ELEMENTARY.iter().position(|e| e.name == name).map(|k| Elementary(k as u8))
+    }
+
+    /// Its row of [`ELEMENTARY`].
+    pub fn row(self) -> &'static ElementaryFn {
+        &ELEMENTARY[self.0 as usize]
+    }
+
+    pub fn name(self) -> &'static str {
+        self.row().name
+    }
+
+    pub fn eval(self, x: f64) -> f64 {
+        (self.row().f64)(x)
     }
 }
 

@@ -34,12 +34,8 @@ pub trait Real:
     fn sqrt(self) -> Self;
     fn exp(self) -> Self;
     fn ln(self) -> Self;
-    fn sin(self) -> Self;
-    fn cos(self) -> Self;
-    fn acos(self) -> Self;
-    fn sinh(self) -> Self;
-    fn cosh(self) -> Self;
-    fn tanh(self) -> Self;
+    /// The elementary function `e` in this precision (`ir::ELEMENTARY`).
+    fn elementary(e: crate::ir::Elementary) -> fn(Self) -> Self;
     fn powf(self, e: Self) -> Self;
     fn abs(self) -> Self;
     fn min(self, o: Self) -> Self;
@@ -62,7 +58,7 @@ pub trait Real:
 }
 
 macro_rules! real {
-    ($t:ty, $name:expr, $exp:path, $ln:path, $pow:path, $consts:path, $ln_consts:path) => {
+    ($t:ty, $elementary:ident, $name:expr, $exp:path, $ln:path, $pow:path, $consts:path, $ln_consts:path) => {
         impl Real for $t {
             const BYTES: usize = std::mem::size_of::<$t>();
             const NAME: &'static str = $name;
@@ -96,29 +92,8 @@ macro_rules! real {
             fn ln(self) -> Self {
                 <$t>::ln(self)
             }
-            #[inline(always)]
-            fn sin(self) -> Self {
-                <$t>::sin(self)
-            }
-            #[inline(always)]
-            fn cos(self) -> Self {
-                <$t>::cos(self)
-            }
-            #[inline(always)]
-            fn acos(self) -> Self {
-                <$t>::acos(self)
-            }
-            #[inline(always)]
-            fn sinh(self) -> Self {
-                <$t>::sinh(self)
-            }
-            #[inline(always)]
-            fn cosh(self) -> Self {
-                <$t>::cosh(self)
-            }
-            #[inline(always)]
-            fn tanh(self) -> Self {
-                <$t>::tanh(self)
+            fn elementary(e: crate::ir::Elementary) -> fn(Self) -> Self {
+                e.row().$elementary
             }
             #[inline(always)]
             fn powf(self, e: Self) -> Self {
@@ -145,6 +120,7 @@ macro_rules! real {
 }
 real!(
     f32,
+    f32,
     "f32",
     crate::backend::cpu::math::exp_f32,
     crate::backend::cpu::math::ln_f32,
@@ -153,6 +129,7 @@ real!(
     crate::backend::cpu::math::LN_F32
 );
 real!(
+    f64,
     f64,
     "f64",
     crate::backend::cpu::math::exp_f64,

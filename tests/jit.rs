@@ -35,7 +35,8 @@ fn natives<T: Real>(
     let mut out = vec![];
     if ccode::enabled() {
         let c = build();
-        // Every program Cranelift runs, C runs (they share the graph and the unsupported list).
+        // Every program Cranelift runs, C runs (they share the graph and the unsupported list; C
+        // also runs the elementary functions, which no bundled pair sum calls).
         assert_eq!(c.passes_made_by(NativeKind::C), cranelift.native_passes().0, "C compiles what Cranelift does");
         out.push(("C", c));
     }
@@ -180,6 +181,55 @@ fn native_pair_programs_equal_the_closures_on_jittered_clouds_with_variable_h() 
             }
         }
     }
+}
+
+/// Every function of the language's table of elementary functions (`ir::ELEMENTARY`) in one pair
+/// sum, of a direction cosine in [−1, 1] on a jittered cloud: the C code calls libm's function on
+/// each lane as the closures call it, so one evaluation agrees with the closures bit for bit, in
+/// f64 and in f32; Cranelift's code has none of them and leaves the pass to the closures.
+#[test]
+fn a_pair_sum_of_every_elementary_function_runs_as_c_code_bit_for_bit_with_the_closures_in_f64_and_f32() {
+    fn check<T: Real>() {
+        use pairsum::backend::Globals;
+        use pairsum::schedule::{IntegratorKind, Plan};
+        let calls: Vec<String> = pairsum::ir::ELEMENTARY.iter().map(|e| format!("y += {}(q)", e.name)).collect();
+        let m = model(&format!(
+            "use kernels\ngroup metal\nkernel = wendland_c2\n\
+             pairsum elementary -> y: scalar [-] {{\n    let q = x_ij.x / max(r_ij, 1e-12 [m])\n    {}\n}}\n\
+             integrate {{ x' = v  v' = 0 }}\n",
+            calls.join("\n    ")
+        ));
+        let dx = 0.01;
+        let mut seed = 5;
+        let mut x = lattice(2, 8, dx);
+        for p in &mut x {
+            for c in p.iter_mut().take(2) {
+                *c += 0.3 * dx * (rnd(&mut seed) - 0.5);
+            }
+        }
+        let inp = input(2, x, dx);
+        let mats = [material(&m, &[("rho0", vec![1000.0]), ("h_ratio", vec![1.3])])];
+        let plan = Plan::build(&m, &scene(&m, 2, &["y"], IntegratorKind::Euler), None).expect("plan");
+        let store = build_store::<T>(&plan, &inp, &mats).expect("store");
+        let g = Globals { time: 0.0, dt: 1e-3 };
+        let mut closures = CpuBackend::new(plan.clone(), store.clone(), vec![]).expect("cpu").without_jit();
+        closures.initialise().expect("init");
+        closures.evaluate(g).expect("closures");
+        let (_, want) = stored_field(&closures, "y");
+        let cranelift = ccode::without_c(|| CpuBackend::new(plan.clone(), store.clone(), vec![]).expect("cpu"));
+        assert_eq!(cranelift.native_passes(), (0, 1), "Cranelift leaves the pass to the closures ({})", T::NAME);
+        assert!(ccode::enabled(), "a C compiler answers on every machine that builds pairsum");
+        let mut c = CpuBackend::new(plan.clone(), store, vec![]).expect("cpu");
+        assert_eq!(c.passes_made_by(NativeKind::C), 1, "the pass runs as C code ({})", T::NAME);
+        c.initialise().expect("init");
+        c.evaluate(g).expect("C");
+        let (_, got) = stored_field(&c, "y");
+        let differ = got.iter().zip(&want).filter(|(a, b)| a.to_bits() != b.to_bits()).count();
+        assert_eq!(differ, 0, "{}: y differs in {differ} of {} particles", T::NAME, got.len());
+        assert!(want.iter().all(|v| v.is_finite()) && want.iter().any(|v| *v != 0.0), "{}: y = {want:?}", T::NAME);
+    }
+    check::<f64>();
+    check::<f32>();
 }
 
 /// A field that only some of a pass's source groups store: FTLR19's plate gathers its damage `D`

@@ -610,7 +610,7 @@ impl Checker {
         let Some((b, arity)) = builtin_by_name(&f.name) else {
             let mut d = Diagnostic::error("E0213", format!("unknown function `{}`", f.name))
                 .at(f.span, "no builtin or helper of this name");
-            let mut names: Vec<String> = types::CALLABLE.iter().map(|s| s.to_string()).collect();
+            let mut names: Vec<String> = types::callable().map(String::from).collect();
             names.extend(self.helper_names());
             if let Some(best) = closest(&f.name, names.iter().map(String::as_str)) {
                 d = d.help(format!("did you mean `{best}`?"));

@@ -367,14 +367,7 @@ pub fn builtin(f: Builtin, mut args: Vec<Expr>, span: crate::diag::Span) -> Resu
             let u = units[0].powr(Ratio { num: 1, den: 2 }).ok_or_else(unit_overflow)?;
             Ok(call(args, Type::scalar(u)))
         }
-        Builtin::Exp
-        | Builtin::Ln
-        | Builtin::Sin
-        | Builtin::Cos
-        | Builtin::Acos
-        | Builtin::Sinh
-        | Builtin::Cosh
-        | Builtin::Tanh => {
+        Builtin::Exp | Builtin::Ln | Builtin::Elementary(_) => {
             if shapes[0] != Shape::Scalar {
                 return Err(bad("a scalar", None));
             }
@@ -465,72 +458,13 @@ pub fn builtin(f: Builtin, mut args: Vec<Expr>, span: crate::diag::Span) -> Resu
 
 /// Builtins by name, with their arity (None: two or more).
 pub fn builtin_by_name(name: &str) -> Option<(Builtin, Option<usize>)> {
-    use Builtin::*;
-    Some(match name {
-        "dot" => (Dot, Some(2)),
-        "outer" => (Outer, Some(2)),
-        "ddot" => (DDot, Some(2)),
-        "sym" => (Sym, Some(1)),
-        "skew" => (Skew, Some(1)),
-        "dev" => (Dev, Some(1)),
-        "trace" => (Trace, Some(1)),
-        "transpose" => (Transpose, Some(1)),
-        "norm" => (Norm, Some(1)),
-        "inv" => (Inv, Some(1)),
-        "det" => (Det, Some(1)),
-        "sqrt" => (Sqrt, Some(1)),
-        "exp" => (Exp, Some(1)),
-        "ln" => (Ln, Some(1)),
-        "sin" => (Sin, Some(1)),
-        "cos" => (Cos, Some(1)),
-        "acos" => (Acos, Some(1)),
-        "sinh" => (Sinh, Some(1)),
-        "cosh" => (Cosh, Some(1)),
-        "tanh" => (Tanh, Some(1)),
-        "abs" => (Abs, Some(1)),
-        "min" => (Min, None),
-        "max" => (Max, None),
-        "W_at" => (KernelAt, Some(2)),
-        "gradW_at" => (KernelGradAt, Some(2)),
-        "vec" => (Vector, None),
-        "diag" => (Diag, Some(1)),
-        _ => return None,
-    })
+    Builtin::by_name(name)
 }
 
+/// Every callable name the language knows besides user helpers and builtins (for suggestions).
+pub const CALLABLE: [&str; 6] = ["pow", "select", "avg", "min_over", "max_over", "sum_over"];
+
 /// Every callable name the language knows besides user helpers (for suggestions).
-pub const CALLABLE: [&str; 33] = [
-    "diag",
-    "dot",
-    "outer",
-    "ddot",
-    "sym",
-    "skew",
-    "dev",
-    "trace",
-    "transpose",
-    "norm",
-    "inv",
-    "det",
-    "sqrt",
-    "exp",
-    "ln",
-    "sin",
-    "cos",
-    "acos",
-    "sinh",
-    "cosh",
-    "tanh",
-    "abs",
-    "min",
-    "max",
-    "W_at",
-    "gradW_at",
-    "vec",
-    "pow",
-    "select",
-    "avg",
-    "min_over",
-    "max_over",
-    "sum_over",
-];
+pub fn callable() -> impl Iterator<Item = &'static str> {
+    Builtin::names().chain(CALLABLE)
+}

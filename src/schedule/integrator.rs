@@ -271,19 +271,20 @@ fn rigid_motion(plan: &Plan, scene: &SceneSpec, k: usize, x_ref: FieldId) -> Opt
         let cross = param_of(SceneRole::AxisCross(k))?;
         let one = Type::scalar(Unit::ONE);
         let angle = ramped_time(c.ramp).scaled_by(omega.clone());
-        let trig = |f| Expr::new(ExprKind::Call(f, vec![angle.clone()]), one);
+        let trig = |name: &str| {
+            let (f, _) = ir::Builtin::by_name(name).expect("sin and cos are builtins");
+            Expr::new(ExprKind::Call(f, vec![angle.clone()]), one)
+        };
         let arm = Expr::field(x_ref, x_ty).minus(center.clone());
         let mat_vec = |m: Expr, u: Expr| {
             let unit = m.ty.unit.mul(&u.ty.unit).unwrap_or(u.ty.unit);
             Expr::binary(Op::MatVec, m, u, Type::new(Shape::Vec, unit))
         };
-        let mut rotated = arm
-            .clone()
-            .scaled_by(trig(ir::Builtin::Cos))
-            .plus(mat_vec(cross.clone(), arm.clone()).scaled_by(trig(ir::Builtin::Sin)));
+        let mut rotated =
+            arm.clone().scaled_by(trig("cos")).plus(mat_vec(cross.clone(), arm.clone()).scaled_by(trig("sin")));
         // The component along the axis, which a 2D (in-plane) arm lacks.
         if let Some(axis) = param_of(SceneRole::AxisProjection(k)) {
-            let along = mat_vec(axis, arm).scaled_by(Expr::constant(1.0, one).minus(trig(ir::Builtin::Cos)));
+            let along = mat_vec(axis, arm).scaled_by(Expr::constant(1.0, one).minus(trig("cos")));
             rotated = rotated.plus(along);
         }
         position = center.plus(shift).plus(rotated.clone());

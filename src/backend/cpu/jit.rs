@@ -10,8 +10,9 @@
 //! multiply–adds; min/max, exp, ln and pow as `program.rs` computes them), hence bit-identical
 //! results — `tests/jit.rs` checks that on every bundled case.
 //!
-//! A program with an operation the JIT does not emit (`sin`, `cos`, `acos`, the hyperbolic
-//! functions) keeps its closures; so does a pass whose gathered columns are not stored with one base on every
+//! A program that calls an elementary function (`ir::ELEMENTARY`: `sin`, `acos`, `tanh`, …),
+//! which the JIT does not emit, is left to the C code ([`super::ccode`], which calls libm on each
+//! lane) or the closures; so does a pass whose gathered columns are not stored with one base on every
 //! group that stores them. A neighbour whose group does not store a gathered field (the
 //! projectile's, for the plate's damage) reads zeros there, as with the closures.
 //! `PAIRSUM_NO_JIT=1` turns the JIT off.
@@ -257,6 +258,13 @@ pub(super) fn check(spec: &PairSpec) -> Result<(), String> {
 /// Compiles the pair program, or says why not.
 pub fn compile_pair<T: Real>(spec: &PairSpec) -> Result<JitPair<T>, String> {
     check(spec)?;
+    let elementary = |id: &Id| match spec.graph.nodes[*id as usize] {
+        Node::Un(Un::Elementary(e), _) => Some(e),
+        _ => None,
+    };
+    if let Some(e) = spec.nodes.iter().find_map(elementary) {
+        return Err(format!("`{}`: Cranelift's code has no elementary functions (the C code has)", e.name()));
+    }
     let mut flags = settings::builder();
     flags.set("opt_level", "speed").map_err(|e| e.to_string())?;
     flags.set("use_colocated_libcalls", "false").map_err(|e| e.to_string())?;
@@ -353,8 +361,6 @@ pub(super) fn demand_order(spec: &PairSpec) -> Vec<Id> {
 
 fn supported(node: &Node) -> Result<(), String> {
     match node {
-        Node::Un(Un::Sin | Un::Cos | Un::Acos, _) => Err("sin, cos and acos".into()),
-        Node::Un(Un::Sinh | Un::Cosh | Un::Tanh, _) => Err("sinh, cosh and tanh".into()),
         Node::Load { side: Side::I, .. } | Node::Param { side: Side::I, .. } => {
             Err("a value of particle i read per lane".into())
         }
@@ -625,9 +631,7 @@ impl<'a, 'b, T: Real> Emitter<'a, 'b, T> {
                         }
                         Un::Exp => self.exp(a, T::EXP),
                         Un::Ln => self.ln(a, T::LN),
-                        Un::Sin | Un::Cos | Un::Acos | Un::Sinh | Un::Cosh | Un::Tanh => {
-                            unreachable!("checked by `supported`")
-                        }
+                        Un::Elementary(_) => unreachable!("checked by `compile_pair`"),
                     }
                 }
                 Node::Bin(op, a, c) => {

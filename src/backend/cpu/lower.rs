@@ -4,8 +4,8 @@
 //! that the closure compiler runs over batches of lanes.
 
 use crate::ir::{
-    self, Builtin, Expr, ExprKind, FieldId, Global, GroupSet, Kernel, LocalId, Model, Op, PairValue, ParamId, Reduce,
-    Shape, Side, Stmt,
+    self, Builtin, Elementary, Expr, ExprKind, FieldId, Global, GroupSet, Kernel, LocalId, Model, Op, PairValue,
+    ParamId, Reduce, Shape, Side, Stmt,
 };
 use std::collections::{BTreeMap, HashMap};
 
@@ -18,12 +18,8 @@ pub enum Un {
     Sqrt,
     Exp,
     Ln,
-    Sin,
-    Cos,
-    Acos,
-    Sinh,
-    Cosh,
-    Tanh,
+    /// A function from the table of elementary functions (`ir::ELEMENTARY`).
+    Elementary(Elementary),
     Abs,
 }
 
@@ -145,12 +141,7 @@ impl Graph {
                 Un::Sqrt => x.sqrt(),
                 Un::Exp => x.exp(),
                 Un::Ln => x.ln(),
-                Un::Sin => x.sin(),
-                Un::Cos => x.cos(),
-                Un::Acos => x.acos(),
-                Un::Sinh => x.sinh(),
-                Un::Cosh => x.cosh(),
-                Un::Tanh => x.tanh(),
+                Un::Elementary(e) => e.eval(x),
                 Un::Abs => x.abs(),
             };
             return self.c(r);
@@ -819,26 +810,12 @@ impl<'a> Lowerer<'a> {
                 let det = self.det(&args[0]);
                 scalar(det)
             }
-            Builtin::Sqrt
-            | Builtin::Exp
-            | Builtin::Ln
-            | Builtin::Sin
-            | Builtin::Cos
-            | Builtin::Acos
-            | Builtin::Sinh
-            | Builtin::Cosh
-            | Builtin::Tanh
-            | Builtin::Abs => {
+            Builtin::Sqrt | Builtin::Exp | Builtin::Ln | Builtin::Elementary(_) | Builtin::Abs => {
                 let op = match f {
                     Builtin::Sqrt => Un::Sqrt,
                     Builtin::Exp => Un::Exp,
                     Builtin::Ln => Un::Ln,
-                    Builtin::Sin => Un::Sin,
-                    Builtin::Cos => Un::Cos,
-                    Builtin::Acos => Un::Acos,
-                    Builtin::Sinh => Un::Sinh,
-                    Builtin::Cosh => Un::Cosh,
-                    Builtin::Tanh => Un::Tanh,
+                    Builtin::Elementary(e) => Un::Elementary(e),
                     _ => Un::Abs,
                 };
                 let c = args[0].c.iter().map(|x| self.g.un(op, *x)).collect();

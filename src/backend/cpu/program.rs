@@ -233,12 +233,16 @@ fn un_instr<T: Real>(op: Un, o: usize, a: usize) -> Instr<T> {
         Un::Sqrt => lanes1!(o, a, |x| x.sqrt()),
         Un::Exp => lanes1!(o, a, |x| x.lane_exp()),
         Un::Ln => lanes1!(o, a, |x| x.lane_ln()),
-        Un::Sin => lanes1!(o, a, |x| x.sin()),
-        Un::Cos => lanes1!(o, a, |x| x.cos()),
-        Un::Acos => lanes1!(o, a, |x| x.acos()),
-        Un::Sinh => lanes1!(o, a, |x| x.sinh()),
-        Un::Cosh => lanes1!(o, a, |x| x.cosh()),
-        Un::Tanh => lanes1!(o, a, |x| x.tanh()),
+        Un::Elementary(e) => {
+            let f = T::elementary(e);
+            Box::new(move |regs: &mut [T], ctx: &Ctx<T>| {
+                let p = regs.as_mut_ptr();
+                let (out, a) = (reg_mut(p, o, ctx.n), reg(p, a, ctx.n));
+                for k in 0..out.len() {
+                    out[k] = f(a[k]);
+                }
+            })
+        }
         Un::Abs => lanes1!(o, a, |x| x.abs()),
     }
 }
