@@ -15,7 +15,7 @@
 
 use super::cpu::{first_non_finite_in, known, lower::Known, snapshot_of, CpuBackend};
 use super::transport::Transport;
-use super::{Backend, BackendError, Globals, Mirror, Snapshot, WatchValues};
+use super::{padded, Backend, BackendError, Globals, Mirror, Nearby, Snapshot, WatchValues};
 use crate::compare::largest_number;
 use crate::engine::watchdog::{gravity, Motion};
 use crate::grid::decompose::{bisect_with_cuts, Cuts};
@@ -72,6 +72,8 @@ struct Anchor {
     x: Vec<[f64; 3]>,
     h: Vec<f64>,
     skin: f64,
+    /// The halo held every particle within this distance of one of the rank's own.
+    reach: f64,
 }
 
 /// The ranks are cut again when the slowest rank's neighbour-pass time exceeds the ranks' mean by
@@ -101,13 +103,6 @@ fn with(mut v: [f64; 3], axis: usize, d: f64) -> [f64; 3] {
 /// The model's field `name`.
 fn field(plan: &Plan, name: &str) -> Result<FieldId, BackendError> {
     plan.model.field_id(name).ok_or_else(|| BackendError(format!("the model has no field `{name}`")))
-}
-
-/// A position of `dim ≤ 3` coordinates as three.
-fn pad(x: &[f64]) -> [f64; 3] {
-    let mut p = [0.0; 3];
-    p[..x.len()].copy_from_slice(x);
-    p
 }
 
 /// One rank of a CPU run split into domains, driven by the engine as a backend.
@@ -165,7 +160,7 @@ impl<T: Real> Domain<T> {
     ) -> Result<Domain<T>, BackendError> {
         let x = field(&plan, "x")?;
         let positions = store.read_f64(x).map(|(_, v)| v).unwrap_or_default();
-        let positions: Vec<[f64; 3]> = positions.chunks(plan.dim.max(1)).map(pad).collect();
+        let positions: Vec<[f64; 3]> = positions.chunks(plan.dim.max(1)).map(padded).collect();
         let (cuts, own) = Self::share(&plan, &positions, transport.rank(), transport.size())?;
         let rows: Vec<(&Store<T>, usize)> = own.into_iter().map(|i| (&store, i)).collect();
         let mine = Store::gather(&plan, &store.params, &rows);
@@ -495,7 +490,7 @@ impl<T: Real> Domain<T> {
         self.backend.replace_particles(new, &owned);
         (self.owned, self.send, self.recv) = (owned, send, recv);
         let (x, h) = self.own().into_iter().map(|i| self.place(i)).unzip();
-        self.anchor = Some(Anchor { x, h, skin });
+        self.anchor = Some(Anchor { x, h, skin, reach });
         self.traffic.rebuilds += 1;
         self.traffic.halo_particles = self.recv.iter().map(Vec::len).sum();
     }
@@ -745,6 +740,44 @@ impl<T: Real> Backend for Domain<T> {
 
     fn ids(&self) -> Result<Vec<u32>, BackendError> {
         Ok(self.gather(1, |s, i| vec![s.id[i] as f64]).into_iter().map(|v| v as u32).collect())
+    }
+
+    /// This rank's own particles, then its halo's with their positions as they are now (sent
+    /// again: the copies hold those of the last pass). The halo held every particle within its
+    /// reach of an own particle at the last rebuild, and since then no particle moved farther
+    /// than the largest displacement over the ranks: the reach now is the rebuild's less twice
+    /// that (none before the first rebuild).
+    fn nearby(&self) -> Result<Option<Nearby>, BackendError> {
+        let (dim, store) = (self.plan.dim.max(1), &self.backend.store);
+        let own = self.own();
+        let mut x: Vec<[f64; 3]> = own.iter().map(|i| self.place(*i).0).collect();
+        let mut ids: Vec<u32> = own.iter().map(|i| store.id[*i]).collect();
+        let out: Vec<Vec<f64>> = self
+            .send
+            .iter()
+            .map(|list| list.iter().flat_map(|i| self.place(*i as usize).0[..dim].to_vec()).collect())
+            .collect();
+        let got = self.transport().exchange(out);
+        for (list, m) in self.recv.iter().zip(&got) {
+            for (k, p) in list.iter().zip(m.chunks(dim)) {
+                x.push(padded(p));
+                ids.push(store.id[*k as usize]);
+            }
+        }
+        let moved = match &self.anchor {
+            Some(a) => x.iter().zip(&a.x).fold(0.0, |m, (p, q)| {
+                let d2: f64 = (0..3).map(|c| (p[c] - q[c]).powi(2)).sum();
+                if d2.is_nan() {
+                    f64::NAN
+                } else {
+                    largest_number(m, [d2.sqrt()])
+                }
+            }),
+            None => f64::INFINITY,
+        };
+        let moved = max_keeping_nan(0.0, self.transport().all_gather(vec![moved]).into_iter().map(|p| p[0]));
+        let reach = self.anchor.as_ref().map_or(0.0, |a| a.reach - 2.0 * moved);
+        Ok(Some(Nearby { x, ids, own: own.len(), reach: if reach.is_nan() { 0.0 } else { reach.max(0.0) } }))
     }
 
     fn groups(&self) -> Vec<u32> {

@@ -179,6 +179,28 @@ impl std::fmt::Display for BackendError {
     }
 }
 
+/// This rank's own particles, then the others near them ([`Backend::nearby`]).
+#[derive(Clone, Debug)]
+pub struct Nearby {
+    /// Positions: this rank's own particles' (in the order of [`Backend::read_own`]), then the
+    /// others'.
+    pub x: Vec<[f64; 3]>,
+    /// Each one's index at creation.
+    pub ids: Vec<u32>,
+    /// How many of them are this rank's own.
+    pub own: usize,
+    /// Every particle within this distance of one of the rank's own is among them (infinite in a
+    /// run in one piece).
+    pub reach: f64,
+}
+
+/// A position of up to three coordinates as three.
+pub fn padded(x: &[f64]) -> [f64; 3] {
+    let mut p = [0.0; 3];
+    p[..x.len().min(3)].copy_from_slice(&x[..x.len().min(3)]);
+    p
+}
+
 pub trait Backend {
     /// "cpu (f64, 2 threads)", "gpu (llvmpipe, f32)".
     fn describe(&self) -> String;
@@ -225,6 +247,15 @@ pub trait Backend {
     /// [`ids`](Self::ids) of this rank's own particles, in the order of [`read_own`](Self::read_own).
     fn ids_own(&self) -> Result<Vec<u32>, BackendError> {
         self.ids()
+    }
+    /// The positions of this rank's own particles and of every other particle within
+    /// [`Nearby::reach`] of one of them: what a measure that compares neighbours reduces on each
+    /// rank. In a run in one piece, every particle, with no limit to the reach.
+    fn nearby(&self) -> Result<Option<Nearby>, BackendError> {
+        let Some(x) = self.plan().model.field_id("x") else { return Ok(None) };
+        let Some((comps, values)) = self.read(x)? else { return Ok(None) };
+        let x: Vec<[f64; 3]> = values.chunks(comps.max(1)).map(padded).collect();
+        Ok(Some(Nearby { own: x.len(), x, ids: self.ids()?, reach: f64::INFINITY }))
     }
     /// Each particle's group, in the current order.
     fn groups(&self) -> Vec<u32>;

@@ -3,7 +3,7 @@
 
 use super::max_keeping_nan;
 use super::spec::{Pick, ProbeKind, ProbeSpec, ProbeValue, ResultSpec, Scene};
-use crate::backend::{Backend, BackendError, FieldReduction, Partial, WatchValues};
+use crate::backend::{Backend, BackendError, FieldReduction, Nearby, Partial, WatchValues};
 use crate::ir::FieldId;
 use crate::ir::{component_indices, Shape};
 use crate::schedule::Plan;
@@ -122,6 +122,12 @@ pub trait Reader {
     fn all_gather(&self, part: Vec<f64>) -> Vec<Vec<f64>> {
         vec![part]
     }
+    /// This rank's own particles and those near them ([`Backend::nearby`]); by default every
+    /// particle [`read`](Self::read) gives, with no limit to the reach.
+    fn nearby(&self) -> Result<Option<Rc<Nearby>>, BackendError> {
+        let Some(x) = positions(self)? else { return Ok(None) };
+        Ok(Some(Rc::new(Nearby { own: x.len(), x, ids: self.ids()?.to_vec(), reach: f64::INFINITY })))
+    }
     /// A probe's reduction where the backend computes it itself ([`Backend::reduce_field`]).
     fn reduce_field(&self, r: &FieldReduction) -> Result<Option<f64>, BackendError> {
         let _ = r;
@@ -153,6 +159,9 @@ impl<B: Backend> Reader for B {
     fn all_gather(&self, part: Vec<f64>) -> Vec<Vec<f64>> {
         Backend::all_gather(self, part)
     }
+    fn nearby(&self) -> Result<Option<Rc<Nearby>>, BackendError> {
+        Ok(Backend::nearby(self)?.map(Rc::new))
+    }
     fn reduce_field(&self, r: &FieldReduction) -> Result<Option<f64>, BackendError> {
         Backend::reduce_field(self, r)
     }
@@ -174,6 +183,7 @@ pub struct Moment<'a, B: Backend> {
     ids: OnceCell<Rc<Vec<u32>>>,
     ids_own: OnceCell<Rc<Vec<u32>>>,
     motion: OnceCell<Option<WatchValues>>,
+    nearby: OnceCell<Option<Rc<Nearby>>>,
 }
 
 impl<'a, B: Backend> Moment<'a, B> {
@@ -184,6 +194,7 @@ impl<'a, B: Backend> Moment<'a, B> {
             ids: OnceCell::new(),
             ids_own: OnceCell::new(),
             motion: OnceCell::new(),
+            nearby: OnceCell::new(),
         }
     }
 
@@ -231,6 +242,9 @@ impl<B: Backend> Reader for Moment<'_, B> {
     fn all_gather(&self, part: Vec<f64>) -> Vec<Vec<f64>> {
         Backend::all_gather(self.backend, part)
     }
+    fn nearby(&self) -> Result<Option<Rc<Nearby>>, BackendError> {
+        cached(&self.nearby, || Reader::nearby(self.backend))
+    }
     fn reduce_field(&self, r: &FieldReduction) -> Result<Option<f64>, BackendError> {
         Backend::reduce_field(self.backend, r)
     }
@@ -254,6 +268,9 @@ impl<B: Backend> Reader for Own<'_, B> {
     fn ids(&self) -> Result<Rc<Vec<u32>>, BackendError> {
         Ok(Rc::new(self.0.ids_own()?))
     }
+    fn nearby(&self) -> Result<Option<Rc<Nearby>>, BackendError> {
+        Ok(None)
+    }
 }
 
 /// Each particle's body, in the backend's current order.
@@ -262,7 +279,7 @@ fn bodies_now(scene: &Scene, ids: &[u32]) -> Vec<u32> {
 }
 
 /// Positions in the backend's current order.
-pub fn positions(b: &dyn Reader) -> Result<Option<Vec<[f64; 3]>>, BackendError> {
+pub fn positions<R: Reader + ?Sized>(b: &R) -> Result<Option<Vec<[f64; 3]>>, BackendError> {
     let Some(x) = b.plan().model.field_id("x") else { return Ok(None) };
     Ok(b.read(x)?.map(|column| padded(&column)))
 }
@@ -469,13 +486,25 @@ fn measure(m: Measure, scene: &Scene, b: &dyn Reader) -> Result<f64, BackendErro
             None => max_keeping_nan(0.0, speeds(b)?),
         },
         // The least distance between a particle of the first body and one of the second, over Δx.
-        Measure::MinInterbodyDistance => placed(&|x, which| Ok(interbody(x, which, dim, dx).0 / dx))?,
+        Measure::MinInterbodyDistance => match near_each_rank(m, scene, b)? {
+            Some(v) => v,
+            None => placed(&|x, which| Ok(interbody(x, which, dim, dx).0 / dx))?,
+        },
         // Particles of the first two bodies closer than Δx/2 to a particle of the other body.
-        Measure::Interpenetrated => placed(&|x, which| Ok(interbody(x, which, dim, dx).1 as f64))?,
+        Measure::Interpenetrated => match near_each_rank(m, scene, b)? {
+            Some(v) => v,
+            None => placed(&|x, which| Ok(interbody(x, which, dim, dx).1 as f64))?,
+        },
         // Where a wave front driven by the first moving constraint, or the first body, has got to.
         Measure::FrontPosition => own(&|x, which| front_position(x, &drivers(scene, which, b)?, b))?,
-        Measure::MinPairDistance => placed(&|x, _| Ok(spacing_extremes(x, b)?.0))?,
-        Measure::MaxNeighbourGap => placed(&|x, _| Ok(spacing_extremes(x, b)?.1))?,
+        Measure::MinPairDistance => match near_each_rank(m, scene, b)? {
+            Some(v) => v,
+            None => placed(&|x, _| Ok(spacing_extremes(x, b)?.0))?,
+        },
+        Measure::MaxNeighbourGap => match near_each_rank(m, scene, b)? {
+            Some(v) => v,
+            None => placed(&|x, _| Ok(spacing_extremes(x, b)?.1))?,
+        },
         Measure::CraterDiameter => own(&|x, which| Ok(crater_diameter(x, which, scene, None, b)))?,
         Measure::IntactCraterDiameter => {
             own(&|x, which| Ok(crater_diameter(x, which, scene, damage(b)?.as_deref(), b)))?
@@ -518,34 +547,76 @@ fn plug_velocity(x: &[[f64; 3]], body: &[u32], scene: &Scene, b: &dyn Reader) ->
     Ok(if count == 0.0 { 0.0 } else { sum / count })
 }
 
+/// A measure that compares neighbours (`min_interbody_distance`, `interpenetrated`,
+/// `min_pair_distance`, `max_neighbour_gap`) reduced on each rank over its own particles against
+/// those near them ([`Reader::nearby`]), then over the ranks, where that gives what the undivided
+/// particles give; `None` where it may not (the measure then gathers every particle) or for
+/// another measure. Every rank calls it alike.
+pub fn near_each_rank(m: Measure, scene: &Scene, b: &dyn Reader) -> Result<Option<f64>, BackendError> {
+    Ok(match m {
+        Measure::MinInterbodyDistance => interbody_near(scene, b)?.map(|(least, _)| least / scene.dx),
+        Measure::Interpenetrated => interbody_near(scene, b)?.map(|(_, close)| close),
+        Measure::MinPairDistance => spacing_near(b)?.map(|(least, _)| least),
+        Measure::MaxNeighbourGap => spacing_near(b)?.map(|(_, gap)| gap),
+        _ => None,
+    })
+}
+
+/// [`spacing_extremes`] reduced on each rank over its own particles against those near them
+/// ([`Reader::nearby`]), then over the ranks; `None` where that may not be what the undivided
+/// particles give (a particle's nearest neighbour, capped at 3 Δx_i, lies past the reach), and the
+/// caller gathers every particle.
+fn spacing_near(b: &dyn Reader) -> Result<Option<(f64, f64)>, BackendError> {
+    let (Some(near), Some(dxf)) = (b.nearby()?, b.plan().model.field_id("dx")) else { return Ok(None) };
+    let Some(column) = b.read_own(dxf)? else { return Ok(None) };
+    let mine = match column.1.len() == near.own {
+        true => spacing_of(&near.x, &column.1, b.plan().dim, near.reach),
+        false => None,
+    };
+    let (least, gap, exact) = mine.unwrap_or((f64::NAN, f64::NAN, false));
+    let all = b.all_gather(vec![least, gap, f64::from(u8::from(exact))]);
+    if all.iter().any(|p| p[2] != 1.0) {
+        return Ok(None);
+    }
+    Ok(Some((all.iter().fold(f64::INFINITY, |m, p| m.min(p[0])), all.iter().fold(0.0, |m, p| m.max(p[1])))))
+}
+
 /// Over every particle, relative to its own spacing Δx_i: the least distance to another particle
 /// (clumping: the tensile instability pulls particles together) and the largest distance to its
 /// nearest neighbour (a crack or a particle left alone). Neighbours within 3 Δx_i are searched.
 fn spacing_extremes(x: &[[f64; 3]], b: &dyn Reader) -> Result<(f64, f64), BackendError> {
-    let dim = b.plan().dim;
     let Some(dxf) = b.plan().model.field_id("dx") else { return Ok((f64::NAN, f64::NAN)) };
     let Some(column) = b.read(dxf)? else { return Ok((f64::NAN, f64::NAN)) };
-    let (_, dx) = (column.0, &column.1);
-    let reach = 3.0 * max_keeping_nan(0.0, dx.iter().copied());
-    if !reach.is_finite() {
-        return Ok((f64::NAN, f64::NAN));
+    let extremes = spacing_of(x, &column.1, b.plan().dim, f64::INFINITY);
+    Ok(extremes.map_or((f64::NAN, f64::NAN), |(least, gap, _)| (least, gap)))
+}
+
+/// [`spacing_extremes`] over the first particles of `x`, those of the spacings `dx`, against
+/// every particle of `x`, and whether each one's nearest (capped at 3 Δx_i) lies within `reach`;
+/// `None` where a spacing is not a number.
+fn spacing_of(x: &[[f64; 3]], dx: &[f64], dim: usize, reach: f64) -> Option<(f64, f64, bool)> {
+    let cell = 3.0 * max_keeping_nan(0.0, dx.iter().copied());
+    if !cell.is_finite() {
+        return None;
     }
     let flat: Vec<f64> = x.iter().flat_map(|p| p[..dim].to_vec()).collect();
-    let grid = crate::grid::Grid::build(&flat, dim, reach);
-    let (mut least, mut gap) = (f64::INFINITY, 0.0f64);
-    for (i, p) in x.iter().enumerate() {
+    let grid = crate::grid::Grid::build(&flat, dim, cell);
+    let (mut least, mut gap, mut within) = (f64::INFINITY, 0.0f64, true);
+    for (i, dx_i) in dx.iter().enumerate().take(x.len()) {
+        let p = x[i];
         let mut nearest = f64::INFINITY;
-        grid.for_each_candidate(*p, |j| {
+        grid.for_each_candidate(p, |j| {
             if j as usize != i {
                 let r = (0..dim).map(|c| (p[c] - x[j as usize][c]).powi(2)).sum::<f64>().sqrt();
                 nearest = nearest.min(r);
             }
         });
-        let nearest = nearest.min(3.0 * dx[i]) / dx[i];
-        least = least.min(nearest);
-        gap = gap.max(nearest);
+        let nearest = nearest.min(3.0 * dx_i);
+        within &= nearest <= reach;
+        least = least.min(nearest / dx_i);
+        gap = gap.max(nearest / dx_i);
     }
-    Ok((least, gap))
+    Some((least, gap, within))
 }
 
 fn speeds(b: &dyn Reader) -> Result<Vec<f64>, BackendError> {
@@ -759,6 +830,42 @@ fn front_position(x: &[[f64; 3]], driving: &[bool], b: &dyn Reader) -> Result<f6
         }
         None => a[0],
     })
+}
+
+/// [`interbody`] reduced on each rank over its own particles against those near them
+/// ([`Reader::nearby`]), then over the ranks: (least distance, particles closer than Δx/2 to the
+/// other body). `None` where that may not be what the undivided particles give (the bodies are
+/// farther apart than 2 Δx, where [`interbody`] searches them all, or than the reach), and the
+/// caller gathers every particle.
+fn interbody_near(scene: &Scene, b: &dyn Reader) -> Result<Option<(f64, f64)>, BackendError> {
+    let Some(near) = b.nearby()? else { return Ok(None) };
+    let (dim, dx) = (b.plan().dim, scene.dx);
+    let body = bodies_now(scene, &near.ids);
+    let grids: Vec<(Vec<usize>, crate::grid::Grid)> = (0..2)
+        .map(|k| {
+            let side: Vec<usize> = (0..near.x.len()).filter(|i| body[*i] == k).collect();
+            let flat: Vec<f64> = side.iter().flat_map(|i| near.x[*i][..dim].to_vec()).collect();
+            let grid = crate::grid::Grid::build(&flat, dim, 2.0 * dx);
+            (side, grid)
+        })
+        .collect();
+    let (mut least, mut close) = (f64::INFINITY, 0usize);
+    for i in (0..near.own).filter(|i| body[*i] < 2) {
+        let (side, grid) = &grids[1 - body[i] as usize];
+        let mut touching = false;
+        grid.for_each_candidate(near.x[i], |j| {
+            let q = near.x[side[j as usize]];
+            let r = (0..dim).map(|c| (near.x[i][c] - q[c]).powi(2)).sum::<f64>().sqrt();
+            least = least.min(r);
+            touching |= r < 0.5 * dx;
+        });
+        close += usize::from(touching);
+    }
+    let all = b.all_gather(vec![least, close as f64, near.reach]);
+    let least = all.iter().fold(f64::INFINITY, |m, p| m.min(p[0]));
+    let reach = all.iter().fold(f64::INFINITY, |m, p| m.min(p[2]));
+    let exact = least <= 2.0 * dx && least <= reach && 0.5 * dx <= reach;
+    Ok(exact.then(|| (least, all.iter().map(|p| p[1]).sum())))
 }
 
 /// (least distance between bodies 0 and 1, number of particles of either closer than Δx/2 to the
