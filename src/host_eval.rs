@@ -19,14 +19,37 @@ pub trait Leaves {
 
 /// The value of `e`, or a clause that says what in it the host cannot evaluate.
 pub fn eval(e: &Expr, dim: usize, leaves: &mut dyn Leaves) -> Result<Vec<f64>, String> {
-    Evaluator { dim, leaves, locals: vec![], every_branch: false }.value(e)
+    Evaluator { dim, leaves, locals: vec![], every_branch: false, scalars_only: false }.value(e)
 }
 
 /// Whether `e` can be evaluated here, before any value is known: every branch of every `select`,
 /// `&&` and `||` is taken, and `leaves` answer with stand-ins (zeros) or with what they cannot
 /// give. `Err` is the clause `eval` would give for the first thing it cannot evaluate.
 pub fn check(e: &Expr, dim: usize, leaves: &mut dyn Leaves) -> Result<(), String> {
-    Evaluator { dim, leaves, locals: vec![], every_branch: true }.value(e).map(|_| ())
+    Evaluator { dim, leaves, locals: vec![], every_branch: true, scalars_only: false }.value(e).map(|_| ())
+}
+
+/// The value of a scalar `e` made of literals and constants only (no field, parameter, global or
+/// reduction, and nothing whose value depends on the dimension): the checker's constant folding.
+pub fn constant(e: &Expr) -> Option<f64> {
+    struct Nothing;
+    impl Leaves for Nothing {
+        fn field(&mut self, _: FieldId) -> Result<Vec<f64>, String> {
+            Err("it reads a field".into())
+        }
+        fn param(&mut self, _: ParamId) -> Result<Vec<f64>, String> {
+            Err("it reads a parameter".into())
+        }
+        fn global(&mut self, _: Global) -> Result<f64, String> {
+            Err("it reads a global".into())
+        }
+        fn reduction(&mut self, _: Reduce, _: &Expr) -> Result<f64, String> {
+            Err("it reduces".into())
+        }
+    }
+    let mut evaluator =
+        Evaluator { dim: 0, leaves: &mut Nothing, locals: vec![], every_branch: false, scalars_only: true };
+    evaluator.value(e).ok().map(|v| v[0])
 }
 
 /// What the host evaluates, for the errors of what it does not.
@@ -39,6 +62,8 @@ struct Evaluator<'a> {
     locals: Vec<(LocalId, Vec<f64>)>,
     /// Evaluate both sides of every choice (`check`).
     every_branch: bool,
+    /// Refuse every value that is not a scalar (`constant`, which knows no dimension).
+    scalars_only: bool,
 }
 
 fn truth(b: bool) -> Vec<f64> {
@@ -47,6 +72,9 @@ fn truth(b: bool) -> Vec<f64> {
 
 impl Evaluator<'_> {
     fn value(&mut self, e: &Expr) -> Result<Vec<f64>, String> {
+        if self.scalars_only && !matches!(e.ty.shape, Shape::Scalar | Shape::Bool) {
+            return Err("its value depends on the dimension".into());
+        }
         let n = ir::components(e.ty.shape, self.dim);
         Ok(match &e.kind {
             ExprKind::Const(v) => vec![*v; n],
@@ -169,5 +197,28 @@ impl Evaluator<'_> {
             Builtin::Vector => (0..self.dim).map(|k| a.get(k).map_or(0.0, |c| c[0])).collect(),
             _ => return Err(format!("it calls `{}`, {BEYOND}", f.name())),
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::constant;
+    use crate::ir::{Builtin, Expr, ExprKind, Global, Shape, Type};
+    use crate::units::Unit;
+
+    #[test]
+    fn a_constant_folds_its_arithmetic_and_functions_and_refuses_a_global_or_a_vec() {
+        let one = Type::scalar(Unit::ONE);
+        let c = |v: f64| Expr::constant(v, one);
+        let call =
+            |name: &str, args: Vec<Expr>| Expr::new(ExprKind::Call(Builtin::by_name(name).expect(name).0, args), one);
+        let e = call("sqrt", vec![c(2.0)]).scaled_by(c(3.0)).minus(call("acos", vec![c(0.5)]));
+        assert_eq!(constant(&e), Some(2f64.sqrt() * 3.0 - 0.5f64.acos()));
+        assert_eq!(constant(&call("min", vec![c(2.0), c(-1.0)])), Some(-1.0));
+        let dim = Expr::new(ExprKind::Global(Global::Dim), one);
+        assert_eq!(constant(&c(1.0).plus(dim)), None, "the dimension is no constant of the checker's");
+        let v = call("vec", vec![c(1.0), c(2.0)]);
+        let v = Expr { ty: Type::new(Shape::Vec, Unit::ONE), ..v };
+        assert_eq!(constant(&call("norm", vec![v])), None, "a vec's length depends on the dimension");
     }
 }

@@ -176,25 +176,10 @@ pub fn binary_op(op: BinOp, a: Expr, b: Expr, span: crate::diag::Span) -> Result
     }
 }
 
-/// A constant's value, if the expression is made of literals and constants only.
+/// A constant's value, if the expression is a scalar made of literals and constants only (the
+/// host's one evaluator, `host_eval::constant`).
 pub fn const_value(e: &Expr) -> Option<f64> {
-    match &e.kind {
-        ExprKind::Const(v) => Some(*v),
-        ExprKind::Unary(Op::Neg, a) => const_value(a).map(|v| -v),
-        ExprKind::Binary(op, a, b) if a.ty.shape == Shape::Scalar && b.ty.shape == Shape::Scalar => {
-            let (x, y) = (const_value(a)?, const_value(b)?);
-            Some(match op {
-                Op::Add => x + y,
-                Op::Sub => x - y,
-                Op::Scale => x * y,
-                Op::Div => x / y,
-                Op::Pow => x.powf(y),
-                _ => return None,
-            })
-        }
-        ExprKind::Call(Builtin::Sqrt, a) => const_value(&a[0]).map(f64::sqrt),
-        _ => None,
-    }
+    crate::host_eval::constant(e)
 }
 
 fn power(a: Expr, b: Expr, span: crate::diag::Span) -> Result<Expr, TypeError> {
