@@ -879,6 +879,28 @@ fn every_elementary_function_on_the_gpu_and_the_cpu_equals_its_f64_value() {
     }
 }
 
+/// A run on the GPU stops at the end time as the CPU's does. Its clock is kept on the host in f64
+/// from the device's f32 steps, and the device cuts the last step to the end in f32, so the clock
+/// lands within f32 rounding of the end: that is the end (the run took one more whole step past
+/// it). A block at rest whose step (1 ms, `dt_max`) does not divide the end time (2.5 ms): both
+/// engines take 3 steps and stop at 2.5 ms.
+#[test]
+fn a_run_on_the_gpu_stops_at_the_end_time_after_the_cpus_steps() {
+    let dir = std::env::temp_dir().join(format!("pairsum-gpu-end-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let top = "integrator = \"euler\"\nend_time = \"2.5 ms\"";
+    std::fs::write(dir.join("case.toml"), block_case("block.sph", top, "", "")).expect("case");
+    let model = "use kernels\ngroup metal\nkernel = wendland_c2\nintegrate { x' = v  v' = 0 }\n\
+                 timestep cfl = min_over(0.3 * h / (1 [m/s] + norm(v)))\n";
+    std::fs::write(dir.join("block.sph"), model).expect("model");
+    let (mut cpu, mut gpu) = run_both(&dir.join("case.toml"), &[], 0);
+    cpu.run(&mut |_| Ok(())).expect("the CPU run");
+    gpu.run(&mut |_| Ok(())).expect("the GPU run");
+    assert_eq!((cpu.step, cpu.time), (3, 0.0025), "the CPU's steps and clock");
+    assert_eq!((gpu.step, gpu.time), (3, 0.0025), "the GPU's steps and clock");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// The case's `damping` (−c v in the rate of `v`) on the GPU: a falling block matches the CPU.
 #[test]
 fn a_damped_falling_block_on_the_gpu_matches_the_cpu() {

@@ -555,9 +555,13 @@ impl GpuBackend {
         if let Some(l) = &self.lists {
             l.check_largest(words[CLOCK_WORDS]).map_err(failed("checking the neighbour lists"))?;
         }
-        // Time accumulates on the host in f64 from the device's f32 step.
+        // Time accumulates on the host in f64 from the device's f32 step. The device cuts the
+        // last step to the end time in f32, so the sum lands within f32 rounding of the end: that
+        // is the end (the run took another whole step past it otherwise).
         let dt = f32::from_bits(words[gl::DT]) as f64;
-        Ok((time + dt, dt, step + 1))
+        let now = time + dt;
+        let at_end = (end_time - now).abs() <= 4.0 * f32::EPSILON as f64 * end_time.abs();
+        Ok((if at_end { end_time } else { now }, dt, step + 1))
     }
 }
 
