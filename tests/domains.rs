@@ -465,12 +465,13 @@ fn measures_of_neighbours_reduced_on_each_rank_give_the_undivided_values_within_
             },
         );
         let (whole, at) = whole;
-        let size = at.values().flat_map(|p| p.iter().map(|c| c.abs())).fold(0.0, f64::max);
+        let coords: Vec<f64> = at.values().flat_map(|p| p.to_vec()).collect();
+        let size = max_abs(&format!("{name}: the undivided positions"), &coords);
         for (k, (_, _, near)) in split.iter().enumerate() {
             assert!(near.reach >= scene.dx, "{name}: rank {k} reaches {} only", near.reach);
             for (id, p) in near.ids.iter().zip(&near.x) {
                 let q = at[id];
-                let d = (0..3).map(|c| (p[c] - q[c]).abs()).fold(0.0, f64::max);
+                let d = max_abs_diff(&format!("{name}: rank {k}: particle {id}'s position"), p, &q);
                 assert!(d <= 1e-12 * size, "{name}: rank {k}: particle {id} at {p:?}, undivided at {q:?}");
             }
             let held: std::collections::HashSet<u32> = near.ids.iter().copied().collect();

@@ -512,6 +512,13 @@ impl<T: Real> Domain<T> {
     /// within its cut-off (`Drift::exceeds`, over every rank's own particles).
     fn must_rebuild(&self) -> bool {
         let Some(a) = &self.anchor else { return true };
+        let all = self.transport().all_reduce(&self.drift(a), &[Reduce::Max, Reduce::Max]);
+        crate::schedule::search::Drift { displacement: all[0], h_growth: all[1] }.exceeds(a.skin, self.support)
+    }
+
+    /// The largest displacement and growth of h of this rank's own particles since `a`, the last
+    /// rebuild (the displacement infinite where a position or h is not a number).
+    fn drift(&self, a: &Anchor) -> [f64; 2] {
         let mut drift = [0.0f64, 0.0];
         for (k, i) in self.own().into_iter().enumerate() {
             let (x, h) = self.place(i);
@@ -521,8 +528,7 @@ impl<T: Real> Domain<T> {
                 drift[0] = f64::INFINITY;
             }
         }
-        let all = self.transport().all_reduce(&drift, &[Reduce::Max, Reduce::Max]);
-        crate::schedule::search::Drift { displacement: all[0], h_growth: all[1] }.exceeds(a.skin, self.support)
+        drift
     }
 
     /// New cuts, weighted by each particle's measured cost, when the slowest rank's neighbour
@@ -764,20 +770,10 @@ impl<T: Real> Backend for Domain<T> {
                 ids.push(store.id[*k as usize]);
             }
         }
-        let moved = match &self.anchor {
-            Some(a) => x.iter().zip(&a.x).fold(0.0, |m, (p, q)| {
-                let d2: f64 = (0..3).map(|c| (p[c] - q[c]).powi(2)).sum();
-                if d2.is_nan() {
-                    f64::NAN
-                } else {
-                    largest_number(m, [d2.sqrt()])
-                }
-            }),
-            None => f64::INFINITY,
-        };
-        let moved = max_keeping_nan(0.0, self.transport().all_gather(vec![moved]).into_iter().map(|p| p[0]));
+        let moved = self.anchor.as_ref().map_or(f64::INFINITY, |a| self.drift(a)[0]);
+        let moved = self.transport().all_reduce(&[moved], &[Reduce::Max])[0];
         let reach = self.anchor.as_ref().map_or(0.0, |a| a.reach - 2.0 * moved);
-        Ok(Some(Nearby { x, ids, own: own.len(), reach: if reach.is_nan() { 0.0 } else { reach.max(0.0) } }))
+        Ok(Some(Nearby { x, ids, own: own.len(), reach: reach.max(0.0) }))
     }
 
     fn groups(&self) -> Vec<u32> {

@@ -292,14 +292,7 @@ pub fn own_positions(b: &dyn Reader) -> Result<Option<Vec<[f64; 3]>>, BackendErr
 
 /// A column of positions as three coordinates each.
 fn padded(column: &Column) -> Vec<[f64; 3]> {
-    let (c, v) = (column.0, &column.1);
-    (0..v.len() / c)
-        .map(|k| {
-            let mut p = [0.0; 3];
-            p[..c].copy_from_slice(&v[k * c..(k + 1) * c]);
-            p
-        })
-        .collect()
+    column.1.chunks(column.0.max(1)).map(crate::backend::padded).collect()
 }
 
 /// The value of a probe now (NaN where it has none); an error only when the backend fails.
