@@ -134,12 +134,9 @@ fn totals<B: Backend>(b: &B) -> (usize, f64, f64, Vec<u32>) {
     (m.len(), mass, momentum, ids)
 }
 
-/// A fresh folder for a test's files.
-fn tempdir(name: &str) -> std::path::PathBuf {
-    let d = std::env::temp_dir().join(format!("pairsum-domains-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).expect("temp dir");
-    d
+/// A fresh folder for a test's files, removed when the test passes.
+fn tempdir(name: &str) -> Scratch {
+    Scratch::new(&format!("domains-{name}"))
 }
 
 #[test]
@@ -528,7 +525,8 @@ fn fast_bars(dir: &Path, tables: &str) -> std::path::PathBuf {
 /// magnitude.
 #[test]
 fn periodic_sides_across_ranks_give_the_undivided_fields_within_1e_12_of_their_magnitude() {
-    let bars = fast_bars(&tempdir("periodic"), "[periodic]\nx = [-0.05, 0.052]\n");
+    let dir = tempdir("periodic");
+    let bars = fast_bars(&dir, "[periodic]\nx = [-0.05, 0.052]\n");
     let bars = bars.display().to_string();
     for (name, ranks, steps) in [("poiseuille_2d", 2, 20), ("poiseuille_2d", 4, 20), ("dam_break_3d", 2, 20)]
         .into_iter()
@@ -557,7 +555,8 @@ fn periodic_sides_across_ranks_give_the_undivided_fields_within_1e_12_of_their_m
 /// is present once.
 #[test]
 fn a_fast_body_that_changes_ranks_every_few_steps_loses_and_duplicates_no_particle() {
-    let path = fast_bars(&tempdir("fast_bars"), "");
+    let dir = tempdir("fast_bars");
+    let path = fast_bars(&dir, "");
     let opts = pairsum::scene::Options { resolution: Some("ci".into()), ..Default::default() };
     let (scene, plan) = prepare(&path, &opts).unwrap_or_else(|e| panic!("{e}"));
     let store = build_store::<f64>(&plan, &scene.particles, &scene.materials).expect("store");

@@ -11,13 +11,12 @@ use pairsum::engine::Engine;
 use pairsum::runner::prepare;
 use std::path::{Path, PathBuf};
 
-/// A case written into a fresh directory.
-fn case_file(tag: &str, text: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("pairsum-motion-{tag}-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).expect("temp dir");
+/// A case written into a fresh folder, removed when the test passes.
+fn case_file(tag: &str, text: &str) -> (Scratch, PathBuf) {
+    let dir = Scratch::new(&format!("motion-{tag}"));
     let path = dir.join(format!("{tag}.toml"));
     std::fs::write(&path, text).expect("write case");
-    path
+    (dir, path)
 }
 
 /// Runs a case on the CPU in f64 for `steps` steps; returns the engine and the initial positions.
@@ -142,7 +141,7 @@ velocity = ["0.5 m/s", 0, "-0.2 m/s"]
 rotation = { center = ["30 mm", "30 mm", "30 mm"], omega = "-4 rad/s", axis = [1, 2, 2] }
 ramp = "20 ms"
 "#;
-    let path = case_file("cube", text);
+    let (_dir, path) = case_file("cube", text);
     let (engine, x0, _) = run(&path, 400);
     let t = engine.time;
     let (omega, ramp, axis) = (-4.0, 0.02, [1.0, 2.0, 2.0]);
@@ -161,7 +160,6 @@ ramp = "20 ms"
         let exact_v = add(speed, scale(omega / 3.0, cross(axis, sub(exact, c))));
         assert!(dist(vel, exact_v) < 1e-12, "particle {k}: v {vel:?}, exact {exact_v:?}");
     }
-    let _ = std::fs::remove_dir_all(path.parent().expect("dir"));
 }
 
 /// A block falling under gravity with the case's `damping` c: every particle's velocity follows
@@ -169,7 +167,7 @@ ramp = "20 ms"
 /// the terminal speed g/c.
 #[test]
 fn a_damped_falling_block_reaches_the_terminal_speed_g_over_c_as_euler_steps_it() {
-    let path = case_file(
+    let (_dir, path) = case_file(
         "damped",
         &common::block_case(
             "falling.sph",

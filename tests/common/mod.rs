@@ -9,7 +9,36 @@ use pairsum::engine::setup::{build_store, MaterialInput, ParticleInput};
 use pairsum::ir::Model;
 use pairsum::particles::Real;
 use pairsum::schedule::{IntegratorKind, Plan, SceneSpec};
-use std::path::Path;
+use std::path::{Path, PathBuf};
+
+/// A fresh folder in the temporary directory for one test's files, removed when the test
+/// passes and kept when it fails (to look at what it wrote).
+pub struct Scratch(PathBuf);
+
+impl Scratch {
+    /// `pairsum-{tag}-{pid}`, emptied if an earlier run left it.
+    pub fn new(tag: &str) -> Scratch {
+        let d = std::env::temp_dir().join(format!("pairsum-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).expect("a folder in the temporary directory");
+        Scratch(d)
+    }
+}
+
+impl std::ops::Deref for Scratch {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        if !std::thread::panicking() {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+}
 
 pub fn stdlib() -> Stdlib {
     Stdlib::Dir(Path::new(env!("CARGO_MANIFEST_DIR")).join("stdlib"))
