@@ -13,6 +13,7 @@
 //! Every exchange goes through a [`Transport`] and is collective: every rank makes the same calls
 //! in the same order. What travels is counted in [`Traffic`].
 
+use super::cpu::lists::{KeptList, TRANSFORM_SHIFT};
 use super::cpu::{first_non_finite_in, known, lower::Known, snapshot_of, CpuBackend};
 use super::transport::Transport;
 use super::{padded, Backend, BackendError, Globals, Mirror, Nearby, Snapshot, WatchValues};
@@ -23,6 +24,7 @@ use crate::ir::{FieldId, Reduce};
 use crate::particles::{ParamTable, Real, Store};
 use crate::scene::max_keeping_nan;
 use crate::schedule::{search::Search as Lists, Plan};
+use std::collections::{HashMap, HashSet};
 use std::sync::Mutex;
 
 /// What a rank sent to the others, in bytes of the run's precision.
@@ -45,12 +47,12 @@ pub struct Traffic {
 }
 
 /// A run that cannot be split into domains (yet), and why.
-pub fn unsupported(plan: &Plan) -> Option<String> {
-    if matches!(plan.search, Lists::Adaptive { .. }) {
+pub fn unsupported(plan: &Plan, mirrors: &[Mirror]) -> Option<String> {
+    if matches!(plan.search, Lists::Adaptive { .. }) && mirrors.iter().any(|m| m.shift > 0.0) {
         return Some(
-            "a run split into domains rebuilds its neighbour lists when particles change domain: the adaptive \
-             search (`search = \"adaptive\"`), which keeps lists from step 0, is not supported; use \"cells\" or \
-             \"verlet\""
+            "a run split into domains carries the adaptive search's lists (`search = \"adaptive\"`) from rank to \
+             rank, but not yet across periodic sides, where the run in one piece rebuilds them all: use \"cells\" \
+             or \"verlet\", or run in one piece"
                 .into(),
         );
     }
@@ -65,6 +67,15 @@ enum Row<'a, T> {
     Here(&'a Store<T>, usize),
     Sent(&'a [f64]),
     Halo(&'a [f64]),
+}
+
+/// The adaptive search's lists of this rank's own particles, by id, while the particles move to
+/// another store (the run in one piece keeps them from their last rebuild, so a split run must
+/// carry them, not rebuild them, when particles change rank or the halo changes).
+struct Carried {
+    /// The lists' skin's length at their full build (every rank's alike).
+    skin_len: f64,
+    lists: HashMap<u32, KeptList>,
 }
 
 /// Where this rank's own particles were at the last rebuild of the halos.
@@ -132,8 +143,14 @@ pub struct Domain<T: Real> {
     /// The others are never read there, and do not travel.
     halo_fields: Vec<FieldId>,
     /// The halo's skin, a fraction of the largest cut-off: the halo holds the particles within
-    /// the cut-off plus the skin, and is kept until a pair may have come closer by the skin.
+    /// the cut-off plus the skin (and the reserve), and is kept until a pair may have come closer
+    /// by the skin.
     skin: f64,
+    /// Beyond the skin, a fraction of the largest cut-off the halo holds for the adaptive search,
+    /// whose lists are rebuilt one by one within their own skin at any evaluation (0 otherwise).
+    reserve: f64,
+    /// The adaptive search's lists, carried from a reordering to the next rebuild of the halos.
+    carried: Option<Carried>,
     /// Every move across the periodic sides, none and both ways along each periodic axis: a
     /// particle whose move lies within a rank's reach is a neighbour of that rank's particles
     /// across the sides (the CPU backend makes the images).
@@ -200,7 +217,7 @@ impl<T: Real> Domain<T> {
         mirrors: Vec<Mirror>,
         mut transport: Box<dyn Transport>,
     ) -> Result<Domain<T>, BackendError> {
-        if let Some(why) = unsupported(&plan) {
+        if let Some(why) = unsupported(&plan, &mirrors) {
             return Err(BackendError(why));
         }
         let (rank, size) = (transport.rank(), transport.size());
@@ -208,9 +225,10 @@ impl<T: Real> Domain<T> {
         let read_at_j: Vec<Vec<FieldId>> = (0..plan.passes.len()).map(|k| plan.fields_read_at_j(k)).collect();
         let halo_fields: Vec<FieldId> =
             plan.layout.iter().map(|l| l.field).filter(|f| read_at_j.iter().flatten().any(|r| r == f)).collect();
-        let skin = match plan.search {
-            Lists::Verlet { skin } => skin,
-            _ => HALO_SKIN,
+        let (skin, reserve) = match plan.search {
+            Lists::Verlet { skin } => (skin, 0.0),
+            Lists::Adaptive { skin, .. } => (HALO_SKIN, skin),
+            Lists::Cells => (HALO_SKIN, 0.0),
         };
         let periodic_moves = periodic_moves(&mirrors);
         let parts: Vec<Known> =
@@ -235,6 +253,8 @@ impl<T: Real> Domain<T> {
             read_at_j,
             halo_fields,
             skin,
+            reserve,
+            carried: None,
             periodic_moves,
             anchor: None,
             kept: None,
@@ -268,6 +288,7 @@ impl<T: Real> Domain<T> {
     /// Replaces the local particles by `store`, all of them owned.
     fn set_own(&mut self, store: Store<T>) {
         self.anchor = None;
+        self.carried = None;
         self.owned = store.ranges.iter().map(|(_, r)| r.len()).collect();
         self.backend.replace_particles(store, &self.owned);
         self.send.iter_mut().chain(&mut self.recv).for_each(Vec::clear);
@@ -408,10 +429,12 @@ impl<T: Real> Domain<T> {
     /// Migration and new halos: every particle goes to the rank whose box holds it; each rank
     /// then receives the others' particles within the box of its own grown by the largest
     /// cut-off, support · h_max.
-    fn rebuild(&mut self) {
+    fn rebuild(&mut self) -> Result<(), BackendError> {
+        let mut carried = self.carry_lists();
         let store = &self.backend.store;
         let own = self.own();
         let mut leaving = vec![vec![]; self.size];
+        let mut lists_leaving: Vec<Vec<f64>> = vec![vec![]; self.size];
         let mut staying = vec![];
         for i in own {
             let to = self.cuts.locate(&self.position(&Row::Here(store, i))) as usize;
@@ -419,10 +442,18 @@ impl<T: Real> Domain<T> {
                 staying.push(i);
             } else {
                 self.encode(store, i, &mut leaving[to]);
+                if let Some(list) = carried.as_mut().and_then(|c| c.lists.remove(&store.id[i])) {
+                    lists_leaving[to].push(store.id[i] as f64);
+                    list.encode(&mut lists_leaving[to]);
+                }
             }
         }
-        self.traffic.migration += (leaving.iter().map(Vec::len).sum::<usize>() * T::BYTES) as u64;
+        let sent = leaving.iter().chain(&lists_leaving).map(Vec::len).sum::<usize>();
+        self.traffic.migration += (sent * T::BYTES) as u64;
         let arrived = self.transport().exchange(leaving);
+        if matches!(self.plan.search, Lists::Adaptive { .. }) {
+            self.receive_lists(&mut carried, lists_leaving);
+        }
         let mut mine: Vec<Row<'_, T>> = staying.iter().map(|i| Row::Here(store, *i)).collect();
         for m in &arrived {
             mine.extend(self.rows(m, false));
@@ -432,7 +463,7 @@ impl<T: Real> Domain<T> {
         let h_local = mine.iter().fold(0.0, |m, r| largest_number(m, self.value(r, self.h).unwrap_or_default()));
         let h_max = self.transport().all_reduce(&[h_local], &[Reduce::Max])[0];
         let skin = self.skin * self.support * h_max;
-        let reach = self.support * h_max + skin;
+        let reach = self.support * h_max + skin + self.reserve * self.support * h_max;
         let dim = self.plan.dim;
         let mut bounds =
             [f64::INFINITY, f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
@@ -444,14 +475,15 @@ impl<T: Real> Domain<T> {
             }
         }
         let boxes = self.transport().all_gather(bounds.to_vec());
-        // Halos: each rank's own particles within another's box.
+        let wanted = self.wanted(carried.as_ref(), &mine);
+        // Halos: each rank's own particles within another's box, and those its lists name.
         let mut halo_out = vec![vec![]; self.size];
         let mut sent_rows: Vec<Vec<usize>> = vec![vec![]; self.size];
         for (d, b) in boxes.iter().enumerate().filter(|(d, _)| *d != self.rank) {
             for (k, r) in mine.iter().enumerate() {
                 let p = self.position(r);
                 let within = |m: &[f64; 3]| (0..dim).all(|a| p[a] + m[a] >= b[a] && p[a] + m[a] <= b[3 + a]);
-                if self.periodic_moves.iter().any(within) {
+                if self.periodic_moves.iter().any(within) || wanted[d].contains(&Self::id_of(r)) {
                     sent_rows[d].push(k);
                     self.encode_halo(r, &mut halo_out[d]);
                 }
@@ -488,11 +520,91 @@ impl<T: Real> Domain<T> {
         let new = self.build(&rows);
         let send: Vec<Vec<u32>> = sent_rows.iter().map(|ks| ks.iter().map(|k| index_of_mine[*k]).collect()).collect();
         self.backend.replace_particles(new, &owned);
+        self.backend.lists_h_max = Some(h_max);
         (self.owned, self.send, self.recv) = (owned, send, recv);
+        if let Some(c) = carried {
+            self.adopt_lists(c)?;
+        }
         let (x, h) = self.own().into_iter().map(|i| self.place(i)).unzip();
         self.anchor = Some(Anchor { x, h, skin, reach });
         self.traffic.rebuilds += 1;
         self.traffic.halo_particles = self.recv.iter().map(Vec::len).sum();
+        Ok(())
+    }
+
+    /// The adaptive search's lists of this rank's own particles by id: the backend's where it
+    /// has built them, else those carried from a reordering (none for other searches).
+    fn carry_lists(&mut self) -> Option<Carried> {
+        if !matches!(self.plan.search, Lists::Adaptive { .. }) {
+            return None;
+        }
+        let lists = &self.backend.lists;
+        if !lists.built {
+            return self.carried.take();
+        }
+        let id = &self.backend.store.id;
+        let by_id = self.own().into_iter().filter_map(|i| Some((id[i], lists.by_id(i, id)?))).collect();
+        Some(Carried { skin_len: lists.skin_len(), lists: by_id })
+    }
+
+    /// Per rank, the particles its carried lists name and it does not own: the adaptive search
+    /// keeps a pair that moved apart (it adds nothing beyond the cut-off, but counts again if the
+    /// two come back), so the halo holds them wherever they are. One collective for that search.
+    fn wanted(&self, carried: Option<&Carried>, mine: &[Row<'_, T>]) -> Vec<HashSet<u32>> {
+        if !matches!(self.plan.search, Lists::Adaptive { .. }) {
+            return vec![HashSet::new(); self.size];
+        }
+        let own: HashSet<u32> = mine.iter().map(Self::id_of).collect();
+        let named = carried.into_iter().flat_map(|c| c.lists.values()).flat_map(|l| l.entries.iter().map(|e| e.1));
+        let need: HashSet<u32> = named.filter(|id| !own.contains(id)).collect();
+        let all = self.transport().all_gather(need.into_iter().map(f64::from).collect());
+        all.into_iter().map(|ids| ids.into_iter().map(|id| id as u32).collect()).collect()
+    }
+
+    /// Sends the lists of the particles that left (per rank: id, then the list, per particle; led
+    /// by the lists' skin) and takes in those of the particles that arrived.
+    fn receive_lists(&self, carried: &mut Option<Carried>, mut out: Vec<Vec<f64>>) {
+        if let Some(c) = carried.as_ref() {
+            out.iter_mut().filter(|m| !m.is_empty()).for_each(|m| m.insert(0, c.skin_len));
+        }
+        for m in self.transport().exchange(out).into_iter().filter(|m| !m.is_empty()) {
+            let c = carried.get_or_insert_with(|| Carried { skin_len: m[0], lists: HashMap::new() });
+            let mut rest = &m[1..];
+            while !rest.is_empty() {
+                let (list, next) = KeptList::decode(&rest[1..]);
+                c.lists.insert(rest[0] as u32, list);
+                rest = next;
+            }
+        }
+    }
+
+    /// Makes the carried lists the backend's, their neighbours' ids mapped to the local store
+    /// (own particles and halo, which holds every particle they name: `wanted`).
+    fn adopt_lists(&mut self, carried: Carried) -> Result<(), BackendError> {
+        let store = &self.backend.store;
+        let local: HashMap<u32, u32> = store.id.iter().enumerate().map(|(k, id)| (*id, k as u32)).collect();
+        let mut of = vec![vec![]; store.n];
+        let mut field0 = vec![f64::NAN; store.n];
+        for i in self.own() {
+            let id = store.id[i];
+            let list = carried.lists.get(&id).ok_or_else(|| {
+                BackendError(format!("particle {id} reached rank {} without its neighbour list", self.rank + 1))
+            })?;
+            for (t, j) in &list.entries {
+                let k = local.get(j).ok_or_else(|| {
+                    BackendError(format!(
+                        "particle {j}, a kept neighbour of particle {id}, is missing on rank {}",
+                        self.rank + 1
+                    ))
+                })?;
+                of[i].push(k | t << TRANSFORM_SHIFT);
+            }
+            field0[i] = list.field0;
+        }
+        let (x, h) = (store.column(self.x).expect("x is stored"), store.column(self.h).expect("h is stored"));
+        let (x, h) = (x.data.clone(), h.data.clone());
+        self.backend.lists.adopt(of, field0, carried.skin_len, &x, &h);
+        Ok(())
     }
 
     /// Local particle i's position and smoothing length.
@@ -687,7 +799,7 @@ impl<T: Real> Backend for Domain<T> {
     /// and was not sent since the last write.
     fn evaluate(&mut self, g: Globals) -> Result<(), BackendError> {
         let mut fresh: Vec<FieldId> = if self.must_rebuild() {
-            self.rebuild();
+            self.rebuild()?;
             self.halo_fields.clone()
         } else {
             vec![]
@@ -729,10 +841,12 @@ impl<T: Real> Backend for Domain<T> {
     /// halo and orders this rank's own particles along the Morton curve.
     fn reorder(&mut self) -> Result<(), BackendError> {
         self.rebalance();
+        let carried = self.carry_lists();
         let own = self.own();
         let rows: Vec<(&Store<T>, usize)> = own.iter().map(|i| (&self.backend.store, *i)).collect();
         let store = Store::gather(&self.plan, &self.params, &rows);
         self.set_own(store);
+        self.carried = carried;
         self.backend.reorder()
     }
 

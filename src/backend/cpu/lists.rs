@@ -152,6 +152,52 @@ impl<T: Real> Lists<T> {
     pub fn invalidate(&mut self) {
         self.built = false;
     }
+
+    /// Particle i's list with its neighbours named by `id` (every particle's id, in the store's
+    /// order), to follow it into another store; `None` before the lists are built.
+    pub fn by_id(&self, i: usize, id: &[u32]) -> Option<KeptList> {
+        let list = self.of.get(i).filter(|_| self.built)?;
+        let entries = list.iter().map(|e| (e >> TRANSFORM_SHIFT, id[(e & INDEX_MASK) as usize])).collect();
+        Some(KeptList { field0: self.field0.get(i).copied().unwrap_or(f64::NAN), entries })
+    }
+
+    /// The skin's length at the last full build.
+    pub fn skin_len(&self) -> f64 {
+        self.skin_len
+    }
+
+    /// Takes lists kept in another store as this store's, built: `of` per particle, the adaptive
+    /// search's field at each one's last rebuild, the skin's length at their full build, and the
+    /// positions and smoothing lengths now.
+    pub fn adopt(&mut self, of: Vec<Vec<u32>>, field0: Vec<f64>, skin_len: f64, x: &[T], h: &[T]) {
+        (self.of, self.field0, self.skin_len) = (of, field0, skin_len);
+        (self.x0, self.h0) = (x.to_vec(), h.to_vec());
+        self.built = true;
+    }
+}
+
+/// One particle's kept list, its neighbours named by id (see [`Lists::by_id`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct KeptList {
+    /// The adaptive search's field at the list's last rebuild.
+    pub field0: f64,
+    /// Per entry: the mirror transform of the neighbour's image and the neighbour's id.
+    pub entries: Vec<(u32, u32)>,
+}
+
+impl KeptList {
+    /// Appends the list to `out` as numbers: the field, the count, then transform and id per entry.
+    pub fn encode(&self, out: &mut Vec<f64>) {
+        out.extend([self.field0, self.entries.len() as f64]);
+        out.extend(self.entries.iter().flat_map(|(t, id)| [*t as f64, *id as f64]));
+    }
+
+    /// The list that `encode` wrote at the start of `m`, and what follows it.
+    pub fn decode(m: &[f64]) -> (KeptList, &[f64]) {
+        let n = m[1] as usize;
+        let entries = m[2..2 + 2 * n].chunks(2).map(|e| (e[0] as u32, e[1] as u32)).collect();
+        (KeptList { field0: m[0], entries }, &m[2 + 2 * n..])
+    }
 }
 
 /// Half the shortest periodic domain, if any: no particle moves that far between two builds

@@ -76,7 +76,10 @@ pub struct CpuBackend<T: Real> {
     x: FieldId,
     h: FieldId,
     /// Neighbour lists kept across evaluations, when the plan's search keeps them.
-    lists: lists::Lists<T>,
+    pub(crate) lists: lists::Lists<T>,
+    /// The largest smoothing length over every rank of a run split into domains, where the lists
+    /// must reach as far as in the run in one piece (their skin is a fraction of it).
+    pub(crate) lists_h_max: Option<f64>,
     /// The state last kept as good ([`Backend::keep`]): the columns in the store's precision,
     /// the ids and the materials, copied into buffers reused from one keep to the next.
     kept: Option<Kept<T>>,
@@ -595,6 +598,7 @@ impl<T: Real> CpuBackend<T> {
             plan,
             store,
             lists: lists::Lists::default(),
+            lists_h_max: None,
             kept: None,
             pass_time: None,
         })
@@ -660,6 +664,7 @@ impl<T: Real> CpuBackend<T> {
         // the cut-off sphere reaches (`Grid::cell_ranges_within`), fewer candidates than the
         // 3^dim cells of a cut-off's size.
         let grid = if self.plan.search.keeps_lists() {
+            let h_max = crate::compare::largest_number(h_max, self.lists_h_max);
             let inp = lists::BuildInput { x: &x, h: &h, dim, support: self.support, h_max, mirrors: &self.mirrors };
             let store = &self.store;
             let field = |f| store.read_f64(f).map(|(_, v)| v).unwrap_or_else(|| vec![f64::NAN; store.n]);
