@@ -32,7 +32,8 @@ use std::sync::Mutex;
 pub struct Traffic {
     /// Whole particles that changed domain.
     pub migration: u64,
-    /// Particles copied into halos when they were rebuilt (the fields some pass reads at j).
+    /// Particles copied into halos when they were rebuilt (the fields some pass reads at j), and
+    /// the ids the adaptive search's lists asked the other ranks for.
     pub halo_builds: u64,
     /// Fields sent to halos before a pass.
     pub halo_updates: u64,
@@ -475,7 +476,8 @@ impl<T: Real> Domain<T> {
             }
         }
         let boxes = self.transport().all_gather(bounds.to_vec());
-        let wanted = self.wanted(carried.as_ref(), &mine);
+        let (wanted, asked) = self.wanted(carried.as_ref(), &mine);
+        self.traffic.halo_builds += (asked * T::BYTES) as u64;
         // Halos: each rank's own particles within another's box, and those its lists name.
         let mut halo_out = vec![vec![]; self.size];
         let mut sent_rows: Vec<Vec<usize>> = vec![vec![]; self.size];
@@ -549,16 +551,18 @@ impl<T: Real> Domain<T> {
 
     /// Per rank, the particles its carried lists name and it does not own: the adaptive search
     /// keeps a pair that moved apart (it adds nothing beyond the cut-off, but counts again if the
-    /// two come back), so the halo holds them wherever they are. One collective for that search.
-    fn wanted(&self, carried: Option<&Carried>, mine: &[Row<'_, T>]) -> Vec<HashSet<u32>> {
+    /// two come back), so the halo holds them wherever they are. One collective for that search;
+    /// with how many ids this rank sent in it.
+    fn wanted(&self, carried: Option<&Carried>, mine: &[Row<'_, T>]) -> (Vec<HashSet<u32>>, usize) {
         if !matches!(self.plan.search, Lists::Adaptive { .. }) {
-            return vec![HashSet::new(); self.size];
+            return (vec![HashSet::new(); self.size], 0);
         }
         let own: HashSet<u32> = mine.iter().map(Self::id_of).collect();
         let named = carried.into_iter().flat_map(|c| c.lists.values()).flat_map(|l| l.entries.iter().map(|e| e.1));
         let need: HashSet<u32> = named.filter(|id| !own.contains(id)).collect();
+        let asked = need.len() * (self.size - 1);
         let all = self.transport().all_gather(need.into_iter().map(f64::from).collect());
-        all.into_iter().map(|ids| ids.into_iter().map(|id| id as u32).collect()).collect()
+        (all.into_iter().map(|ids| ids.into_iter().map(|id| id as u32).collect()).collect(), asked)
     }
 
     /// Sends the lists of the particles that left (per rank: id, then the list, per particle; led
