@@ -450,14 +450,12 @@ fn standing_wave_on_the_gpu_matches_the_cpu() {
 // with Verlet lists.
 #[test]
 fn a_lattice_crossing_periodic_sides_on_the_gpu_matches_the_cpu() {
-    let dir = std::env::temp_dir().join(format!("pairsum-gpu-periodic-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).expect("temp dir");
+    let dir = Scratch::new("gpu-periodic");
     for (search, table) in [("cells", ""), ("verlet", "[neighbours]\nsearch = \"verlet\"\nskin = 0.3")] {
         let path = dir.join(format!("{search}.toml"));
         std::fs::write(&path, common::lattice_case("1 m/s", "0.25 s", common::BOTH_AXES, table)).expect("case");
         case_file_matches_cpu(&path, &[], 300, &["rho"], 1e-4);
     }
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 // Sod's shock tube (the ideal gas: density summed into `rho` with its grad-h factor, h from the
@@ -879,6 +877,15 @@ fn every_elementary_function_on_the_gpu_and_the_cpu_equals_its_f64_value() {
     }
 }
 
+/// A fresh folder holding `case.toml`, a block (`common::block_case`) with the top-level keys
+/// `top`, and its model `block.sph`.
+fn block_case_files(tag: &str, top: &str, model: &str) -> Scratch {
+    let dir = Scratch::new(tag);
+    std::fs::write(dir.join("case.toml"), block_case("block.sph", top, "", "")).expect("case");
+    std::fs::write(dir.join("block.sph"), model).expect("model");
+    dir
+}
+
 /// A run on the GPU stops at the end time as the CPU's does. Its clock is kept on the host in f64
 /// from the device's f32 steps, and the device cuts the last step to the end in f32, so the clock
 /// lands within f32 rounding of the end: that is the end (the run took one more whole step past
@@ -886,32 +893,24 @@ fn every_elementary_function_on_the_gpu_and_the_cpu_equals_its_f64_value() {
 /// engines take 3 steps and stop at 2.5 ms.
 #[test]
 fn a_run_on_the_gpu_stops_at_the_end_time_after_the_cpus_steps() {
-    let dir = std::env::temp_dir().join(format!("pairsum-gpu-end-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).expect("dir");
     let top = "integrator = \"euler\"\nend_time = \"2.5 ms\"";
-    std::fs::write(dir.join("case.toml"), block_case("block.sph", top, "", "")).expect("case");
     let model = "use kernels\ngroup metal\nkernel = wendland_c2\nintegrate { x' = v  v' = 0 }\n\
                  timestep cfl = min_over(0.3 * h / (1 [m/s] + norm(v)))\n";
-    std::fs::write(dir.join("block.sph"), model).expect("model");
+    let dir = block_case_files("gpu-end", top, model);
     let (mut cpu, mut gpu) = run_both(&dir.join("case.toml"), &[], 0);
     cpu.run(&mut |_| Ok(())).expect("the CPU run");
     gpu.run(&mut |_| Ok(())).expect("the GPU run");
     assert_eq!((cpu.step, cpu.time), (3, 0.0025), "the CPU's steps and clock");
     assert_eq!((gpu.step, gpu.time), (3, 0.0025), "the GPU's steps and clock");
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// The case's `damping` (−c v in the rate of `v`) on the GPU: a falling block matches the CPU.
 #[test]
 fn a_damped_falling_block_on_the_gpu_matches_the_cpu() {
-    let dir = std::env::temp_dir().join(format!("pairsum-gpu-damped-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).expect("dir");
     let top = "integrator = \"euler\"\nend_time = \"1 s\"\ngravity = [0, \"-9.81 m/s^2\"]\ndamping = \"10 1/s\"";
-    std::fs::write(dir.join("case.toml"), block_case("falling.sph", top, "", "")).expect("case");
     let model = "use kernels\ngroup metal\nkernel = wendland_c2\nintegrate { x' = v  v' = 0 }\n";
-    std::fs::write(dir.join("falling.sph"), model).expect("model");
+    let dir = block_case_files("gpu-damped", top, model);
     case_file_matches_cpu(&dir.join("case.toml"), &[], 300, &[], 1e-5);
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// The watchdog's reductions on the device (the largest speed; the energy Σ m (½|v|² + e − g·x)

@@ -452,7 +452,7 @@ impl<T: Real> Domain<T> {
         let sent = leaving.iter().chain(&lists_leaving).map(Vec::len).sum::<usize>();
         self.traffic.migration += (sent * T::BYTES) as u64;
         let arrived = self.transport().exchange(leaving);
-        if matches!(self.plan.search, Lists::Adaptive { .. }) {
+        if self.carries_lists() {
             self.receive_lists(&mut carried, lists_leaving);
         }
         let mut mine: Vec<Row<'_, T>> = staying.iter().map(|i| Row::Here(store, *i)).collect();
@@ -534,10 +534,15 @@ impl<T: Real> Domain<T> {
         Ok(())
     }
 
+    /// Whether the plan's search keeps lists that a split run must carry (the adaptive search's).
+    fn carries_lists(&self) -> bool {
+        matches!(self.plan.search, Lists::Adaptive { .. })
+    }
+
     /// The adaptive search's lists of this rank's own particles by id: the backend's where it
     /// has built them, else those carried from a reordering (none for other searches).
     fn carry_lists(&mut self) -> Option<Carried> {
-        if !matches!(self.plan.search, Lists::Adaptive { .. }) {
+        if !self.carries_lists() {
             return None;
         }
         let lists = &self.backend.lists;
@@ -554,7 +559,7 @@ impl<T: Real> Domain<T> {
     /// two come back), so the halo holds them wherever they are. One collective for that search;
     /// with how many ids this rank sent in it.
     fn wanted(&self, carried: Option<&Carried>, mine: &[Row<'_, T>]) -> (Vec<HashSet<u32>>, usize) {
-        if !matches!(self.plan.search, Lists::Adaptive { .. }) {
+        if !self.carries_lists() {
             return (vec![HashSet::new(); self.size], 0);
         }
         let own: HashSet<u32> = mine.iter().map(Self::id_of).collect();
