@@ -87,7 +87,7 @@ fn verlet_lists_never_miss(planes: impl Fn(usize) -> Vec<Mirror>, max_builds: u6
         let steps = 60u64;
         for step in 0..steps {
             let h_max = max_abs("h", &h);
-            let inp = BuildInput { x: &x, h: &h, dim, support: SUPPORT, h_max, mirrors: &mirrors };
+            let inp = BuildInput { x: &x, h: &h, dim, support: SUPPORT, h_max, mirrors: &mirrors, sources: None };
             lists.prepare(&search, &inp, no_field);
             assert_eq!(missed(&lists, &x, &h, dim, &mirrors), 0, "{dim}D, step {step}: a pair is missing");
             // Move, grow some smoothing lengths, and reorder the store now and then.
@@ -135,6 +135,46 @@ fn verlet_lists_never_miss(planes: impl Fn(usize) -> Vec<Mirror>, max_builds: u6
         assert!(lists.of.iter().flatten().all(|e| (e & INDEX_MASK) < n as u32));
         assert!(listed > 0);
     }
+}
+
+/// Lists hold only the groups some pass reads neighbours from on a particle's group: in a cloud of
+/// three groups, where group 0 reads 0 and 1, group 1 reads 0 only (a wall that takes from the
+/// fluid) and group 2 nothing, every pair brute force finds within those groups is listed and no
+/// other.
+#[test]
+fn lists_hold_every_neighbour_of_the_groups_a_pass_reads_from_and_no_other() {
+    let (dim, n) = (2, 300);
+    let mut seed = 11;
+    let x: Vec<f64> = (0..n * dim).map(|_| rnd(&mut seed)).collect();
+    let h: Vec<f64> = (0..n).map(|_| 0.1 + 0.05 * rnd(&mut seed)).collect();
+    let group: Vec<u32> = (0..n as u32).map(|i| i % 3).collect();
+    let sources = [0b011u64, 0b001, 0b000];
+    let mut lists = Lists::default();
+    let inp = BuildInput {
+        x: &x,
+        h: &h,
+        dim,
+        support: SUPPORT,
+        h_max: max_abs("h", &h),
+        mirrors: &[],
+        sources: Some((&group, &sources)),
+    };
+    lists.prepare(&Search::Verlet { skin: 0.1 }, &inp, |_| unreachable!("Verlet lists read no field"));
+    let wanted = |i: usize, e: u32| sources[group[i] as usize] >> group[(e & INDEX_MASK) as usize] & 1 == 1;
+    let sets: Vec<HashSet<u32>> = lists.of.iter().map(|l| l.iter().copied().collect()).collect();
+    let within = pairs_within(&x, &h, dim, &[]);
+    let missed = within.iter().filter(|(i, e)| wanted(*i, *e) && !sets[*i].contains(e)).count();
+    assert_eq!(missed, 0, "pairs of the groups read from that no list holds");
+    let unwanted: Vec<(usize, u32)> = lists
+        .of
+        .iter()
+        .enumerate()
+        .flat_map(|(i, l)| l.iter().map(move |e| (i, *e)))
+        .filter(|(i, e)| !wanted(*i, *e))
+        .collect();
+    assert!(unwanted.is_empty(), "entries of groups no pass reads from: {:?}", &unwanted[..unwanted.len().min(5)]);
+    // Group 1's lists hold group 0's neighbours: the filter keeps what it must.
+    assert!((0..n).filter(|i| group[*i] == 1).all(|i| !lists.of[i].is_empty()));
 }
 
 fn case(name: &str) -> PathBuf {

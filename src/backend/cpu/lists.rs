@@ -19,6 +19,16 @@ pub const TRANSFORM_SHIFT: u32 = 26;
 pub const MAX_PLANES: usize = 6;
 pub const INDEX_MASK: u32 = (1 << TRANSFORM_SHIFT) - 1;
 
+/// Per model group, the groups some pass reads neighbours from on it, a bit per group: what its
+/// particles' lists hold.
+pub fn sources_per_group(plan: &crate::schedule::Plan) -> Vec<u64> {
+    let mut sources = vec![0u64; plan.model.groups.len()];
+    for v in plan.passes.iter().flat_map(|p| &p.variants) {
+        sources[v.group.index()] |= v.sources.0;
+    }
+    sources
+}
+
 /// The lists, with the state they were built on.
 #[derive(Default)]
 pub struct Lists<T> {
@@ -43,6 +53,10 @@ pub struct BuildInput<'a, T> {
     pub support: f64,
     pub h_max: f64,
     pub mirrors: &'a [Mirror],
+    /// Every particle's group, and per group the groups some pass reads neighbours from on it
+    /// (a bit per group): a list holds only those (a wall that takes only from the fluid lists
+    /// no other wall). `None`: every group.
+    pub sources: Option<(&'a [u32], &'a [u64])>,
 }
 
 impl<T: Real> Lists<T> {
@@ -275,6 +289,10 @@ fn collect<T: Real, const D: usize>(
     xi[..D].copy_from_slice(&inp.x[i * D..i * D + D]);
     // h_ij ≤ (h_i + h_near_i)/2: no neighbour lies beyond support · that.
     let (hi, skin) = (inp.h[i].to_f64(), near.skin);
+    let wanted = inp.sources.map_or(u64::MAX, |(group, sources)| sources[group[i] as usize]);
+    if wanted == 0 {
+        return;
+    }
     for t in 0..1u32 << inp.mirrors.len() {
         // Across a periodic side the neighbours are not near i: any h may be among them.
         let h_far = if shifts(t, inp.mirrors) { inp.h_max } else { near.h_near[i] };
@@ -291,6 +309,11 @@ fn collect<T: Real, const D: usize>(
         levels.for_each_candidate(p, reach, ranges, |j| {
             if t == 0 && j as usize == i {
                 return;
+            }
+            if let Some((group, _)) = inp.sources.filter(|_| wanted != u64::MAX) {
+                if (wanted >> group[j as usize]) & 1 == 0 {
+                    return;
+                }
             }
             let xj = &inp.x[j as usize * D..j as usize * D + D];
             let r2: f64 = (0..D).map(|c| (yi[c] - xj[c]).to_f64().powi(2)).sum();

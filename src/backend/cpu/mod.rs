@@ -665,7 +665,16 @@ impl<T: Real> CpuBackend<T> {
         // 3^dim cells of a cut-off's size.
         let grid = if self.plan.search.keeps_lists() {
             let h_max = crate::compare::largest_number(h_max, self.lists_h_max);
-            let inp = lists::BuildInput { x: &x, h: &h, dim, support: self.support, h_max, mirrors: &self.mirrors };
+            let sources = lists::sources_per_group(&self.plan);
+            let inp = lists::BuildInput {
+                x: &x,
+                h: &h,
+                dim,
+                support: self.support,
+                h_max,
+                mirrors: &self.mirrors,
+                sources: Some((&self.store.group, &sources)),
+            };
             let store = &self.store;
             let field = |f| store.read_f64(f).map(|(_, v)| v).unwrap_or_else(|| vec![f64::NAN; store.n]);
             self.lists.prepare(&self.plan.search, &inp, field);

@@ -256,6 +256,8 @@ impl GpuBackend {
                             support: support as f64,
                             h_max: h_start,
                             mirrors,
+                            // The device's lists hold every group.
+                            sources: None,
                         }),
                         search.skin(),
                     ),
