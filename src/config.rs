@@ -23,6 +23,8 @@ pub struct Env {
     /// `PAIRSUM_NATIVE`: `cranelift` keeps the CPU backend's pair programs on Cranelift instead of
     /// the machine's C compiler.
     pub native: Option<String>,
+    /// `PAIRSUM_C_LANES`: lanes per iteration of the C pair programs' loop (else 8).
+    pub c_lanes: Option<usize>,
     /// `CC`: the C compiler for the pair programs (else `cc`).
     pub cc: Option<String>,
     /// `PAIRSUM_CACHE`: where compiled pair programs are kept.
@@ -50,6 +52,7 @@ impl Env {
             no_wide_simd: var("PAIRSUM_NO_WIDE_SIMD").is_some(),
             no_jit: var("PAIRSUM_NO_JIT").is_some(),
             native: var("PAIRSUM_NATIVE"),
+            c_lanes: var("PAIRSUM_C_LANES").and_then(|v| v.parse().ok()),
             cc: var("CC"),
             cache: var("PAIRSUM_CACHE").map(PathBuf::from),
             gpu_memory_limit: var("PAIRSUM_GPU_MEMORY_LIMIT").and_then(|v| v.parse().ok()),

@@ -9,9 +9,9 @@ use crate::grid::{Level, SizeLevels};
 use crate::ir::Reduce;
 use crate::particles::{Real, Store};
 
-/// Lanes past a batch's last that native code may read or write: up to the widest vector's
-/// lanes (the fold period; the most lanes are f32's).
-pub const OVERRUN: usize = super::jit::FOLD_BYTES / std::mem::size_of::<f32>();
+/// Lanes past a batch's last that native code may read or write: up to one iteration of the C
+/// code's loop, at most four vectors of the fold period (the most lanes are f32's).
+pub const OVERRUN: usize = 4 * super::jit::FOLD_BYTES / std::mem::size_of::<f32>();
 
 /// A chunk of consecutive particles of one group.
 #[derive(Clone, Copy, Debug)]
