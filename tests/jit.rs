@@ -126,6 +126,24 @@ fn native_pair_programs_equal_the_closures_bit_for_bit_on_every_bundled_case_and
     assert!(wrong.is_empty(), "{}", wrong.join("\n"));
 }
 
+/// Where a case keeps neighbour lists and no mirror makes images (the dam break, whose walls
+/// take from the fluid only, and PySPH's impact3d), the native backend walks them in C
+/// (`backend/cpu/cwalk.rs`) and the closures' backend one entry at a time: 40 steps of the dam
+/// break (its lists rebuilt on the way) give the same fields bit for bit in f64 and f32.
+#[test]
+fn kept_lists_walked_in_c_give_the_scalar_walks_fields_bit_for_bit_over_40_dam_break_steps_in_f64_and_f32() {
+    assert!(ccode::enabled(), "no C compiler answers `cc --version`: install one (Debian: gcc)");
+    for name in ["dam_break_2d", "pysph_impact3d"] {
+        let (scene, plan) = prepare(&case(name), &Default::default()).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let store = build_store::<f64>(&plan, &scene.particles, &scene.materials).expect("store");
+        let native = CpuBackend::new(plan.clone(), store.clone(), scene.mirrors.clone()).expect("cpu");
+        assert!(native.walks_lists_in_c(), "{name}: its lists are not walked in C");
+        assert!(!native.without_jit().walks_lists_in_c(), "{name}: the closures' backend walks in C");
+    }
+    native_equals_closures::<f64>("dam_break_2d", 40);
+    native_equals_closures::<f32>("dam_break_2d", 40);
+}
+
 #[test]
 fn native_pair_programs_equal_the_closures_bit_for_bit_in_f32() {
     // The dam break's fluid pass takes Fourtakas' pow: the f32 recipes of ln and exp.

@@ -134,6 +134,12 @@ pub fn compile_pair<T: Real>(spec: &PairSpec) -> Result<JitPair<T>, String> {
     Ok(JitPair::from_library(func, gathers, lib, NativeKind::C))
 }
 
+/// The shared library of a C source of this module's kind (`super::cwalk`'s walk), built as a
+/// pair program's is.
+pub(super) fn build_source(source: &str) -> Result<libloading::Library, String> {
+    build(compiler().ok_or("no C compiler")?, source)
+}
+
 /// The shared library of `source`: from the cache, else compiled into it (written beside its
 /// final name and renamed, so that processes compiling the same program at once never load a
 /// half-written file).

@@ -221,6 +221,8 @@ pub struct Neighbours<'a, T> {
     pub h_max: f64,
     pub mirrors: &'a [Mirror],
     pub walk: Walk<'a>,
+    /// The kept lists' walk in C, where it runs (no mirrors).
+    pub list_walk: Option<super::cwalk::WalkFn<T>>,
 }
 
 /// Where a pass finds the candidates of a particle.
@@ -536,6 +538,43 @@ fn listed_neighbours_of<T: Real, const D: usize>(
     let hi = nb.h[i];
     let group = w.sh.group;
     let sources = w.v.sources;
+    if let Some(walk) = nb.list_walk {
+        let PairRegs { x, r, h } = w.v.pair_regs;
+        let sources = if filter { sources } else { u64::MAX };
+        let mut at = 0;
+        while at < list.len() {
+            let mut n = w.n;
+            // SAFETY: the walk reads the entries list[at..], the rows of x and h they name (every
+            // one a particle of the store, as `nb.x`, `nb.h` and `group` hold) and writes lanes
+            // n.. of the batch below LANES only: registers x..x + D, r and h of the pair frame
+            // (each LANES lanes of it) and j (LANES + OVERRUN long); xi holds D values.
+            let taken = unsafe {
+                walk(
+                    list[at..].as_ptr(),
+                    list.len() - at,
+                    nb.x.as_ptr(),
+                    nb.h.as_ptr(),
+                    group.as_ptr(),
+                    sources,
+                    xi.as_ptr(),
+                    hi,
+                    nb.support,
+                    w.pair.as_mut_ptr(),
+                    x,
+                    r,
+                    h,
+                    w.j.as_mut_ptr(),
+                    &mut n,
+                )
+            };
+            (w.n, at) = (n, at + taken);
+            if w.n == LANES {
+                w.flush();
+                w.segs.push((w.k, 0));
+            }
+        }
+        return;
+    }
     let (mut t, (mut yi, mut flip)) = (0u32, (xi, [false; 3]));
     for &e in list {
         let jj = (e & INDEX_MASK) as usize;
