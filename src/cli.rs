@@ -477,11 +477,12 @@ fn report_outcome(outcome: Result<crate::runner::RunOutcome, crate::runner::RunF
     match outcome {
         Ok(o) => {
             let r = &o.report;
-            if let Some((n, secs, dir)) = crate::backend::cpu::ccode::build_stats().filter(|s| s.0 > 0) {
-                let programs = if n == 1 { "pair program" } else { "pair programs" };
+            let stats = crate::backend::cpu::ccode::build_stats();
+            if let Some((s, what)) = stats.and_then(|s| s.describe().map(|w| (s, w))) {
                 eprintln!(
-                    "{n} {programs} compiled by the C compiler in {secs:.1} s, kept in {} for later runs",
-                    dir.display()
+                    "{what} compiled by the C compiler in {:.1} s, kept in {} for later runs",
+                    s.secs,
+                    s.cache.display()
                 );
             }
             eprintln!(

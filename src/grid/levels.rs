@@ -97,6 +97,25 @@ impl SizeLevels {
     /// level as far as `reach` says (usually [`Level::reach`]), skipping levels it answers `None`
     /// for. `ranges` is scratch space for the cell ranges.
     #[inline(always)]
+    /// As [`for_each_candidate`](Self::for_each_candidate), a run of consecutive candidates (one
+    /// cell range of a grid's order) at a time.
+    pub fn for_each_candidate_run(
+        &self,
+        p: [f64; 3],
+        reach: impl Fn(&Level) -> Option<f64>,
+        ranges: &mut Vec<(u32, u32)>,
+        mut visit: impl FnMut(&[u32]),
+    ) {
+        for level in &self.levels {
+            let Some(radius) = reach(level) else { continue };
+            level.grid.cell_ranges_within(p, radius, ranges);
+            let order = level.grid.order();
+            for &(s, e) in ranges.iter() {
+                visit(&order[s as usize..e as usize]);
+            }
+        }
+    }
+
     pub fn for_each_candidate(
         &self,
         p: [f64; 3],

@@ -104,16 +104,49 @@ fn cache_dir(env: &crate::config::Env) -> Option<PathBuf> {
         .or_else(|| var("XDG_CACHE_HOME").or_else(|| var("HOME").map(|h| h.join(".cache"))).map(|c| c.join("pairsum")))
 }
 
-/// Pair programs compiled by the C compiler in this process, and the time it took (ns).
+/// Pair programs and neighbour walks compiled by the C compiler in this process, and the time
+/// it all took (ns).
 static COMPILED: AtomicUsize = AtomicUsize::new(0);
+static WALKS_COMPILED: AtomicUsize = AtomicUsize::new(0);
 static COMPILE_NS: AtomicU64 = AtomicU64::new(0);
 
-/// What this process has asked of the C compiler so far: (programs compiled, seconds, the
-/// cache's directory).
-pub fn build_stats() -> Option<(usize, f64, &'static Path)> {
+/// What this process has asked of the C compiler so far.
+pub struct BuildStats {
+    pub pair_programs: usize,
+    /// Neighbour walks (`super::cwalk`), one per precision and dimension.
+    pub walks: usize,
+    pub secs: f64,
+    pub cache: &'static Path,
+}
+
+impl BuildStats {
+    /// "2 pair programs and the neighbour walk", or `None` when nothing was compiled.
+    pub fn describe(&self) -> Option<String> {
+        let pairs = match self.pair_programs {
+            0 => None,
+            1 => Some("1 pair program".to_string()),
+            n => Some(format!("{n} pair programs")),
+        };
+        let walks = match self.walks {
+            0 => None,
+            1 => Some("the neighbour walk".to_string()),
+            n => Some(format!("{n} neighbour walks")),
+        };
+        match (pairs, walks) {
+            (Some(p), Some(w)) => Some(format!("{p} and {w}")),
+            (p, w) => p.or(w),
+        }
+    }
+}
+
+pub fn build_stats() -> Option<BuildStats> {
     let c = compiler()?;
-    let secs = COMPILE_NS.load(Ordering::Relaxed) as f64 * 1e-9;
-    Some((COMPILED.load(Ordering::Relaxed), secs, &c.cache))
+    Some(BuildStats {
+        pair_programs: COMPILED.load(Ordering::Relaxed),
+        walks: WALKS_COMPILED.load(Ordering::Relaxed),
+        secs: COMPILE_NS.load(Ordering::Relaxed) as f64 * 1e-9,
+        cache: &c.cache,
+    })
 }
 
 /// Compiles the pair program as C, or says why not.
@@ -124,7 +157,7 @@ pub fn compile_pair<T: Real>(spec: &PairSpec) -> Result<JitPair<T>, String> {
     if crate::config::env().debug >= 2 {
         eprintln!("C pair program:\n{source}");
     }
-    let lib = build(cc, &source)?;
+    let lib = build(cc, &source, &COMPILED)?;
     // SAFETY: `pair` was printed with exactly this signature (C calling convention), and the
     // library stays loaded as long as the function pointer (both are kept in the JitPair).
     let func = unsafe {
@@ -137,13 +170,13 @@ pub fn compile_pair<T: Real>(spec: &PairSpec) -> Result<JitPair<T>, String> {
 /// The shared library of a C source of this module's kind (`super::cwalk`'s walk), built as a
 /// pair program's is.
 pub(super) fn build_source(source: &str) -> Result<libloading::Library, String> {
-    build(compiler().ok_or("no C compiler")?, source)
+    build(compiler().ok_or("no C compiler")?, source, &WALKS_COMPILED)
 }
 
 /// The shared library of `source`: from the cache, else compiled into it (written beside its
 /// final name and renamed, so that processes compiling the same program at once never load a
 /// half-written file).
-fn build(cc: &Compiler, source: &str) -> Result<libloading::Library, String> {
+fn build(cc: &Compiler, source: &str, compiled: &AtomicUsize) -> Result<libloading::Library, String> {
     use std::hash::{Hash, Hasher};
     let mut h = std::collections::hash_map::DefaultHasher::new();
     (cc.identity.as_str(), source).hash(&mut h);
@@ -168,7 +201,7 @@ fn build(cc: &Compiler, source: &str) -> Result<libloading::Library, String> {
         let err = String::from_utf8_lossy(&out.stderr);
         return Err(format!("{} failed: {}", cc.program, err.lines().take(5).collect::<Vec<_>>().join("\n")));
     }
-    COMPILED.fetch_add(1, Ordering::Relaxed);
+    compiled.fetch_add(1, Ordering::Relaxed);
     COMPILE_NS.fetch_add(t0.elapsed().as_nanos() as u64, Ordering::Relaxed);
     std::fs::rename(&tmp, &lib).map_err(|e| format!("{}: {e}", lib.display()))?;
     // SAFETY: as above.

@@ -221,8 +221,8 @@ pub struct Neighbours<'a, T> {
     pub h_max: f64,
     pub mirrors: &'a [Mirror],
     pub walk: Walk<'a>,
-    /// The kept lists' walk in C, where it runs (no mirrors).
-    pub list_walk: Option<super::cwalk::WalkFn<T>>,
+    /// The walk in C, where a C compiler answers (else the scalar walk).
+    pub c_walk: Option<super::cwalk::WalkFn<T>>,
 }
 
 /// Where a pass finds the candidates of a particle.
@@ -392,6 +392,59 @@ impl<T: Real> Writer<'_, '_, T> {
         }
     }
 
+    /// Adds the candidates `list` names (of one image transform: `yi` and `flip`) by the walk in
+    /// C, flushing the batch whenever it is full, as [`offer`](Self::offer) does.
+    #[allow(clippy::too_many_arguments)]
+    fn walk_in_c(
+        &mut self,
+        walk: super::cwalk::WalkFn<T>,
+        nb: &Neighbours<T>,
+        list: &[u32],
+        yi: [T; 3],
+        flip: [bool; 3],
+        hi: T,
+        sources: u64,
+    ) {
+        let PairRegs { x, r, h } = self.v.pair_regs;
+        let flip = flip.map(|f| if f { -T::one() } else { T::one() });
+        let sign = if self.with_sign { self.sign.as_mut_ptr() } else { std::ptr::null_mut() };
+        let mut at = 0;
+        while at < list.len() {
+            let mut n = self.n;
+            // SAFETY: the walk reads the candidates list[at..], the rows of x and h they name
+            // (particles of the store, as `nb.x`, `nb.h` and `group` hold), yi and flip (three
+            // each), and writes lanes n.. of the batch below LANES only: registers x..x + D, r and h
+            // of the pair frame (each LANES lanes of it), j (LANES + OVERRUN long) and, with
+            // mirrors, the three sign registers.
+            let taken = unsafe {
+                walk(
+                    list[at..].as_ptr(),
+                    list.len() - at,
+                    nb.x.as_ptr(),
+                    nb.h.as_ptr(),
+                    self.sh.group.as_ptr(),
+                    sources,
+                    yi.as_ptr(),
+                    flip.as_ptr(),
+                    hi,
+                    nb.support,
+                    self.pair.as_mut_ptr(),
+                    x,
+                    r,
+                    h,
+                    self.j.as_mut_ptr(),
+                    sign,
+                    &mut n,
+                )
+            };
+            (self.n, at) = (n, at + taken);
+            if self.n == LANES {
+                self.flush();
+                self.segs.push((self.k, 0));
+            }
+        }
+    }
+
     /// Runs the pair program over the batch and folds every particle's lanes into its
     /// accumulators: natively, one call per particle (which loads the particle's own values and
     /// folds its sums itself), or by closures over the whole batch, each particle's own values
@@ -515,6 +568,12 @@ fn neighbours_of<T: Real, const D: usize>(
         }
         // h_ij ≤ (h_i + min(h_hi, h_near))/2: no neighbour lies beyond support · that.
         let reach = |level: &Level| level.reach(nb.support.to_f64(), hi.to_f64(), h_near, 0.0);
+        if let Some(walk) = nb.c_walk {
+            // Particle i itself is at distance 0: the walk never keeps it.
+            let sources = if filter { sources } else { u64::MAX };
+            levels.for_each_candidate_run(p, reach, ranges, |run| w.walk_in_c(walk, nb, run, yi, flip, hi, sources));
+            continue;
+        }
         levels.for_each_candidate(p, reach, ranges, |jj| {
             let jj = jj as usize;
             if (t != 0 || jj != i) && (!filter || (sources >> group[jj]) & 1 != 0) {
@@ -538,40 +597,16 @@ fn listed_neighbours_of<T: Real, const D: usize>(
     let hi = nb.h[i];
     let group = w.sh.group;
     let sources = w.v.sources;
-    if let Some(walk) = nb.list_walk {
-        let PairRegs { x, r, h } = w.v.pair_regs;
+    if let Some(walk) = nb.c_walk {
         let sources = if filter { sources } else { u64::MAX };
         let mut at = 0;
         while at < list.len() {
-            let mut n = w.n;
-            // SAFETY: the walk reads the entries list[at..], the rows of x and h they name (every
-            // one a particle of the store, as `nb.x`, `nb.h` and `group` hold) and writes lanes
-            // n.. of the batch below LANES only: registers x..x + D, r and h of the pair frame
-            // (each LANES lanes of it) and j (LANES + OVERRUN long); xi holds D values.
-            let taken = unsafe {
-                walk(
-                    list[at..].as_ptr(),
-                    list.len() - at,
-                    nb.x.as_ptr(),
-                    nb.h.as_ptr(),
-                    group.as_ptr(),
-                    sources,
-                    xi.as_ptr(),
-                    hi,
-                    nb.support,
-                    w.pair.as_mut_ptr(),
-                    x,
-                    r,
-                    h,
-                    w.j.as_mut_ptr(),
-                    &mut n,
-                )
-            };
-            (w.n, at) = (n, at + taken);
-            if w.n == LANES {
-                w.flush();
-                w.segs.push((w.k, 0));
-            }
+            // Entries come grouped by transform: one run of each.
+            let t = list[at] >> TRANSFORM_SHIFT;
+            let run = list[at..].iter().position(|e| e >> TRANSFORM_SHIFT != t).unwrap_or(list.len() - at);
+            let (yi, flip) = transformed(xi, t, nb.mirrors);
+            w.walk_in_c(walk, nb, &list[at..at + run], yi, flip, hi, sources);
+            at += run;
         }
         return;
     }

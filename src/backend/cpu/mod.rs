@@ -81,9 +81,8 @@ pub struct CpuBackend<T: Real> {
     /// The largest smoothing length over every rank of a run split into domains, where the lists
     /// must reach as far as in the run in one piece (their skin is a fraction of it).
     pub(crate) lists_h_max: Option<f64>,
-    /// The kept lists' walk in C (`cwalk`), where lists are kept, no mirror makes images and a C
-    /// compiler answers; else the scalar walk.
-    list_walk: Option<cwalk::WalkFn<T>>,
+    /// The neighbour walk in C (`cwalk`), where a C compiler answers; else the scalar walk.
+    c_walk: Option<cwalk::WalkFn<T>>,
     /// The state last kept as good ([`Backend::keep`]): the columns in the store's precision,
     /// the ids and the materials, copied into buffers reused from one keep to the next.
     kept: Option<Kept<T>>,
@@ -468,13 +467,13 @@ impl<T: Real> CpuBackend<T> {
         for v in self.passes.iter_mut().flatten() {
             v.jit = None;
         }
-        self.list_walk = None;
+        self.c_walk = None;
         self
     }
 
-    /// Whether the kept lists are walked in C (`cwalk`).
-    pub fn walks_lists_in_c(&self) -> bool {
-        self.list_walk.is_some()
+    /// Whether the neighbours are walked in C (`cwalk`).
+    pub fn walks_in_c(&self) -> bool {
+        self.c_walk.is_some()
     }
 
     /// How many pass variants run as native code, of how many.
@@ -594,10 +593,9 @@ impl<T: Real> CpuBackend<T> {
                 }
             }
         }
-        let list_walk =
-            (plan.search.keeps_lists() && mirrors.is_empty()).then(|| cwalk::walker::<T>(plan.dim)).flatten();
+        let c_walk = cwalk::walker::<T>(plan.dim);
         Ok(CpuBackend {
-            list_walk,
+            c_walk,
             passes,
             stages,
             derived,
@@ -721,7 +719,7 @@ impl<T: Real> CpuBackend<T> {
             h_near: &search.h_near,
             h_max: search.h_max,
             mirrors: &self.mirrors,
-            list_walk: self.list_walk,
+            c_walk: self.c_walk,
         };
         let pass = &self.passes[k];
         let timed = self.pass_time.as_deref();
