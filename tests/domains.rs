@@ -441,9 +441,12 @@ fn probes_measures_and_the_watchdog_reduced_on_each_rank_give_the_undivided_valu
 /// every rank computed each of them that way (not by gathering every particle), and each is within
 /// 1e-12 of the undivided run's value. What a rank compares (`Backend::nearby`) holds every
 /// particle within its reach (at least Δx) of one of its own, each at its undivided position
-/// within 1e-12 of the body's size.
+/// within 1e-12 of the body's size. The bytes a rank counts for those positions
+/// (`Domain::nearby_sent`, printed with the run's traffic) add up over the ranks to one position
+/// per halo particle.
 #[test]
-fn measures_of_neighbours_reduced_on_each_rank_give_the_undivided_values_within_1e_12() {
+fn measures_of_neighbours_reduced_on_each_rank_give_the_undivided_values_within_1e_12_and_their_positions_are_counted()
+{
     use pairsum::scene::measure::{near_each_rank, Measure};
     let measures =
         [Measure::MinInterbodyDistance, Measure::Interpenetrated, Measure::MinPairDistance, Measure::MaxNeighbourGap];
@@ -475,9 +478,19 @@ fn measures_of_neighbours_reduced_on_each_rank_give_the_undivided_values_within_
                 let now = Moment::new(&b.backend);
                 let near: Vec<Option<f64>> =
                     which.iter().map(|m| near_each_rank(*m, &scene, &now).expect("measured")).collect();
-                (near, evaluated(&probes, &scene, &b.backend), b.backend.nearby().expect("nearby").expect("positions"))
+                let before = b.backend.nearby_sent();
+                let positions = b.backend.nearby().expect("nearby").expect("positions");
+                let sent = b.backend.nearby_sent() - before;
+                (near, evaluated(&probes, &scene, &b.backend), positions, sent)
             },
         );
+        // What the ranks sent for one `nearby` is one position per halo particle they hold.
+        let sent: u64 = split.iter().map(|s| s.3).sum();
+        let held: usize = split.iter().map(|s| s.2.x.len() - s.2.own).sum();
+        assert!(held > 0, "{name}: no rank holds a halo");
+        let dim = prepare(&case(name), &opts).expect("case").1.dim;
+        assert_eq!(sent, (held * dim * 8) as u64, "{name}: bytes counted for the positions of {held} halo particles");
+        let split: Vec<_> = split.into_iter().map(|(a, b, c, _)| (a, b, c)).collect();
         let (whole, at) = whole;
         let coords: Vec<f64> = at.values().flat_map(|p| p.to_vec()).collect();
         let size = max_abs(&format!("{name}: the undivided positions"), &coords);

@@ -45,6 +45,9 @@ pub struct Traffic {
     pub rebalances: u64,
     /// The largest rank's neighbour-pass time over the ranks' mean, at the last check.
     pub imbalance: f64,
+    /// Positions sent again for the measures that compare neighbours ([`Backend::nearby`]), as of
+    /// the last evaluation ([`Domain::nearby_sent`] counts them as they go).
+    pub nearby: u64,
 }
 
 /// A run that cannot be split into domains (yet), and why.
@@ -165,6 +168,8 @@ pub struct Domain<T: Real> {
     /// the balance (particles times evaluations).
     evaluated: Vec<f64>,
     pub traffic: Traffic,
+    /// Bytes of positions sent for [`Backend::nearby`] (which reads, so counts through `&self`).
+    nearby_sent: std::sync::atomic::AtomicU64,
 }
 
 impl<T: Real> Domain<T> {
@@ -261,10 +266,16 @@ impl<T: Real> Domain<T> {
             kept: None,
             evaluated: vec![0.0; plan.model.groups.len()],
             traffic: Traffic::default(),
+            nearby_sent: Default::default(),
             plan,
         };
         domain.set_own(own);
         Ok(domain)
+    }
+
+    /// Bytes of positions this rank has sent for [`Backend::nearby`] so far.
+    pub fn nearby_sent(&self) -> u64 {
+        self.nearby_sent.load(std::sync::atomic::Ordering::Relaxed)
     }
 
     /// This rank's own particles and its halo's, as of the last evaluation.
@@ -816,6 +827,7 @@ impl<T: Real> Backend for Domain<T> {
         for ((g, _), n) in self.backend.store.ranges.iter().zip(&self.owned) {
             self.evaluated[g.index()] += *n as f64;
         }
+        self.traffic.nearby = self.nearby_sent();
         let mut search = None;
         for k in 0..self.plan.passes.len() {
             let fields: Vec<FieldId> = self.read_at_j[k].iter().copied().filter(|f| !fresh.contains(f)).collect();
@@ -886,6 +898,8 @@ impl<T: Real> Backend for Domain<T> {
             .iter()
             .map(|list| list.iter().flat_map(|i| self.place(*i as usize).0[..dim].to_vec()).collect())
             .collect();
+        let sent = out.iter().map(Vec::len).sum::<usize>() * T::BYTES;
+        self.nearby_sent.fetch_add(sent as u64, std::sync::atomic::Ordering::Relaxed);
         let got = self.transport().exchange(out);
         for (list, m) in self.recv.iter().zip(&got) {
             for (k, p) in list.iter().zip(m.chunks(dim)) {
@@ -992,7 +1006,8 @@ impl<T: Real> Backend for Domain<T> {
         Some(format!(
             "rank {} of {}: {own} particles of its own, {} in its halo at the last evaluation; sent per \
              step (kB, {} B a value): {:.1} migrating, {:.1} rebuilding halos ({} rebuilds), {:.1} updating halos \
-             before a pass; {} rebalances, the slowest rank's passes {:.2}× the mean at the last check\n",
+             before a pass, {:.1} for the measures that compare neighbours; {} rebalances, the slowest rank's \
+             passes {:.2}× the mean at the last check\n",
             self.rank + 1,
             self.size,
             t.halo_particles,
@@ -1001,6 +1016,7 @@ impl<T: Real> Backend for Domain<T> {
             per(t.halo_builds),
             t.rebuilds,
             per(t.halo_updates),
+            per(self.nearby_sent()),
             t.rebalances,
             t.imbalance
         ))
