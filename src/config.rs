@@ -21,7 +21,7 @@ pub struct Env {
     /// `PAIRSUM_NO_JIT`: the CPU backend runs its neighbour loops as closures, not native code.
     pub no_jit: bool,
     /// `PAIRSUM_NATIVE`: `cranelift` keeps the CPU backend's pair programs on Cranelift instead of
-    /// the machine's C compiler.
+    /// the machine's C compiler, and its neighbour walk in Rust.
     pub native: Option<String>,
     /// `PAIRSUM_C_LANES`: lanes per iteration of the C pair programs' loop (else 8).
     pub c_lanes: Option<usize>,
