@@ -624,7 +624,9 @@ const LOOP_LANES: usize = 8;
 
 /// The loop body for `copies` vectors of `w` lanes each, statement by statement: copy h's
 /// temporaries, neighbours and lane pointers are suffixed `_h` and start `h · w` lanes on. The
-/// folds come in lane order, copy 0's first, so the sums are those of one vector at a time.
+/// folds come in lane order, copy 0's first, so the sums are those of one vector at a time. A
+/// name the printer gives to something per lane must be one [`copy_of`] renames (t…, j…, `lane`,
+/// `sg`, `base`).
 fn interleaved(body: &str, copies: usize, w: usize) -> String {
     let mut out = String::with_capacity(body.len() * copies);
     for line in body.lines() {
