@@ -454,7 +454,7 @@ fn measures_of_neighbours_reduced_on_each_rank_give_the_undivided_values_within_
         [("body_in_water_2d", 3, 20, &measures[..]), ("tensile_test", 2, 20, &measures[2..])]
     {
         let opts = pairsum::scene::Options { resolution: Some("ci".into()), ..Default::default() };
-        let (scene, _) = prepare(&case(name), &opts).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let (scene, plan) = prepare(&case(name), &opts).unwrap_or_else(|e| panic!("{name}: {e}"));
         let probes: Vec<ProbeSpec> = which
             .iter()
             .map(|m| ProbeSpec {
@@ -488,8 +488,11 @@ fn measures_of_neighbours_reduced_on_each_rank_give_the_undivided_values_within_
         let sent: u64 = split.iter().map(|s| s.3).sum();
         let held: usize = split.iter().map(|s| s.2.x.len() - s.2.own).sum();
         assert!(held > 0, "{name}: no rank holds a halo");
-        let dim = prepare(&case(name), &opts).expect("case").1.dim;
-        assert_eq!(sent, (held * dim * 8) as u64, "{name}: bytes counted for the positions of {held} halo particles");
+        assert_eq!(
+            sent,
+            (held * plan.dim * 8) as u64,
+            "{name}: bytes counted for the positions of {held} halo particles"
+        );
         let split: Vec<_> = split.into_iter().map(|(a, b, c, _)| (a, b, c)).collect();
         let (whole, at) = whole;
         let coords: Vec<f64> = at.values().flat_map(|p| p.to_vec()).collect();

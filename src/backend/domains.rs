@@ -45,9 +45,6 @@ pub struct Traffic {
     pub rebalances: u64,
     /// The largest rank's neighbour-pass time over the ranks' mean, at the last check.
     pub imbalance: f64,
-    /// Positions sent again for the measures that compare neighbours ([`Backend::nearby`]), as of
-    /// the last evaluation ([`Domain::nearby_sent`] counts them as they go).
-    pub nearby: u64,
 }
 
 /// A run that cannot be split into domains (yet), and why.
@@ -168,7 +165,8 @@ pub struct Domain<T: Real> {
     /// the balance (particles times evaluations).
     evaluated: Vec<f64>,
     pub traffic: Traffic,
-    /// Bytes of positions sent for [`Backend::nearby`] (which reads, so counts through `&self`).
+    /// Bytes of positions sent again for the measures that compare neighbours
+    /// ([`Backend::nearby`], which reads, so counts through `&self`; not in [`Traffic`] for that).
     nearby_sent: std::sync::atomic::AtomicU64,
 }
 
@@ -827,7 +825,6 @@ impl<T: Real> Backend for Domain<T> {
         for ((g, _), n) in self.backend.store.ranges.iter().zip(&self.owned) {
             self.evaluated[g.index()] += *n as f64;
         }
-        self.traffic.nearby = self.nearby_sent();
         let mut search = None;
         for k in 0..self.plan.passes.len() {
             let fields: Vec<FieldId> = self.read_at_j[k].iter().copied().filter(|f| !fresh.contains(f)).collect();

@@ -93,12 +93,11 @@ impl SizeLevels {
         &self.levels
     }
 
-    /// Calls `visit` with every particle index in the cells that a search at `p` walks: in each
-    /// level as far as `reach` says (usually [`Level::reach`]), skipping levels it answers `None`
-    /// for. `ranges` is scratch space for the cell ranges.
+    /// Calls `visit` with every run of consecutive candidates (one cell range of a grid's order)
+    /// in the cells that a search at `p` walks: in each level as far as `reach` says (usually
+    /// [`Level::reach`]), skipping levels it answers `None` for. `ranges` is scratch space for the
+    /// cell ranges.
     #[inline(always)]
-    /// As [`for_each_candidate`](Self::for_each_candidate), a run of consecutive candidates (one
-    /// cell range of a grid's order) at a time.
     pub fn for_each_candidate_run(
         &self,
         p: [f64; 3],
@@ -116,6 +115,8 @@ impl SizeLevels {
         }
     }
 
+    /// As [`for_each_candidate_run`](Self::for_each_candidate_run), one particle index at a time.
+    #[inline(always)]
     pub fn for_each_candidate(
         &self,
         p: [f64; 3],
@@ -123,13 +124,6 @@ impl SizeLevels {
         ranges: &mut Vec<(u32, u32)>,
         mut visit: impl FnMut(u32),
     ) {
-        for level in &self.levels {
-            let Some(radius) = reach(level) else { continue };
-            level.grid.cell_ranges_within(p, radius, ranges);
-            let order = level.grid.order();
-            for &(s, e) in ranges.iter() {
-                order[s as usize..e as usize].iter().for_each(|&j| visit(j));
-            }
-        }
+        self.for_each_candidate_run(p, reach, ranges, |run| run.iter().for_each(|&j| visit(j)));
     }
 }
