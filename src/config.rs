@@ -36,6 +36,9 @@ pub struct Env {
     /// `PAIRSUM_GPU_CELLS_PER_CUTOFF`: the GPU cell list's cells per cut-off (1, 2, 4 or 8) instead
     /// of the scene's choice (`backend::gpu::runtime::cells_per_cutoff`); as written, checked there.
     pub gpu_cells_per_cutoff: Option<String>,
+    /// `PAIRSUM_HALO_SKIN`: a run split into domains keeps its halos' skin at this fraction of the
+    /// largest cut-off instead of fitting it to the fastest particle (`backend::domains`).
+    pub halo_skin: Option<f64>,
 }
 
 fn var(name: &str) -> Option<String> {
@@ -58,6 +61,7 @@ impl Env {
             gpu_memory_limit: var("PAIRSUM_GPU_MEMORY_LIMIT").and_then(|v| v.parse().ok()),
             wgsl_fault: var("PAIRSUM_WGSL_FAULT").is_some(),
             gpu_cells_per_cutoff: var("PAIRSUM_GPU_CELLS_PER_CUTOFF"),
+            halo_skin: var("PAIRSUM_HALO_SKIN").and_then(|v| v.parse().ok()).filter(|f: &f64| *f > 0.0),
         }
     }
 }

@@ -45,6 +45,10 @@ pub struct Traffic {
     pub rebalances: u64,
     /// The largest rank's neighbour-pass time over the ranks' mean, at the last check.
     pub imbalance: f64,
+    /// The halo's skin at the last rebuild, as a fraction of the largest cut-off.
+    pub skin: f64,
+    /// Seconds this rank spent rebuilding and updating its halos.
+    pub halo_secs: f64,
 }
 
 /// A run that cannot be split into domains (yet), and why.
@@ -86,6 +90,8 @@ struct Anchor {
     skin: f64,
     /// The halo held every particle within this distance of one of the rank's own.
     reach: f64,
+    /// The largest cut-off then.
+    cut_off: f64,
 }
 
 /// The ranks are cut again when the slowest rank's neighbour-pass time exceeds the ranks' mean by
@@ -93,8 +99,56 @@ struct Anchor {
 const REBALANCE_AT: f64 = 1.1;
 
 /// The halo's skin, as a fraction of the largest cut-off, where the plan's search keeps no lists
-/// (lists bring their own).
+/// (lists bring their own), until it is fitted to the particles' speed ([`SkinFit`]).
 const HALO_SKIN: f64 = 0.1;
+
+/// The fitted skin's bounds, as fractions of the largest cut-off.
+const SKIN_BOUNDS: (f64, f64) = (0.02, 1.0);
+
+/// The halo's skin fitted to the fastest particle, where the plan's search keeps no lists of its
+/// own (the cell list; the adaptive search's skin beyond its reserve). A skin s keeps the halos
+/// for s / 2d evaluations, d the fastest particle's displacement per evaluation. An evaluation's
+/// halo updates take about A (r + s), r the cut-off (they scale with the halo's depth), and a
+/// rebuild B more than an evaluation without one (the store rebuilt, the collectives), so that
+/// the halos cost A (r + s) + B 2d / s per evaluation, least at
+///   s = √(2 d B / A),
+/// fitted whenever the halos are dropped, from that interval's d and the slowest rank's times.
+/// An interval that rebuilt at every evaluation measured no A: the skin then doubles. The
+/// hypervelocity impact on two ranks rebuilt its halos at each of its 643 steps with the fixed
+/// tenth of the cut-off. Like the cuts that follow the measured work, the skin follows measured
+/// times, so a split run repeats its figures within rounding, not bit for bit;
+/// `PAIRSUM_HALO_SKIN` fixes the skin.
+#[derive(Default)]
+struct SkinFit {
+    /// False where the skin is the kept lists' own or `PAIRSUM_HALO_SKIN` fixes it.
+    on: bool,
+    /// Evaluations since the last rebuild, the rebuild's included.
+    evaluations: u64,
+    /// Seconds of the last rebuild and of the halo updates of its evaluation.
+    rebuild_secs: f64,
+    /// Seconds of the halo updates of the evaluations since then that did not rebuild.
+    update_secs: f64,
+}
+
+impl SkinFit {
+    /// The skin, as a fraction of the cut-off, after an interval in which the fastest particle
+    /// moved `d_over_r` of the cut-off, with `skin` that fraction then and `times` the slowest
+    /// rank's halo seconds [in the rebuild's evaluation, in each other one on average].
+    fn fraction(&self, skin: f64, d_over_r: f64, times: [f64; 2]) -> f64 {
+        let plain = self.evaluations.saturating_sub(1);
+        let f = if plain == 0 {
+            2.0 * skin
+        } else {
+            let (b, a) = ((times[0] - times[1]).max(0.0), times[1] / (1.0 + skin));
+            (2.0 * d_over_r / self.evaluations as f64 * b / a).sqrt()
+        };
+        if f.is_finite() {
+            f.clamp(SKIN_BOUNDS.0, SKIN_BOUNDS.1)
+        } else {
+            skin
+        }
+    }
+}
 
 /// Every combination of no move and a move by ± the period along each periodic axis of
 /// `mirrors` (`[0, 0, 0]` alone where none is periodic).
@@ -159,6 +213,7 @@ pub struct Domain<T: Real> {
     /// Since the last rebuild: this rank's own particles' positions and smoothing lengths, and
     /// the skin's length; `None` when the next evaluation must rebuild.
     anchor: Option<Anchor>,
+    fit: SkinFit,
     /// This rank's own particles when the watchdog last kept the state.
     kept: Option<Store<T>>,
     /// Per model group: how many of its particles this rank evaluated since the last check of
@@ -229,11 +284,13 @@ impl<T: Real> Domain<T> {
         let read_at_j: Vec<Vec<FieldId>> = (0..plan.passes.len()).map(|k| plan.fields_read_at_j(k)).collect();
         let halo_fields: Vec<FieldId> =
             plan.layout.iter().map(|l| l.field).filter(|f| read_at_j.iter().flatten().any(|r| r == f)).collect();
+        let fixed = crate::config::env().halo_skin;
         let (skin, reserve) = match plan.search {
             Lists::Verlet { skin } => (skin, 0.0),
-            Lists::Adaptive { skin, .. } => (HALO_SKIN, skin),
-            Lists::Cells => (HALO_SKIN, 0.0),
+            Lists::Adaptive { skin, .. } => (fixed.unwrap_or(HALO_SKIN), skin),
+            Lists::Cells => (fixed.unwrap_or(HALO_SKIN), 0.0),
         };
+        let fit = SkinFit { on: fixed.is_none() && !matches!(plan.search, Lists::Verlet { .. }), ..Default::default() };
         let periodic_moves = periodic_moves(&mirrors);
         let parts: Vec<Known> =
             transport.all_gather(known(&plan, &own).encode()).iter().map(|k| Known::decode(k)).collect();
@@ -261,6 +318,7 @@ impl<T: Real> Domain<T> {
             carried: None,
             periodic_moves,
             anchor: None,
+            fit,
             kept: None,
             evaluated: vec![0.0; plan.model.groups.len()],
             traffic: Traffic::default(),
@@ -269,6 +327,15 @@ impl<T: Real> Domain<T> {
         };
         domain.set_own(own);
         Ok(domain)
+    }
+
+    /// Keeps the halo's skin at `fraction` of the largest cut-off from the next rebuild on, not
+    /// fitted to the particles' speed (as `PAIRSUM_HALO_SKIN` does; the kept lists' skin stays
+    /// theirs).
+    pub fn fix_halo_skin(&mut self, fraction: f64) {
+        if self.fit.on {
+            (self.skin, self.fit.on) = (fraction, false);
+        }
     }
 
     /// Bytes of positions this rank has sent for [`Backend::nearby`] so far.
@@ -537,8 +604,10 @@ impl<T: Real> Domain<T> {
             self.adopt_lists(c)?;
         }
         let (x, h) = self.own().into_iter().map(|i| self.place(i)).unzip();
-        self.anchor = Some(Anchor { x, h, skin, reach });
+        self.anchor = Some(Anchor { x, h, skin, reach, cut_off: self.support * h_max });
         self.traffic.rebuilds += 1;
+        self.traffic.skin = self.skin;
+        (self.fit.evaluations, self.fit.update_secs) = (0, 0.0);
         self.traffic.halo_particles = self.recv.iter().map(Vec::len).sum();
         Ok(())
     }
@@ -639,11 +708,33 @@ impl<T: Real> Domain<T> {
     }
 
     /// Whether the halos must be rebuilt: never built, or a pair outside them may have come
-    /// within its cut-off (`Drift::exceeds`, over every rank's own particles).
-    fn must_rebuild(&self) -> bool {
-        let Some(a) = &self.anchor else { return true };
+    /// within its cut-off (`Drift::exceeds`, over every rank's own particles). The skin of the
+    /// next is fitted first.
+    fn must_rebuild(&mut self) -> bool {
+        let Some(drift) = self.global_drift() else { return true };
+        let skin = self.anchor.as_ref().map_or(0.0, |a| a.skin);
+        let rebuild = drift.exceeds(skin, self.support);
+        if rebuild {
+            self.fit_skin(drift.displacement);
+        }
+        rebuild
+    }
+
+    /// Every rank's largest drift since the last rebuild (a collective); `None` before the first.
+    fn global_drift(&self) -> Option<crate::schedule::search::Drift> {
+        let a = self.anchor.as_ref()?;
         let all = self.transport().all_reduce(&self.drift(a), &[Reduce::Max, Reduce::Max]);
-        crate::schedule::search::Drift { displacement: all[0], h_growth: all[1] }.exceeds(a.skin, self.support)
+        Some(crate::schedule::search::Drift { displacement: all[0], h_growth: all[1] })
+    }
+
+    /// Fits the skin of the next rebuild ([`SkinFit`]) to the interval since the last: the
+    /// fastest particle moved `displacement` in it. A collective where the skin is fitted.
+    fn fit_skin(&mut self, displacement: f64) {
+        let Some(a) = self.anchor.as_ref().filter(|_| self.fit.on && self.fit.evaluations > 0) else { return };
+        let plain = self.fit.evaluations.saturating_sub(1).max(1) as f64;
+        let mine = [self.fit.rebuild_secs, self.fit.update_secs / plain];
+        let slowest = self.transport().all_reduce(&mine, &[Reduce::Max, Reduce::Max]);
+        self.skin = self.fit.fraction(self.skin, displacement / a.cut_off, [slowest[0], slowest[1]]);
     }
 
     /// The largest displacement and growth of h of this rank's own particles since `a`, the last
@@ -816,20 +907,26 @@ impl<T: Real> Backend for Domain<T> {
     /// rebuild (which sends what the passes read at j) what an earlier pass wrote, else what the pass reads
     /// and was not sent since the last write.
     fn evaluate(&mut self, g: Globals) -> Result<(), BackendError> {
-        let mut fresh: Vec<FieldId> = if self.must_rebuild() {
+        let rebuilt = self.must_rebuild();
+        let started = std::time::Instant::now();
+        let mut fresh: Vec<FieldId> = if rebuilt {
             self.rebuild()?;
             self.halo_fields.clone()
         } else {
             vec![]
         };
+        let mut halo_secs = if rebuilt { started.elapsed().as_secs_f64() } else { 0.0 };
         for ((g, _), n) in self.backend.store.ranges.iter().zip(&self.owned) {
             self.evaluated[g.index()] += *n as f64;
         }
+        self.fit.evaluations += 1;
         let mut search = None;
         for k in 0..self.plan.passes.len() {
             let fields: Vec<FieldId> = self.read_at_j[k].iter().copied().filter(|f| !fresh.contains(f)).collect();
             if !fields.is_empty() {
+                let t = std::time::Instant::now();
                 self.refresh_halos(&fields);
+                halo_secs += t.elapsed().as_secs_f64();
             }
             fresh.extend(&fields);
             fresh.retain(|f| !self.plan.passes[k].writes.contains(f));
@@ -841,6 +938,11 @@ impl<T: Real> Backend for Domain<T> {
                 self.backend.run_pass(k, g, search);
             }
         }
+        match rebuilt {
+            true => self.fit.rebuild_secs = halo_secs,
+            false => self.fit.update_secs += halo_secs,
+        }
+        self.traffic.halo_secs += halo_secs;
         Ok(())
     }
 
@@ -859,6 +961,10 @@ impl<T: Real> Backend for Domain<T> {
     /// halo and orders this rank's own particles along the Morton curve.
     fn reorder(&mut self) -> Result<(), BackendError> {
         self.rebalance();
+        // The halo is dropped here: its interval is measured as one that ran out.
+        if let Some(drift) = self.global_drift().filter(|_| self.fit.on) {
+            self.fit_skin(drift.displacement);
+        }
         let carried = self.carry_lists();
         let own = self.own();
         let rows: Vec<(&Store<T>, usize)> = own.iter().map(|i| (&self.backend.store, *i)).collect();
@@ -1002,8 +1108,8 @@ impl<T: Real> Backend for Domain<T> {
         let per = |b: u64| b as f64 / steps.max(1) as f64 / 1e3;
         Some(format!(
             "rank {} of {}: {own} particles of its own, {} in its halo at the last evaluation; sent per \
-             step (kB, {} B a value): {:.1} migrating, {:.1} rebuilding halos ({} rebuilds), {:.1} updating halos \
-             before a pass, {:.1} for the measures that compare neighbours; {} rebalances, the slowest rank's \
+             step (kB, {} B a value): {:.1} migrating, {:.1} rebuilding halos ({} rebuilds, the last with a skin of \
+             {:.2} of the cut-off), {:.1} updating halos before a pass ({:.3} ms a step on halos), {:.1} for the measures that compare neighbours; {} rebalances, the slowest rank's \
              passes {:.2}× the mean at the last check\n",
             self.rank + 1,
             self.size,
@@ -1012,7 +1118,9 @@ impl<T: Real> Backend for Domain<T> {
             per(t.migration),
             per(t.halo_builds),
             t.rebuilds,
+            t.skin,
             per(t.halo_updates),
+            t.halo_secs * 1e3 / steps.max(1) as f64,
             per(self.nearby_sent()),
             t.rebalances,
             t.imbalance
@@ -1035,5 +1143,31 @@ impl<T: Real> Backend for Domain<T> {
         let all = self.transport().all_gather(code.to_vec());
         let best = all.iter().filter(|c| c[0].is_finite()).min_by(|a, b| a[0].total_cmp(&b[0]));
         Ok(best.map(|c| (c[0] as usize, FieldId(c[1] as u32))))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn fit(evaluations: u64) -> SkinFit {
+        SkinFit { on: true, evaluations, ..Default::default() }
+    }
+
+    #[test]
+    fn the_skin_doubles_after_an_interval_that_rebuilt_at_its_only_evaluation() {
+        assert_eq!(fit(1).fraction(0.1, 0.3, [1.0, 0.0]), 0.2);
+        assert_eq!(fit(1).fraction(0.8, 0.3, [1.0, 0.0]), SKIN_BOUNDS.1);
+    }
+
+    #[test]
+    fn the_fitted_skin_is_the_root_of_twice_the_displacement_times_the_rebuilds_cost_over_the_depths() {
+        // 4 evaluations, the fastest particle 0.2 of the cut-off in all (0.05 each); the rebuild's
+        // evaluation 0.5 ms more than another's 0.2 ms at a depth of 1.25 cut-offs: A = 0.16 ms
+        // per cut-off of depth, B = 0.5 ms, s = √(2 · 0.05 · 0.5 / 0.16) = 0.559.
+        let f = fit(4).fraction(0.25, 0.2, [0.7e-3, 0.2e-3]);
+        assert!((f - (2.0 * 0.05 * 0.5 / 0.16f64).sqrt()).abs() < 1e-12, "{f}");
+        assert_eq!(fit(4).fraction(0.25, 0.0, [0.7e-3, 0.2e-3]), SKIN_BOUNDS.0, "a body at rest");
+        assert_eq!(fit(4).fraction(0.25, f64::NAN, [0.7e-3, 0.2e-3]), 0.25, "no measure: kept");
     }
 }
