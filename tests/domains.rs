@@ -727,7 +727,7 @@ fn the_halo_skin_fitted_to_the_fastest_particle_rebuilds_the_impacts_halos_at_fe
 }
 
 #[test]
-fn a_split_run_refuses_more_ranks_than_particles_and_adaptive_lists_across_periodic_sides() {
+fn a_split_run_refuses_more_ranks_than_particles() {
     let opts = pairsum::scene::Options { resolution: Some("ci".into()), ..Default::default() };
     let (scene, plan) = prepare(&case("rings_2d"), &opts).expect("rings");
     let store = build_store::<f64>(&plan, &scene.particles, &scene.materials).expect("store");
@@ -735,14 +735,39 @@ fn a_split_run_refuses_more_ranks_than_particles_and_adaptive_lists_across_perio
     let mut ends = Threads::ranks(n + 1);
     let err = Domain::new(plan, store, scene.mirrors.clone(), Box::new(ends.remove(0))).err().expect("refused");
     assert!(err.0.contains(&format!("cannot split {n} particles into {} domains", n + 1)), "{}", err.0);
+}
+
+/// The adaptive search across periodic sides: where a particle crosses a side its images move,
+/// and the run in one piece rebuilds every list (`Lists::prepare`); a split run carries each
+/// list's position at the last full build with it, and every rank rebuilds all its lists when
+/// any rank's particle crossed. Two bars at 1000 and 1300 m/s in 1D, the faster leaving through
+/// the upper side and coming back through the lower, 30 steps on two and four ranks: the lists
+/// are built as often as in one piece (more than once: particles crossed) and every watched field
+/// is within 1e-12 of its largest magnitude. Two mutations fail it: no rebuild where a particle
+/// crossed (`L_inv` off by half its magnitude on two ranks), and the positions at the last full
+/// build not carried with the lists (`edot` off by its whole magnitude).
+#[test]
+fn the_adaptive_search_across_periodic_sides_split_into_domains_rebuilds_as_often_and_gives_the_undivided_fields_within_1e_12(
+) {
     let dir = tempdir("adaptive_periodic");
     let adaptive = "[neighbours]\nsearch = \"adaptive\"\nfield = \"rho\"\nthreshold = 1\n";
     let bars = fast_bars(&dir, &format!("[periodic]\nx = [-0.05, 0.052]\n\n{adaptive}"));
-    let (scene, plan) = prepare(&bars, &opts).unwrap_or_else(|e| panic!("{e}"));
-    let store = build_store::<f64>(&plan, &scene.particles, &scene.materials).expect("store");
-    let err =
-        Domain::new(plan, store, scene.mirrors.clone(), Box::new(Threads::ranks(2).remove(0))).err().expect("refused");
-    assert!(err.0.contains("adaptive search") && err.0.contains("periodic"), "{}", err.0);
+    let name = bars.to_str().expect("a path");
+    for ranks in [2, 4] {
+        let ((stats, whole), results): (_, Vec<_>) = run_both(
+            name,
+            ranks,
+            30,
+            |a| (a.backend.search_stats(), fields(&a.backend)),
+            |b| (fields(&b.backend), b.backend.search_stats()),
+        );
+        let (field, d) = worst(&relative_diffs(name, &whole, &results[0].0));
+        assert!(d <= 1e-12, "on {ranks} ranks: `{field}` differs by {d:e} of its magnitude");
+        assert!(stats.full_builds > 1, "no particle crossed a side: {stats:?}");
+        for r in &results {
+            assert_eq!(r.1.full_builds, stats.full_builds, "on {ranks} ranks: {:?} against {stats:?}", r.1);
+        }
+    }
 }
 
 /// Runs the pairsum binary with `args` (under `mpirun -n ranks` when `ranks` is given) and

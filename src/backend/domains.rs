@@ -13,7 +13,7 @@
 //! Every exchange goes through a [`Transport`] and is collective: every rank makes the same calls
 //! in the same order. What travels is counted in [`Traffic`].
 
-use super::cpu::lists::{KeptList, TRANSFORM_SHIFT};
+use super::cpu::lists::{half_period, KeptList, TRANSFORM_SHIFT};
 use super::cpu::{first_non_finite_in, known, lower::Known, snapshot_of, CpuBackend};
 use super::transport::Transport;
 use super::{padded, Backend, BackendError, Globals, Mirror, Nearby, Snapshot, WatchValues};
@@ -49,19 +49,6 @@ pub struct Traffic {
     pub skin: f64,
     /// Seconds this rank spent rebuilding and updating its halos.
     pub halo_secs: f64,
-}
-
-/// A run that cannot be split into domains (yet), and why.
-pub fn unsupported(plan: &Plan, mirrors: &[Mirror]) -> Option<String> {
-    if matches!(plan.search, Lists::Adaptive { .. }) && mirrors.iter().any(|m| m.shift > 0.0) {
-        return Some(
-            "a run split into domains carries the adaptive search's lists (`search = \"adaptive\"`) from rank to \
-             rank, but not yet across periodic sides, where the run in one piece rebuilds them all: use \"cells\" \
-             or \"verlet\", or run in one piece"
-                .into(),
-        );
-    }
-    None
 }
 
 /// A particle: one in a store here, or one that travelled as its group, material and id, then
@@ -210,6 +197,8 @@ pub struct Domain<T: Real> {
     /// particle whose move lies within a rank's reach is a neighbour of that rank's particles
     /// across the sides (the CPU backend makes the images).
     periodic_moves: Vec<[f64; 3]>,
+    /// Half the shortest periodic side, if any: a particle that moved that far crossed one.
+    half_period: Option<f64>,
     /// Since the last rebuild: this rank's own particles' positions and smoothing lengths, and
     /// the skin's length; `None` when the next evaluation must rebuild.
     anchor: Option<Anchor>,
@@ -276,9 +265,6 @@ impl<T: Real> Domain<T> {
         mirrors: Vec<Mirror>,
         mut transport: Box<dyn Transport>,
     ) -> Result<Domain<T>, BackendError> {
-        if let Some(why) = unsupported(&plan, &mirrors) {
-            return Err(BackendError(why));
-        }
         let (rank, size) = (transport.rank(), transport.size());
         let (x, h) = (field(&plan, "x")?, field(&plan, "h")?);
         let read_at_j: Vec<Vec<FieldId>> = (0..plan.passes.len()).map(|k| plan.fields_read_at_j(k)).collect();
@@ -291,7 +277,7 @@ impl<T: Real> Domain<T> {
             Lists::Cells => (fixed.unwrap_or(HALO_SKIN), 0.0),
         };
         let fit = SkinFit { on: fixed.is_none() && !matches!(plan.search, Lists::Verlet { .. }), ..Default::default() };
-        let periodic_moves = periodic_moves(&mirrors);
+        let (periodic_moves, half_period) = (periodic_moves(&mirrors), half_period(&mirrors));
         let parts: Vec<Known> =
             transport.all_gather(known(&plan, &own).encode()).iter().map(|k| Known::decode(k)).collect();
         let mut backend = CpuBackend::with_known(plan.clone(), own.clone(), mirrors, Known::agreed(&parts))?;
@@ -317,6 +303,7 @@ impl<T: Real> Domain<T> {
             reserve,
             carried: None,
             periodic_moves,
+            half_period,
             anchor: None,
             fit,
             kept: None,
@@ -672,6 +659,9 @@ impl<T: Real> Domain<T> {
         let local: HashMap<u32, u32> = store.id.iter().enumerate().map(|(k, id)| (*id, k as u32)).collect();
         let mut of = vec![vec![]; store.n];
         let mut field0 = vec![f64::NAN; store.n];
+        // Where each particle was at its lists' last full build (the halo's: where it is now).
+        let dim = self.plan.dim;
+        let mut x0 = store.column(self.x).expect("x is stored").data.clone();
         for i in self.own() {
             let id = store.id[i];
             let list = carried.lists.get(&id).ok_or_else(|| {
@@ -687,11 +677,31 @@ impl<T: Real> Domain<T> {
                 of[i].push(k | t << TRANSFORM_SHIFT);
             }
             field0[i] = list.field0;
+            for (c, v) in x0[i * dim..(i + 1) * dim].iter_mut().zip(list.x0) {
+                *c = T::from_f64(v);
+            }
         }
-        let (x, h) = (store.column(self.x).expect("x is stored"), store.column(self.h).expect("h is stored"));
-        let (x, h) = (x.data.clone(), h.data.clone());
-        self.backend.lists.adopt(of, field0, carried.skin_len, &x, &h);
+        let h = store.column(self.h).expect("h is stored").data.clone();
+        self.backend.lists.adopt(of, field0, x0, carried.skin_len, &h);
         Ok(())
+    }
+
+    /// Where a particle crossed a periodic side since the adaptive search's last full build (it
+    /// moved half a period), the run in one piece rebuilds every list (`Lists::prepare`): so do
+    /// all ranks then, whichever rank's particle crossed (a collective where the lists are kept
+    /// and a side is periodic).
+    fn rebuild_lists_if_a_particle_crossed(&mut self) {
+        let Some(half) = self.half_period.filter(|_| self.carries_lists()) else { return };
+        let lists = &self.backend.lists;
+        let x = &self.backend.store.column(self.x).expect("x is stored").data;
+        let mine = match lists.built {
+            true => lists.displacement_since_build(x, self.plan.dim, self.own().into_iter()),
+            false => 0.0,
+        };
+        let moved = self.transport().all_reduce(&[mine], &[Reduce::Max])[0];
+        if moved.partial_cmp(&half) != Some(std::cmp::Ordering::Less) {
+            self.backend.lists.invalidate();
+        }
     }
 
     /// Local particle i's position and smoothing length.
@@ -931,6 +941,9 @@ impl<T: Real> Backend for Domain<T> {
             fresh.extend(&fields);
             fresh.retain(|f| !self.plan.passes[k].writes.contains(f));
             // The search reads the halo's positions: after the first pass's fields arrived.
+            if search.is_none() {
+                self.rebuild_lists_if_a_particle_crossed();
+            }
             if search.is_none() && self.backend.store.n > 0 {
                 search = Some(self.backend.search()?);
             }

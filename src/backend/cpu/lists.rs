@@ -172,7 +172,26 @@ impl<T: Real> Lists<T> {
     pub fn by_id(&self, i: usize, id: &[u32]) -> Option<KeptList> {
         let list = self.of.get(i).filter(|_| self.built)?;
         let entries = list.iter().map(|e| (e >> TRANSFORM_SHIFT, id[(e & INDEX_MASK) as usize])).collect();
-        Some(KeptList { field0: self.field0.get(i).copied().unwrap_or(f64::NAN), entries })
+        let d = self.x0.len() / self.of.len().max(1);
+        let mut x0 = [0.0; 3];
+        for (c, v) in x0.iter_mut().zip(&self.x0[i * d..(i + 1) * d]) {
+            *c = v.to_f64();
+        }
+        Some(KeptList { field0: self.field0.get(i).copied().unwrap_or(f64::NAN), x0, entries })
+    }
+
+    /// The largest displacement since the last full build of the particles `which` (at `x`, now),
+    /// infinite where one is not a number: where it reaches half a period, a particle crossed a
+    /// periodic side ([`prepare`](Self::prepare)).
+    pub fn displacement_since_build(&self, x: &[T], dim: usize, which: impl Iterator<Item = usize>) -> f64 {
+        which.fold(0.0, |m: f64, i| {
+            let d2: f64 = (0..dim).map(|c| (x[i * dim + c] - self.x0[i * dim + c]).to_f64().powi(2)).sum();
+            if d2.is_nan() {
+                f64::INFINITY
+            } else {
+                m.max(d2.sqrt())
+            }
+        })
     }
 
     /// The skin's length at the last full build.
@@ -181,11 +200,11 @@ impl<T: Real> Lists<T> {
     }
 
     /// Takes lists kept in another store as this store's, built: `of` per particle, the adaptive
-    /// search's field at each one's last rebuild, the skin's length at their full build, and the
-    /// positions and smoothing lengths now.
-    pub fn adopt(&mut self, of: Vec<Vec<u32>>, field0: Vec<f64>, skin_len: f64, x: &[T], h: &[T]) {
+    /// search's field at each one's last rebuild, the positions at the lists' last full build, the
+    /// skin's length then, and the smoothing lengths now.
+    pub fn adopt(&mut self, of: Vec<Vec<u32>>, field0: Vec<f64>, x0: Vec<T>, skin_len: f64, h: &[T]) {
         (self.of, self.field0, self.skin_len) = (of, field0, skin_len);
-        (self.x0, self.h0) = (x.to_vec(), h.to_vec());
+        (self.x0, self.h0) = (x0, h.to_vec());
         self.built = true;
     }
 }
@@ -195,22 +214,27 @@ impl<T: Real> Lists<T> {
 pub struct KeptList {
     /// The adaptive search's field at the list's last rebuild.
     pub field0: f64,
+    /// The particle's position at the last full build (padded to three components).
+    pub x0: [f64; 3],
     /// Per entry: the mirror transform of the neighbour's image and the neighbour's id.
     pub entries: Vec<(u32, u32)>,
 }
 
 impl KeptList {
-    /// Appends the list to `out` as numbers: the field, the count, then transform and id per entry.
+    /// Appends the list to `out` as numbers: the field, the position, the count, then transform
+    /// and id per entry.
     pub fn encode(&self, out: &mut Vec<f64>) {
-        out.extend([self.field0, self.entries.len() as f64]);
+        out.push(self.field0);
+        out.extend(self.x0);
+        out.push(self.entries.len() as f64);
         out.extend(self.entries.iter().flat_map(|(t, id)| [*t as f64, *id as f64]));
     }
 
     /// The list that `encode` wrote at the start of `m`, and what follows it.
     pub fn decode(m: &[f64]) -> (KeptList, &[f64]) {
-        let n = m[1] as usize;
-        let entries = m[2..2 + 2 * n].chunks(2).map(|e| (e[0] as u32, e[1] as u32)).collect();
-        (KeptList { field0: m[0], entries }, &m[2 + 2 * n..])
+        let n = m[4] as usize;
+        let entries = m[5..5 + 2 * n].chunks(2).map(|e| (e[0] as u32, e[1] as u32)).collect();
+        (KeptList { field0: m[0], x0: [m[1], m[2], m[3]], entries }, &m[5 + 2 * n..])
     }
 }
 
