@@ -930,6 +930,7 @@ impl<T: Real> Backend for Domain<T> {
             self.evaluated[g.index()] += *n as f64;
         }
         self.fit.evaluations += 1;
+        self.rebuild_lists_if_a_particle_crossed();
         let mut search = None;
         for k in 0..self.plan.passes.len() {
             let fields: Vec<FieldId> = self.read_at_j[k].iter().copied().filter(|f| !fresh.contains(f)).collect();
@@ -941,9 +942,6 @@ impl<T: Real> Backend for Domain<T> {
             fresh.extend(&fields);
             fresh.retain(|f| !self.plan.passes[k].writes.contains(f));
             // The search reads the halo's positions: after the first pass's fields arrived.
-            if search.is_none() {
-                self.rebuild_lists_if_a_particle_crossed();
-            }
             if search.is_none() && self.backend.store.n > 0 {
                 search = Some(self.backend.search()?);
             }
