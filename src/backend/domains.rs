@@ -104,7 +104,8 @@ const SKIN_BOUNDS: (f64, f64) = (0.02, 1.0);
 /// hypervelocity impact on two ranks rebuilt its halos at each of its 643 steps with the fixed
 /// tenth of the cut-off. Like the cuts that follow the measured work, the skin follows measured
 /// times, so a split run repeats its figures within rounding, not bit for bit;
-/// `PAIRSUM_HALO_SKIN` fixes the skin.
+/// `PAIRSUM_HALO_SKIN` fixes the skin. The updates' time includes any wait for a slower rank's
+/// pass, which A then overstates: where the ranks' work differs, the skin is thinner than best.
 #[derive(Default)]
 struct SkinFit {
     /// False where the skin is the kept lists' own or `PAIRSUM_HALO_SKIN` fixes it.
