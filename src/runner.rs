@@ -228,6 +228,13 @@ fn human_seconds(s: f64) -> String {
 pub fn run_case(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailure> {
     let (scene, plan) = prepare(path, &opts.scene)?;
     eprint!("{}", scene.warnings.concat());
+    if split_ranks(opts) > 1 && opts.backend == BackendChoice::Gpu {
+        return Err(RunFailure::Input(
+            "error: a run split into domains runs on the CPU backend: each rank's own GPU is not supported yet; \
+             run it with `--backend cpu`, or on the GPU in one process (without `mpirun` or `--domains`)\n"
+                .into(),
+        ));
+    }
     let ours = leads() && claim_out(opts)?;
     if ours && opts.vtk && opts.restart.is_none() {
         // A fresh series: an earlier run's frames past this one's last would be left beside it.
@@ -235,12 +242,6 @@ pub fn run_case(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailure
             .map_err(|e| RunFailure::Run(format!("removing the earlier run's VTK frames: {e}")))?;
     }
     if split_ranks(opts) > 1 {
-        if opts.backend == BackendChoice::Gpu {
-            return Err(RunFailure::Input(
-                "error: a run split into domains runs on the CPU backend (each rank's own GPU is not supported yet)\n"
-                    .into(),
-            ));
-        }
         return run_cpu_precision(scene, plan, opts);
     }
     match opts.backend {

@@ -737,6 +737,23 @@ fn a_split_run_refuses_more_ranks_than_particles() {
     assert!(err.0.contains(&format!("cannot split {n} particles into {} domains", n + 1)), "{}", err.0);
 }
 
+/// Each rank's own GPU is not built: `--backend gpu` with `--domains 2` stops before anything is
+/// written, saying how to run the case instead (no adapter is looked for).
+#[test]
+fn a_split_run_on_the_gpu_is_refused_with_the_ways_to_run_it_and_writes_nothing() {
+    let dir = tempdir("split_gpu");
+    let out = dir.join("out");
+    let done = std::process::Command::new(env!("CARGO_BIN_EXE_pairsum"))
+        .args(["run", "hypervelocity_impact", "--backend", "gpu", "--domains", "2", "--max-steps", "1", "--out"])
+        .arg(&out)
+        .output()
+        .expect("pairsum runs");
+    let stderr = String::from_utf8_lossy(&done.stderr);
+    assert!(!done.status.success(), "{stderr}");
+    assert!(stderr.contains("own GPU is not supported yet") && stderr.contains("`--backend cpu`"), "{stderr}");
+    assert!(!out.exists(), "the refused run made {}", out.display());
+}
+
 /// The adaptive search across periodic sides: where a particle crosses a side its images move,
 /// and the run in one piece rebuilds every list (`Lists::prepare`); a split run carries each
 /// list's position at the last full build with it, and every rank rebuilds all its lists when
