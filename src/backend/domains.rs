@@ -695,8 +695,12 @@ impl<T: Real> Domain<T> {
         let Some(half) = self.half_period.filter(|_| self.carries_lists()) else { return };
         let lists = &self.backend.lists;
         let x = &self.backend.store.column(self.x).expect("x is stored").data;
+        let owned = |i: usize| {
+            let store = &self.backend.store;
+            store.ranges.iter().zip(&self.owned).any(|((_, r), n)| i >= r.start && i < r.start + n)
+        };
         let mine = match lists.built {
-            true => lists.displacement_since_build(x, self.plan.dim, self.own().into_iter()),
+            true => lists.displacement_since_build(x, self.plan.dim, owned),
             false => 0.0,
         };
         let moved = self.transport().all_reduce(&[mine], &[Reduce::Max])[0];

@@ -107,14 +107,7 @@ impl<T: Real> Lists<T> {
 
     /// The largest displacement and growth of h since the last full build.
     fn drift(&self, inp: &BuildInput<T>) -> Drift {
-        let d = inp.dim;
-        let displacement = inp
-            .x
-            .par_chunks(d)
-            .zip(self.x0.par_chunks(d))
-            .map(|(a, b)| a.iter().zip(b).map(|(p, q)| (*p - *q).to_f64().powi(2)).sum::<f64>())
-            .reduce(|| 0.0, |a, b| if a.is_nan() || b.is_nan() { f64::NAN } else { a.max(b) })
-            .sqrt();
+        let displacement = self.displacement_since_build(inp.x, inp.dim, |_| true);
         let h_growth = inp.h.iter().zip(&self.h0).map(|(a, b)| (*a - *b).to_f64()).fold(0.0, |m: f64, g| {
             if g.is_nan() {
                 g
@@ -180,18 +173,23 @@ impl<T: Real> Lists<T> {
         Some(KeptList { field0: self.field0.get(i).copied().unwrap_or(f64::NAN), x0, entries })
     }
 
-    /// The largest displacement since the last full build of the particles `which` (at `x`, now),
-    /// infinite where one is not a number: where it reaches half a period, a particle crossed a
-    /// periodic side ([`prepare`](Self::prepare)).
-    pub fn displacement_since_build(&self, x: &[T], dim: usize, which: impl Iterator<Item = usize>) -> f64 {
-        which.fold(0.0, |m: f64, i| {
-            let d2: f64 = (0..dim).map(|c| (x[i * dim + c] - self.x0[i * dim + c]).to_f64().powi(2)).sum();
-            if d2.is_nan() {
-                f64::INFINITY
-            } else {
-                m.max(d2.sqrt())
-            }
-        })
+    /// The largest displacement since the last full build of the particles that `counted` takes
+    /// (at `x`, now), infinite where one is not a number: where it reaches half a period, a
+    /// particle crossed a periodic side ([`prepare`](Self::prepare)).
+    pub fn displacement_since_build(&self, x: &[T], dim: usize, counted: impl Fn(usize) -> bool + Sync) -> f64 {
+        let d = x
+            .par_chunks(dim)
+            .zip(self.x0.par_chunks(dim))
+            .enumerate()
+            .filter(|(i, _)| counted(*i))
+            .map(|(_, (a, b))| a.iter().zip(b).map(|(p, q)| (*p - *q).to_f64().powi(2)).sum::<f64>())
+            .reduce(|| 0.0, |a, b| if a.is_nan() || b.is_nan() { f64::NAN } else { a.max(b) })
+            .sqrt();
+        if d.is_nan() {
+            f64::INFINITY
+        } else {
+            d
+        }
     }
 
     /// The skin's length at the last full build.
