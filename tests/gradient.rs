@@ -146,3 +146,100 @@ fn shaped_kernels_follow_a_squeeze_keep_the_velocity_gradient_exact_and_stop_at_
     assert!((last("h_short_min") / (h0 * 0.2) - 1.0).abs() < 1e-12, "h_short = {}", last("h_short_min"));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The hourglass stiffness of the shaped kernels (solid/shaped_hourglass.sph), at rest.
+const HOURGLASS_MODEL: &str = "
+use kernels
+use solid::shaped_kernel
+use solid::shaped_hourglass
+use eos::linear
+group metal
+kernel = wendland_c2
+integrate { x' = v  u' = v  v' = dv_hourglass  kernel_shape' = dkernel_shape }
+";
+
+/// `common::block_case`'s 6 × 6 block at rest, run one step of 1 ns, with `initial` its
+/// particles' initial values: the largest |a| of the hourglass stiffness, the largest and the
+/// smallest a · u, each at the end.
+fn hourglass_pull(tag: &str, initial: &str) -> [f64; 3] {
+    let dir = std::env::temp_dir().join(format!("pairsum-gradient-hourglass-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    std::fs::write(dir.join("hourglass.sph"), HOURGLASS_MODEL).unwrap();
+    let probes: String = [
+        ("pull", "norm(dv_hourglass)", "max"),
+        ("against_u_max", "dot(dv_hourglass, u)", "max"),
+        ("against_u_min", "dot(dv_hourglass, u)", "min"),
+    ]
+    .iter()
+    .map(|(name, e, r)| {
+        format!("[[probes]]\nname = \"{name}\"\nbody = \"block\"\nexpression = \"{e}\"\nreduce = \"{r}\"\n\n")
+    })
+    .collect();
+    let top = "integrator = \"predictor_corrector\"\nend_time = \"1 ns\"";
+    let case = common::block_case("hourglass.sph", top, &format!("initial = {{ {initial} }}"), &probes).replace(
+        "rho0 = \"1000 kg/m^3\"",
+        "rho0 = \"1000 kg/m^3\"\nc0 = \"10 m/s\"\nbulk = \"2e5 Pa\"\nG = \"1e5 Pa\"\nh_ratio = 1.3",
+    );
+    let outcome = common::run_case_text_on_cpu(&dir, &case);
+    let _ = std::fs::remove_dir_all(&dir);
+    ["pull", "against_u_max", "against_u_min"].map(|probe| {
+        let points = &outcome.histories.iter().find(|(n, _)| n == probe).expect("probe").1;
+        points.last().expect("a point").1
+    })
+}
+
+/// Wendland C2 in 2D, W(r, h) (stdlib/kernels.sph).
+fn wendland_c2_2d(r: f64, h: f64) -> f64 {
+    let q = r / h;
+    if q >= 2.0 {
+        return 0.0;
+    }
+    7.0 / (4.0 * std::f64::consts::PI * h * h) * (1.0 - q / 2.0).powi(4) * (2.0 * q + 1.0)
+}
+
+/// A zig-zag along x of 1 mm (a tenth of the spacing) from a reference the kernels' shape (I)
+/// maps to the lattice: every particle is pulled back against its displacement (a · u < 0 at
+/// each), and the largest pull is the one computed here from the module's formula,
+/// α V0 W(|X_ij|, h0) E / (ρ0 |X_ij|²) (ε_ij · x̂_ij) x̂_ij summed over the lattice, within 1e-6.
+/// A homogeneous stretch (shape 1.2 I, reference x / 1.2) is pulled by less than 1e-9 of that.
+#[test]
+fn the_shaped_hourglass_stiffness_pulls_a_zig_zag_back_as_its_formula_says_and_leaves_a_homogeneous_deformation_alone()
+{
+    let [pull, against_max, against_min] =
+        hourglass_pull("zigzag", "u = \"vec(0.001 [m] * sin(pi * x.x / 0.01 [m]), 0 [m])\"");
+    // The formula, on the lattice at 5, 15, …, 55 mm.
+    let (dx, h0, alpha) = (0.01, 0.013, 0.01);
+    let (bulk, g, rho0) = (2e5, 1e5, 1000.0);
+    let e = 9.0 * bulk * g / (3.0 * bulk + g);
+    let x: Vec<[f64; 2]> = (0..36).map(|k| [(k % 6) as f64 * dx + dx / 2.0, (k / 6) as f64 * dx + dx / 2.0]).collect();
+    let u = |p: [f64; 2]| [1e-3 * (std::f64::consts::PI * p[0] / dx).sin(), 0.0];
+    let expected = x
+        .iter()
+        .map(|xi| {
+            let mut a = [0.0f64; 2];
+            for xj in &x {
+                let xij = [xi[0] - xj[0], xi[1] - xj[1]];
+                let r = xij[0].hypot(xij[1]);
+                if r == 0.0 || r >= 2.0 * h0 {
+                    continue;
+                }
+                let uij = [u(*xi)[0] - u(*xj)[0], u(*xi)[1] - u(*xj)[1]];
+                let big_x = [xij[0] - uij[0], xij[1] - uij[1]];
+                let r0 = big_x[0].hypot(big_x[1]);
+                let unit = [xij[0] / r, xij[1] / r];
+                let miss = (big_x[0] - xij[0]) * unit[0] + (big_x[1] - xij[1]) * unit[1];
+                let k = alpha * dx * dx * wendland_c2_2d(r0, h0) * e / (rho0 * r0 * r0);
+                a = [a[0] + k * miss * unit[0], a[1] + k * miss * unit[1]];
+            }
+            a[0].hypot(a[1])
+        })
+        .fold(0.0, f64::max);
+    assert!(expected > 0.0);
+    assert!((pull / expected - 1.0).abs() < 1e-6, "the largest pull {pull:e} against the formula's {expected:e}");
+    assert!(against_max < 0.0, "a particle not pulled back: largest a · u = {against_max:e}");
+    assert!(against_min < 0.0 && against_min.is_finite(), "a · u = {against_min:e}");
+    let homogeneous = "kernel_shape = \"1.2 * I\", u = \"x - x / 1.2\"";
+    let [still, ..] = hourglass_pull("homogeneous", homogeneous);
+    assert!(still.is_finite() && still < 1e-9 * expected, "a homogeneous deformation pulled by {still:e}");
+}
