@@ -50,12 +50,20 @@ fn st_h_short(i: u32, v: f32) {
     let b = u32(info[18 + ints[i]] + i32(i) * 1);
     data[b] = v;
 }
+fn ld_hourglass_rate2(i: u32) -> f32 {
+    let b = u32(info[28 + ints[i]] + i32(i) * 1);
+    return data[b];
+}
+fn st_hourglass_rate2(i: u32, v: f32) {
+    let b = u32(info[28 + ints[i]] + i32(i) * 1);
+    data[b] = v;
+}
 fn prm_C_cfl(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 8u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 9u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -66,7 +74,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     if (i >= n) { return; }
     let t = globals[0u];
     let dt = globals[1u];
-    let scratch = u32(info[35]);
+    let scratch = u32(info[39]);
     data[scratch + 0u * n + i] = (prm_C_cfl(i) * ld_h_short(i));
     data[scratch + 1u * n + i] = (prm_c0(i) + length(ld_v(i)));
+    data[scratch + 2u * n + i] = (prm_C_cfl(i) / (0.3 * sqrt((2.0 * ld_hourglass_rate2(i)))));
 }
