@@ -1081,9 +1081,10 @@ fn taylor_bar_final_length_and_foot_diameter_are_within_their_tolerances_at_4_pa
 }
 
 /// The copper Taylor bar (linear hardening, no heating, a converged finite-element reference) at
-/// 0.8 mm with kernels that follow the deformation (solid/shaped_kernel.sph): its final length and
-/// foot diameter within the case's bounds, and their pinned figures (+1.5 % and −13.1 %;
-/// docs/results/taylor_bar_copper_shaped_convergence/ has 0.533 and 0.4 mm).
+/// 0.8 mm with kernels that follow the deformation and their hourglass stiffness
+/// (solid/shaped_kernel.sph, solid/shaped_hourglass.sph): its final length and foot diameter within
+/// the case's bounds, and their pinned figures (+1.7 % and −15.3 %;
+/// docs/results/taylor_bar_copper_hourglass_convergence/ has 0.533, 0.4, 0.3 and 0.225 mm).
 #[test]
 fn copper_taylor_bar_final_length_and_foot_diameter_are_within_their_tolerances_at_4_particles_across_the_radius() {
     run_and_check("taylor_bar_copper", Precision::F64);

@@ -375,10 +375,11 @@ fn hypervelocity_impact_with_damage_over_a_length_on_the_gpu_matches_the_cpu_thr
 }
 
 #[test]
-fn copper_taylor_bar_with_kernels_that_follow_the_deformation_on_the_gpu_matches_the_cpu() {
-    // Linear hardening, no heating, the shaped kernels of solid/shaped_kernel.sph: 30 steps of
-    // flow against the wall plane, the search length h taken from each kernel's shape.
-    case_matches_cpu("taylor_bar_copper", &[], 30, &["p", "eps_p", "h"], 2e-3);
+fn copper_taylor_bar_with_shaped_kernels_and_their_hourglass_stiffness_on_the_gpu_matches_the_cpu() {
+    // Linear hardening, no heating, the shaped kernels of solid/shaped_kernel.sph with the
+    // hourglass stiffness of solid/shaped_hourglass.sph: 30 steps of flow against the wall plane,
+    // the search length h taken from each kernel's shape, u the displacement the stiffness reads.
+    case_matches_cpu("taylor_bar_copper", &[], 30, &["p", "eps_p", "h", "u"], 2e-3);
 }
 
 #[test]
