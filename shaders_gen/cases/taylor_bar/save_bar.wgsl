@@ -54,19 +54,19 @@ fn st_v(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn ld_rho(i: u32) -> f32 {
-    let b = u32(info[7 + G] + i32(i) * 1);
+    let b = u32(info[8 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho(i: u32, v: f32) {
-    let b = u32(info[7 + G] + i32(i) * 1);
+    let b = u32(info[8 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s(i: u32) -> mat3x3<f32> {
-    let b = u32(info[10 + G] + i32(i) * 6);
+    let b = u32(info[12 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[10 + G] + i32(i) * 6);
+    let b = u32(info[12 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -74,56 +74,82 @@ fn st_s(i: u32, v: mat3x3<f32>) {
     data[b + 4u] = v[2][1];
     data[b + 5u] = v[2][2];
 }
+fn ld_kernel_shape(i: u32) -> mat3x3<f32> {
+    let b = u32(info[15 + G] + i32(i) * 9);
+    return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
+}
+fn st_kernel_shape(i: u32, v: mat3x3<f32>) {
+    let b = u32(info[15 + G] + i32(i) * 9);
+    data[b] = v[0][0];
+    data[b + 1u] = v[1][0];
+    data[b + 2u] = v[2][0];
+    data[b + 3u] = v[0][1];
+    data[b + 4u] = v[1][1];
+    data[b + 5u] = v[2][1];
+    data[b + 6u] = v[0][2];
+    data[b + 7u] = v[1][2];
+    data[b + 8u] = v[2][2];
+}
+fn ld_u(i: u32) -> vec3<f32> {
+    let b = u32(info[20 + G] + i32(i) * 3);
+    return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
+}
+fn st_u(i: u32, v: vec3<f32>) {
+    let b = u32(info[20 + G] + i32(i) * 3);
+    data[b] = v[0];
+    data[b + 1u] = v[1];
+    data[b + 2u] = v[2];
+}
 fn ld_eps_p(i: u32) -> f32 {
-    let b = u32(info[15 + G] + i32(i) * 1);
+    let b = u32(info[21 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_eps_p(i: u32, v: f32) {
-    let b = u32(info[15 + G] + i32(i) * 1);
+    let b = u32(info[21 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_T(i: u32) -> f32 {
-    let b = u32(info[17 + G] + i32(i) * 1);
+    let b = u32(info[23 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_T(i: u32, v: f32) {
-    let b = u32(info[17 + G] + i32(i) * 1);
+    let b = u32(info[23 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_x_0(i: u32) -> vec3<f32> {
-    let b = u32(info[22 + G] + i32(i) * 3);
+    let b = u32(info[31 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_x_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[22 + G] + i32(i) * 3);
+    let b = u32(info[31 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_v_0(i: u32) -> vec3<f32> {
-    let b = u32(info[23 + G] + i32(i) * 3);
+    let b = u32(info[32 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_v_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[23 + G] + i32(i) * 3);
+    let b = u32(info[32 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_rho_0(i: u32) -> f32 {
-    let b = u32(info[24 + G] + i32(i) * 1);
+    let b = u32(info[33 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho_0(i: u32, v: f32) {
-    let b = u32(info[24 + G] + i32(i) * 1);
+    let b = u32(info[33 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s_0(i: u32) -> mat3x3<f32> {
-    let b = u32(info[25 + G] + i32(i) * 6);
+    let b = u32(info[34 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s_0(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[25 + G] + i32(i) * 6);
+    let b = u32(info[34 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -131,20 +157,46 @@ fn st_s_0(i: u32, v: mat3x3<f32>) {
     data[b + 4u] = v[2][1];
     data[b + 5u] = v[2][2];
 }
+fn ld_kernel_shape_0(i: u32) -> mat3x3<f32> {
+    let b = u32(info[35 + G] + i32(i) * 9);
+    return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
+}
+fn st_kernel_shape_0(i: u32, v: mat3x3<f32>) {
+    let b = u32(info[35 + G] + i32(i) * 9);
+    data[b] = v[0][0];
+    data[b + 1u] = v[1][0];
+    data[b + 2u] = v[2][0];
+    data[b + 3u] = v[0][1];
+    data[b + 4u] = v[1][1];
+    data[b + 5u] = v[2][1];
+    data[b + 6u] = v[0][2];
+    data[b + 7u] = v[1][2];
+    data[b + 8u] = v[2][2];
+}
+fn ld_u_0(i: u32) -> vec3<f32> {
+    let b = u32(info[36 + G] + i32(i) * 3);
+    return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
+}
+fn st_u_0(i: u32, v: vec3<f32>) {
+    let b = u32(info[36 + G] + i32(i) * 3);
+    data[b] = v[0];
+    data[b + 1u] = v[1];
+    data[b + 2u] = v[2];
+}
 fn ld_eps_p_0(i: u32) -> f32 {
-    let b = u32(info[26 + G] + i32(i) * 1);
+    let b = u32(info[37 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_eps_p_0(i: u32, v: f32) {
-    let b = u32(info[26 + G] + i32(i) * 1);
+    let b = u32(info[37 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_T_0(i: u32) -> f32 {
-    let b = u32(info[27 + G] + i32(i) * 1);
+    let b = u32(info[38 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_T_0(i: u32, v: f32) {
-    let b = u32(info[27 + G] + i32(i) * 1);
+    let b = u32(info[38 + G] + i32(i) * 1);
     data[b] = v;
 }
 @compute @workgroup_size(64)
@@ -161,18 +213,24 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var v_0_i: vec3<f32> = ld_v_0(i);
     var rho_0_i: f32 = ld_rho_0(i);
     var s_0_i: mat3x3<f32> = ld_s_0(i);
+    var kernel_shape_0_i: mat3x3<f32> = ld_kernel_shape_0(i);
+    var u_0_i: vec3<f32> = ld_u_0(i);
     var eps_p_0_i: f32 = ld_eps_p_0(i);
     var T_0_i: f32 = ld_T_0(i);
     x_0_i = ld_x(i);
     v_0_i = ld_v(i);
     rho_0_i = ld_rho(i);
     s_0_i = ld_s(i);
+    kernel_shape_0_i = ld_kernel_shape(i);
+    u_0_i = ld_u(i);
     eps_p_0_i = ld_eps_p(i);
     T_0_i = ld_T(i);
     st_x_0(i, x_0_i);
     st_v_0(i, v_0_i);
     st_rho_0(i, rho_0_i);
     st_s_0(i, s_0_i);
+    st_kernel_shape_0(i, kernel_shape_0_i);
+    st_u_0(i, u_0_i);
     st_eps_p_0(i, eps_p_0_i);
     st_T_0(i, T_0_i);
 }

@@ -33,9 +33,12 @@ fn main() {
     let t = globals[0u];
     let dt = globals[1u];
     var best = globals[4u];
-    // timestep cfl
-    let limit_cfl = (globals[16u] / globals[17u]);
-    if (limit_cfl > 0.0 && limit_cfl < pinf()) { best = min(best, limit_cfl); }
+    // timestep shaped_cfl
+    let limit_shaped_cfl = (globals[16u] / globals[17u]);
+    if (limit_shaped_cfl > 0.0 && limit_shaped_cfl < pinf()) { best = min(best, limit_shaped_cfl); }
+    // timestep shaped_hourglass
+    let limit_shaped_hourglass = globals[18u];
+    if (limit_shaped_hourglass > 0.0 && limit_shaped_hourglass < pinf()) { best = min(best, limit_shaped_hourglass); }
     let remaining = globals[3u] - t;
     if (remaining > 0.0 && remaining < best * 1.000001) { best = remaining; }
     globals[2u] = best;

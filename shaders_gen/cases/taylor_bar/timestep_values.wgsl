@@ -42,20 +42,28 @@ fn st_v(i: u32, v: vec3<f32>) {
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
-fn ld_h(i: u32) -> f32 {
-    let b = u32(info[8 + ints[i]] + i32(i) * 1);
+fn ld_h_short(i: u32) -> f32 {
+    let b = u32(info[18 + ints[i]] + i32(i) * 1);
     return data[b];
 }
-fn st_h(i: u32, v: f32) {
-    let b = u32(info[8 + ints[i]] + i32(i) * 1);
+fn st_h_short(i: u32, v: f32) {
+    let b = u32(info[18 + ints[i]] + i32(i) * 1);
     data[b] = v;
 }
-fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 7u;
-    return params[b];
+fn ld_hourglass_rate2(i: u32) -> f32 {
+    let b = u32(info[28 + ints[i]] + i32(i) * 1);
+    return data[b];
+}
+fn st_hourglass_rate2(i: u32, v: f32) {
+    let b = u32(info[28 + ints[i]] + i32(i) * 1);
+    data[b] = v;
 }
 fn prm_C_cfl(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 8u;
+    return params[b];
+}
+fn prm_c0(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 9u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -66,7 +74,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     if (i >= n) { return; }
     let t = globals[0u];
     let dt = globals[1u];
-    let scratch = u32(info[28]);
-    data[scratch + 0u * n + i] = (prm_C_cfl(i) * ld_h(i));
+    let scratch = u32(info[39]);
+    data[scratch + 0u * n + i] = (prm_C_cfl(i) * ld_h_short(i));
     data[scratch + 1u * n + i] = (prm_c0(i) + length(ld_v(i)));
+    data[scratch + 2u * n + i] = (prm_C_cfl(i) / (0.3 * sqrt((2.0 * ld_hourglass_rate2(i)))));
 }

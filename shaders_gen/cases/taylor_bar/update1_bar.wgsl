@@ -53,20 +53,52 @@ fn st_v(i: u32, v: vec3<f32>) {
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
+fn ld_dx(i: u32) -> f32 {
+    let b = u32(info[5 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_dx(i: u32, v: f32) {
+    let b = u32(info[5 + G] + i32(i) * 1);
+    data[b] = v;
+}
 fn ld_rho(i: u32) -> f32 {
-    let b = u32(info[7 + G] + i32(i) * 1);
+    let b = u32(info[8 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho(i: u32, v: f32) {
-    let b = u32(info[7 + G] + i32(i) * 1);
+    let b = u32(info[8 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_h(i: u32) -> f32 {
+    let b = u32(info[9 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_h(i: u32, v: f32) {
+    let b = u32(info[9 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_p(i: u32) -> f32 {
+    let b = u32(info[10 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_p(i: u32, v: f32) {
+    let b = u32(info[10 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_c(i: u32) -> f32 {
+    let b = u32(info[11 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_c(i: u32, v: f32) {
+    let b = u32(info[11 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s(i: u32) -> mat3x3<f32> {
-    let b = u32(info[10 + G] + i32(i) * 6);
+    let b = u32(info[12 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[10 + G] + i32(i) * 6);
+    let b = u32(info[12 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -75,11 +107,11 @@ fn st_s(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_edot(i: u32) -> mat3x3<f32> {
-    let b = u32(info[11 + G] + i32(i) * 6);
+    let b = u32(info[13 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_edot(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[11 + G] + i32(i) * 6);
+    let b = u32(info[13 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -87,60 +119,28 @@ fn st_edot(i: u32, v: mat3x3<f32>) {
     data[b + 4u] = v[2][1];
     data[b + 5u] = v[2][2];
 }
-fn ld_p(i: u32) -> f32 {
-    let b = u32(info[13 + G] + i32(i) * 1);
-    return data[b];
+fn ld_kernel_shape(i: u32) -> mat3x3<f32> {
+    let b = u32(info[15 + G] + i32(i) * 9);
+    return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
-fn st_p(i: u32, v: f32) {
-    let b = u32(info[13 + G] + i32(i) * 1);
-    data[b] = v;
+fn st_kernel_shape(i: u32, v: mat3x3<f32>) {
+    let b = u32(info[15 + G] + i32(i) * 9);
+    data[b] = v[0][0];
+    data[b + 1u] = v[1][0];
+    data[b + 2u] = v[2][0];
+    data[b + 3u] = v[0][1];
+    data[b + 4u] = v[1][1];
+    data[b + 5u] = v[2][1];
+    data[b + 6u] = v[0][2];
+    data[b + 7u] = v[1][2];
+    data[b + 8u] = v[2][2];
 }
-fn ld_c(i: u32) -> f32 {
-    let b = u32(info[14 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_c(i: u32, v: f32) {
-    let b = u32(info[14 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ld_eps_p(i: u32) -> f32 {
-    let b = u32(info[15 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_eps_p(i: u32, v: f32) {
-    let b = u32(info[15 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ld_deps_p(i: u32) -> f32 {
-    let b = u32(info[16 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_deps_p(i: u32, v: f32) {
-    let b = u32(info[16 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ld_T(i: u32) -> f32 {
-    let b = u32(info[17 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_T(i: u32, v: f32) {
-    let b = u32(info[17 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ld_drho(i: u32) -> f32 {
-    let b = u32(info[19 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_drho(i: u32, v: f32) {
-    let b = u32(info[19 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ld_ds(i: u32) -> mat3x3<f32> {
-    let b = u32(info[20 + G] + i32(i) * 6);
+fn ld_kernel_metric(i: u32) -> mat3x3<f32> {
+    let b = u32(info[16 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
-fn st_ds(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[20 + G] + i32(i) * 6);
+fn st_kernel_metric(i: u32, v: mat3x3<f32>) {
+    let b = u32(info[16 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -148,50 +148,147 @@ fn st_ds(i: u32, v: mat3x3<f32>) {
     data[b + 4u] = v[2][1];
     data[b + 5u] = v[2][2];
 }
-fn ld_dv(i: u32) -> vec3<f32> {
-    let b = u32(info[21 + G] + i32(i) * 3);
+fn ld_kernel_norm(i: u32) -> f32 {
+    let b = u32(info[17 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_kernel_norm(i: u32, v: f32) {
+    let b = u32(info[17 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_h_short(i: u32) -> f32 {
+    let b = u32(info[18 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_h_short(i: u32, v: f32) {
+    let b = u32(info[18 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_u(i: u32) -> vec3<f32> {
+    let b = u32(info[20 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
-fn st_dv(i: u32, v: vec3<f32>) {
-    let b = u32(info[21 + G] + i32(i) * 3);
+fn st_u(i: u32, v: vec3<f32>) {
+    let b = u32(info[20 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
+fn ld_eps_p(i: u32) -> f32 {
+    let b = u32(info[21 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_eps_p(i: u32, v: f32) {
+    let b = u32(info[21 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_deps_p(i: u32) -> f32 {
+    let b = u32(info[22 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_deps_p(i: u32, v: f32) {
+    let b = u32(info[22 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_T(i: u32) -> f32 {
+    let b = u32(info[23 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_T(i: u32, v: f32) {
+    let b = u32(info[23 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_dkernel_shape(i: u32) -> mat3x3<f32> {
+    let b = u32(info[24 + G] + i32(i) * 9);
+    return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
+}
+fn st_dkernel_shape(i: u32, v: mat3x3<f32>) {
+    let b = u32(info[24 + G] + i32(i) * 9);
+    data[b] = v[0][0];
+    data[b + 1u] = v[1][0];
+    data[b + 2u] = v[2][0];
+    data[b + 3u] = v[0][1];
+    data[b + 4u] = v[1][1];
+    data[b + 5u] = v[2][1];
+    data[b + 6u] = v[0][2];
+    data[b + 7u] = v[1][2];
+    data[b + 8u] = v[2][2];
+}
+fn ld_dv(i: u32) -> vec3<f32> {
+    let b = u32(info[26 + G] + i32(i) * 3);
+    return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
+}
+fn st_dv(i: u32, v: vec3<f32>) {
+    let b = u32(info[26 + G] + i32(i) * 3);
+    data[b] = v[0];
+    data[b + 1u] = v[1];
+    data[b + 2u] = v[2];
+}
+fn ld_dv_hourglass(i: u32) -> vec3<f32> {
+    let b = u32(info[27 + G] + i32(i) * 3);
+    return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
+}
+fn st_dv_hourglass(i: u32, v: vec3<f32>) {
+    let b = u32(info[27 + G] + i32(i) * 3);
+    data[b] = v[0];
+    data[b + 1u] = v[1];
+    data[b + 2u] = v[2];
+}
+fn ld_drho(i: u32) -> f32 {
+    let b = u32(info[29 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_drho(i: u32, v: f32) {
+    let b = u32(info[29 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_ds(i: u32) -> mat3x3<f32> {
+    let b = u32(info[30 + G] + i32(i) * 6);
+    return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
+}
+fn st_ds(i: u32, v: mat3x3<f32>) {
+    let b = u32(info[30 + G] + i32(i) * 6);
+    data[b] = v[0][0];
+    data[b + 1u] = v[1][0];
+    data[b + 2u] = v[2][0];
+    data[b + 3u] = v[1][1];
+    data[b + 4u] = v[2][1];
+    data[b + 5u] = v[2][2];
+}
 fn ld_x_0(i: u32) -> vec3<f32> {
-    let b = u32(info[22 + G] + i32(i) * 3);
+    let b = u32(info[31 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_x_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[22 + G] + i32(i) * 3);
+    let b = u32(info[31 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_v_0(i: u32) -> vec3<f32> {
-    let b = u32(info[23 + G] + i32(i) * 3);
+    let b = u32(info[32 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_v_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[23 + G] + i32(i) * 3);
+    let b = u32(info[32 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_rho_0(i: u32) -> f32 {
-    let b = u32(info[24 + G] + i32(i) * 1);
+    let b = u32(info[33 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho_0(i: u32, v: f32) {
-    let b = u32(info[24 + G] + i32(i) * 1);
+    let b = u32(info[33 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s_0(i: u32) -> mat3x3<f32> {
-    let b = u32(info[25 + G] + i32(i) * 6);
+    let b = u32(info[34 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s_0(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[25 + G] + i32(i) * 6);
+    let b = u32(info[34 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -199,56 +296,90 @@ fn st_s_0(i: u32, v: mat3x3<f32>) {
     data[b + 4u] = v[2][1];
     data[b + 5u] = v[2][2];
 }
+fn ld_kernel_shape_0(i: u32) -> mat3x3<f32> {
+    let b = u32(info[35 + G] + i32(i) * 9);
+    return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
+}
+fn st_kernel_shape_0(i: u32, v: mat3x3<f32>) {
+    let b = u32(info[35 + G] + i32(i) * 9);
+    data[b] = v[0][0];
+    data[b + 1u] = v[1][0];
+    data[b + 2u] = v[2][0];
+    data[b + 3u] = v[0][1];
+    data[b + 4u] = v[1][1];
+    data[b + 5u] = v[2][1];
+    data[b + 6u] = v[0][2];
+    data[b + 7u] = v[1][2];
+    data[b + 8u] = v[2][2];
+}
+fn ld_u_0(i: u32) -> vec3<f32> {
+    let b = u32(info[36 + G] + i32(i) * 3);
+    return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
+}
+fn st_u_0(i: u32, v: vec3<f32>) {
+    let b = u32(info[36 + G] + i32(i) * 3);
+    data[b] = v[0];
+    data[b + 1u] = v[1];
+    data[b + 2u] = v[2];
+}
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 0u;
+    return params[b];
+}
+fn prm_h_ratio(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 1u;
+    return params[b];
+}
+fn prm_shape_floor(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 7u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 13u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 14u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 17u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 18u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 19u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 20u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 21u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 22u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 23u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 24u;
     return params[b];
 }
 fn prm_C_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 25u;
     return params[b];
 }
 fn prm_taylor_quinney(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 26u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -265,14 +396,60 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var v_i: vec3<f32> = ld_v(i);
     var rho_i: f32 = ld_rho(i);
     var s_i: mat3x3<f32> = ld_s(i);
+    var kernel_shape_i: mat3x3<f32> = ld_kernel_shape(i);
+    var u_i: vec3<f32> = ld_u(i);
     let rate_of_x = v_i;
-    let rate_of_v = ld_dv(i);
+    let rate_of_u = v_i;
+    let rate_of_v = (ld_dv(i) + ld_dv_hourglass(i));
     let rate_of_rho = ld_drho(i);
     let rate_of_s = ld_ds(i);
+    let rate_of_kernel_shape = ld_dkernel_shape(i);
     v_i = (ld_v_0(i) + (0.5 * (dt * rate_of_v)));
     x_i = (ld_x_0(i) + (0.5 * (dt * rate_of_x)));
+    u_i = (ld_u_0(i) + (0.5 * (dt * rate_of_u)));
     rho_i = (ld_rho_0(i) + (0.5 * (dt * rate_of_rho)));
     s_i = (ld_s_0(i) + (0.5 * (dt * rate_of_s)));
+    kernel_shape_i = (ld_kernel_shape_0(i) + (0.5 * (dt * rate_of_kernel_shape)));
+    // shape_kernel
+    var h_i: f32 = ld_h(i);
+    var kernel_metric_i: mat3x3<f32> = ld_kernel_metric(i);
+    var kernel_norm_i: f32 = ld_kernel_norm(i);
+    var h_short_i: f32 = ld_h_short(i);
+    let AAt = sym((kernel_shape_i * transpose(kernel_shape_i)));
+    let p1 = prm_shape_floor(i);
+    let C = AAt;
+    let sign = -1.0;
+    let q = (trace(C) / 3.0);
+    let b = (C - (q * eye()));
+    let spread = sqrt((ddot(b, b) / 6.0));
+    let unit = select(1.0, spread, (spread > 0.0));
+    let angle = (acos(min(max((determinant(div_m(b, unit)) / 2.0), -1.0), 1.0)) / 3.0);
+    let largest = (q + ((2.0 * spread) * cos(angle)));
+    let smallest = (q + ((2.0 * spread) * cos((angle + ((2.0 * 3.1415927) / 3.0)))));
+    let B = (AAt + (max(((p1 * p1) - select(smallest, largest, (sign > 0.0))), 0.0) * eye()));
+    kernel_metric_i = sym(inv(B));
+    kernel_norm_i = (1.0 / sqrt(determinant(B)));
+    let C_2 = B;
+    let sign_2 = 1.0;
+    let q_2 = (trace(C_2) / 3.0);
+    let b_2 = (C_2 - (q_2 * eye()));
+    let spread_2 = sqrt((ddot(b_2, b_2) / 6.0));
+    let unit_2 = select(1.0, spread_2, (spread_2 > 0.0));
+    let angle_2 = (acos(min(max((determinant(div_m(b_2, unit_2)) / 2.0), -1.0), 1.0)) / 3.0);
+    let largest_2 = (q_2 + ((2.0 * spread_2) * cos(angle_2)));
+    let smallest_2 = (q_2 + ((2.0 * spread_2) * cos((angle_2 + ((2.0 * 3.1415927) / 3.0)))));
+    h_i = ((prm_h_ratio(i) * ld_dx(i)) * sqrt(max(select(smallest_2, largest_2, (sign_2 > 0.0)), 1.0)));
+    let C_3 = B;
+    let sign_3 = -1.0;
+    let q_3 = (trace(C_3) / 3.0);
+    let b_3 = (C_3 - (q_3 * eye()));
+    let spread_3 = sqrt((ddot(b_3, b_3) / 6.0));
+    let unit_3 = select(1.0, spread_3, (spread_3 > 0.0));
+    let angle_3 = (acos(min(max((determinant(div_m(b_3, unit_3)) / 2.0), -1.0), 1.0)) / 3.0);
+    let largest_3 = (q_3 + ((2.0 * spread_3) * cos(angle_3)));
+    let smallest_3 = (q_3 + ((2.0 * spread_3) * cos((angle_3 + ((2.0 * 3.1415927) / 3.0)))));
+    let p2 = prm_shape_floor(i);
+    h_short_i = ((prm_h_ratio(i) * ld_dx(i)) * sqrt(max(select(smallest_3, largest_3, (sign_3 > 0.0)), (p2 * p2))));
     // radial_return
     var eps_p_i: f32 = ld_eps_p(i);
     var deps_p_i: f32 = ld_deps_p(i);
@@ -311,9 +488,15 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     st_x(i, x_i);
     st_v(i, v_i);
     st_rho(i, rho_i);
-    st_s(i, s_i);
+    st_h(i, h_i);
     st_p(i, p_i);
     st_c(i, c_i);
+    st_s(i, s_i);
+    st_kernel_shape(i, kernel_shape_i);
+    st_kernel_metric(i, kernel_metric_i);
+    st_kernel_norm(i, kernel_norm_i);
+    st_h_short(i, h_short_i);
+    st_u(i, u_i);
     st_eps_p(i, eps_p_i);
     st_deps_p(i, deps_p_i);
     st_T(i, T_i);
