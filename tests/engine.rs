@@ -693,15 +693,6 @@ fn a_time_step_that_is_not_finite_names_its_limit_and_the_fields_it_reads() {
     }
 }
 
-/// Wendland C2 in 2D at distance r with smoothing length h, written out here.
-fn wendland_c2_2d(r: f64, h: f64) -> f64 {
-    let q = r / h;
-    if q >= 2.0 {
-        return 0.0;
-    }
-    7.0 / (4.0 * std::f64::consts::PI * h * h) * (1.0 - q / 2.0).powi(4) * (2.0 * q + 1.0)
-}
-
 /// `density::summation` writes the state `rho` itself (issue 41): in every evaluation ρ_i =
 /// Σ_j m_j W(r_ij, h_ij) over the particle and its neighbours, and the equation of state reads
 /// that value, not the one carried from the step before.

@@ -191,15 +191,6 @@ fn hourglass_pull(tag: &str, initial: &str) -> [f64; 3] {
     })
 }
 
-/// Wendland C2 in 2D, W(r, h) (stdlib/kernels.sph).
-fn wendland_c2_2d(r: f64, h: f64) -> f64 {
-    let q = r / h;
-    if q >= 2.0 {
-        return 0.0;
-    }
-    7.0 / (4.0 * std::f64::consts::PI * h * h) * (1.0 - q / 2.0).powi(4) * (2.0 * q + 1.0)
-}
-
 /// A zig-zag along x of 1 mm (a tenth of the spacing) from a reference the kernels' shape (I)
 /// maps to the lattice: every particle is pulled back against its displacement (a · u < 0 at
 /// each), and the largest pull is the one computed here from the module's formula,

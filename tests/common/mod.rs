@@ -347,3 +347,13 @@ pub fn run_case_text_on_cpu(dir: &Path, case: &str) -> pairsum::runner::RunOutco
     };
     pairsum::runner::run_case(&dir.join("case.toml"), &opts).unwrap_or_else(|e| panic!("{e}"))
 }
+
+/// Wendland C2 in 2D at distance r with smoothing length h (stdlib/kernels.sph), written out here
+/// for sums computed independently of the engine.
+pub fn wendland_c2_2d(r: f64, h: f64) -> f64 {
+    let q = r / h;
+    if q >= 2.0 {
+        return 0.0;
+    }
+    7.0 / (4.0 * std::f64::consts::PI * h * h) * (1.0 - q / 2.0).powi(4) * (2.0 * q + 1.0)
+}
