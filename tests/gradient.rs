@@ -70,6 +70,16 @@ fn corrected_gradient_of_a_linear_field_is_exact_to_round_off() {
     }
 }
 
+/// Case text for probes of the body `block` (`common::block_case`): (name, expression, reduction).
+fn block_probes(probes: &[(&str, &str, &str)]) -> String {
+    probes
+        .iter()
+        .map(|(name, e, r)| {
+            format!("[[probes]]\nname = \"{name}\"\nbody = \"block\"\nexpression = \"{e}\"\nreduce = \"{r}\"\n\n")
+        })
+        .collect()
+}
+
 /// A homogeneous squeeze for the kernels that follow the deformation (solid/shaped_kernel.sph):
 /// the velocity v = G x with G = diag(−r, r) kept linear (v̇ = G v), so the motion is
 /// x(t) = exp(G t) x(0) and the kernel's shape must be A(t) = exp(G t).
@@ -98,7 +108,7 @@ fn shaped_kernels_follow_a_squeeze_keep_the_velocity_gradient_exact_and_stop_at_
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).expect("temp dir");
     std::fs::write(dir.join("squeeze.sph"), SQUEEZE_MODEL).unwrap();
-    let probes: String = [
+    let probes = block_probes(&[
         ("axx", "kernel_shape.xx", "min"),
         ("axx_max", "kernel_shape.xx", "max"),
         ("ayy", "kernel_shape.yy", "min"),
@@ -110,12 +120,7 @@ fn shaped_kernels_follow_a_squeeze_keep_the_velocity_gradient_exact_and_stop_at_
         ("eyy_max", "edot.yy", "max"),
         ("h_max", "h", "max"),
         ("h_short_min", "h_short", "min"),
-    ]
-    .iter()
-    .map(|(name, e, r)| {
-        format!("[[probes]]\nname = \"{name}\"\nbody = \"block\"\nexpression = \"{e}\"\nreduce = \"{r}\"\n\n")
-    })
-    .collect();
+    ]);
     // The prescribed squeeze feeds energy in; the watchdog would stop it as a blow-up.
     let probes = probes + "[watchdog]\nspeed_factor = inf\nenergy_factor = inf\n";
     let top = "integrator = \"predictor_corrector\"\nend_time = \"24 ms\"";
@@ -168,16 +173,11 @@ fn hourglass_pull(tag: &str, initial: &str) -> [f64; 3] {
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).expect("temp dir");
     std::fs::write(dir.join("hourglass.sph"), HOURGLASS_MODEL).unwrap();
-    let probes: String = [
+    let probes = block_probes(&[
         ("pull", "norm(dv_hourglass)", "max"),
         ("against_u_max", "dot(dv_hourglass, u)", "max"),
         ("against_u_min", "dot(dv_hourglass, u)", "min"),
-    ]
-    .iter()
-    .map(|(name, e, r)| {
-        format!("[[probes]]\nname = \"{name}\"\nbody = \"block\"\nexpression = \"{e}\"\nreduce = \"{r}\"\n\n")
-    })
-    .collect();
+    ]);
     let top = "integrator = \"predictor_corrector\"\nend_time = \"1 ns\"";
     let case = common::block_case("hourglass.sph", top, &format!("initial = {{ {initial} }}"), &probes).replace(
         "rho0 = \"1000 kg/m^3\"",
