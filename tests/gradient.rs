@@ -104,9 +104,7 @@ integrate { x' = v  v' = a  kernel_shape' = dkernel_shape }
 /// has lifted its smallest.
 #[test]
 fn shaped_kernels_follow_a_squeeze_keep_the_velocity_gradient_exact_and_stop_at_the_floor() {
-    let dir = std::env::temp_dir().join(format!("pairsum-gradient-squeeze-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("temp dir");
+    let dir = Scratch::new("gradient-squeeze");
     std::fs::write(dir.join("squeeze.sph"), SQUEEZE_MODEL).unwrap();
     let probes = block_probes(&[
         ("axx", "kernel_shape.xx", "min"),
@@ -151,7 +149,6 @@ fn shaped_kernels_follow_a_squeeze_keep_the_velocity_gradient_exact_and_stop_at_
     let longest = h0 * (stretched * stretched + 0.04 - squeezed * squeezed).sqrt();
     assert!((last("h_max") / longest - 1.0).abs() < 1e-4, "h = {} against {longest}", last("h_max"));
     assert!((last("h_short_min") / (h0 * 0.2) - 1.0).abs() < 1e-12, "h_short = {}", last("h_short_min"));
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// The hourglass stiffness of the shaped kernels (solid/shaped_hourglass.sph), at rest.
@@ -169,9 +166,7 @@ integrate { x' = v  u' = v  v' = dv_hourglass  kernel_shape' = dkernel_shape }
 /// particles' initial values: the largest |a| of the hourglass stiffness, the largest and the
 /// smallest a · u, each at the end.
 fn hourglass_pull(tag: &str, initial: &str) -> [f64; 3] {
-    let dir = std::env::temp_dir().join(format!("pairsum-gradient-hourglass-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("temp dir");
+    let dir = Scratch::new(&format!("gradient-hourglass-{tag}"));
     std::fs::write(dir.join("hourglass.sph"), HOURGLASS_MODEL).unwrap();
     let probes = block_probes(&[
         ("pull", "norm(dv_hourglass)", "max"),
@@ -184,7 +179,6 @@ fn hourglass_pull(tag: &str, initial: &str) -> [f64; 3] {
         "rho0 = \"1000 kg/m^3\"\nc0 = \"10 m/s\"\nbulk = \"2e5 Pa\"\nG = \"1e5 Pa\"\nh_ratio = 1.3",
     );
     let outcome = common::run_case_text_on_cpu(&dir, &case);
-    let _ = std::fs::remove_dir_all(&dir);
     ["pull", "against_u_max", "against_u_min"].map(|probe| {
         let points = &outcome.histories.iter().find(|(n, _)| n == probe).expect("probe").1;
         points.last().expect("a point").1
