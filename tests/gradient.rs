@@ -201,7 +201,7 @@ fn the_shaped_hourglass_stiffness_pulls_a_zig_zag_back_as_its_formula_says_and_l
     let e = 9.0 * bulk * g / (3.0 * bulk + g);
     let x: Vec<[f64; 2]> = (0..36).map(|k| [(k % 6) as f64 * dx + dx / 2.0, (k / 6) as f64 * dx + dx / 2.0]).collect();
     let u = |p: [f64; 2]| [1e-3 * (std::f64::consts::PI * p[0] / dx).sin(), 0.0];
-    let expected = x
+    let pulls: Vec<f64> = x
         .iter()
         .map(|xi| {
             let mut a = [0.0f64; 2];
@@ -221,7 +221,8 @@ fn the_shaped_hourglass_stiffness_pulls_a_zig_zag_back_as_its_formula_says_and_l
             }
             a[0].hypot(a[1])
         })
-        .fold(0.0, f64::max);
+        .collect();
+    let expected = largest("the formula's pull", &pulls);
     assert!(expected > 0.0);
     assert!((pull / expected - 1.0).abs() < 1e-6, "the largest pull {pull:e} against the formula's {expected:e}");
     assert!(against_max < 0.0, "a particle not pulled back: largest a · u = {against_max:e}");
