@@ -250,6 +250,27 @@ impl<T: Real> Store<T> {
         }
     }
 
+    /// The same particles with their values in precision `U`.
+    pub fn converted<U: Real>(&self) -> Store<U> {
+        let convert = |v: &[T]| v.iter().map(|x| U::from_f64(x.to_f64())).collect();
+        let column = |c: &Column<T>| Column { comps: c.comps, data: convert(&c.data), base: c.base.clone() };
+        Store {
+            dim: self.dim,
+            n: self.n,
+            ranges: self.ranges.clone(),
+            group: self.group.clone(),
+            material: self.material.clone(),
+            id: self.id.clone(),
+            columns: self.columns.iter().map(|c| c.as_ref().map(column)).collect(),
+            params: ParamTable {
+                offset: self.params.offset.clone(),
+                comps: self.params.comps.clone(),
+                stride: self.params.stride,
+                values: convert(&self.params.values),
+            },
+        }
+    }
+
     pub fn column(&self, f: FieldId) -> Option<&Column<T>> {
         self.columns.get(f.index()).and_then(|c| c.as_ref())
     }

@@ -228,18 +228,22 @@ fn human_seconds(s: f64) -> String {
 pub fn run_case(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailure> {
     let (scene, plan) = prepare(path, &opts.scene)?;
     eprint!("{}", scene.warnings.concat());
-    if split_ranks(opts) > 1 && opts.backend == BackendChoice::Gpu {
-        return Err(RunFailure::Input(
-            "error: a run split into domains runs on the CPU backend: each rank's own GPU is not supported yet; \
-             run it with `--backend cpu`, or on the GPU in one process (without `mpirun` or `--domains`)\n"
-                .into(),
-        ));
+    let split_on_gpus = split_ranks(opts) > 1 && opts.backend == BackendChoice::Gpu;
+    if let Some(e) = crate::backend::gpu::share::DevicePasses::refuses(&plan).filter(|_| split_on_gpus) {
+        return Err(RunFailure::Input(format!("error: {}\n", e.0)));
     }
     let ours = leads() && claim_out(opts)?;
     if ours && opts.vtk && opts.restart.is_none() {
         // A fresh series: an earlier run's frames past this one's last would be left beside it.
         crate::output_dir::remove_earlier_series(&opts.out.join("vtk"), &scene.name)
             .map_err(|e| RunFailure::Run(format!("removing the earlier run's VTK frames: {e}")))?;
+    }
+    if split_on_gpus {
+        // Each rank's passes on its own GPU, in f32; `--backend auto` splits on the CPU.
+        if opts.precision == Precision::F64 {
+            eprintln!("note: the GPU backend computes in f32");
+        }
+        return run_cpu::<f32>(scene, plan, opts);
     }
     if split_ranks(opts) > 1 {
         return run_cpu_precision(scene, plan, opts);
@@ -315,7 +319,7 @@ fn split_ranks(opts: &RunOptions) -> usize {
 
 fn run_cpu<T: Real>(scene: Scene, plan: Plan, opts: &RunOptions) -> Result<RunOutcome, RunFailure> {
     if let Some(world) = crate::backend::transport::world().map_err(|e| RunFailure::Run(e.0))? {
-        let backend = domain::<T>(&scene, plan, world)?;
+        let backend = domain::<T>(&scene, plan, world, opts)?;
         return drive(scene, backend, opts, T::NAME, true);
     }
     if let Some(n) = opts.domains.filter(|n| *n > 1) {
@@ -329,8 +333,14 @@ fn run_cpu<T: Real>(scene: Scene, plan: Plan, opts: &RunOptions) -> Result<RunOu
 
 /// This rank's domain of a run split over `transport`: every rank cuts the scene's particles
 /// alike and builds the store of its own share only, so that no rank ever holds every particle's
-/// state.
-fn domain<T: Real>(scene: &Scene, plan: Plan, transport: Box<dyn Transport>) -> Result<Domain<T>, RunFailure> {
+/// state. With `--backend gpu`, each rank runs its passes on a GPU of its machine
+/// ([`Gpu::for_rank`](crate::backend::gpu::device::Gpu::for_rank)).
+fn domain<T: Real>(
+    scene: &Scene,
+    plan: Plan,
+    transport: Box<dyn Transport>,
+    opts: &RunOptions,
+) -> Result<Domain<T>, RunFailure> {
     let input = &scene.particles;
     let (rank, size) = (transport.rank(), transport.size());
     let (cuts, own) =
@@ -339,7 +349,15 @@ fn domain<T: Real>(scene: &Scene, plan: Plan, transport: Box<dyn Transport>) -> 
         setup::build_store_of::<T>(&plan, input, &scene.materials, &own).map_err(|e| setup_failure(scene, e))?;
     let mut groups = input.group.clone();
     groups.sort_unstable();
-    Domain::of_own(plan, store, groups, cuts, scene.mirrors.clone(), transport).map_err(|e| RunFailure::Run(e.0))
+    let mut domain = Domain::of_own(plan, store, groups, cuts, scene.mirrors.clone(), transport)
+        .map_err(|e| RunFailure::Run(e.0))?;
+    if opts.backend == BackendChoice::Gpu {
+        let local = crate::backend::transport::local_rank().unwrap_or(rank);
+        let gpu = crate::backend::gpu::device::Gpu::for_rank(false, local)
+            .map_err(|e| RunFailure::Run(format!("rank {}: {e}", rank + 1)))?;
+        domain.on_gpu(gpu).map_err(|e| RunFailure::Input(format!("error: {}\n", e.0)))?;
+    }
+    Ok(domain)
 }
 
 /// A run split into `ranks` domains, each run by a thread of this process as a rank. Rank 0
@@ -362,7 +380,7 @@ fn run_threads<T: Real>(scene: Scene, plan: Plan, opts: &RunOptions, ranks: usiz
                         Some(prepared) => prepared,
                         None => (prepare(&path, &opts.scene)?.0, plan),
                     };
-                    let backend = domain::<T>(&scene, plan, Box::new(t))?;
+                    let backend = domain::<T>(&scene, plan, Box::new(t), opts)?;
                     let theirs = if leads {
                         opts.clone()
                     } else {

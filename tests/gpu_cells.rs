@@ -3,7 +3,7 @@
 //! a GPU test is never silently skipped.
 
 use pairsum::backend::gpu::cells::{wgsl_helpers, CellList};
-use pairsum::backend::gpu::device::{choose_adapter, dispatch_grid, used_bindings, Gpu, GpuError};
+use pairsum::backend::gpu::device::{choose_adapter, choose_adapter_for, dispatch_grid, used_bindings, Gpu, GpuError};
 use pairsum::backend::gpu::reduce::{ReduceOp, Reducer, Segment, ALL_FINITE};
 use pairsum::grid::Grid;
 use std::sync::OnceLock;
@@ -764,6 +764,13 @@ fn adapter_choice_and_messages() {
         Err(e @ GpuError::NoMatchingAdapter { .. }) => assert!(e.to_string().contains("NVIDIA RTX"), "{e}"),
         other => panic!("{other:?}"),
     }
+    // The ranks on a machine share its best adapters out, cyclically.
+    let mut two = infos.to_vec();
+    two.push(info("NVIDIA RTX", wgpu::DeviceType::DiscreteGpu, wgpu::Backend::Vulkan));
+    two.push(info("NVIDIA RTX GL", wgpu::DeviceType::DiscreteGpu, wgpu::Backend::Gl));
+    let ranks: Vec<usize> = (0..3).map(|r| choose_adapter_for(&two, None, r).unwrap()).collect();
+    assert_eq!(ranks, [3, 4, 3]);
+    assert_eq!(choose_adapter_for(&two, Some("iris"), 1).unwrap(), 2);
     let none = choose_adapter(&[], None).unwrap_err().to_string();
     assert!(none.contains("mesa-vulkan-drivers") && none.contains("lavapipe"), "{none}");
     assert_eq!(dispatch_grid(10, 65535), (10, 1));

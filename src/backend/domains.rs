@@ -15,6 +15,7 @@
 
 use super::cpu::lists::{half_period, KeptList, TRANSFORM_SHIFT};
 use super::cpu::{first_non_finite_in, known, lower::Known, snapshot_of, CpuBackend};
+use super::gpu::{device::Gpu, share::DevicePasses};
 use super::transport::Transport;
 use super::{padded, Backend, BackendError, Globals, Mirror, Nearby, Snapshot, WatchValues};
 use crate::compare::largest_number;
@@ -163,6 +164,10 @@ fn field(plan: &Plan, name: &str) -> Result<FieldId, BackendError> {
 pub struct Domain<T: Real> {
     plan: Plan,
     backend: CpuBackend<T>,
+    /// The rank's own GPU, where it runs the neighbour passes (`--backend gpu`); the CPU backend
+    /// runs them otherwise.
+    device: Option<DevicePasses>,
+    mirrors: Vec<Mirror>,
     transport: Mutex<Box<dyn Transport>>,
     rank: usize,
     size: usize,
@@ -281,11 +286,13 @@ impl<T: Real> Domain<T> {
         let (periodic_moves, half_period) = (periodic_moves(&mirrors), half_period(&mirrors));
         let parts: Vec<Known> =
             transport.all_gather(known(&plan, &own).encode()).iter().map(|k| Known::decode(k)).collect();
-        let mut backend = CpuBackend::with_known(plan.clone(), own.clone(), mirrors, Known::agreed(&parts))?;
+        let mut backend = CpuBackend::with_known(plan.clone(), own.clone(), mirrors.clone(), Known::agreed(&parts))?;
         backend.measure_pass_time();
         let support = backend.support;
         let mut domain = Domain {
             backend,
+            device: None,
+            mirrors,
             transport: Mutex::new(transport),
             rank,
             size,
@@ -326,6 +333,13 @@ impl<T: Real> Domain<T> {
         }
     }
 
+    /// Runs this rank's neighbour passes on `gpu` from now on (its particles stay on the host,
+    /// where the CPU backend integrates them: `gpu::share`).
+    pub fn on_gpu(&mut self, gpu: Gpu) -> Result<(), BackendError> {
+        self.device = Some(DevicePasses::new(gpu, &self.plan, &self.mirrors)?);
+        Ok(())
+    }
+
     /// Bytes of positions this rank has sent for [`Backend::nearby`] so far.
     pub fn nearby_sent(&self) -> u64 {
         self.nearby_sent.load(std::sync::atomic::Ordering::Relaxed)
@@ -354,9 +368,19 @@ impl<T: Real> Domain<T> {
     fn set_own(&mut self, store: Store<T>) {
         self.anchor = None;
         self.carried = None;
-        self.owned = store.ranges.iter().map(|(_, r)| r.len()).collect();
-        self.backend.replace_particles(store, &self.owned);
+        let owned = store.ranges.iter().map(|(_, r)| r.len()).collect();
+        self.replace_particles(store, owned);
         self.send.iter_mut().chain(&mut self.recv).for_each(Vec::clear);
+    }
+
+    /// Makes `store` the local particles, of which the first `owned[k]` of each group range are
+    /// this rank's own.
+    fn replace_particles(&mut self, store: Store<T>, owned: Vec<usize>) {
+        self.backend.replace_particles(store, &owned);
+        self.owned = owned;
+        if let Some(d) = &mut self.device {
+            d.forget();
+        }
     }
 
     /// The indices of the local particles this rank owns, in store order.
@@ -585,9 +609,9 @@ impl<T: Real> Domain<T> {
         // rows here is the order it sent them (its own rows are group-major too).
         let new = self.build(&rows);
         let send: Vec<Vec<u32>> = sent_rows.iter().map(|ks| ks.iter().map(|k| index_of_mine[*k]).collect()).collect();
-        self.backend.replace_particles(new, &owned);
+        self.replace_particles(new, owned);
         self.backend.lists_h_max = Some(h_max);
-        (self.owned, self.send, self.recv) = (owned, send, recv);
+        (self.send, self.recv) = (send, recv);
         if let Some(c) = carried {
             self.adopt_lists(c)?;
         }
@@ -772,7 +796,10 @@ impl<T: Real> Domain<T> {
     /// particle's cost is its group's pass time per particle-evaluation over all ranks. The
     /// particles move to their new ranks at the next evaluation.
     fn rebalance(&mut self) {
-        let time = self.backend.take_pass_time();
+        let time = match &mut self.device {
+            Some(d) => d.take_pass_time(),
+            None => self.backend.take_pass_time(),
+        };
         let evaluated = std::mem::replace(&mut self.evaluated, vec![0.0; time.len()]);
         let mine: f64 = time.iter().sum();
         let times: Vec<f64> = self.transport().all_gather(vec![mine]).concat();
@@ -898,7 +925,15 @@ impl<T: Real> Domain<T> {
 
 impl<T: Real> Backend for Domain<T> {
     fn describe(&self) -> String {
-        format!("{}, rank {} of {} domains", self.backend.describe(), self.rank + 1, self.size)
+        let (rank, size) = (self.rank + 1, self.size);
+        match &self.device {
+            Some(d) => format!(
+                "gpu ({}, f32) for the passes, {} for the rest, rank {rank} of {size} domains",
+                d.describe(),
+                self.backend.describe()
+            ),
+            None => format!("{}, rank {rank} of {size} domains", self.backend.describe()),
+        }
     }
 
     fn plan(&self) -> &Plan {
@@ -946,6 +981,10 @@ impl<T: Real> Backend for Domain<T> {
             }
             fresh.extend(&fields);
             fresh.retain(|f| !self.plan.passes[k].writes.contains(f));
+            if let Some(device) = self.device.as_mut().filter(|_| self.backend.store.n > 0) {
+                device.run_pass(k, g, &mut self.backend.store, &self.owned, &fields, k == 0)?;
+                continue;
+            }
             // The search reads the halo's positions: after the first pass's fields arrived.
             if search.is_none() && self.backend.store.n > 0 {
                 search = Some(self.backend.search()?);

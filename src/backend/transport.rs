@@ -127,6 +127,12 @@ pub fn launched_ranks() -> Option<usize> {
     ["OMPI_COMM_WORLD_SIZE", "PMI_SIZE"].iter().find_map(|v| std::env::var(v).ok()?.parse().ok())
 }
 
+/// This process's rank among those `mpirun` (Open MPI's or MPICH's) started on this machine,
+/// if it did.
+pub fn local_rank() -> Option<usize> {
+    ["OMPI_COMM_WORLD_LOCAL_RANK", "MPI_LOCALRANKID"].iter().find_map(|v| std::env::var(v).ok()?.parse().ok())
+}
+
 /// This process's rank among those `mpirun` started (initialising MPI on first use); `None`
 /// where it was not started by `mpirun` on more than one rank.
 pub fn launched_rank() -> Result<Option<usize>, super::BackendError> {

@@ -82,6 +82,10 @@ pub struct Gpu {
     errors: Arc<Mutex<Vec<String>>>,
     /// What the run's kernels, submissions and read-backs cost (`pairsum run --timing`).
     timing: Option<Timing>,
+    /// The pipelines compiled so far, by label, source and entry point: a rank of a split run
+    /// builds its passes again for each new halo ([`crate::backend::gpu::share`]), from the same
+    /// kernels.
+    pipelines: Mutex<std::collections::HashMap<(String, String, String), wgpu::ComputePipeline>>,
 }
 
 impl fmt::Debug for Gpu {
@@ -118,6 +122,27 @@ pub fn describe_adapter(info: &wgpu::AdapterInfo) -> String {
 /// The index of the adapter to use among `infos`: the first whose name contains `wanted`
 /// (case-insensitive) if given, else the best by device type, then backend, then order.
 pub fn choose_adapter(infos: &[wgpu::AdapterInfo], wanted: Option<&str>) -> Result<usize, GpuError> {
+    choose_adapter_for(infos, wanted, 0)
+}
+
+/// [`choose_adapter`] for the `nth` rank on a machine: the `nth` (cyclically, in order) of the
+/// adapters whose name contains `wanted`, or else of those tied for the best device type and
+/// backend (a machine's GPUs, not their GL doubles).
+pub fn choose_adapter_for(infos: &[wgpu::AdapterInfo], wanted: Option<&str>, nth: usize) -> Result<usize, GpuError> {
+    let first = choose_first_adapter(infos, wanted)?;
+    let tied: Vec<usize> = (0..infos.len())
+        .filter(|&k| match wanted {
+            Some(w) => infos[k].name.to_lowercase().contains(&w.to_lowercase()),
+            None => {
+                let rank = |k: usize| (type_rank(infos[k].device_type), backend_rank(infos[k].backend));
+                rank(k) == rank(first)
+            }
+        })
+        .collect();
+    Ok(tied[nth % tied.len()])
+}
+
+fn choose_first_adapter(infos: &[wgpu::AdapterInfo], wanted: Option<&str>) -> Result<usize, GpuError> {
     if infos.is_empty() {
         return Err(GpuError::NoAdapter { help: NO_ADAPTER_HELP.to_string() });
     }
@@ -160,17 +185,24 @@ impl Gpu {
     /// [`new`](Self::new); with `timing`, the device also keeps a [`Timing`] of the run (with
     /// each kernel's device time where the adapter has timestamp queries).
     pub fn with_timing(timing: bool) -> Result<Gpu, GpuError> {
+        Gpu::for_rank(timing, 0)
+    }
+
+    /// [`with_timing`](Self::with_timing) for the rank `local` of those on this machine: it takes
+    /// the `local`-th (cyclically) of the adapters tied for the best ([`choose_adapter_for`]), so
+    /// that the ranks of a split run share a machine's GPUs out.
+    pub fn for_rank(timing: bool, local: usize) -> Result<Gpu, GpuError> {
         let wanted = crate::config::env().adapter.clone().filter(|s| !s.trim().is_empty());
         // wgpu may panic inside driver or loader code; a failure to start is never a crash.
-        std::panic::catch_unwind(move || Gpu::open(wanted.as_deref(), timing))
+        std::panic::catch_unwind(move || Gpu::open(wanted.as_deref(), timing, local))
             .unwrap_or_else(|p| Err(GpuError::Device(format!("wgpu panicked: {}", panic_message(p)))))
     }
 
-    fn open(wanted: Option<&str>, timing: bool) -> Result<Gpu, GpuError> {
+    fn open(wanted: Option<&str>, timing: bool, local: usize) -> Result<Gpu, GpuError> {
         let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
         let adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
         let infos: Vec<wgpu::AdapterInfo> = adapters.iter().map(|a| a.get_info()).collect();
-        let k = choose_adapter(&infos, wanted)?;
+        let k = choose_adapter_for(&infos, wanted, local)?;
         let adapter = &adapters[k];
         let limits = adapter.limits();
         let timestamps = timing && adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
@@ -204,7 +236,16 @@ impl Gpu {
         }
         let limits = device.limits();
         let timing = timing.then(|| Timing::new(&device, &queue, timestamps));
-        Ok(Gpu { device, queue, adapter_info: infos[k].clone(), limits, lost, errors, timing })
+        Ok(Gpu {
+            device,
+            queue,
+            adapter_info: infos[k].clone(),
+            limits,
+            lost,
+            errors,
+            timing,
+            pipelines: Default::default(),
+        })
     }
 
     /// Whether the adapter is a software rasteriser on the CPU (lavapipe, SwiftShader): right for
@@ -241,7 +282,20 @@ impl Gpu {
     /// Parses and validates `wgsl` with naga, then builds a compute pipeline for `entry` with an
     /// automatic layout. A module naga rejects never reaches wgpu; wgpu's own validation errors
     /// are caught in an error scope. Both give `GpuError::Shader` with the text and the message.
+    /// A kernel compiled before on this device is not compiled again.
     pub fn compile(&self, label: &str, wgsl: &str, entry: &str) -> Result<wgpu::ComputePipeline, GpuError> {
+        let key = (label.to_string(), wgsl.to_string(), entry.to_string());
+        if let Some(p) = self.pipelines.lock().ok().and_then(|c| c.get(&key).cloned()) {
+            return Ok(p);
+        }
+        let pipeline = self.compile_new(label, wgsl, entry)?;
+        if let Ok(mut c) = self.pipelines.lock() {
+            c.insert(key, pipeline.clone());
+        }
+        Ok(pipeline)
+    }
+
+    fn compile_new(&self, label: &str, wgsl: &str, entry: &str) -> Result<wgpu::ComputePipeline, GpuError> {
         validate_wgsl(label, wgsl)?;
         let shader_error =
             |message: String| GpuError::Shader { label: label.to_string(), wgsl: wgsl.to_string(), message };

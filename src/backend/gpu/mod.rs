@@ -6,6 +6,7 @@ pub mod probe;
 pub mod reduce;
 pub mod reorder;
 pub mod runtime;
+pub mod share;
 pub mod timing;
 
 pub use runtime::GpuBackend;

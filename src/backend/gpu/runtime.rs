@@ -14,7 +14,7 @@ use super::reorder::{Particles, Reorder};
 use crate::backend::wgsl::{self, globals as gl, Binding, Kernel, KernelKind, Layout, ABSENT};
 use crate::backend::{Backend, BackendError, Globals, Mirror, Snapshot};
 use crate::ir::{FieldId, GroupId, Reduce};
-use crate::particles::Store;
+use crate::particles::{Real, Store};
 use crate::schedule::{Action, Plan, Search};
 
 /// A compiled kernel with its bind group.
@@ -389,6 +389,65 @@ impl GpuBackend {
         &self.gpu
     }
 
+    /// The device, given back: a rank of a split run builds its passes again on it over each new
+    /// halo ([`super::share`]).
+    pub fn into_gpu(self) -> Gpu {
+        self.gpu
+    }
+
+    /// Runs the particle kernels only on the first `active[k]` particles of the store's k-th
+    /// group range: the others (a domain's halo) are read as neighbours only.
+    pub fn activate_only(&mut self, active: &[usize]) -> Result<(), BackendError> {
+        for ((g, _, count), a) in self.group_counts.iter_mut().zip(active) {
+            *count = *a;
+            self.gpu.upload(&self.info, 4 * (2 + 2 * g.index()) as u64, &[*a as i32]).map_err(err)?;
+        }
+        Ok(())
+    }
+
+    /// Writes `fields` of `store`, a store of the same particles in the same layout as this
+    /// backend's, to the device.
+    pub fn upload_fields<T: Real>(&self, store: &Store<T>, fields: &[FieldId]) -> Result<(), BackendError> {
+        for f in fields {
+            if let (Some(c), Some(o)) = (store.column(*f), self.offset[f.index()]) {
+                let values: Vec<f32> = c.data.iter().map(|v| v.to_f64() as f32).collect();
+                self.gpu.upload(&self.data, 4 * o as u64, &values).map_err(err)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Reads `fields` back into `store` (as [`upload_fields`](Self::upload_fields)'s), in one
+    /// read of the state.
+    pub fn download_fields<T: Real>(&self, store: &mut Store<T>, fields: &[FieldId]) -> Result<(), BackendError> {
+        if fields.is_empty() {
+            return Ok(());
+        }
+        let all: Vec<f32> =
+            self.gpu.download(&self.data, 0, self.scratch).map_err(failed("reading back a pass's fields"))?;
+        for f in fields {
+            if let (Some(c), Some(o)) = (store.column_mut(*f), self.offset[f.index()]) {
+                for (d, s) in c.data.iter_mut().zip(&all[o..]) {
+                    *d = T::from_f64(*s as f64);
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Neighbour pass `k` alone, after the search when `search` (the first pass of an
+    /// evaluation: the positions do not change within one).
+    pub fn run_pass(&mut self, k: usize, g: Globals, search: bool) -> Result<(), BackendError> {
+        self.set_globals(&[(gl::TIME, g.time as f32), (gl::DT_PREV, g.dt as f32)])?;
+        let mut encoder = self.gpu.encoder("pass");
+        if search {
+            self.record_search(&mut encoder);
+        }
+        self.record_pass(&mut encoder, k);
+        self.submit(encoder, &format!("running neighbour pass {}", k + 1))?;
+        self.check_lists()
+    }
+
     /// The cells per cut-off of its cell list ([`cells_per_cutoff`], chosen at the start).
     pub fn cells_per_cutoff(&self) -> u32 {
         self.cells.cells_per_cutoff()
@@ -445,6 +504,14 @@ impl GpuBackend {
     }
 
     fn record_evaluate(&self, encoder: &mut wgpu::CommandEncoder) {
+        self.record_search(encoder);
+        for p in 0..self.plan.passes.len() {
+            self.record_pass(encoder, p);
+        }
+    }
+
+    /// The cell list of the particles' positions, and the kept lists brought up to date.
+    fn record_search(&self, encoder: &mut wgpu::CommandEncoder) {
         match &self.lists {
             // Cells of the cut-off plus the skin, for the lists' build.
             Some(l) => {
@@ -454,9 +521,10 @@ impl GpuBackend {
             }
             None => self.cells.record(&self.gpu, encoder, &self.data, self.x_offset, self.h_offset, self.support),
         }
-        for p in 0..self.plan.passes.len() {
-            self.dispatch_where(encoder, |k| matches!(k, KernelKind::Pass { pass, .. } if *pass == p));
-        }
+    }
+
+    fn record_pass(&self, encoder: &mut wgpu::CommandEncoder, p: usize) {
+        self.dispatch_where(encoder, |k| matches!(k, KernelKind::Pass { pass, .. } if *pass == p));
     }
 
     fn record_reductions(&self, encoder: &mut wgpu::CommandEncoder) {
