@@ -81,7 +81,8 @@ enum Command {
         #[arg(long)]
         reanalyse: bool,
         /// Split the run into this many domains, each run by a thread of this process as a rank
-        /// (the CPU backend); `mpirun -n N pairsum run CASE` runs N processes instead
+        /// (on the CPU; with `--backend gpu`, each rank's neighbour passes on a GPU); `mpirun -n N
+        /// pairsum run CASE` runs N processes instead
         #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1024))]
         domains: Option<u32>,
     },
