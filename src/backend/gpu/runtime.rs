@@ -418,16 +418,21 @@ impl GpuBackend {
     }
 
     /// Reads `fields` back into `store` (as [`upload_fields`](Self::upload_fields)'s), in one
-    /// read of the state.
+    /// read of the span of the state that holds them.
     pub fn download_fields<T: Real>(&self, store: &mut Store<T>, fields: &[FieldId]) -> Result<(), BackendError> {
-        if fields.is_empty() {
+        let span = |f: &FieldId| Some((self.offset[f.index()]?, store.column(*f)?.data.len()));
+        let spans: Vec<(usize, usize)> = fields.iter().filter_map(span).collect();
+        let (Some(first), Some(end)) = (spans.iter().map(|s| s.0).min(), spans.iter().map(|(o, len)| o + len).max())
+        else {
             return Ok(());
-        }
-        let all: Vec<f32> =
-            self.gpu.download(&self.data, 0, self.scratch).map_err(failed("reading back a pass's fields"))?;
+        };
+        let read: Vec<f32> = self
+            .gpu
+            .download(&self.data, 4 * first as u64, end - first)
+            .map_err(failed("reading back a pass's fields"))?;
         for f in fields {
             if let (Some(c), Some(o)) = (store.column_mut(*f), self.offset[f.index()]) {
-                for (d, s) in c.data.iter_mut().zip(&all[o..]) {
+                for (d, s) in c.data.iter_mut().zip(&read[o - first..]) {
                     *d = T::from_f64(*s as f64);
                 }
             }
