@@ -84,27 +84,7 @@ fn run_both_with<W, R: Send>(
     for k in 0..steps {
         a.step().unwrap_or_else(|e| panic!("{name}: undivided step {k}: {e}"));
     }
-    let (rank, setup) = (&rank, &setup);
-    let results = std::thread::scope(|s| {
-        let handles: Vec<_> = Threads::ranks(ranks)
-            .into_iter()
-            .map(|t| {
-                let (plan, store, mirrors, config) =
-                    (plan.clone(), store.clone(), scene.mirrors.clone(), scene.config.clone());
-                s.spawn(move || {
-                    let mut split = Domain::new(plan, store, mirrors, Box::new(t)).expect("domain");
-                    setup(&mut split);
-                    let mut b = Engine::new(split, config);
-                    b.initialise().expect("init");
-                    for k in 0..steps {
-                        b.step().unwrap_or_else(|e| panic!("{name}: split step {k}: {e}"));
-                    }
-                    rank(&b)
-                })
-            })
-            .collect();
-        handles.into_iter().map(|h| h.join().expect("a rank panicked")).collect()
-    });
+    let results = run_split(name, (&scene, &plan, &store), ranks, steps, setup, rank);
     (whole(&a), results)
 }
 

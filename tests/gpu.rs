@@ -372,8 +372,6 @@ fn split_on_gpus(
     steps: usize,
     fields: &[&str],
 ) -> (Vec<(f64, f64)>, Vec<usize>) {
-    use pairsum::backend::domains::Domain;
-    use pairsum::backend::transport::Threads;
     let path = std::path::PathBuf::from(case(name));
     let (cpu, whole_gpu) = run_both(&path, set, steps);
     let opts = pairsum::scene::Options {
@@ -382,27 +380,11 @@ fn split_on_gpus(
     };
     let (scene, plan) = pairsum::runner::prepare(&path, &opts).unwrap_or_else(|e| panic!("{name}: {e}"));
     let store = build_store::<f32>(&plan, &scene.particles, &scene.materials).expect("store");
-    let split: Vec<(Vec<Vec<f64>>, usize)> = std::thread::scope(|s| {
-        let handles: Vec<_> = Threads::ranks(ranks)
-            .into_iter()
-            .map(|t| {
-                let (plan, store, mirrors, config) =
-                    (plan.clone(), store.clone(), scene.mirrors.clone(), scene.config.clone());
-                s.spawn(move || {
-                    let mut d = Domain::new(plan, store, mirrors, Box::new(t)).expect("domain");
-                    d.on_gpu(gpu()).expect("the rank's GPU");
-                    let mut e = pairsum::engine::Engine::new(d, config);
-                    e.initialise().expect("init");
-                    for k in 0..steps {
-                        e.step().unwrap_or_else(|err| panic!("{name}: split step {k}: {err}"));
-                    }
-                    assert!((e.time - cpu.time).abs() <= 1e-3 * cpu.time, "{name}: clocks {} vs {}", e.time, cpu.time);
-                    let values = fields.iter().map(|f| stored_field(&e.backend, f).1).collect();
-                    (values, e.backend.sizes().0)
-                })
-            })
-            .collect();
-        handles.into_iter().map(|h| h.join().expect("a rank panicked")).collect()
+    let on_gpu = |d: &mut pairsum::backend::domains::Domain<f32>| d.on_gpu(gpu()).expect("the rank's GPU");
+    let split = run_split(name, (&scene, &plan, &store), ranks, steps, on_gpu, |e| {
+        assert!((e.time - cpu.time).abs() <= 1e-3 * cpu.time, "{name}: clocks {} vs {}", e.time, cpu.time);
+        let values: Vec<Vec<f64>> = fields.iter().map(|f| stored_field(&e.backend, f).1).collect();
+        (values, e.backend.sizes().0)
     });
     let diffs = fields
         .iter()

@@ -357,3 +357,38 @@ pub fn wendland_c2_2d(r: f64, h: f64) -> f64 {
     }
     7.0 / (4.0 * std::f64::consts::PI * h * h) * (1.0 - q / 2.0).powi(4) * (2.0 * q + 1.0)
 }
+
+/// `steps` steps of `store` (of `scene`, under `plan`) split over `ranks` threads as ranks, each
+/// rank's domain set up by `setup` first: what `read` takes of each rank's engine at the end, in
+/// rank order.
+pub fn run_split<T: Real, R: Send>(
+    name: &str,
+    (scene, plan, store): (&pairsum::scene::Scene, &Plan, &pairsum::particles::Store<T>),
+    ranks: usize,
+    steps: usize,
+    setup: impl Fn(&mut pairsum::backend::domains::Domain<T>) + Sync,
+    read: impl Fn(&pairsum::engine::Engine<pairsum::backend::domains::Domain<T>>) -> R + Sync,
+) -> Vec<R> {
+    use pairsum::backend::domains::Domain;
+    let (setup, read) = (&setup, &read);
+    std::thread::scope(|s| {
+        let handles: Vec<_> = pairsum::backend::transport::Threads::ranks(ranks)
+            .into_iter()
+            .map(|t| {
+                let (plan, store, mirrors, config) =
+                    (plan.clone(), store.clone(), scene.mirrors.clone(), scene.config.clone());
+                s.spawn(move || {
+                    let mut split = Domain::new(plan, store, mirrors, Box::new(t)).expect("domain");
+                    setup(&mut split);
+                    let mut b = pairsum::engine::Engine::new(split, config);
+                    b.initialise().expect("init");
+                    for k in 0..steps {
+                        b.step().unwrap_or_else(|e| panic!("{name}: split step {k}: {e}"));
+                    }
+                    read(&b)
+                })
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().expect("a rank panicked")).collect()
+    })
+}
