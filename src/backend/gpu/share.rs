@@ -74,10 +74,11 @@ impl DevicePasses {
         }
     }
 
-    /// Neighbour pass `k` of `store`, whose first `owned[k]` particles of each group range are
-    /// the rank's own (the rest, its halo, are read as neighbours only): the fields the host
+    /// Neighbour pass `k` of `store`, whose first `owned[r]` particles of its r-th group range
+    /// are the rank's own (the rest, its halo, are read as neighbours only): the fields the host
     /// changed since the last pass (`changed`; every one at the first pass of an evaluation, when
-    /// the search runs) go to the device, and what the pass writes comes back.
+    /// the search runs) go to the device, and what the pass writes comes back. Buffers built
+    /// for this pass are searched whatever `first` says.
     pub fn run_pass<T: Real>(
         &mut self,
         k: usize,
@@ -88,6 +89,7 @@ impl DevicePasses {
         first: bool,
     ) -> Result<(), BackendError> {
         let started = std::time::Instant::now();
+        let search = first || self.built.is_none();
         let b = match self.built.take() {
             Some(b) => {
                 let fields = if first { self.stored() } else { changed.to_vec() };
@@ -103,7 +105,7 @@ impl DevicePasses {
             }
         };
         let b = self.built.insert(b);
-        b.run_pass(k, g, first)?;
+        b.run_pass(k, g, search)?;
         b.download_fields(store, &self.plan.passes[k].writes)?;
         let secs = started.elapsed().as_secs_f64();
         let total: usize = self.owned.iter().map(|(_, n)| n).sum();
