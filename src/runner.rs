@@ -240,9 +240,7 @@ pub fn run_case(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailure
     }
     if split_on_gpus {
         // Each rank's passes on its own GPU, in f32; `--backend auto` splits on the CPU.
-        if opts.precision == Precision::F64 {
-            eprintln!("note: the GPU backend computes in f32");
-        }
+        note_gpu_precision(opts);
         return run_cpu::<f32>(scene, plan, opts);
     }
     if split_ranks(opts) > 1 {
@@ -284,6 +282,13 @@ fn run_cpu_precision(scene: Scene, plan: Plan, opts: &RunOptions) -> Result<RunO
     }
 }
 
+/// Where `--backend gpu` was asked for in f64: the GPU computes in f32.
+fn note_gpu_precision(opts: &RunOptions) {
+    if opts.precision == Precision::F64 && opts.backend == BackendChoice::Gpu {
+        eprintln!("note: the GPU backend computes in f32");
+    }
+}
+
 /// The GPU computes in f32 whatever precision was asked for (the report says so).
 fn run_gpu(
     gpu: crate::backend::gpu::device::Gpu,
@@ -291,9 +296,7 @@ fn run_gpu(
     plan: Plan,
     opts: &RunOptions,
 ) -> Result<RunOutcome, RunFailure> {
-    if opts.precision == Precision::F64 && opts.backend == BackendChoice::Gpu {
-        eprintln!("note: the GPU backend computes in f32");
-    }
+    note_gpu_precision(opts);
     let store =
         setup::build_store::<f32>(&plan, &scene.particles, &scene.materials).map_err(|e| setup_failure(&scene, e))?;
     let backend =

@@ -890,8 +890,8 @@ fn frames_differ(a: &Fields<Vec<f64>>, b: &Fields<Vec<f64>>) -> f64 {
 
 /// `mpirun -n 2 pairsum run --backend gpu`: each rank runs its passes on a GPU (both on
 /// lavapipe's one adapter in CI; without an adapter the run fails saying how to install one), and
-/// X
-/// the neighbours in another order).
+/// the 60 steps' probe histories are within 1e-6 of the single GPU process's (measured 8.6e-8;
+/// f32, and the ranks sum the neighbours in another order).
 #[test]
 fn mpirun_on_two_ranks_each_with_its_gpu_gives_the_single_gpu_process_histories_within_1e_6() {
     let dir = tempdir("mpirun_gpu");

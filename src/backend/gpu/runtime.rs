@@ -405,8 +405,21 @@ impl GpuBackend {
         Ok(())
     }
 
-    /// Writes `fields` of `store`, a store of the same particles in the same layout as this
-    /// backend's, to the device.
+    /// Writes every stored field of `store`, a store of the same particles in the same layout as
+    /// this backend's, to the device, in one write.
+    pub fn upload_state<T: Real>(&self, store: &Store<T>) -> Result<(), BackendError> {
+        let mut all = vec![0f32; self.scratch];
+        for (f, c) in store.columns.iter().enumerate() {
+            if let (Some(c), Some(o)) = (c, self.offset[f]) {
+                for (d, v) in all[o..o + c.data.len()].iter_mut().zip(&c.data) {
+                    *d = v.to_f64() as f32;
+                }
+            }
+        }
+        self.gpu.upload(&self.data, 0, &all).map_err(err)
+    }
+
+    /// Writes `fields` of `store` (as [`upload_state`](Self::upload_state)'s) to the device.
     pub fn upload_fields<T: Real>(&self, store: &Store<T>, fields: &[FieldId]) -> Result<(), BackendError> {
         for f in fields {
             if let (Some(c), Some(o)) = (store.column(*f), self.offset[f.index()]) {
@@ -468,13 +481,7 @@ impl GpuBackend {
     }
 
     fn upload_data(&mut self) -> Result<(), BackendError> {
-        let mut all = vec![0f32; self.scratch];
-        for (f, c) in self.host.columns.iter().enumerate() {
-            if let (Some(c), Some(o)) = (c, self.offset[f]) {
-                all[o..o + c.data.len()].copy_from_slice(&c.data);
-            }
-        }
-        self.gpu.upload(&self.data, 0, &all).map_err(err)
+        self.upload_state(&self.host)
     }
 
     /// Writes clock values into `globals` (queued before the next submission).
