@@ -10,7 +10,10 @@ particles within 20 mm of the axis (the plate is body 1, its fine region reaches
   positions), and the ring's radius;
 - the band's width: the strain's integral over the rings from 6 to 16 mm divided by that peak;
 - the plastic strain integrated over the volume, Σ V ε_p (mm³), and the volume with ε_p > 0.5;
-- the plate's failed particles (D = 1), wherever they are, and their volume.
+- the plate's failed particles (D = 1), wherever they are, and their volume;
+- the largest ε_p and the largest D of a single particle within 20 mm of the axis: with a
+  damage length ℓ, D follows ε_p averaged over ℓ, and a band thinner than ℓ keeps D well below
+  what its own strain would give.
 
 A particle's volume is Δx³ (the report's `dx`; all of these particles are in the fine region).
 The model is a quarter: volumes and counts are a quarter of the plate's. Pure Python, so that it
@@ -44,6 +47,7 @@ def read_vtu(path):
 def band(d, dx_mm):
     rings = {}
     strain = high = failed = 0.0
+    top_eps = top_D = 0.0
     volume = dx_mm**3
     for k, body in enumerate(d["body"]):
         if body != 1:
@@ -54,6 +58,8 @@ def band(d, dx_mm):
         if r > 20.0:
             continue
         e = d["eps_p"][k]
+        top_eps = max(top_eps, e)
+        top_D = max(top_D, d["D"][k])
         ring = rings.setdefault(int(r), [0, 0.0])
         ring[0] += 1
         ring[1] += e
@@ -62,11 +68,11 @@ def band(d, dx_mm):
     mean = {b + 0.5: s / n for b, (n, s) in rings.items()}
     peak_r, peak = max(mean.items(), key=lambda kv: kv[1])
     width = sum(e for r, e in mean.items() if 6.0 <= r <= 16.0) / peak if peak > 0 else float("nan")
-    return peak, peak_r, width, strain, high, failed, failed * volume
+    return peak, peak_r, width, strain, high, failed, failed * volume, top_eps, top_D
 
 
 def main(dirs):
-    print("run | t [µs] | peak ring ε_p | at r [mm] | width [mm] | Σ V ε_p [mm³] | V(ε_p > 0.5) [mm³] | failed | V failed [mm³]")
+    print("run | t [µs] | peak ring ε_p | at r [mm] | width [mm] | Σ V ε_p [mm³] | V(ε_p > 0.5) [mm³] | failed | V failed [mm³] | largest ε_p | largest D")
     for run in dirs:
         run = Path(run)
         dx_mm = 1000.0 * json.loads((run / "report.json").read_text())["dx"]
@@ -74,9 +80,10 @@ def main(dirs):
         for t, f in re.findall(r'timestep="([^"]*)"[^>]*file="([^"]*)"', pvd):
             if float(t) == 0.0:
                 continue
-            peak, r, width, strain, high, failed, vfailed = band(read_vtu(run / "vtk" / f), dx_mm)
+            peak, r, width, strain, high, failed, vfailed, top_eps, top_D = band(read_vtu(run / "vtk" / f), dx_mm)
             print(
                 f"{run} | {1e6 * float(t):.0f} | {peak:.3f} | {r:.1f} | {width:.2f} | {strain:.0f} | {high:.0f} | {failed:.0f} | {vfailed:.0f}"
+                f" | {top_eps:.2f} | {top_D:.2f}"
             )
 
 
