@@ -847,6 +847,57 @@ fn the_nonlocal_plastic_strain_of_a_step_converges_at_second_order_to_the_helmho
     assert!(errors[1] < 0.4 * errors[0], "not second order from 0.5 to 0.25 mm: {errors:?}");
 }
 
+/// A Weldox bar 40 mm long at 0.5 mm, stretched from its middle at 2,000 1/s, after 200 steps
+/// of `models::ftlr19_perforation` with local damage and `failure_band` w (mm): each particle's D.
+fn damage_of_a_stretched_bar(failure_band_mm: f64) -> Vec<f64> {
+    let dir = std::env::temp_dir().join(format!("pairsum-band-{failure_band_mm}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("bar.toml");
+    let case = format!(
+        "name = \"bar\"\ntitle = \"a stretched bar\"\nmodel = \"models::ftlr19_perforation\"\n\
+         dim = 1\nintegrator = \"predictor_corrector\"\nend_time = \"1 s\"\ndefault_resolution = \"r\"\n\
+         [resolutions]\nr = \"0.5 mm\"\n\
+         [materials.weldox]\nrho0 = \"7850 kg/m^3\"\nG = \"75.19 GPa\"\nc0 = \"5047.6 m/s\"\nS_s = 1.5\n\
+         gamma0 = 2.0\njc_A = \"490 MPa\"\njc_B = \"807 MPa\"\njc_C = 0.0114\njc_n = 0.73\n\
+         eps_rate0 = \"5e-4 1/s\"\nD1 = 0.0705\nD2 = 1.732\nD3 = -0.54\nfailure_band = \"{failure_band_mm} mm\"\n\
+         C_cfl = 0.3\nh_ratio = 1.3\n\
+         [[bodies]]\nname = \"bar\"\ngroup = \"target\"\nmaterial = \"weldox\"\n\
+         shape = {{ box = {{ min = [0], max = [\"40 mm\"] }} }}\n\
+         initial = {{ v = \"2000 [1/s] * (x - vec(0.02 [m], 0 [m]))\" }}\n"
+    );
+    std::fs::write(&path, case).unwrap();
+    let (scene, plan) = pairsum::runner::prepare(&path, &Default::default()).unwrap_or_else(|e| panic!("{e}"));
+    let store = pairsum::engine::setup::build_store::<f64>(&plan, &scene.particles, &scene.materials).expect("store");
+    let b = CpuBackend::new(plan, store, scene.mirrors.clone()).expect("backend");
+    let mut e = Engine::new(b, scene.config.clone());
+    e.initialise().unwrap_or_else(|err| panic!("initialise: {err}"));
+    for _ in 0..200 {
+        e.step().unwrap_or_else(|err| panic!("step: {err}"));
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+    stored_field(&e.backend, "D").1
+}
+
+/// `failure_band` w scales local damage by Δx / w (damage/nonlocal_strain.sph): the failure strains
+/// hold as given at Δx = w. With the damage not weakening the stress (`damage_coupling` 0), the
+/// plastic flow is the same whatever w, so at Δx = 0.5 mm w = 0.5 mm gives the unscaled damage and
+/// w = 1 mm half of it, particle by particle.
+#[test]
+fn a_failure_band_of_twice_the_spacing_halves_each_particles_local_damage_and_one_spacing_leaves_it() {
+    let unscaled = damage_of_a_stretched_bar(0.0);
+    let largest = pairsum::compare::max_abs(&unscaled).unwrap_or_else(|e| panic!("unscaled D: {e}"));
+    // Measured: 1.44e-3, and both scalings exact to the bit (Δx / w is 1 and 0.5).
+    assert!(largest > 1e-4 && largest < 1.0, "the bar's largest damage is {largest}: no flow, or failed");
+    let same = damage_of_a_stretched_bar(0.5);
+    let halved: Vec<f64> = damage_of_a_stretched_bar(1.0).iter().map(|d| 2.0 * d).collect();
+    let off_same = pairsum::compare::max_abs_diff(&same, &unscaled).unwrap_or_else(|e| panic!("w = Δx: {e}"));
+    let off_half = pairsum::compare::max_abs_diff(&halved, &unscaled).unwrap_or_else(|e| panic!("w = 2 Δx: {e}"));
+    assert!(
+        off_same <= 1e-12 * largest && off_half <= 1e-12 * largest,
+        "D off the scaled local damage by {off_same} (w = Δx) and {off_half} (w = 2 Δx, doubled)"
+    );
+}
+
 /// A `select` whose condition reads only a parameter every material binds alike is taken when
 /// the plan is built (schedule/settle.rs): with `switch = 0` the pair sum that only the other
 /// branch reads is in no pass and its output is not stored, and the output is the branch taken;

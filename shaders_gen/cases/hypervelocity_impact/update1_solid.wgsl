@@ -232,83 +232,83 @@ fn st_e_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 0u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 5u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 6u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 7u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 8u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 13u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 14u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 15u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 16u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 17u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 18u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 19u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 20u;
     return params[b];
 }
 fn prm_p_spall(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 21u;
     return params[b];
 }
 fn prm_D1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 22u;
     return params[b];
 }
 fn prm_D2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 23u;
     return params[b];
 }
 fn prm_D3(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 24u;
     return params[b];
 }
 fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 25u;
     return params[b];
 }
 fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 26u;
     return params[b];
 }
 fn prm_C_v(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 29u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -361,7 +361,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var D_i: f32 = ld_D(i);
     let D = D_i;
     let deps_p = deps_p_i;
-    let deps_p_2 = deps_p;
+    let local = deps_p;
+    let deps_p_2 = local;
     let p = ld_p(i);
     let s_2 = s_i;
     let edot = ld_edot(i);
