@@ -783,24 +783,24 @@ fn a_correction_copies_the_sum_of_the_evaluation_before_the_integration_stage() 
     );
 }
 
-/// A Weldox bar at rest with a step of plastic strain (1 for x < 20 mm, 0 beyond) and
-/// `damage_length` ℓ, at spacing `dx` (mm), after `steps` steps of `models::ftlr19_perforation`:
-/// each particle's x and its nonlocal plastic strain ε̄_p.
-fn nonlocal_strain_of_a_step(dx: f64, length_mm: f64, steps: usize) -> Vec<(f64, f64)> {
-    let dir = std::env::temp_dir().join(format!("pairsum-nonlocal-{dx}-{length_mm}-{}", std::process::id()));
+/// A Weldox bar 40 mm long in 1D at spacing `dx` (mm), its material given `damage` (one more
+/// line of it) and its particles `initial` (the body's `initial` table), after `steps` steps of
+/// `models::ftlr19_perforation`; the engine, to read its fields.
+fn weldox_bar(dx: f64, damage: &str, initial: &str, steps: usize) -> Engine<CpuBackend<f64>> {
+    let dir = std::env::temp_dir().join(format!("pairsum-bar-{dx}-{:x}-{}", fxhash(damage), std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join("step.toml");
+    let path = dir.join("bar.toml");
     let case = format!(
-        "name = \"step\"\ntitle = \"a step of plastic strain\"\nmodel = \"models::ftlr19_perforation\"\n\
+        "name = \"bar\"\ntitle = \"a Weldox bar\"\nmodel = \"models::ftlr19_perforation\"\n\
          dim = 1\nintegrator = \"predictor_corrector\"\nend_time = \"1 s\"\ndefault_resolution = \"r\"\n\
          [resolutions]\nr = \"{dx} mm\"\n\
          [materials.weldox]\nrho0 = \"7850 kg/m^3\"\nG = \"75.19 GPa\"\nc0 = \"5047.6 m/s\"\nS_s = 1.5\n\
          gamma0 = 2.0\njc_A = \"490 MPa\"\njc_B = \"807 MPa\"\njc_C = 0.0114\njc_n = 0.73\n\
-         eps_rate0 = \"5e-4 1/s\"\nD1 = 0.0705\nD2 = 1.732\nD3 = -0.54\ndamage_length = \"{length_mm} mm\"\n\
+         eps_rate0 = \"5e-4 1/s\"\nD1 = 0.0705\nD2 = 1.732\nD3 = -0.54\n{damage}\n\
          C_cfl = 0.3\nh_ratio = 1.3\n\
          [[bodies]]\nname = \"bar\"\ngroup = \"target\"\nmaterial = \"weldox\"\n\
          shape = {{ box = {{ min = [0], max = [\"40 mm\"] }} }}\n\
-         initial = {{ eps_p = \"select(x.x < 0.02 [m], 1, 0)\" }}\n"
+         initial = {{ {initial} }}\n"
     );
     std::fs::write(&path, case).unwrap();
     let (scene, plan) = pairsum::runner::prepare(&path, &Default::default()).unwrap_or_else(|e| panic!("{e}"));
@@ -811,11 +811,25 @@ fn nonlocal_strain_of_a_step(dx: f64, length_mm: f64, steps: usize) -> Vec<(f64,
     for _ in 0..steps {
         e.step().unwrap_or_else(|err| panic!("step: {err}"));
     }
+    let _ = std::fs::remove_dir_all(&dir);
+    e
+}
+
+/// A short hash of a string, to keep the temporary folders of concurrent tests apart.
+fn fxhash(text: &str) -> u64 {
+    text.bytes().fold(0xcbf2_9ce4_8422_2325, |h, b| (h ^ u64::from(b)).wrapping_mul(0x100_0000_01b3))
+}
+
+/// A Weldox bar at rest with a step of plastic strain (1 for x < 20 mm, 0 beyond) and
+/// `damage_length` ℓ, at spacing `dx` (mm), after `steps` steps of `models::ftlr19_perforation`:
+/// each particle's x and its nonlocal plastic strain ε̄_p.
+fn nonlocal_strain_of_a_step(dx: f64, length_mm: f64, steps: usize) -> Vec<(f64, f64)> {
+    let damage = format!("damage_length = \"{length_mm} mm\"");
+    let e = weldox_bar(dx, &damage, "eps_p = \"select(x.x < 0.02 [m], 1, 0)\"", steps);
     let (_, x) = stored_field(&e.backend, "x");
     let (_, eps_nl) = stored_field(&e.backend, "eps_nl");
     let (_, eps_p) = stored_field(&e.backend, "eps_p");
     assert!(eps_p.iter().zip(&x).all(|(e, x)| *e == if *x < 0.02 { 1.0 } else { 0.0 }), "the bar at rest flowed");
-    let _ = std::fs::remove_dir_all(&dir);
     x.into_iter().zip(eps_nl).collect()
 }
 
@@ -850,31 +864,8 @@ fn the_nonlocal_plastic_strain_of_a_step_converges_at_second_order_to_the_helmho
 /// A Weldox bar 40 mm long at 0.5 mm, stretched from its middle at 2,000 1/s, after 200 steps
 /// of `models::ftlr19_perforation` with local damage and `failure_band` w (mm): each particle's D.
 fn damage_of_a_stretched_bar(failure_band_mm: f64) -> Vec<f64> {
-    let dir = std::env::temp_dir().join(format!("pairsum-band-{failure_band_mm}-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join("bar.toml");
-    let case = format!(
-        "name = \"bar\"\ntitle = \"a stretched bar\"\nmodel = \"models::ftlr19_perforation\"\n\
-         dim = 1\nintegrator = \"predictor_corrector\"\nend_time = \"1 s\"\ndefault_resolution = \"r\"\n\
-         [resolutions]\nr = \"0.5 mm\"\n\
-         [materials.weldox]\nrho0 = \"7850 kg/m^3\"\nG = \"75.19 GPa\"\nc0 = \"5047.6 m/s\"\nS_s = 1.5\n\
-         gamma0 = 2.0\njc_A = \"490 MPa\"\njc_B = \"807 MPa\"\njc_C = 0.0114\njc_n = 0.73\n\
-         eps_rate0 = \"5e-4 1/s\"\nD1 = 0.0705\nD2 = 1.732\nD3 = -0.54\nfailure_band = \"{failure_band_mm} mm\"\n\
-         C_cfl = 0.3\nh_ratio = 1.3\n\
-         [[bodies]]\nname = \"bar\"\ngroup = \"target\"\nmaterial = \"weldox\"\n\
-         shape = {{ box = {{ min = [0], max = [\"40 mm\"] }} }}\n\
-         initial = {{ v = \"2000 [1/s] * (x - vec(0.02 [m], 0 [m]))\" }}\n"
-    );
-    std::fs::write(&path, case).unwrap();
-    let (scene, plan) = pairsum::runner::prepare(&path, &Default::default()).unwrap_or_else(|e| panic!("{e}"));
-    let store = pairsum::engine::setup::build_store::<f64>(&plan, &scene.particles, &scene.materials).expect("store");
-    let b = CpuBackend::new(plan, store, scene.mirrors.clone()).expect("backend");
-    let mut e = Engine::new(b, scene.config.clone());
-    e.initialise().unwrap_or_else(|err| panic!("initialise: {err}"));
-    for _ in 0..200 {
-        e.step().unwrap_or_else(|err| panic!("step: {err}"));
-    }
-    let _ = std::fs::remove_dir_all(&dir);
+    let damage = format!("failure_band = \"{failure_band_mm} mm\"");
+    let e = weldox_bar(0.5, &damage, "v = \"2000 [1/s] * (x - vec(0.02 [m], 0 [m]))\"", 200);
     stored_field(&e.backend, "D").1
 }
 
