@@ -785,10 +785,10 @@ fn a_correction_copies_the_sum_of_the_evaluation_before_the_integration_stage() 
 
 /// A Weldox bar 40 mm long in 1D at spacing `dx` (mm), its material given `damage` (one more
 /// line of it) and its particles `initial` (the body's `initial` table), after `steps` steps of
-/// `models::ftlr19_perforation`; the engine, to read its fields.
-fn weldox_bar(dx: f64, damage: &str, initial: &str, steps: usize) -> Engine<CpuBackend<f64>> {
-    let dir = std::env::temp_dir().join(format!("pairsum-bar-{dx}-{:x}-{}", fxhash(damage), std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+/// `models::ftlr19_perforation`, its case written in a scratch folder named by `tag`; the
+/// engine, to read its fields.
+fn weldox_bar(tag: &str, dx: f64, damage: &str, initial: &str, steps: usize) -> Engine<CpuBackend<f64>> {
+    let dir = Scratch::new(tag);
     let path = dir.join("bar.toml");
     let case = format!(
         "name = \"bar\"\ntitle = \"a Weldox bar\"\nmodel = \"models::ftlr19_perforation\"\n\
@@ -811,13 +811,7 @@ fn weldox_bar(dx: f64, damage: &str, initial: &str, steps: usize) -> Engine<CpuB
     for _ in 0..steps {
         e.step().unwrap_or_else(|err| panic!("step: {err}"));
     }
-    let _ = std::fs::remove_dir_all(&dir);
     e
-}
-
-/// A short hash of a string, to keep the temporary folders of concurrent tests apart.
-fn fxhash(text: &str) -> u64 {
-    text.bytes().fold(0xcbf2_9ce4_8422_2325, |h, b| (h ^ u64::from(b)).wrapping_mul(0x100_0000_01b3))
 }
 
 /// A Weldox bar at rest with a step of plastic strain (1 for x < 20 mm, 0 beyond) and
@@ -825,7 +819,13 @@ fn fxhash(text: &str) -> u64 {
 /// each particle's x and its nonlocal plastic strain ε̄_p.
 fn nonlocal_strain_of_a_step(dx: f64, length_mm: f64, steps: usize) -> Vec<(f64, f64)> {
     let damage = format!("damage_length = \"{length_mm} mm\"");
-    let e = weldox_bar(dx, &damage, "eps_p = \"select(x.x < 0.02 [m], 1, 0)\"", steps);
+    let e = weldox_bar(
+        &format!("nonlocal-{dx}-{length_mm}"),
+        dx,
+        &damage,
+        "eps_p = \"select(x.x < 0.02 [m], 1, 0)\"",
+        steps,
+    );
     let (_, x) = stored_field(&e.backend, "x");
     let (_, eps_nl) = stored_field(&e.backend, "eps_nl");
     let (_, eps_p) = stored_field(&e.backend, "eps_p");
@@ -865,7 +865,13 @@ fn the_nonlocal_plastic_strain_of_a_step_converges_at_second_order_to_the_helmho
 /// of `models::ftlr19_perforation` with local damage and `failure_band` w (mm): each particle's D.
 fn damage_of_a_stretched_bar(failure_band_mm: f64) -> Vec<f64> {
     let damage = format!("failure_band = \"{failure_band_mm} mm\"");
-    let e = weldox_bar(0.5, &damage, "v = \"2000 [1/s] * (x - vec(0.02 [m], 0 [m]))\"", 200);
+    let e = weldox_bar(
+        &format!("band-{failure_band_mm}"),
+        0.5,
+        &damage,
+        "v = \"2000 [1/s] * (x - vec(0.02 [m], 0 [m]))\"",
+        200,
+    );
     stored_field(&e.backend, "D").1
 }
 

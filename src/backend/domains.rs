@@ -1,8 +1,9 @@
 //! A run split into domains (issue 42): one rank's share of it. The particles are cut into boxes
 //! by recursive coordinate bisection (`grid::decompose`); a rank runs a CPU backend over the
 //! particles in its box (its own) and copies of the others' particles within reach of them (its
-//! halo), its neighbour passes on its own GPU where it has one (`on_gpu`, `gpu::share`). Each evaluation starts by sending every particle that left the box to the rank whose box
-//! it entered, with its whole state (migration), and by rebuilding the halos, whose copies carry
+//! halo), its neighbour passes on its own GPU where it has one (`on_gpu`, `gpu::share`). Each
+//! evaluation starts by sending every particle that left the box to the rank whose box it
+//! entered, with its whole state (migration), and by rebuilding the halos, whose copies carry
 //! only the fields some pass reads at j (the rest of a particle's state is never read there);
 //! before each later
 //! pass, a halo receives the fields that pass reads at j and an earlier pass of the evaluation

@@ -96,9 +96,10 @@ impl DevicePasses {
             // them (`Pass::reads` leaves out `x` and `h`, which the plan's report adds: uploading
             // only those, the impact's time step went 0.24 % off within 40 steps).
             Some(b) => {
-                match first {
-                    true => b.upload_state(store)?,
-                    false => b.upload_fields(store, changed)?,
+                if first {
+                    b.upload_state(store)?;
+                } else {
+                    b.upload_fields(store, changed)?;
                 }
                 b
             }
