@@ -295,6 +295,16 @@ pub struct Timestep {
     pub span: Span,
 }
 
+/// `require cond else "why"`: a condition on a material's parameters, checked for every material
+/// with particles on `groups` (the `on` of the `use` that reached it) when a case binds them.
+#[derive(Clone, Debug)]
+pub struct Requirement {
+    pub cond: Expr,
+    pub why: String,
+    pub groups: GroupSet,
+    pub span: Span,
+}
+
 #[derive(Clone, Debug)]
 pub enum Stmt {
     Let(LocalId, Expr),
@@ -588,6 +598,7 @@ pub struct Model {
     pub equations: Vec<Equation>,
     pub rates: Vec<Rate>,
     pub timesteps: Vec<Timestep>,
+    pub requirements: Vec<Requirement>,
     pub locals: Vec<Local>,
 }
 

@@ -1137,6 +1137,30 @@ fn total_lagrangian_beam_vibration_2d_keeps_its_amplitude_within_1_percent_over_
     assert!((last / first - 1.0).abs() < 0.01, "amplitude {first:e} m in the first period, {last:e} m in the last");
 }
 
+/// A model's `require` holds for each material where it applies, checked when the case binds
+/// the parameters: the Børvik plate with a failure band beside a damage length (which replaces the
+/// local damage the band scales) is error C0048 naming the material, the reason and both values,
+/// and with either one alone the store builds.
+#[test]
+fn a_failure_band_beside_a_damage_length_is_error_c0048_naming_the_material_and_both_values() {
+    let store_with = |set: &[(&str, &str)]| {
+        let opts = pairsum::scene::Options {
+            set: set.iter().map(|(k, v)| (k.to_string(), v.to_string())).collect(),
+            ..Default::default()
+        };
+        let (scene, plan) = prepare(&case("borvik_perforation"), &opts).unwrap_or_else(|e| panic!("{e}"));
+        setup::build_store::<f64>(&plan, &scene.particles, &scene.materials).map(|_| ()).map_err(|e| e.to_string())
+    };
+    let err = store_with(&[("failure_band", "1"), ("damage_length", "2")]).expect_err("both set");
+    for part in
+        ["C0048", "material `weldox`", "set one of them to 0", "damage_length = 0.002 m", "failure_band = 0.001 m"]
+    {
+        assert!(err.contains(part), "{part} not in: {err}");
+    }
+    assert_eq!(store_with(&[("failure_band", "1")]), Ok(()));
+    assert_eq!(store_with(&[("damage_length", "2")]), Ok(()));
+}
+
 /// A material no body uses is not checked against the model (a case that switches models keeps
 /// the other model's materials): a warning, not error C0007.
 #[test]

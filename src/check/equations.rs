@@ -482,6 +482,15 @@ impl Checker {
         self.model.timesteps.push(ir::Timestep { name: def.name.name.clone(), dest, value, reads, span: def.span });
     }
 
+    pub(crate) fn requirement(&mut self, def: &ast::RequireDef) {
+        let cx = Cx::new(Where::Material, "a requirement");
+        let Some(cond) = self.expr_as(&def.cond, &cx, Type::BOOL, "a requirement") else {
+            return;
+        };
+        let groups = self.scoped_groups(None, def.span, "a requirement");
+        self.model.requirements.push(ir::Requirement { cond, why: def.why.clone(), groups, span: def.span });
+    }
+
     pub(crate) fn kernel(&mut self, k: &ast::KernelDef) {
         if self.model.kernel_id(&k.name.name).is_some() {
             self.error(

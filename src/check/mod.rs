@@ -275,6 +275,7 @@ impl Checker {
                 Item::Particle(p) => self.particle(p),
                 Item::Integrate(i) => self.integrate(i),
                 Item::Timestep(t) => self.timestep(t),
+                Item::Require(r) => self.requirement(r),
                 Item::KernelSelect(k) => match self.model.kernel_id(&k.name) {
                     Some(id) => self.model.kernel = Some(id),
                     None => {

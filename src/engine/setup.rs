@@ -312,12 +312,7 @@ pub fn build_store<T: Real>(
     // bound (or defaulted) for every material with particles on that group.
     let used = params_used(plan);
     for (mi, (m, values)) in materials.iter().zip(&resolved).enumerate() {
-        let groups = input
-            .material
-            .iter()
-            .zip(&input.group)
-            .filter(|(mat, _)| **mat as usize == mi)
-            .fold(GroupSet::default(), |s, (_, g)| s.with(GroupId(*g)));
+        let groups = material_groups(input, mi);
         for (p, v) in values.iter().enumerate() {
             match v {
                 Some(v) => store.params.set(mi, ParamId(p as u32), v),
@@ -338,7 +333,72 @@ pub fn build_store<T: Real>(
             }
         }
     }
+    check_requirements(plan, input, materials, &resolved)?;
     Ok(store)
+}
+
+/// The groups that material `mi` has particles on.
+fn material_groups(input: &ParticleInput, mi: usize) -> GroupSet {
+    input
+        .material
+        .iter()
+        .zip(&input.group)
+        .filter(|(mat, _)| **mat as usize == mi)
+        .fold(GroupSet::default(), |s, (_, g)| s.with(GroupId(*g)))
+}
+
+/// Every `require` of the model holds for every material with particles where it applies.
+fn check_requirements(
+    plan: &Plan,
+    input: &ParticleInput,
+    materials: &[MaterialInput],
+    resolved: &[Vec<Option<Vec<f64>>>],
+) -> Result<(), SetupError> {
+    let model = &plan.model;
+    for r in &model.requirements {
+        for (mi, m) in materials.iter().enumerate() {
+            if material_groups(input, mi).intersect(r.groups).is_empty() {
+                continue;
+            }
+            let mut params = resolved[mi].clone();
+            let holds = eval(model, plan.dim, &r.cond, &mut params, &mut BTreeSet::new(), None);
+            let values = || {
+                let mut read = BTreeSet::new();
+                ir::walk_expr(&r.cond, &mut |e| {
+                    if let ir::ExprKind::Param(p, _) = e.kind {
+                        read.insert(p);
+                    }
+                });
+                let shown: Vec<String> = read
+                    .iter()
+                    .map(|p| {
+                        let value = params[p.index()].as_ref().map_or("unbound".to_string(), |v| format!("{}", v[0]));
+                        format!("{} = {} {}", model.params[p.index()].name, value, model.params[p.index()].ty.unit)
+                    })
+                    .collect();
+                shown.join(", ")
+            };
+            match holds {
+                Ok(v) if v[0] != 0.0 => {}
+                Ok(_) => {
+                    return Err(SetupError::new(
+                        "C0048",
+                        format!("material `{}` breaks a requirement of the model: {} ({})", m.name, r.why, values()),
+                    ))
+                }
+                Err(what) => {
+                    return Err(SetupError::new(
+                        "C0048",
+                        format!(
+                            "cannot check a requirement of the model (`{}`) for material `{}`: {what}",
+                            r.why, m.name
+                        ),
+                    ))
+                }
+            }
+        }
+    }
+    Ok(())
 }
 
 /// The scene's fields (x, v, vol, dx, body) and the initial values computed from them, per

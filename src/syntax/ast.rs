@@ -28,6 +28,7 @@ pub enum Item {
     Particle(ParticleDef),
     Integrate(IntegrateDef),
     Timestep(TimestepDef),
+    Require(RequireDef),
 }
 
 #[derive(Clone, Debug)]
@@ -216,6 +217,14 @@ pub struct IntegrateDef {
 pub struct TimestepDef {
     pub name: Ident,
     pub value: Expr,
+    pub span: Span,
+}
+
+/// `require cond else "why"`: a condition on a material's parameters.
+#[derive(Clone, Debug)]
+pub struct RequireDef {
+    pub cond: Expr,
+    pub why: String,
     pub span: Span,
 }
 

@@ -192,7 +192,9 @@ fn rule_text(r: Rule) -> &'static str {
         module_path | string | path_part => "a module path",
         storage => "`field` or `state`",
         item | use_item | group_decl | field_decl | param_decl | const_decl | kernel_select | kernel_def | fn_def
-        | pairsum_def | particle_def | integrate_def | timestep_def => "an item (field, param, pairsum, particle, ...)",
+        | pairsum_def | particle_def | integrate_def | timestep_def | require_def => {
+            "an item (field, param, pairsum, particle, ...)"
+        }
         kernel_entry | kernel_key => "a kernel entry (support, norm1, norm2, norm3, w, dw)",
         on_clause => "`on`",
         from_clause => "`from`",
@@ -210,6 +212,7 @@ fn rule_text(r: Rule) -> &'static str {
         K_particle => "`particle`",
         K_integrate => "`integrate`",
         K_timestep => "`timestep`",
+        K_require => "`require`",
         K_on => "`on`",
         K_from => "`from`",
         K_let => "`let`",
@@ -267,6 +270,7 @@ fn is_keyword(r: Rule) -> bool {
             | K_particle
             | K_integrate
             | K_timestep
+            | K_require
             | K_on
             | K_from
             | K_let
@@ -437,6 +441,12 @@ impl Builder {
                 let name = self.ident(it.next().expect("timestep name"));
                 let value = self.expr(it.next().expect("timestep value"));
                 Item::Timestep(TimestepDef { name, value, span })
+            }
+            Rule::require_def => {
+                let mut it = kids(p);
+                let cond = self.expr(it.next().expect("require condition"));
+                let why = it.next().expect("require message").as_str().trim_matches('"').to_string();
+                Item::Require(RequireDef { cond, why, span })
             }
             r => unreachable!("item rule {r:?}"),
         }

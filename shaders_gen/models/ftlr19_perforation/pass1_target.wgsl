@@ -767,7 +767,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 let f3 = select(0.0, ((mass * pen_rate) / dt), (pen_rate > 0.0));
                 a_contact = a_contact + (((K_p_i * max(max(f1, f2), f3)) / m_i) * n_2);
             }
-            // pairsum nonlocal_strain_laplacian (stdlib/damage/nonlocal_strain.sph:53)
+            // pairsum nonlocal_strain_laplacian (stdlib/damage/nonlocal_strain.sph:55)
             if (in_groups(2u, ints[j])) {
                 let k_2 = max(((((-2.0 * ldj_m(j, sgn)) / ldj_rho(j, sgn)) * dot(x_ij, gradW_ij)) / ((r_ij * r_ij) + (0.01 * (h_ij * h_ij)))), 0.0);
                 sum = sum + (k_2 * ldj_eps_nl(j, sgn));
