@@ -79,6 +79,22 @@ fn use_on_restricts_a_module_and_what_it_pulls_in() {
     assert_eq!(groups(*from), "target");
 }
 
+/// Two modules may give one parameter a default when it is the same constant (the corrected
+/// gradient's and the shaped kernel's `det_min = 0.1`): the model keeps it. Different defaults
+/// stay error E0107 (tests/ui/parameter_with_two_defaults.sph).
+#[test]
+fn two_modules_that_default_a_parameter_to_the_same_constant_compose() {
+    let text = "use kernels\ngroup round, shaped\nkernel = wendland_c2\n\
+                use correction::kernel_gradient on round\nuse solid::shaped_kernel on shaped\n";
+    let mut sources = Sources::new();
+    let checked = pairsum::check::check_text(&mut sources, "m.sph", text, Stdlib::Dir(stdlib_dir()));
+    assert!(!checked.has_errors(), "{}", render(&sources, &checked.diags));
+    let m = &checked.model;
+    let det_min = m.param_id("det_min").expect("det_min");
+    let default = m.params[det_min.index()].default.as_ref().expect("a default");
+    assert_eq!(pairsum::host_eval::constant(default), Some(0.1));
+}
+
 /// Every plasticity module with every thermal module (and none) and every equation of state, in a
 /// solid model with the energy equation: each combination whose physics makes sense checks clean
 /// and schedules, with the radial return before the heating it causes.

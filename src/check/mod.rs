@@ -617,15 +617,21 @@ impl Checker {
                         continue;
                     };
                     let ty = self.model.params[id.index()].ty;
-                    if self.model.params[id.index()].default.is_some() {
+                    let cx = expr::Cx::new(expr::Where::Material, "a parameter's default");
+                    if let Some(first) = &self.model.params[id.index()].default {
+                        let first = crate::host_eval::constant(first);
+                        let second =
+                            self.expr_as(default, &cx, ty, "the default").as_ref().and_then(crate::host_eval::constant);
+                        if first.is_some() && first == second {
+                            continue; // two modules that agree on a constant default
+                        }
                         self.error(
                             Diagnostic::error("E0107", format!("parameter `{}` has two defaults", p.name.name))
                                 .at(default.span, "second default")
-                                .help("keep one; a material can always bind its own value"),
+                                .help("keep one, or give both the same constant; a material can always bind its own value"),
                         );
                         continue;
                     }
-                    let cx = expr::Cx::new(expr::Where::Material, "a parameter's default");
                     if let Some(e) = self.expr_as(default, &cx, ty, "the default") {
                         self.model.params[id.index()].default = Some(e);
                     }
