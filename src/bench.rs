@@ -84,6 +84,7 @@ fn elastic_store<T: crate::particles::Real>(n: usize) -> Result<(Plan, Store<T>)
         search: Default::default(),
         damping: None,
         settled: vec![],
+        initialised: vec![],
     };
     let plan = Plan::build(&model, &scene, None).map_err(|e| e.to_string())?;
     let mut store: Store<T> = build_store(&plan, &input, &[mat]).map_err(|e| e.to_string())?;

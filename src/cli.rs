@@ -574,6 +574,7 @@ fn run_plan(
         search: Default::default(),
         damping: None,
         settled: vec![],
+        initialised: vec![],
     };
     match crate::schedule::Plan::build(&model, &scene, None) {
         Ok(plan) => {
@@ -611,6 +612,7 @@ pub fn plan_of(path: &Path, dim: usize) -> Result<crate::schedule::Plan, String>
         search: Default::default(),
         damping: None,
         settled: vec![],
+        initialised: vec![],
     };
     crate::schedule::Plan::build(&checked.model, &scene, None).map_err(|e| render(&sources, &[*e.0]))
 }

@@ -36,6 +36,8 @@ impl std::fmt::Display for Type {
 /// The prelude's parameter that the case's `gravity` binds for every material (the integrator adds
 /// it to the rate of `v`; models may read it).
 pub const GRAVITY: &str = "gravity";
+/// The state fields the scene places with every particle (besides its velocity `v`).
+pub const PLACED: [&str; 5] = ["x", "vol", "dx", "body", "part"];
 
 /// Components a shape holds in `dim` dimensions. Symmetric and skew tensors keep their upper
 /// triangle row by row (sym 3D: xx xy xz yy yz zz; skew 3D: xy xz yz); full tensors are row-major.

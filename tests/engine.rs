@@ -928,6 +928,51 @@ fn a_select_that_a_parameter_settles_drops_the_pair_sum_only_its_other_branch_re
     }
 }
 
+/// A state that nothing writes keeps its constant initial value all run (schedule/settle.rs):
+/// a pair sum that spares "failed" pairs reads it as that constant, and the plan stores no `D`;
+/// where a body's `initial` sets it (to 1: no pair intact), or an equation writes it, it is stored.
+#[test]
+fn a_state_nothing_writes_is_folded_to_its_initial_value_and_not_stored() {
+    let text = |writer: &str| {
+        format!(
+            "use kernels\ngroup g\nkernel = wendland_c2\nstate D: scalar [-]\n{writer}\
+             pairsum intact_neighbours -> n_intact: scalar [-] {{ if D[i] < 1 && D[j] < 1 {{ n_intact += 1 }} }}\n\
+             integrate {{ x' = v  v' = 0 }}\n"
+        )
+    };
+    let (n, dx) = (4, 0.01);
+    let inp = input(2, lattice(2, n, dx), dx);
+    let count = |m: &pairsum::ir::Model, initial_d: Option<f64>| {
+        let mat = material(m, &[("rho0", vec![1000.0]), ("h_ratio", vec![1.3])]);
+        let settled = m.params.iter().map(|_| None).collect();
+        let d = m.field_id("D").expect("D");
+        let mut inp = inp.clone();
+        if let Some(value) = initial_d {
+            let value = pairsum::ir::Expr::constant(value, pairsum::ir::Type::scalar(pairsum::units::Unit::ONE));
+            inp.initial.push(pairsum::engine::setup::InitialValue { field: d, body: 0, value });
+        }
+        let initialised = initial_d.map(|_| d).into_iter().collect();
+        let sc =
+            pairsum::schedule::SceneSpec { settled, initialised, ..scene(m, 2, &["n_intact"], IntegratorKind::Euler) };
+        let mut b = backend::<f64>(m, &sc, &inp, &[mat], vec![]);
+        let stored = b.plan().field_layout(m.field_id("D").expect("D")).is_some();
+        b.evaluate(Default::default()).expect("evaluate");
+        (stored, field_by_id(&b, "n_intact").1)
+    };
+    let unwritten = model(&text(""));
+    let (stored, intact) = count(&unwritten, None);
+    assert!(!stored, "D is stored though nothing writes it");
+    assert!(intact.iter().all(|k| *k >= 4.0), "every neighbour intact (D = 0), got {intact:?}");
+    let (stored, intact) = count(&unwritten, Some(1.0));
+    assert!(stored, "D that a body's `initial` sets is not stored");
+    assert!(
+        intact.iter().all(|k| *k == 0.0),
+        "every particle failed (initial D = 1), yet intact neighbours {intact:?}"
+    );
+    let written = model(&text("particle fail -> D { D = 1 }\n"));
+    assert!(count(&written, None).0, "D that an equation writes is not stored");
+}
+
 /// A drop of water with no neighbour (two particles far apart) limits the step by its sound speed
 /// alone: `timestep::lsr`'s signal speed is 0 there. Before, it was the empty maximum, −∞, and
 /// Δt_cv = C h / (c + mu_max) came out −0, which stopped the run at its first step.

@@ -140,6 +140,7 @@ fn every_plasticity_thermal_and_eos_module_compose() {
                 search: Default::default(),
                 damping: None,
                 settled: vec![],
+                initialised: vec![],
             };
             let plan = pairsum::schedule::Plan::build(&m, &scene, None).unwrap_or_else(|e| panic!("{what}: {e}"));
             let order: Vec<&str> =

@@ -1086,8 +1086,21 @@ fn build(
         None => None,
     };
     let settled = settled_params(&model, dim, &materials, &used);
-    let spec =
-        SceneSpec { dim, groups, outputs, integrator, gravity, loads, constraints, planes, search, damping, settled };
+    let initialised: std::collections::BTreeSet<FieldId> = particles.initial.iter().map(|iv| iv.field).collect();
+    let spec = SceneSpec {
+        dim,
+        groups,
+        outputs,
+        integrator,
+        gravity,
+        loads,
+        constraints,
+        planes,
+        search,
+        damping,
+        settled,
+        initialised: initialised.into_iter().collect(),
+    };
     let mut config =
         RunConfig { end_time, dt_max, reorder_every: case.reorder_every.unwrap_or(25), ..RunConfig::default() };
     if let Some(r) = &case.min_dt_ratio {
@@ -1487,13 +1500,13 @@ fn initial_value(
     set_before: &[FieldId],
     cx: &mut Ctx,
 ) -> Option<(FieldId, ir::Expr)> {
-    const PLACED: [&str; 5] = ["x", "vol", "dx", "body", "part"];
-    let f = model.field_id(field).filter(|f| model.field(*f).storage == ir::Storage::State && !PLACED.contains(&field));
+    let f =
+        model.field_id(field).filter(|f| model.field(*f).storage == ir::Storage::State && !ir::PLACED.contains(&field));
     let Some(f) = f else {
         let states: Vec<&str> = model
             .fields
             .iter()
-            .filter(|f| f.storage == ir::Storage::State && !PLACED.contains(&f.name.as_str()))
+            .filter(|f| f.storage == ir::Storage::State && !ir::PLACED.contains(&f.name.as_str()))
             .map(|f| f.name.as_str())
             .collect();
         let d = Diagnostic::error("C0032", format!("`{field}` is not a state field a case can give an initial value"))
@@ -1512,7 +1525,8 @@ fn initial_value(
     };
     // Computed on the host before the run (engine::setup), from what the scene places, the
     // model's initial values and this body's earlier ones (in the order of their names).
-    let known = |g: FieldId| ["v"].iter().chain(&PLACED).any(|n| *n == model.field(g).name) || set_before.contains(&g);
+    let known =
+        |g: FieldId| ["v"].iter().chain(&ir::PLACED).any(|n| *n == model.field(g).name) || set_before.contains(&g);
     let mut leaves = BeforeTheRun { model, dim: cx.dim, known: &known };
     if let Err(what) = crate::host_eval::check(&e, cx.dim, &mut leaves) {
         let d = Diagnostic::error(

@@ -95,6 +95,9 @@ pub struct SceneSpec {
     /// By parameter id: the value every material with particles binds it to, where they agree
     /// (`settle.rs` takes the branches it decides); empty where no materials are known.
     pub settled: Vec<Option<Vec<f64>>>,
+    /// State fields some body's `initial` sets (beyond those the scene places): with `settled`,
+    /// what tells a state that nothing writes, which `settle.rs` folds to its initial value.
+    pub initialised: Vec<FieldId>,
 }
 
 /// The particles a load or a constraint acts on: a whole body, or a part (a region of a body).
@@ -310,6 +313,7 @@ impl Plan {
         let mut model = model.clone();
         let scene_params = integrator::scene_params(&mut model, scene);
         settle::settle(&mut model, &scene.settled, scene.dim);
+        settle::fold_constant_states(&mut model, scene);
         let live = live::analyse(&model, scene)?;
         for (id, drop) in &live.unneeded {
             model.equations[id.index()] = live::pruned(&model.equations[id.index()], &model, drop);

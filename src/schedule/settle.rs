@@ -5,12 +5,20 @@
 //! driver is the case in point: with `damage_length = 0` its Laplacian sum and the nonlocal
 //! strain it smooths are gone from the plan (`damage/nonlocal_strain.sph`).
 //!
+//! A state that nothing writes (no equation, no rate, not the scene: it places `x`, `v`, `vol`,
+//! `dx`, `body`, `part` and the bodies' `initial` values) and whose initial value is a scalar
+//! constant keeps that value all run: every read of it becomes the constant
+//! ([`fold_constant_states`]), so it is neither stored nor gathered. A module may then read a
+//! state another module may set, as `solid/shaped_hourglass.sph` reads the damage `D` to spare
+//! failed pairs, and a model without damage pays nothing for it.
+//!
 //! The backends fold such conditions too (the CPU lowering's known parameters, the shader
 //! compiler's constants), but only inside a program; settling them here is what lets the plan
 //! drop a whole pair sum and its stored fields.
 
+use super::SceneSpec;
 use crate::host_eval;
-use crate::ir::{self, Equation, Expr, ExprKind, FieldId, Global, LocalId, Model, ParamId, Reduce, Stmt};
+use crate::ir::{self, Equation, Expr, ExprKind, FieldId, Global, LocalId, Model, ParamId, Reduce, Stmt, Storage};
 
 /// Settles every equation of `model` by the parameter values `settled` (by parameter id; `None`
 /// or missing: not the same on every material; empty: no materials known, nothing settled). An
@@ -26,6 +34,83 @@ pub fn settle(model: &mut Model, settled: &[Option<Vec<f64>>], dim: usize) {
             model.equations[k] = super::live::pruned(&e, model, &Default::default());
         }
     }
+}
+
+/// Replaces every read of a state nothing writes by its constant initial value (in a scene whose
+/// materials are known: `scene.settled` not empty). An equation that changes has its reads
+/// recomputed, as `settle` does.
+pub fn fold_constant_states(model: &mut Model, scene: &SceneSpec) {
+    if scene.settled.is_empty() {
+        return;
+    }
+    let constants: Vec<(FieldId, f64)> = unwritten_states(model, scene)
+        .into_iter()
+        .filter_map(|f| {
+            let value = model.field(f).init.as_ref().map_or(Some(0.0), host_eval::constant)?;
+            Some((f, value))
+        })
+        .collect();
+    if constants.is_empty() {
+        return;
+    }
+    for k in 0..model.equations.len() {
+        let mut e = model.equations[k].clone();
+        let mut changed = false;
+        for stmts in super::live::stmts_of_mut(&mut e) {
+            for s in stmts.iter_mut() {
+                changed |= fold_in_stmt(s, &constants);
+            }
+        }
+        if changed {
+            model.equations[k] = super::live::pruned(&e, model, &Default::default());
+        }
+    }
+}
+
+/// The scalar states that no equation or rate writes and the scene does not set.
+fn unwritten_states(model: &Model, scene: &SceneSpec) -> Vec<FieldId> {
+    let written: std::collections::BTreeSet<FieldId> = model
+        .equations
+        .iter()
+        .flat_map(|e| e.writes.iter().copied())
+        .chain(model.rates.iter().map(|r| r.state))
+        .chain(scene.initialised.iter().copied())
+        .collect();
+    (0..model.fields.len())
+        .map(|k| FieldId(k as u32))
+        .filter(|f| {
+            let field = model.field(*f);
+            field.storage == Storage::State
+                && field.ty.shape == ir::Shape::Scalar
+                && field.name != "v"
+                && !ir::PLACED.contains(&field.name.as_str())
+                && !written.contains(f)
+        })
+        .collect()
+}
+
+fn fold_in_stmt(s: &mut Stmt, constants: &[(FieldId, f64)]) -> bool {
+    let mut changed = false;
+    let mut fold = |e: &mut Expr| {
+        ir::walk_expr_mut(e, &mut |x| {
+            if let ExprKind::Field(f, _) = x.kind {
+                if let Some((_, value)) = constants.iter().find(|(c, _)| *c == f) {
+                    *x = Expr::constant(*value, x.ty);
+                    changed = true;
+                }
+            }
+        })
+    };
+    match s {
+        Stmt::Let(_, e) | Stmt::Set(_, e) | Stmt::Accum(_, _, e) => fold(e),
+        Stmt::If(c, a, b) => {
+            fold(c);
+            for s in a.iter_mut().chain(b.iter_mut()) {
+                changed |= fold_in_stmt(s, constants);
+            }
+        }
+    }
+    changed
 }
 
 fn settle_equation(e: &mut Equation, settled: &[Option<Vec<f64>>], dim: usize) -> bool {

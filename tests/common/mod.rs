@@ -105,6 +105,7 @@ pub fn scene(model: &Model, dim: usize, outputs: &[&str], integrator: Integrator
         search: Default::default(),
         damping: None,
         settled: vec![],
+        initialised: vec![],
     }
 }
 

@@ -234,6 +234,7 @@ mod tests {
                     search: Default::default(),
                     damping: None,
                     settled: vec![],
+                    initialised: vec![],
                 };
                 let plan = Plan::build(&checked.model, &scene, None).expect("plan");
                 let kernels = generate(&plan, cells).unwrap_or_else(|e| panic!("{m} {dim}D: {e}"));
