@@ -1161,6 +1161,43 @@ fn a_failure_band_beside_a_damage_length_is_error_c0048_naming_the_material_and_
     assert_eq!(store_with(&[("damage_length", "2")]), Ok(()));
 }
 
+/// The Børvik plate on kernels that follow the deformation (`models::ftlr19_perforation_shaped`,
+/// CI resolution, a 0.5 mm failure band, 300 steps: about 27 µs): plate particles fail, every
+/// failed particle's kernel is round again (its shape exactly I) and no hourglass force pulls it
+/// (its pairs are spared, so its `dv_hourglass` is exactly 0), while intact ones are pulled.
+#[test]
+fn the_shaped_borvik_plate_rounds_each_failed_particles_kernel_and_spares_it_the_hourglass_pull() {
+    let opts = pairsum::scene::Options {
+        set: [("model", "models::ftlr19_perforation_shaped"), ("failure_band", "0.5")]
+            .iter()
+            .map(|(k, v)| (k.to_string(), v.to_string()))
+            .collect(),
+        ..Default::default()
+    };
+    let (scene, plan) = prepare(&case("borvik_perforation"), &opts).unwrap_or_else(|e| panic!("{e}"));
+    let store = setup::build_store::<f64>(&plan, &scene.particles, &scene.materials).expect("store");
+    let b = CpuBackend::new(plan, store, scene.mirrors.clone()).expect("backend");
+    let mut e = Engine::new(b, scene.config.clone());
+    e.initialise().expect("initialise");
+    for _ in 0..300 {
+        e.step().expect("step");
+    }
+    e.backend.evaluate(Default::default()).expect("evaluate");
+    let (_, damage) = common::stored_field(&e.backend, "D");
+    let (_, shape) = common::stored_field(&e.backend, "kernel_shape");
+    let (_, pull) = common::stored_field(&e.backend, "dv_hourglass");
+    let failed: Vec<usize> = (0..damage.len()).filter(|k| damage[*k] >= 1.0).collect();
+    assert!(failed.len() >= 5, "only {} plate particles failed", failed.len());
+    let identity = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+    for k in &failed {
+        assert_eq!(shape[9 * k..9 * k + 9], identity, "failed particle {k}'s kernel shape");
+        assert_eq!(pull[3 * k..3 * k + 3], [0.0; 3], "failed particle {k}'s hourglass pull");
+    }
+    let pulled =
+        (0..damage.len()).filter(|k| damage[*k] < 1.0 && pull[3 * k..3 * k + 3].iter().any(|a| *a != 0.0)).count();
+    assert!(pulled > 100, "only {pulled} intact plate particles feel an hourglass pull");
+}
+
 /// A material no body uses is not checked against the model (a case that switches models keeps
 /// the other model's materials): a warning, not error C0007.
 #[test]

@@ -232,83 +232,83 @@ fn st_e_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 0u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 5u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 6u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 7u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 8u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 13u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 14u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 15u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 16u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 17u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 18u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 19u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 20u;
     return params[b];
 }
 fn prm_p_spall(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 21u;
     return params[b];
 }
 fn prm_D1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 22u;
     return params[b];
 }
 fn prm_D2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 23u;
     return params[b];
 }
 fn prm_D3(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 24u;
     return params[b];
 }
 fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 25u;
     return params[b];
 }
 fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 26u;
     return params[b];
 }
 fn prm_C_v(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 30u;
     return params[b];
 }
 @compute @workgroup_size(64)

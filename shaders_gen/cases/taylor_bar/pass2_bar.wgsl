@@ -302,41 +302,39 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         if (r2 >= rc * rc || r2 == 0.0) { continue; }
         let x_ij = (dxv * sgn);
         let r_ij = sqrt(r2);
-        // pairsum momentum_shaped (stdlib/solid/shaped_kernel.sph:121)
+        // pairsum momentum_shaped (stdlib/momentum/shaped.sph:8)
         if ((body_i == ldj_body(j, sgn))) {
-            let M = kernel_metric_i;
-            let norm = kernel_norm_i;
-            let x_2 = x_ij;
-            let h0 = (h_ratio_i * dx_i);
-            let M_2 = M;
-            let x_3 = x_2;
-            let q = sqrt(dot(x_3, (M_2 * x_3)));
-            let axis_2 = vec3<f32>(1.0, 0.0, 0.0);
-            let slope = dot(kernel_grad_at((q * axis_2), h0), axis_2);
-            let M_3 = ldj_kernel_metric(j, sgn);
-            let norm_2 = ldj_kernel_norm(j, sgn);
-            let x_4 = x_ij;
-            let h0_2 = (h_ratio_i * ldj_dx(j, sgn));
-            let M_4 = M_3;
-            let x_5 = x_4;
-            let q_2 = sqrt(dot(x_5, (M_4 * x_5)));
-            let axis_3 = vec3<f32>(1.0, 0.0, 0.0);
-            let slope_2 = dot(kernel_grad_at((q_2 * axis_3), h0_2), axis_3);
-            let g = ((select(((0.0 * x_2) / 1.0), (((slope / max(q, 1e-30)) * norm) * (M * x_2)), (q > 0.0)) + select(((0.0 * x_4) / 1.0), (((slope_2 / max(q_2, 1e-30)) * norm_2) * (M_3 * x_4)), (q_2 > 0.0))) / 2.0);
             let sig_i = (s_i - (p_i * eye()));
             let sig_j = (ldj_s(j, sgn) - (ldj_p(j, sgn) * eye()));
-            let M_5 = kernel_metric_i;
-            let x_6 = x_ij;
-            let M_6 = ldj_kernel_metric(j, sgn);
-            let x_7 = x_ij;
-            let hh = ((((h_ratio_i * (0.5 * (dx_i + ldj_dx(j, sgn)))) * 2.0) * r_ij) / max((sqrt(dot(x_6, (M_5 * x_6))) + sqrt(dot(x_7, (M_6 * x_7)))), 1e-12));
+            let p1 = ldj_rho(j, sgn);
+            let M = kernel_metric_i;
+            let x_2 = x_ij;
+            let M_2 = ldj_kernel_metric(j, sgn);
+            let x_3 = x_ij;
+            let hh = ((((h_ratio_i * (0.5 * (dx_i + ldj_dx(j, sgn)))) * 2.0) * r_ij) / max((sqrt(dot(x_2, (M * x_2))) + sqrt(dot(x_3, (M_2 * x_3)))), 1e-12));
             let vr = dot((v_i - ldj_v(j, sgn)), x_ij);
-            let p1 = (eta_ratio_i * hh);
-            let phi = ((hh * vr) / ((r_ij * r_ij) + (p1 * p1)));
+            let p2 = (eta_ratio_i * hh);
+            let phi = ((hh * vr) / ((r_ij * r_ij) + (p2 * p2)));
             let share = (0.5 * (compression_i + ldj_compression(j, sgn)));
-            let pi_ij = (share * select(0.0, ((((((-visc_a_i) * (c_i + ldj_c(j, sgn))) / 2.0) * phi) + (visc_b_i * (phi * phi))) / (0.5 * (rho_i + ldj_rho(j, sgn)))), (vr < 0.0)));
-            let p2 = ldj_rho(j, sgn);
-            dv = dv + ((ldj_m(j, sgn) * ((div_m(sig_i, (rho_i * rho_i)) + div_m(sig_j, (p2 * p2))) - (pi_ij * eye()))) * (L_inv_i * g));
+            let M_3 = kernel_metric_i;
+            let norm = kernel_norm_i;
+            let x_4 = x_ij;
+            let h0 = (h_ratio_i * dx_i);
+            let M_4 = M_3;
+            let x_5 = x_4;
+            let q = sqrt(dot(x_5, (M_4 * x_5)));
+            let axis_2 = vec3<f32>(1.0, 0.0, 0.0);
+            let slope = dot(kernel_grad_at((q * axis_2), h0), axis_2);
+            let M_5 = ldj_kernel_metric(j, sgn);
+            let norm_2 = ldj_kernel_norm(j, sgn);
+            let x_6 = x_ij;
+            let h0_2 = (h_ratio_i * ldj_dx(j, sgn));
+            let M_6 = M_5;
+            let x_7 = x_6;
+            let q_2 = sqrt(dot(x_7, (M_6 * x_7)));
+            let axis_3 = vec3<f32>(1.0, 0.0, 0.0);
+            let slope_2 = dot(kernel_grad_at((q_2 * axis_3), h0_2), axis_3);
+            dv = dv + ((ldj_m(j, sgn) * ((div_m(sig_i, (rho_i * rho_i)) + div_m(sig_j, (p1 * p1))) - ((share * select(0.0, ((((((-visc_a_i) * (c_i + ldj_c(j, sgn))) / 2.0) * phi) + (visc_b_i * (phi * phi))) / (0.5 * (rho_i + ldj_rho(j, sgn)))), (vr < 0.0))) * eye()))) * (L_inv_i * ((select(((0.0 * x_4) / 1.0), (((slope / max(q, 1e-30)) * norm) * (M_3 * x_4)), (q > 0.0)) + select(((0.0 * x_6) / 1.0), (((slope_2 / max(q_2, 1e-30)) * norm_2) * (M_5 * x_6)), (q_2 > 0.0))) / 2.0)));
         }
     }
     st_dv(i, dv);

@@ -398,7 +398,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         if (r2 >= rc * rc || r2 == 0.0) { continue; }
         let x_ij = (dxv * sgn);
         let r_ij = sqrt(r2);
-        // pairsum shaped_velocity_gradient (stdlib/solid/shaped_kernel.sph:99)
+        // pairsum shaped_velocity_gradient (stdlib/solid/shaped_kernel.sph:100)
         if ((body_i == ldj_body(j, sgn))) {
             let M = kernel_metric_i;
             let norm = kernel_norm_i;
@@ -422,14 +422,14 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             L = L + neg_m(((ldj_m(j, sgn) / ldj_rho(j, sgn)) * outer(g, x_ij)));
             grad_v = grad_v + outer((ldj_v(j, sgn) - v_i), ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * g));
         }
-        // pairsum shaped_hourglass (stdlib/solid/shaped_hourglass.sph:28)
-        if ((body_i == ldj_body(j, sgn))) {
+        // pairsum shaped_hourglass (stdlib/solid/shaped_hourglass.sph:32)
+        if ((((body_i == ldj_body(j, sgn)) && (0.0 < 1.0)) && (0.0 < 1.0))) {
             let X_ij = (x_ij - (u_i - ldj_u(j, sgn)));
             let r0 = max(length(X_ij), 1e-9);
-            let e = (x_ij / r_ij);
-            let miss = dot((((0.5 * (kernel_shape_i + ldj_kernel_shape(j, sgn))) * X_ij) - x_ij), e);
+            let along = (x_ij / r_ij);
+            let miss = dot((((0.5 * (kernel_shape_i + ldj_kernel_shape(j, sgn))) * X_ij) - x_ij), along);
             let k_2 = (((((hourglass_alpha_i * ldj_m(j, sgn)) / rho0_i) * kernel_w_at(r0, (h_ratio_i * (0.5 * (dx_i + ldj_dx(j, sgn)))))) * hourglass_E_i) / (rho0_i * (r0 * r0)));
-            dv_hourglass = dv_hourglass + ((k_2 * miss) * e);
+            dv_hourglass = dv_hourglass + ((k_2 * miss) * along);
             hourglass_rate2 = hourglass_rate2 + k_2;
         }
     }

@@ -544,23 +544,23 @@ fn st_lap_weight(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 5u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 9u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 10u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 11u;
     return params[b];
 }
 fn prm_damage_coupling(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 12u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -696,7 +696,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let pi_ij_2 = select(0.0, (((((-visc_a_i) * c_bar_2) * phi_2) + (visc_b_i * (phi_2 * phi_2))) / rho_bar_2), (vr_2 < 0.0));
             let p4 = ldj_rho(j, sgn);
             dv = dv + (ldj_m(j, sgn) * (((div_m(sig_i_2, (rho_i * rho_i)) + div_m(sig_j_2, (p4 * p4))) - (pi_ij_2 * eye())) * gradW_ij));
-            // pairsum nonlocal_strain_laplacian (stdlib/damage/nonlocal_strain.sph:55)
+            // pairsum nonlocal_strain_laplacian (stdlib/damage/nonlocal_strain.sph:62)
             if ((body_i == ldj_body(j, sgn))) {
                 let k_2 = max(((((-2.0 * ldj_m(j, sgn)) / ldj_rho(j, sgn)) * dot(x_ij, gradW_ij)) / ((r_ij * r_ij) + (0.01 * (h_ij * h_ij)))), 0.0);
                 sum = sum + (k_2 * ldj_eps_nl(j, sgn));
