@@ -334,7 +334,20 @@ fn cantilever_tip_deflection_is_within_10_percent_of_timoshenko() {
 }
 
 fn engine_for(name: &str) -> Engine<CpuBackend<f64>> {
-    let (scene, plan) = prepare(&case(name), &Default::default()).unwrap_or_else(|e| panic!("{e}"));
+    engine_with(name, &[])
+}
+
+/// The case's `[parameters]` set to these values (`--set name=value`).
+fn with_set(set: &[(&str, &str)]) -> pairsum::scene::Options {
+    pairsum::scene::Options {
+        set: set.iter().map(|(k, v)| (k.to_string(), v.to_string())).collect(),
+        ..Default::default()
+    }
+}
+
+/// A bundled case's engine on the CPU at CI resolution, its parameters set, initialised.
+fn engine_with(name: &str, set: &[(&str, &str)]) -> Engine<CpuBackend<f64>> {
+    let (scene, plan) = prepare(&case(name), &with_set(set)).unwrap_or_else(|e| panic!("{e}"));
     let store = setup::build_store::<f64>(&plan, &scene.particles, &scene.materials).expect("store");
     let b = CpuBackend::new(plan, store, scene.mirrors.clone()).expect("backend");
     let mut e = Engine::new(b, scene.config.clone());
@@ -1144,11 +1157,7 @@ fn total_lagrangian_beam_vibration_2d_keeps_its_amplitude_within_1_percent_over_
 #[test]
 fn a_failure_band_beside_a_damage_length_is_error_c0048_naming_the_material_and_both_values() {
     let store_with = |set: &[(&str, &str)]| {
-        let opts = pairsum::scene::Options {
-            set: set.iter().map(|(k, v)| (k.to_string(), v.to_string())).collect(),
-            ..Default::default()
-        };
-        let (scene, plan) = prepare(&case("borvik_perforation"), &opts).unwrap_or_else(|e| panic!("{e}"));
+        let (scene, plan) = prepare(&case("borvik_perforation"), &with_set(set)).unwrap_or_else(|e| panic!("{e}"));
         setup::build_store::<f64>(&plan, &scene.particles, &scene.materials).map(|_| ()).map_err(|e| e.to_string())
     };
     let err = store_with(&[("failure_band", "1"), ("damage_length", "2")]).expect_err("both set");
@@ -1167,18 +1176,8 @@ fn a_failure_band_beside_a_damage_length_is_error_c0048_naming_the_material_and_
 /// (its pairs are spared, so its `dv_hourglass` is exactly 0), while intact ones are pulled.
 #[test]
 fn the_shaped_borvik_plate_rounds_each_failed_particles_kernel_and_spares_it_the_hourglass_pull() {
-    let opts = pairsum::scene::Options {
-        set: [("model", "models::ftlr19_perforation_shaped"), ("failure_band", "0.5")]
-            .iter()
-            .map(|(k, v)| (k.to_string(), v.to_string()))
-            .collect(),
-        ..Default::default()
-    };
-    let (scene, plan) = prepare(&case("borvik_perforation"), &opts).unwrap_or_else(|e| panic!("{e}"));
-    let store = setup::build_store::<f64>(&plan, &scene.particles, &scene.materials).expect("store");
-    let b = CpuBackend::new(plan, store, scene.mirrors.clone()).expect("backend");
-    let mut e = Engine::new(b, scene.config.clone());
-    e.initialise().expect("initialise");
+    let mut e =
+        engine_with("borvik_perforation", &[("model", "models::ftlr19_perforation_shaped"), ("failure_band", "0.5")]);
     for _ in 0..300 {
         e.step().expect("step");
     }

@@ -89,6 +89,7 @@ use solid::shaped_kernel
 use eos::linear
 group metal
 kernel = wendland_c2
+param C_cfl: scalar [-] = 0.3      // solid/shaped_kernel.sph's step takes it; it gives no default
 param rate: scalar [1/s]
 particle squeeze -> a: vec [m/s^2] {
     a = rate * vec(-dot(v, vec(1, 0)), dot(v, vec(0, 1)))
@@ -159,6 +160,7 @@ use solid::shaped_hourglass
 use eos::linear
 group metal
 kernel = wendland_c2
+param C_cfl: scalar [-] = 0.3
 integrate { x' = v  u' = v  v' = dv_hourglass  kernel_shape' = dkernel_shape }
 ";
 
