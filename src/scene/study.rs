@@ -328,16 +328,22 @@ pub const STOPPED_BELOW: f64 = 0.05;
 /// [`STOPPED_BELOW`] of the impact speed) bound the limit from below; `a` is linear and solved
 /// exactly for each (p, v_bl) of a search, unless `held` gives it (and `p`). With three runs and nothing held the fit has as many unknowns
 /// as points and its limit swings with small changes in them; holding `a` and `p` at Recht and
-/// Ipson's plugging values leaves the limit alone to fit.
+/// Ipson's plugging values leaves the limit alone to fit, and then one run is enough: the limit
+/// of the curve through it.
 pub fn fit_recht_ipson(points: &[(f64, f64)], held: Held) -> Option<RechtIpson> {
     let perforated = |p: &(f64, f64)| p.1 > STOPPED_BELOW * p.0;
     let stopped = super::max_keeping_nan(0.0, points.iter().filter(|p| !perforated(p)).map(|p| p.0));
     let through: Vec<(f64, f64)> = points.iter().copied().filter(perforated).collect();
     let lowest = super::min_keeping_nan(f64::INFINITY, through.iter().map(|p| p.0));
+    let mean_residual = through.iter().map(|p| p.1).sum::<f64>() / through.len() as f64;
+    if let ([(v, y)], Held { a: Some(a), p: Some(p) }) = (through.as_slice(), held) {
+        // One run and the curve's shape held: the limit is the curve through it, exactly.
+        let v_bl = super::max_keeping_nan(stopped, [(v.powf(p) - (y / a).powf(p)).max(0.0).powf(1.0 / p)]);
+        return Some(RechtIpson { a, p, v_bl, rms: 0.0, mean_residual });
+    }
     if through.len() < 2 {
         return None;
     }
-    let mean_residual = through.iter().map(|p| p.1).sum::<f64>() / through.len() as f64;
     let mut best: Option<RechtIpson> = None;
     let ps: Vec<f64> = match held.p {
         Some(p) => vec![p],
@@ -417,5 +423,19 @@ mod tests {
         let fit = fit_recht_ipson(&exact, held).expect("fits");
         assert!((fit.v_bl - 152.5).abs() < 0.5, "{fit:?}");
         assert!((fit.mean_residual - (exact[0].1 + exact[1].1) / 2.0).abs() < 1e-9, "{fit:?}");
+    }
+
+    #[test]
+    fn recht_ipson_with_a_and_p_held_through_one_run_gives_that_curves_limit_and_none_when_not_held() {
+        let truth = RechtIpson { a: 0.909, p: 2.0, v_bl: 152.5, rms: 0.0, mean_residual: 0.0 };
+        let held = Held { a: Some(0.909), p: Some(2.0) };
+        let one = [(298.0, truth.residual(298.0))];
+        let fit = fit_recht_ipson(&one, held).expect("fits");
+        assert!((fit.v_bl - 152.5).abs() < 1e-9, "{fit:?}");
+        // A run that stopped bounds it from below.
+        let fit = fit_recht_ipson(&[(298.0, 0.909 * (298.0f64.powi(2) - 100.0f64.powi(2)).sqrt()), (120.0, 0.0)], held)
+            .expect("fits");
+        assert!((fit.v_bl - 120.0).abs() < 1e-9, "{fit:?}");
+        assert!(fit_recht_ipson(&one, Held { a: Some(0.909), p: None }).is_none());
     }
 }
