@@ -788,10 +788,22 @@ fn a_correction_copies_the_sum_of_the_evaluation_before_the_integration_stage() 
 /// `models::ftlr19_perforation`, its case written in a scratch folder named by `tag`; the
 /// engine, to read its fields.
 fn weldox_bar(tag: &str, dx: f64, damage: &str, initial: &str, steps: usize) -> Engine<CpuBackend<f64>> {
+    weldox_bar_of("models::ftlr19_perforation", tag, dx, damage, initial, steps)
+}
+
+/// `weldox_bar` on `model`.
+fn weldox_bar_of(
+    model: &str,
+    tag: &str,
+    dx: f64,
+    damage: &str,
+    initial: &str,
+    steps: usize,
+) -> Engine<CpuBackend<f64>> {
     let dir = Scratch::new(tag);
     let path = dir.join("bar.toml");
     let case = format!(
-        "name = \"bar\"\ntitle = \"a Weldox bar\"\nmodel = \"models::ftlr19_perforation\"\n\
+        "name = \"bar\"\ntitle = \"a Weldox bar\"\nmodel = \"{model}\"\n\
          dim = 1\nintegrator = \"predictor_corrector\"\nend_time = \"1 s\"\ndefault_resolution = \"r\"\n\
          [resolutions]\nr = \"{dx} mm\"\n\
          [materials.weldox]\nrho0 = \"7850 kg/m^3\"\nG = \"75.19 GPa\"\nc0 = \"5047.6 m/s\"\nS_s = 1.5\n\
@@ -859,6 +871,56 @@ fn the_nonlocal_plastic_strain_of_a_step_converges_at_second_order_to_the_helmho
         "ε̄ departs from the Helmholtz solution by {errors:?} at 0.5 / 0.25 mm"
     );
     assert!(errors[1] < 0.4 * errors[0], "not second order from 0.5 to 0.25 mm: {errors:?}");
+}
+
+/// The density diffusion of the shaped Børvik plate (continuity/shaped_diffusion.sph) on a bar at
+/// rest whose density is ρ = ρ0 (1 + k x²): at every particle it is the sum
+/// δ h0 c0 Σ_j V_j 2 (ρ_i − ρ_j) (x_ij · ∇W_ij) / (r_ij² + 0.01 h0²) computed here from the stored
+/// positions and densities, and more than two kernel radii from the ends that sum is
+/// δ h0 c0 ∇²ρ = δ h0 c0 · 2 ρ0 k to within 6 % (1D Wendland C2 at h = 1.3 Δx: −5.1 to −5.7 %).
+#[test]
+fn the_shaped_plates_density_diffusion_is_its_pair_sum_and_within_6_percent_of_delta_h_c_times_the_laplacian() {
+    let (dx, k, rho0, c0, delta) = (0.5e-3, 1.0, 7850.0, 5047.6, 0.1);
+    let e = weldox_bar_of(
+        "models::ftlr19_perforation_shaped",
+        "shaped-diffusion",
+        0.5,
+        "",
+        &format!("rho = \"7850 [kg/m^3] * (1 + {k} [1/m^2] * x.x * x.x)\""),
+        0,
+    );
+    let (_, x) = stored_field(&e.backend, "x");
+    let (_, rho) = stored_field(&e.backend, "rho");
+    let (_, diffusion) = stored_field(&e.backend, "drho_diffusion");
+    let h0 = 1.3 * dx;
+    let slope = |r: f64| {
+        let q = r / h0;
+        if q < 2.0 {
+            0.75 / (h0 * h0) * -5.0 * q * (1.0 - q / 2.0).powi(3)
+        } else {
+            0.0
+        }
+    };
+    let pair_sum: Vec<f64> = (0..x.len())
+        .map(|i| {
+            let terms = (0..x.len()).filter(|&j| j != i).map(|j| {
+                let (x_ij, volume) = (x[i] - x[j], rho0 * dx / rho[j]);
+                let along = x_ij * slope(x_ij.abs()) * x_ij.signum();
+                volume * 2.0 * (rho[i] - rho[j]) * along / (x_ij * x_ij + 0.01 * h0 * h0)
+            });
+            delta * h0 * c0 * terms.sum::<f64>()
+        })
+        .collect();
+    let scale = pairsum::compare::max_abs(&pair_sum).unwrap_or_else(|e| panic!("the pair sum: {e}"));
+    let off_sum =
+        pairsum::compare::max_abs_diff(&diffusion, &pair_sum).unwrap_or_else(|e| panic!("the diffusion: {e}"));
+    assert!(off_sum < 1e-9 * scale, "the diffusion departs from its pair sum by {off_sum} (largest {scale})");
+    let laplacian = delta * h0 * c0 * 2.0 * rho0 * k;
+    let inner: Vec<f64> =
+        x.iter().zip(&diffusion).filter(|(x, _)| **x > 4.0 * h0 && **x < 0.04 - 4.0 * h0).map(|(_, d)| *d).collect();
+    assert_eq!(inner.len(), 70, "particles more than two kernel radii from the ends");
+    let off = pairsum::compare::max_abs_diff(&inner, &vec![laplacian; inner.len()]).unwrap_or_else(|e| panic!("{e}"));
+    assert!(off < 0.06 * laplacian, "the diffusion departs from δ h0 c0 ∇²ρ = {laplacian} by {off}");
 }
 
 /// A Weldox bar 40 mm long at 0.5 mm, stretched from its middle at 2,000 1/s, after 200 steps

@@ -274,12 +274,20 @@ fn st_dv_hourglass(i: u32, v: vec3<f32>) {
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
+fn ld_drho_diffusion(i: u32) -> f32 {
+    let b = u32(info[69 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_drho_diffusion(i: u32, v: f32) {
+    let b = u32(info[69 + G] + i32(i) * 1);
+    data[b] = v;
+}
 fn ld_ds(i: u32) -> mat3x3<f32> {
-    let b = u32(info[69 + G] + i32(i) * 6);
+    let b = u32(info[71 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_ds(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[69 + G] + i32(i) * 6);
+    let b = u32(info[71 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -288,65 +296,65 @@ fn st_ds(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_a_contact(i: u32) -> vec3<f32> {
-    let b = u32(info[71 + G] + i32(i) * 3);
+    let b = u32(info[73 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_a_contact(i: u32, v: vec3<f32>) {
-    let b = u32(info[71 + G] + i32(i) * 3);
+    let b = u32(info[73 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_lap_sum(i: u32) -> f32 {
-    let b = u32(info[73 + G] + i32(i) * 1);
+    let b = u32(info[75 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_lap_sum(i: u32, v: f32) {
-    let b = u32(info[73 + G] + i32(i) * 1);
+    let b = u32(info[75 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_lap_weight(i: u32) -> f32 {
-    let b = u32(info[75 + G] + i32(i) * 1);
+    let b = u32(info[77 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_lap_weight(i: u32, v: f32) {
-    let b = u32(info[75 + G] + i32(i) * 1);
+    let b = u32(info[77 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_x_0(i: u32) -> vec3<f32> {
-    let b = u32(info[77 + G] + i32(i) * 3);
+    let b = u32(info[79 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_x_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[77 + G] + i32(i) * 3);
+    let b = u32(info[79 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_v_0(i: u32) -> vec3<f32> {
-    let b = u32(info[79 + G] + i32(i) * 3);
+    let b = u32(info[81 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_v_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[79 + G] + i32(i) * 3);
+    let b = u32(info[81 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_rho_0(i: u32) -> f32 {
-    let b = u32(info[81 + G] + i32(i) * 1);
+    let b = u32(info[83 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho_0(i: u32, v: f32) {
-    let b = u32(info[81 + G] + i32(i) * 1);
+    let b = u32(info[83 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s_0(i: u32) -> mat3x3<f32> {
-    let b = u32(info[83 + G] + i32(i) * 6);
+    let b = u32(info[85 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s_0(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[83 + G] + i32(i) * 6);
+    let b = u32(info[85 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -355,19 +363,19 @@ fn st_s_0(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_e_0(i: u32) -> f32 {
-    let b = u32(info[85 + G] + i32(i) * 1);
+    let b = u32(info[87 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_e_0(i: u32, v: f32) {
-    let b = u32(info[85 + G] + i32(i) * 1);
+    let b = u32(info[87 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_kernel_shape_0(i: u32) -> mat3x3<f32> {
-    let b = u32(info[87 + G] + i32(i) * 9);
+    let b = u32(info[89 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_kernel_shape_0(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[87 + G] + i32(i) * 9);
+    let b = u32(info[89 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -379,37 +387,37 @@ fn st_kernel_shape_0(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ld_u_0(i: u32) -> vec3<f32> {
-    let b = u32(info[89 + G] + i32(i) * 3);
+    let b = u32(info[91 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_u_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[89 + G] + i32(i) * 3);
+    let b = u32(info[91 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_D_0(i: u32) -> f32 {
-    let b = u32(info[91 + G] + i32(i) * 1);
+    let b = u32(info[93 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_D_0(i: u32, v: f32) {
-    let b = u32(info[91 + G] + i32(i) * 1);
+    let b = u32(info[93 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_eps_p_0(i: u32) -> f32 {
-    let b = u32(info[93 + G] + i32(i) * 1);
+    let b = u32(info[95 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_eps_p_0(i: u32, v: f32) {
-    let b = u32(info[93 + G] + i32(i) * 1);
+    let b = u32(info[95 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_eps_nl_0(i: u32) -> f32 {
-    let b = u32(info[95 + G] + i32(i) * 1);
+    let b = u32(info[97 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_eps_nl_0(i: u32, v: f32) {
-    let b = u32(info[95 + G] + i32(i) * 1);
+    let b = u32(info[97 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
@@ -524,7 +532,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let rate_of_x = v_i;
     let rate_of_u = v_i;
     let rate_of_v = ((ld_dv(i) + ld_a_contact(i)) + ld_dv_hourglass(i));
-    let rate_of_rho = ld_drho(i);
+    let rate_of_rho = (ld_drho(i) + ld_drho_diffusion(i));
     let rate_of_s = ld_ds(i);
     let rate_of_e = ld_de(i);
     let rate_of_kernel_shape = ld_dkernel_shape(i);
