@@ -166,8 +166,11 @@ pub fn analyse(levels: &[(String, RunReport)]) -> Convergence {
         let row = q.finest;
         out.results.push(row.clone());
         let n = h.len();
-        let trend = (n >= 3)
-            .then(|| Trend::of([h[n - 3], h[n - 2], h[n - 1]], [q.values[n - 3], q.values[n - 2], q.values[n - 1]]));
+        let triple = |last: usize| {
+            Trend::of([h[last - 2], h[last - 1], h[last]], [q.values[last - 2], q.values[last - 1], q.values[last]])
+        };
+        let trend = (n >= 3).then(|| triple(n - 1));
+        let coarser = (n >= 4).then(|| triple(n - 2));
         let order = match trend {
             Some(Trend::Converging { order, limit }) => Some((order, limit)),
             _ => None,
@@ -201,21 +204,45 @@ pub fn analyse(levels: &[(String, RunReport)]) -> Convergence {
                 Some(Err(why)) => why.to_string(),
                 None => String::new(),
             },
+            coarser.map_or(String::new(), |t| t.describe()),
+            match (trend, coarser) {
+                (Some(fine), Some(coarse)) => order_holds(fine, coarse).into(),
+                _ => String::new(),
+            },
         ]);
     }
     out.tables.push(Table {
         title: "Convergence".into(),
-        header: ["quantity", "reference", "observed order p", "Richardson estimate", "its error", "error order q"]
-            .map(String::from)
-            .to_vec(),
+        header: [
+            "quantity",
+            "reference",
+            "observed order p",
+            "Richardson estimate",
+            "its error",
+            "error order q",
+            "p through the three coarser",
+            "order holds",
+        ]
+        .map(String::from)
+        .to_vec(),
         rows: summary,
     });
     out.histories = error_plots(&levels, &followed);
     out.notes = vec![
         "Observed order p: through the three finest spacings, f(Δx) = f0 + C Δx^p; none when their differences change sign or do not shrink enough for p in [0.05, 10]. Richardson estimate: that f0. It is trustworthy only in the asymptotic range: a p far from the scheme's order, or from the error order q, says the spacings are not there yet.".into(),
+        "p through the three coarser: the observed order one level back (with four or more spacings). The order holds when both triples converge and their orders are within a factor of 1.5 of each other: a p that moves more than that as a level is added is not yet the scheme's order, and its Richardson estimate is not a limit.".into(),
         "Error order q: the least-squares slope of ln |error| against ln Δx over every resolution (the error falls as Δx^q); none when the error changes sign or does not fall at every refinement, or when the values do not converge (no observed order p: an error that falls while the differences grow is passing through the reference).".into(),
     ];
     out
+}
+
+/// Whether the observed order survives one level more: both triples converge (the finest three
+/// and the three one level back) and their orders are within a factor of 1.5.
+fn order_holds(finest: Trend, coarser: Trend) -> &'static str {
+    match (finest, coarser) {
+        (Trend::Converging { order: p, .. }, Trend::Converging { order: q, .. }) if p.max(q) <= 1.5 * p.min(q) => "yes",
+        _ => "no",
+    }
 }
 
 fn levels_table(levels: &[&(String, RunReport)]) -> Table {
@@ -336,6 +363,32 @@ mod tests {
         assert_eq!(error_order_if_falling(&growing), Err("none: the error does not fall at every refinement"));
     }
 
+    #[test]
+    fn the_order_holds_only_when_the_coarser_triple_converges_at_an_order_within_a_factor_of_1_5() {
+        // crater = 10 − 4 Δx²: both triples give order 2.
+        let power = vec![
+            level("a", 2.0, 10.0 - 16.0, 1.0),
+            level("b", 1.0, 6.0, 1.0),
+            level("c", 0.5, 9.0, 1.0),
+            level("d", 0.25, 9.75, 1.0),
+        ];
+        let row = &analyse(&power).tables[2].rows[0];
+        assert_eq!(row[2], "2.00");
+        assert_eq!(row[6..], ["2.00", "yes"]);
+        // A coarse level off the power law: the coarser triple's order is 0.42, the finest's 2.
+        let mut off = power.clone();
+        off[0] = level("a", 2.0, 2.0, 1.0);
+        assert_eq!(analyse(&off).tables[2].rows[0][6..], ["0.42", "no"]);
+        // Alternating levels (the 12 mm Børvik plate's residuals): no order in either triple.
+        let alternating = vec![
+            level("a", 1.333, 248.47, 1.0),
+            level("b", 1.0, 250.99, 1.0),
+            level("c", 0.8, 249.01, 1.0),
+            level("d", 0.667, 251.76, 1.0),
+        ];
+        assert_eq!(analyse(&alternating).tables[2].rows[0][6..], ["none: oscillates", "no"]);
+    }
+
     fn level(name: &str, dx: f64, value: f64, wall: f64) -> (String, RunReport) {
         let report = RunReport {
             dx,
@@ -367,6 +420,7 @@ mod tests {
         let t = analyse(&through);
         assert!(t.results.iter().all(|r| r.quantity != "crater, error order"), "no error order");
         assert_eq!(t.tables[2].rows[0][5], "none: the values do not converge");
+        assert_eq!(c.tables[2].rows[0][6..], ["", ""], "three levels: no coarser triple");
         let values = &c.tables[1];
         assert_eq!(values.header[3..], ["coarse (Δx = 1)", "ci (Δx = 0.5)", "fine (Δx = 0.25)"]);
         assert_eq!(values.rows[0][3], "6 (-40.00 %)");
