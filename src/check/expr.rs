@@ -612,7 +612,9 @@ impl Checker {
                 .at(f.span, "no builtin or helper of this name");
             let mut names: Vec<String> = types::callable().map(String::from).collect();
             names.extend(self.helper_names());
-            if let Some(best) = closest(&f.name, names.iter().map(String::as_str)) {
+            if let Some(ours) = name_elsewhere(&f.name) {
+                d = d.help(format!("this language writes it `{ours}`"));
+            } else if let Some(best) = closest(&f.name, names.iter().map(String::as_str)) {
                 d = d.help(format!("did you mean `{best}`?"));
             } else {
                 d = d.help("define it with `fn name(...) -> type { ... }`");
@@ -919,4 +921,18 @@ impl Checker {
             self.scope.truncate(mark);
         }
     }
+}
+
+/// What this language calls a function that WGSL, GLSL, C or NumPy name otherwise (`length` is
+/// `norm`), for E0213's help.
+fn name_elsewhere(name: &str) -> Option<&'static str> {
+    Some(match name {
+        "length" | "magnitude" | "mag" => "norm",
+        "normalize" | "normalise" => "v / norm(v)",
+        "log" => "ln",
+        "determinant" => "det",
+        "inverse" => "inv",
+        "clamp" => "min(max(x, lo), hi)",
+        _ => return None,
+    })
 }
