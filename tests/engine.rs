@@ -596,7 +596,14 @@ fn sliding_block(contact: &str) -> (f64, f64) {
     inp.group = body.clone();
     inp.material = body.clone();
     inp.body = body.clone();
-    let values = [("rho0", 7850.0), ("G", 77e9), ("c0", 5000.0), ("C_cfl", 0.3), ("h_ratio", 1.3)];
+    let values = [
+        ("rho0", 7850.0),
+        ("G", 77e9),
+        ("c0", 5000.0),
+        ("bulk", 7850.0 * 5000.0 * 5000.0),
+        ("C_cfl", 0.3),
+        ("h_ratio", 1.3),
+    ];
     let known: Vec<(&str, Vec<f64>)> =
         values.iter().filter(|(name, _)| m.param_id(name).is_some()).map(|(name, v)| (*name, vec![*v])).collect();
     let steel = || material(&m, &known);

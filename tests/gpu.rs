@@ -493,9 +493,11 @@ fn borvik_perforation_on_shaped_kernels_with_a_failure_band_on_the_gpu_matches_t
     // models::ftlr19_perforation_shaped: the plate's kernels follow its deformation, their
     // hourglass pull spares failed pairs, and a failed particle's kernel is round again; a 0.5 mm
     // failure band, started 0.2 mm above the plate: 60 steps in contact, where the time step
-    // shrinks with the kernels' shortest axis. Measured: v within 2.9e-5, p 3.3e-5, D 2.3e-5. Before
-    // the CPU's corrector read the last step's `dt` as the GPU's does (engine/mod.rs), the contact
-    // force parted them: v 4.5e-2 off (and 8.4e-4 on the round kernels, now 8.6e-6).
+    // shrinks with the kernels' shortest axis, the bodies meeting through their kernels' overlap
+    // (contact/overlap_pressure.sph). Measured: v within 5.5e-6, p 1.5e-5, D 5.1e-6 (with penalty
+    // contact, stop 75: 2.9e-5, 3.3e-5, 2.3e-5). Before the CPU's corrector read the last step's
+    // `dt` as the GPU's does (engine/mod.rs), the penalty's force parted them: v 4.5e-2 off (and
+    // 8.4e-4 on the round kernels, now 8.6e-6).
     let set = [("model", "models::ftlr19_perforation_shaped"), ("failure_band", "0.5"), ("gap", "0.2")];
     case_matches_cpu("borvik_perforation", &set, 60, &["p", "eps_p", "h", "u", "D"], 5e-3);
 }

@@ -296,65 +296,65 @@ fn st_ds(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_a_contact(i: u32) -> vec3<f32> {
-    let b = u32(info[73 + G] + i32(i) * 3);
+    let b = u32(info[77 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_a_contact(i: u32, v: vec3<f32>) {
-    let b = u32(info[73 + G] + i32(i) * 3);
+    let b = u32(info[77 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_lap_sum(i: u32) -> f32 {
-    let b = u32(info[75 + G] + i32(i) * 1);
+    let b = u32(info[79 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_lap_sum(i: u32, v: f32) {
-    let b = u32(info[75 + G] + i32(i) * 1);
+    let b = u32(info[79 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_lap_weight(i: u32) -> f32 {
-    let b = u32(info[77 + G] + i32(i) * 1);
+    let b = u32(info[81 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_lap_weight(i: u32, v: f32) {
-    let b = u32(info[77 + G] + i32(i) * 1);
+    let b = u32(info[81 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_x_0(i: u32) -> vec3<f32> {
-    let b = u32(info[79 + G] + i32(i) * 3);
+    let b = u32(info[83 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_x_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[79 + G] + i32(i) * 3);
+    let b = u32(info[83 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_v_0(i: u32) -> vec3<f32> {
-    let b = u32(info[81 + G] + i32(i) * 3);
+    let b = u32(info[85 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_v_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[81 + G] + i32(i) * 3);
+    let b = u32(info[85 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_rho_0(i: u32) -> f32 {
-    let b = u32(info[83 + G] + i32(i) * 1);
+    let b = u32(info[87 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho_0(i: u32, v: f32) {
-    let b = u32(info[83 + G] + i32(i) * 1);
+    let b = u32(info[87 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s_0(i: u32) -> mat3x3<f32> {
-    let b = u32(info[85 + G] + i32(i) * 6);
+    let b = u32(info[89 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s_0(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[85 + G] + i32(i) * 6);
+    let b = u32(info[89 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -363,19 +363,19 @@ fn st_s_0(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_e_0(i: u32) -> f32 {
-    let b = u32(info[87 + G] + i32(i) * 1);
+    let b = u32(info[91 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_e_0(i: u32, v: f32) {
-    let b = u32(info[87 + G] + i32(i) * 1);
+    let b = u32(info[91 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_kernel_shape_0(i: u32) -> mat3x3<f32> {
-    let b = u32(info[89 + G] + i32(i) * 9);
+    let b = u32(info[93 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_kernel_shape_0(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[89 + G] + i32(i) * 9);
+    let b = u32(info[93 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -387,105 +387,105 @@ fn st_kernel_shape_0(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ld_u_0(i: u32) -> vec3<f32> {
-    let b = u32(info[91 + G] + i32(i) * 3);
+    let b = u32(info[95 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_u_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[91 + G] + i32(i) * 3);
+    let b = u32(info[95 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 1u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 8u;
     return params[b];
 }
 fn prm_shape_floor(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 14u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 15u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 19u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 20u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 23u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 24u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 25u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 26u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 27u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 28u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 29u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 30u;
     return params[b];
 }
 fn prm_D1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 31u;
     return params[b];
 }
 fn prm_D2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 32u;
     return params[b];
 }
 fn prm_D3(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 32u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 33u;
     return params[b];
 }
 fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 33u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 34u;
     return params[b];
 }
 fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 34u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 35u;
     return params[b];
 }
 fn prm_damage_length(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 35u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 36u;
     return params[b];
 }
 fn prm_failure_band(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 36u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 37u;
     return params[b];
 }
 fn prm_failure_band_spacing(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 37u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 38u;
     return params[b];
 }
 @compute @workgroup_size(64)
