@@ -10,7 +10,7 @@ use crate::engine::{checkpoint, setup, Engine, RunError};
 use crate::particles::Real;
 use crate::report::{self, Curve, GroupBytes, History, PointField, ResultRow, RunReport};
 use crate::scene::measure::Reader;
-use crate::scene::spec::ProfileSpec;
+use crate::scene::spec::{BodyInfo, ProfileSpec};
 use crate::scene::{self, measure, Scene};
 use crate::schedule::Plan;
 use std::path::{Path, PathBuf};
@@ -808,6 +808,7 @@ fn make_report<B: Backend>(
         .collect();
     let plots = history_plots(scene, histories);
     let mut notes = vec![format!("resolution `{}`: particle spacing {} m", scene.resolution, scene.dx)];
+    notes.extend(scene.bodies.iter().filter_map(|b| own_spacing_note(scene, b)));
     let search = &engine.backend.plan().search;
     if search.keeps_lists() {
         notes.push(format!("neighbour search: {}", search.describe()));
@@ -833,6 +834,15 @@ fn make_report<B: Backend>(
         end_time: engine.time,
         tables: vec![],
     }
+}
+
+/// A note for a body filled at one spacing of its own (`spacing_factor`, `spacing_divides`).
+fn own_spacing_note(scene: &Scene, body: &BodyInfo) -> Option<String> {
+    let dx = &scene.particles.dx[body.particles.clone()];
+    let first = *dx.first()?;
+    let uniform = dx.iter().all(|&s| s == first);
+    (uniform && (first / scene.dx - 1.0).abs() > 1e-9)
+        .then(|| format!("body `{}`: particle spacing {first} m", body.name))
 }
 
 /// Each probe's history as a plot (and a column of `histories.csv`), with its result's reference.

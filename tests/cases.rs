@@ -968,6 +968,45 @@ fn load_error_of_edited(name: &str, from: &str, to: &str) -> String {
     err.to_string()
 }
 
+/// The Børvik projectile (a quarter of a cylinder of radius 10 mm) at dx = 1.333 mm: the plain
+/// lattice's outermost particles on the row next to the plane y = 0 lie at x = 8.667 mm, a whole
+/// spacing inside the radius; with `spacing_divides = "10 mm"` the body fills at 1.25 mm (8 to the
+/// radius) and they lie at 9.375 mm, half its spacing inside. The volumes sum to the quarter
+/// cylinder's either way. On a graded body the key is error C0049.
+#[test]
+fn spacing_divides_fills_at_the_largest_spacing_whole_in_the_length_so_the_edge_lies_half_a_spacing_in() {
+    let text = std::fs::read_to_string(case("borvik_perforation")).expect("case");
+    let key = "spacing_factor = ${projectile_factor}";
+    assert!(text.contains(key), "the Børvik case's projectile changed");
+    let dir = out_dir("spacing-divides");
+    std::fs::create_dir_all(&dir).unwrap();
+    let at = pairsum::scene::Options { resolution: Some("ci@1.3333333333333333mm".into()), ..Default::default() };
+    let quarter = std::f64::consts::PI * 0.01f64.powi(2) * 0.08 / 4.0;
+    for (edit, spacing, edge) in [("", 0.004 / 3.0, 0.026 / 3.0), ("\nspacing_divides = \"10 mm\"", 0.00125, 0.009375)]
+    {
+        let path = dir.join("borvik_perforation.toml");
+        let edited = text.replace("spacing_divides = \"10 mm\"\n", "").replace(key, &format!("{key}{edit}"));
+        std::fs::write(&path, edited).unwrap();
+        let (scene, _) = prepare(&path, &at).expect("the case loads");
+        let body = scene.bodies.iter().find(|b| b.name == "projectile").expect("a projectile");
+        let range = body.particles.clone();
+        assert!(scene.particles.dx[range.clone()].iter().all(|&s| (s - spacing).abs() < 1e-12), "{edit}: spacing");
+        let next_to_plane: Vec<f64> = range
+            .clone()
+            .filter(|&k| (scene.particles.x[k][1] - spacing / 2.0).abs() < 1e-9)
+            .map(|k| scene.particles.x[k][0])
+            .collect();
+        let (_, outermost) = pairsum::compare::extremes(&next_to_plane).expect("finite positions");
+        assert!((outermost - edge).abs() < 1e-9, "{edit}: outermost x {outermost}, expected {edge}");
+        let volume: f64 = scene.particles.vol[range].iter().sum();
+        assert!((volume / quarter - 1.0).abs() < 1e-9, "{edit}: volume {volume}, expected {quarter}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+    let plate = "spacing_factor = ${coarse_factor}";
+    let err = load_error_of_edited("borvik_perforation", plate, &format!("{plate}\nspacing_divides = \"10 mm\""));
+    assert!(err.contains("C0049") && err.contains("`spacing_divides` fits a uniform fill"), "{err}");
+}
+
 /// Two symmetry planes on one axis (clamped_plate_2d: the clamp at x = 0 keeping above, the
 /// mid-span at 0.2 m keeping below) keep a slab: 40 × 8 particles at 5 mm, the first and last
 /// columns half a spacing off their planes. Two planes that keep the same side, a third plane, and

@@ -649,7 +649,7 @@ fn build(
             );
             continue;
         };
-        let spacing = dx * body.spacing_factor.unwrap_or(1.0);
+        let Some(spacing) = body_spacing(body, dx, cx) else { continue };
         let budget = Budget { left: max_particles.saturating_sub(particles.len() as u64), limit: max_particles };
         let Some(placed) = place(body, spacing, dx, dir, &symmetry, budget, cx) else { continue };
         let velocity = match &body.velocity {
@@ -1293,6 +1293,23 @@ impl Budget {
 /// Particles of one body: a primitive filled at its spacing (graded if asked), or a node list.
 /// With symmetry planes, the lattice (uniform or graded) is anchored half a spacing off each plane,
 /// and only the particles on the planes' positive side are kept.
+/// The body's spacing, `spacing_factor × dx`; with `spacing_divides = L`, the largest spacing not
+/// above it that goes into L a whole number of times (a radius of 10 mm at 1.333 mm: 1.25 mm).
+fn body_spacing(body: &case::Body, dx: f64, cx: &mut Ctx) -> Option<f64> {
+    let spacing = dx * body.spacing_factor.unwrap_or(1.0);
+    let Some(divides) = &body.spacing_divides else { return Some(spacing) };
+    let what = format!("`spacing_divides` of body `{}`", body.name.get_ref());
+    let length = cx.scalar(divides, unit("m"), &what).and_then(|l| cx.positive(divides.span(), l, &what))?;
+    if let Some(refine) = &body.refine {
+        let msg = format!("body `{}`: `spacing_divides` fits a uniform fill; this one is graded", body.name.get_ref());
+        cx.err(refine.region.span(), "C0049", msg, "a graded fill");
+        return None;
+    }
+    // A length already a whole number of spacings keeps it (up to round-off).
+    let whole = (length / spacing * (1.0 - 1e-9)).ceil().max(1.0);
+    Some(length / whole)
+}
+
 fn place(
     body: &case::Body,
     spacing: f64,

@@ -121,6 +121,11 @@ pub struct Body {
     /// Spacing as a multiple of the resolution's dx (default 1).
     #[serde(default)]
     pub spacing_factor: Option<f64>,
+    /// A length (`"10 mm"`) the body's spacing must divide: the spacing shrinks to the largest
+    /// that fits it a whole number of times, so that the body's edge lies the same way in its
+    /// lattice at every resolution.
+    #[serde(default)]
+    pub spacing_divides: Option<Value>,
     /// A finer spacing (a multiple of dx) inside this region of the body.
     #[serde(default)]
     pub refine: Option<Refine>,
