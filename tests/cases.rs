@@ -971,8 +971,9 @@ fn load_error_of_edited(name: &str, from: &str, to: &str) -> String {
 /// The Børvik projectile (a quarter of a cylinder of radius 10 mm) at dx = 1.333 mm: the plain
 /// lattice's outermost particles on the row next to the plane y = 0 lie at x = 8.667 mm, a whole
 /// spacing inside the radius; with `spacing_divides = "10 mm"` the body fills at 1.25 mm (8 to the
-/// radius) and they lie at 9.375 mm, half its spacing inside. The volumes sum to the quarter
-/// cylinder's either way. On a graded body the key is error C0049.
+/// radius) and they lie at 9.375 mm, half its spacing inside; `spacing_divides = "0 mm"` is the
+/// plain lattice. The volumes sum to the quarter cylinder's each way. On a graded body the key is
+/// error C0049.
 #[test]
 fn spacing_divides_fills_at_the_largest_spacing_whole_in_the_length_so_the_edge_lies_half_a_spacing_in() {
     let text = std::fs::read_to_string(case("borvik_perforation")).expect("case");
@@ -982,10 +983,13 @@ fn spacing_divides_fills_at_the_largest_spacing_whole_in_the_length_so_the_edge_
     std::fs::create_dir_all(&dir).unwrap();
     let at = pairsum::scene::Options { resolution: Some("ci@1.3333333333333333mm".into()), ..Default::default() };
     let quarter = std::f64::consts::PI * 0.01f64.powi(2) * 0.08 / 4.0;
-    for (edit, spacing, edge) in [("", 0.004 / 3.0, 0.026 / 3.0), ("\nspacing_divides = \"10 mm\"", 0.00125, 0.009375)]
+    let (plain, fitted) = ((0.004 / 3.0, 0.026 / 3.0), (0.00125, 0.009375));
+    for (edit, (spacing, edge)) in
+        [("", plain), ("\nspacing_divides = \"0 mm\"", plain), ("\nspacing_divides = \"10 mm\"", fitted)]
     {
         let path = dir.join("borvik_perforation.toml");
-        let edited = text.replace("spacing_divides = \"10 mm\"\n", "").replace(key, &format!("{key}{edit}"));
+        let edited =
+            text.replace("\nspacing_divides = \"${projectile_divides} mm\"", "").replace(key, &format!("{key}{edit}"));
         std::fs::write(&path, edited).unwrap();
         let (scene, _) = prepare(&path, &at).expect("the case loads");
         let body = scene.bodies.iter().find(|b| b.name == "projectile").expect("a projectile");

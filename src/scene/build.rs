@@ -1294,12 +1294,17 @@ impl Budget {
 /// With symmetry planes, the lattice (uniform or graded) is anchored half a spacing off each plane,
 /// and only the particles on the planes' positive side are kept.
 /// The body's spacing, `spacing_factor × dx`; with `spacing_divides = L`, the largest spacing not
-/// above it that goes into L a whole number of times (a radius of 10 mm at 1.333 mm: 1.25 mm).
+/// above it that goes into L a whole number of times (a radius of 10 mm at 1.333 mm: 1.25 mm);
+/// `spacing_divides = 0` is the plain `spacing_factor × dx`.
 fn body_spacing(body: &case::Body, dx: f64, cx: &mut Ctx) -> Option<f64> {
     let spacing = dx * body.spacing_factor.unwrap_or(1.0);
     let Some(divides) = &body.spacing_divides else { return Some(spacing) };
     let what = format!("`spacing_divides` of body `{}`", body.name.get_ref());
-    let length = cx.scalar(divides, unit("m"), &what).and_then(|l| cx.positive(divides.span(), l, &what))?;
+    let length = cx.scalar(divides, unit("m"), &what)?;
+    if length == 0.0 {
+        return Some(spacing);
+    }
+    let length = cx.positive(divides.span(), length, &what)?;
     if let Some(refine) = &body.refine {
         let msg = format!("body `{}`: `spacing_divides` fits a uniform fill; this one is graded", body.name.get_ref());
         cx.err(refine.region.span(), "C0049", msg, "a graded fill");

@@ -123,7 +123,7 @@ pub struct Body {
     pub spacing_factor: Option<f64>,
     /// A length (`"10 mm"`) the body's spacing must divide: the spacing shrinks to the largest
     /// that fits it a whole number of times, so that the body's edge lies the same way in its
-    /// lattice at every resolution.
+    /// lattice at every resolution; 0 leaves the spacing as it is.
     #[serde(default)]
     pub spacing_divides: Option<Value>,
     /// A finer spacing (a multiple of dx) inside this region of the body.
