@@ -1290,9 +1290,6 @@ impl Budget {
     }
 }
 
-/// Particles of one body: a primitive filled at its spacing (graded if asked), or a node list.
-/// With symmetry planes, the lattice (uniform or graded) is anchored half a spacing off each plane,
-/// and only the particles on the planes' positive side are kept.
 /// The body's spacing, `spacing_factor × dx`; with `spacing_divides = L`, the largest spacing not
 /// above it that goes into L a whole number of times (a radius of 10 mm at 1.333 mm: 1.25 mm);
 /// `spacing_divides = 0` is the plain `spacing_factor × dx`.
@@ -1315,6 +1312,9 @@ fn body_spacing(body: &case::Body, dx: f64, cx: &mut Ctx) -> Option<f64> {
     Some(length / whole)
 }
 
+/// Particles of one body: a primitive filled at its spacing (graded if asked), or a node list.
+/// With symmetry planes, the lattice (uniform or graded) is anchored half a spacing off each plane,
+/// and only the particles on the planes' positive side are kept.
 fn place(
     body: &case::Body,
     spacing: f64,
