@@ -951,6 +951,50 @@ fn the_nonlocal_plastic_strain_of_a_step_converges_at_second_order_to_the_helmho
     assert!(errors[1] < 0.4 * errors[0], "not second order from 0.5 to 0.25 mm: {errors:?}");
 }
 
+/// With `nonlocal_hardening = 1` the Johnson–Cook return (plasticity/radial_return_jc.sph) hardens
+/// with the nonlocal plastic strain ε̄_p of the step before, not the particle's own ε_p. A Weldox
+/// bar stretched at 10⁴ 1/s with a step of ε_p (0.2 below 20 mm, 0 beyond) that ℓ = 2 mm
+/// smooths: every particle that flowed in the last step and has not failed, away from the ends,
+/// sits on (A + B ε̄_p^n)(1 + C ln(ε̇/ε̇0)) to 1e-9 (ε̇ from its stored strain rate, the 1D
+/// deviator's √(2/3) · 2/3 |ε̇_xx|), and the same surface of its own ε_p misses by more than 1e-3
+/// on at least one of them.
+#[test]
+fn nonlocal_hardening_returns_the_stress_to_the_flow_stress_of_the_nonlocal_plastic_strain() {
+    let mut e = weldox_bar(
+        "nonlocal-hardening",
+        0.5,
+        "damage_length = \"2 mm\"\nnonlocal_hardening = 1",
+        "eps_p = \"select(x.x < 0.02 [m], 0.2, 0)\", v = \"10000 [1/s] * (x - vec(0.02 [m], 0 [m]))\"",
+        300,
+    );
+    let (_, eps_nl_before) = stored_field(&e.backend, "eps_nl");
+    let (_, eps_p_before) = stored_field(&e.backend, "eps_p");
+    e.step().unwrap_or_else(|err| panic!("step: {err}"));
+    let field = |name| stored_field(&e.backend, name).1;
+    let (x, s, eps_p, damage, edot) = (field("x"), field("s"), field("eps_p"), field("D"), field("edot"));
+    let (a, b, n, c, rate0) = (490e6, 807e6, 0.73, 0.0114, 5e-4);
+    let surface = |strain: f64, i: usize| {
+        let rate = (2.0f64 / 3.0).sqrt() * 2.0 / 3.0 * edot[i].abs();
+        (a + b * strain.max(0.0).powf(n)) * (1.0 + c * (rate / rate0).max(1.0).ln())
+    };
+    let (mut off_nonlocal, mut off_local, mut flowed) = (vec![], vec![], 0);
+    for i in 0..x.len() {
+        // Three kernel radii (1.3 mm each) from the ends.
+        if eps_p[i] <= eps_p_before[i] || damage[i] >= 1.0 || x[i] < 0.004 || x[i] > 0.036 {
+            continue;
+        }
+        flowed += 1;
+        let sigma_eq = 1.5f64.sqrt() * s[i].abs();
+        off_nonlocal.push(sigma_eq / surface(eps_nl_before[i], i) - 1.0);
+        off_local.push(sigma_eq / surface(eps_p_before[i], i) - 1.0);
+    }
+    assert!(flowed > 10, "only {flowed} particles flowed in the bar's interior");
+    let nonlocal = pairsum::compare::max_abs(&off_nonlocal).unwrap_or_else(|e| panic!("nonlocal: {e}"));
+    let local = pairsum::compare::max_abs(&off_local).unwrap_or_else(|e| panic!("local: {e}"));
+    assert!(nonlocal < 1e-9, "σ_eq off the surface of ε̄_p by {nonlocal:e}");
+    assert!(local > 1e-3, "σ_eq off the surface of ε_p by only {local:e}: the bar does not tell them apart");
+}
+
 /// The density diffusion of the shaped Børvik plate (continuity/shaped_diffusion.sph) on a bar at
 /// rest whose density is ρ = ρ0 (1 + k x²): at every particle it is the sum
 /// δ h0 c0 Σ_j V_j 2 (ρ_i − ρ_j) (x_ij · ∇W_ij) / (r_ij² + 0.01 h0²) computed here from the stored

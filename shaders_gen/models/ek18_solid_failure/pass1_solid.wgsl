@@ -484,7 +484,7 @@ fn ldj_D(j: u32, sgn: vec3<f32>) -> f32 {
     return data[b];
 }
 fn ldj_eps_nl(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[20u];
+    let base = info[19u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
@@ -544,23 +544,23 @@ fn st_lap_weight(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 5u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 9u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 10u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 11u;
     return params[b];
 }
 fn prm_damage_coupling(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 12u;
     return params[b];
 }
 @compute @workgroup_size(64)

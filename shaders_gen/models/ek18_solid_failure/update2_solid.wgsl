@@ -143,19 +143,19 @@ fn st_deps_p(i: u32, v: f32) {
     let b = u32(info[18 + G] + i32(i) * 1);
     data[b] = v;
 }
-fn ld_T(i: u32) -> f32 {
-    let b = u32(info[19 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_T(i: u32, v: f32) {
-    let b = u32(info[19 + G] + i32(i) * 1);
-    data[b] = v;
-}
 fn ld_eps_nl(i: u32) -> f32 {
-    let b = u32(info[20 + G] + i32(i) * 1);
+    let b = u32(info[19 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_eps_nl(i: u32, v: f32) {
+    let b = u32(info[19 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_T(i: u32) -> f32 {
+    let b = u32(info[20 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_T(i: u32, v: f32) {
     let b = u32(info[20 + G] + i32(i) * 1);
     data[b] = v;
 }
@@ -288,95 +288,99 @@ fn st_eps_nl_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 0u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 5u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 6u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 7u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 8u;
     return params[b];
 }
-fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 13u;
-    return params[b];
-}
-fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 14u;
-    return params[b];
-}
-fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 15u;
-    return params[b];
-}
-fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 16u;
-    return params[b];
-}
-fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 17u;
-    return params[b];
-}
-fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 18u;
-    return params[b];
-}
-fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 19u;
-    return params[b];
-}
-fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 20u;
-    return params[b];
-}
-fn prm_p_spall(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 21u;
-    return params[b];
-}
-fn prm_D1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 22u;
-    return params[b];
-}
-fn prm_D2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 23u;
-    return params[b];
-}
-fn prm_D3(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 24u;
-    return params[b];
-}
-fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 25u;
-    return params[b];
-}
-fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 26u;
+fn prm_nonlocal_hardening(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 13u;
     return params[b];
 }
 fn prm_damage_length(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 14u;
+    return params[b];
+}
+fn prm_jc_A(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 15u;
+    return params[b];
+}
+fn prm_jc_B(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 16u;
+    return params[b];
+}
+fn prm_jc_C(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 17u;
+    return params[b];
+}
+fn prm_jc_n(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 18u;
+    return params[b];
+}
+fn prm_jc_m(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 19u;
+    return params[b];
+}
+fn prm_eps_rate0(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 20u;
+    return params[b];
+}
+fn prm_T_melt(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 21u;
+    return params[b];
+}
+fn prm_T_room(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 22u;
+    return params[b];
+}
+fn prm_p_spall(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 23u;
+    return params[b];
+}
+fn prm_D1(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 24u;
+    return params[b];
+}
+fn prm_D2(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 25u;
+    return params[b];
+}
+fn prm_D3(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 26u;
+    return params[b];
+}
+fn prm_D4(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 27u;
+    return params[b];
+}
+fn prm_D5(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 28u;
     return params[b];
 }
 fn prm_failure_band(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 29u;
     return params[b];
 }
 fn prm_failure_band_spacing(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 30u;
     return params[b];
 }
 fn prm_C_v(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 31u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -419,7 +423,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // radial_return
     var deps_p_i: f32 = ld_deps_p(i);
     let sig_eq = sqrt(((3.0 * 0.5) * ddot(s_i, s_i)));
-    let eps_p = eps_p_i;
+    let hardening_strain = select(eps_p_i, eps_nl_i, ((prm_nonlocal_hardening(i) > 0.0) && (prm_damage_length(i) > 0.0)));
+    let eps_p = hardening_strain;
     let e = ld_edot(i);
     let d = dev(e);
     let rate_p = sqrt(((2.0 / 3.0) * ddot(d, d)));
@@ -485,6 +490,6 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     st_D(i, D_i);
     st_eps_p(i, eps_p_i);
     st_deps_p(i, deps_p_i);
-    st_T(i, T_i);
     st_eps_nl(i, eps_nl_i);
+    st_T(i, T_i);
 }

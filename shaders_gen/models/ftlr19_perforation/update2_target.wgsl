@@ -143,19 +143,19 @@ fn st_deps_p(i: u32, v: f32) {
     let b = u32(info[37 + G] + i32(i) * 1);
     data[b] = v;
 }
-fn ld_T(i: u32) -> f32 {
-    let b = u32(info[39 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_T(i: u32, v: f32) {
-    let b = u32(info[39 + G] + i32(i) * 1);
-    data[b] = v;
-}
 fn ld_eps_nl(i: u32) -> f32 {
-    let b = u32(info[41 + G] + i32(i) * 1);
+    let b = u32(info[39 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_eps_nl(i: u32, v: f32) {
+    let b = u32(info[39 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_T(i: u32) -> f32 {
+    let b = u32(info[41 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_T(i: u32, v: f32) {
     let b = u32(info[41 + G] + i32(i) * 1);
     data[b] = v;
 }
@@ -298,87 +298,91 @@ fn st_eps_nl_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 0u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 7u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 8u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 9u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 10u;
     return params[b];
 }
-fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 16u;
-    return params[b];
-}
-fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 17u;
-    return params[b];
-}
-fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 18u;
-    return params[b];
-}
-fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 19u;
-    return params[b];
-}
-fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 20u;
-    return params[b];
-}
-fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 21u;
-    return params[b];
-}
-fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 22u;
-    return params[b];
-}
-fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 23u;
-    return params[b];
-}
-fn prm_D1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 24u;
-    return params[b];
-}
-fn prm_D2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 25u;
-    return params[b];
-}
-fn prm_D3(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 26u;
-    return params[b];
-}
-fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 27u;
-    return params[b];
-}
-fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 28u;
+fn prm_nonlocal_hardening(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 16u;
     return params[b];
 }
 fn prm_damage_length(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 17u;
+    return params[b];
+}
+fn prm_jc_A(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 18u;
+    return params[b];
+}
+fn prm_jc_B(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 19u;
+    return params[b];
+}
+fn prm_jc_C(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 20u;
+    return params[b];
+}
+fn prm_jc_n(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 21u;
+    return params[b];
+}
+fn prm_jc_m(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 22u;
+    return params[b];
+}
+fn prm_eps_rate0(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 23u;
+    return params[b];
+}
+fn prm_T_melt(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 24u;
+    return params[b];
+}
+fn prm_T_room(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 25u;
+    return params[b];
+}
+fn prm_D1(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 26u;
+    return params[b];
+}
+fn prm_D2(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 27u;
+    return params[b];
+}
+fn prm_D3(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 28u;
+    return params[b];
+}
+fn prm_D4(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 29u;
+    return params[b];
+}
+fn prm_D5(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 30u;
     return params[b];
 }
 fn prm_failure_band(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 31u;
     return params[b];
 }
 fn prm_failure_band_spacing(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 32u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -418,7 +422,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // radial_return
     var deps_p_i: f32 = ld_deps_p(i);
     let sig_eq = sqrt(((3.0 * 0.5) * ddot(s_i, s_i)));
-    let eps_p = eps_p_i;
+    let hardening_strain = select(eps_p_i, eps_nl_i, ((prm_nonlocal_hardening(i) > 0.0) && (prm_damage_length(i) > 0.0)));
+    let eps_p = hardening_strain;
     let e = ld_edot(i);
     let d = dev(e);
     let rate_p = sqrt(((2.0 / 3.0) * ddot(d, d)));

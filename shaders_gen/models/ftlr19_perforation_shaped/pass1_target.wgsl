@@ -577,7 +577,7 @@ fn ldj_D(j: u32, sgn: vec3<f32>) -> f32 {
     return data[b];
 }
 fn ldj_eps_nl(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[51u + ints[j]];
+    let base = info[49u + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
@@ -686,47 +686,47 @@ fn st_lap_weight(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 1u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 5u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 6u;
     return params[b];
 }
 fn prm_delta(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 7u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 8u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 15u;
     return params[b];
 }
 fn prm_hourglass_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 16u;
     return params[b];
 }
 fn prm_hourglass_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 17u;
     return params[b];
 }
 fn prm_contact_colour(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 21u;
     return params[b];
 }
 fn prm_contact_stiffness(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 22u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -125,11 +125,11 @@ fn st_eps_p(i: u32, v: f32) {
     data[b] = v;
 }
 fn ld_eps_nl(i: u32) -> f32 {
-    let b = u32(info[51 + G] + i32(i) * 1);
+    let b = u32(info[49 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_eps_nl(i: u32, v: f32) {
-    let b = u32(info[51 + G] + i32(i) * 1);
+    let b = u32(info[49 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_x_0(i: u32) -> vec3<f32> {

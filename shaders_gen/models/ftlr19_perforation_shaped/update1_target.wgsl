@@ -206,19 +206,19 @@ fn st_deps_p(i: u32, v: f32) {
     let b = u32(info[47 + G] + i32(i) * 1);
     data[b] = v;
 }
-fn ld_T(i: u32) -> f32 {
-    let b = u32(info[49 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_T(i: u32, v: f32) {
-    let b = u32(info[49 + G] + i32(i) * 1);
-    data[b] = v;
-}
 fn ld_eps_nl(i: u32) -> f32 {
-    let b = u32(info[51 + G] + i32(i) * 1);
+    let b = u32(info[49 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_eps_nl(i: u32, v: f32) {
+    let b = u32(info[49 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_T(i: u32) -> f32 {
+    let b = u32(info[51 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_T(i: u32, v: f32) {
     let b = u32(info[51 + G] + i32(i) * 1);
     data[b] = v;
 }
@@ -397,95 +397,99 @@ fn st_u_0(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 1u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 8u;
     return params[b];
 }
 fn prm_shape_floor(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 14u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 15u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 19u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 20u;
     return params[b];
 }
-fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 23u;
-    return params[b];
-}
-fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 24u;
-    return params[b];
-}
-fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 25u;
-    return params[b];
-}
-fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 26u;
-    return params[b];
-}
-fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 27u;
-    return params[b];
-}
-fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 28u;
-    return params[b];
-}
-fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 29u;
-    return params[b];
-}
-fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 30u;
-    return params[b];
-}
-fn prm_D1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 31u;
-    return params[b];
-}
-fn prm_D2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 32u;
-    return params[b];
-}
-fn prm_D3(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 33u;
-    return params[b];
-}
-fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 34u;
-    return params[b];
-}
-fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 35u;
+fn prm_nonlocal_hardening(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 23u;
     return params[b];
 }
 fn prm_damage_length(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 36u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 24u;
+    return params[b];
+}
+fn prm_jc_A(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 25u;
+    return params[b];
+}
+fn prm_jc_B(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 26u;
+    return params[b];
+}
+fn prm_jc_C(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 27u;
+    return params[b];
+}
+fn prm_jc_n(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 28u;
+    return params[b];
+}
+fn prm_jc_m(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 29u;
+    return params[b];
+}
+fn prm_eps_rate0(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 30u;
+    return params[b];
+}
+fn prm_T_melt(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 31u;
+    return params[b];
+}
+fn prm_T_room(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 32u;
+    return params[b];
+}
+fn prm_D1(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 33u;
+    return params[b];
+}
+fn prm_D2(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 34u;
+    return params[b];
+}
+fn prm_D3(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 35u;
+    return params[b];
+}
+fn prm_D4(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 36u;
+    return params[b];
+}
+fn prm_D5(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 37u;
     return params[b];
 }
 fn prm_failure_band(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 37u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 38u;
     return params[b];
 }
 fn prm_failure_band_spacing(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 38u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 39u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -523,7 +527,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var eps_p_i: f32 = ld_eps_p(i);
     var deps_p_i: f32 = ld_deps_p(i);
     let sig_eq = sqrt(((3.0 * 0.5) * ddot(s_i, s_i)));
-    let eps_p = eps_p_i;
+    let hardening_strain = select(eps_p_i, ld_eps_nl(i), ((prm_nonlocal_hardening(i) > 0.0) && (prm_damage_length(i) > 0.0)));
+    let eps_p = hardening_strain;
     let e = ld_edot(i);
     let d = dev(e);
     let rate_p = sqrt(((2.0 / 3.0) * ddot(d, d)));

@@ -537,7 +537,7 @@ fn ldj_D(j: u32, sgn: vec3<f32>) -> f32 {
     return data[b];
 }
 fn ldj_eps_nl(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[41u + ints[j]];
+    let base = info[39u + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
@@ -600,31 +600,31 @@ fn st_lap_weight(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 5u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 8u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 11u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 12u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 13u;
     return params[b];
 }
 fn prm_damage_coupling(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 14u;
     return params[b];
 }
 fn prm_K_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 15u;
     return params[b];
 }
 @compute @workgroup_size(64)

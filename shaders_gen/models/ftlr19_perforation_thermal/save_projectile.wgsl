@@ -98,19 +98,19 @@ fn st_eps_p(i: u32, v: f32) {
     let b = u32(info[35 + G] + i32(i) * 1);
     data[b] = v;
 }
-fn ld_T(i: u32) -> f32 {
-    let b = u32(info[39 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_T(i: u32, v: f32) {
-    let b = u32(info[39 + G] + i32(i) * 1);
-    data[b] = v;
-}
 fn ld_eps_nl(i: u32) -> f32 {
-    let b = u32(info[41 + G] + i32(i) * 1);
+    let b = u32(info[39 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_eps_nl(i: u32, v: f32) {
+    let b = u32(info[39 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_T(i: u32) -> f32 {
+    let b = u32(info[41 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_T(i: u32, v: f32) {
     let b = u32(info[41 + G] + i32(i) * 1);
     data[b] = v;
 }
@@ -180,8 +180,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var e_0_i: f32 = ld_e_0(i);
     var D_0_i: f32 = 0.0;
     var eps_p_0_i: f32 = 0.0;
-    var T_0_i: f32 = 0.0;
     var eps_nl_0_i: f32 = 0.0;
+    var T_0_i: f32 = 0.0;
     x_0_i = ld_x(i);
     v_0_i = ld_v(i);
     rho_0_i = ld_rho(i);
@@ -189,8 +189,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     e_0_i = ld_e(i);
     D_0_i = ld_D(i);
     eps_p_0_i = ld_eps_p(i);
-    T_0_i = ld_T(i);
     eps_nl_0_i = ld_eps_nl(i);
+    T_0_i = ld_T(i);
     st_x_0(i, x_0_i);
     st_v_0(i, v_0_i);
     st_rho_0(i, rho_0_i);

@@ -143,19 +143,19 @@ fn st_deps_p(i: u32, v: f32) {
     let b = u32(info[37 + G] + i32(i) * 1);
     data[b] = v;
 }
-fn ld_T(i: u32) -> f32 {
-    let b = u32(info[39 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_T(i: u32, v: f32) {
-    let b = u32(info[39 + G] + i32(i) * 1);
-    data[b] = v;
-}
 fn ld_eps_nl(i: u32) -> f32 {
-    let b = u32(info[41 + G] + i32(i) * 1);
+    let b = u32(info[39 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_eps_nl(i: u32, v: f32) {
+    let b = u32(info[39 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_T(i: u32) -> f32 {
+    let b = u32(info[41 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_T(i: u32, v: f32) {
     let b = u32(info[41 + G] + i32(i) * 1);
     data[b] = v;
 }
@@ -274,95 +274,99 @@ fn st_e_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 0u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 7u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 8u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 9u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 10u;
     return params[b];
 }
-fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 16u;
-    return params[b];
-}
-fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 17u;
-    return params[b];
-}
-fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 18u;
-    return params[b];
-}
-fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 19u;
-    return params[b];
-}
-fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 20u;
-    return params[b];
-}
-fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 21u;
-    return params[b];
-}
-fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 22u;
-    return params[b];
-}
-fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 23u;
-    return params[b];
-}
-fn prm_D1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 24u;
-    return params[b];
-}
-fn prm_D2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 25u;
-    return params[b];
-}
-fn prm_D3(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 26u;
-    return params[b];
-}
-fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 27u;
-    return params[b];
-}
-fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 28u;
+fn prm_nonlocal_hardening(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 16u;
     return params[b];
 }
 fn prm_damage_length(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 17u;
+    return params[b];
+}
+fn prm_jc_A(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 18u;
+    return params[b];
+}
+fn prm_jc_B(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 19u;
+    return params[b];
+}
+fn prm_jc_C(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 20u;
+    return params[b];
+}
+fn prm_jc_n(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 21u;
+    return params[b];
+}
+fn prm_jc_m(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 22u;
+    return params[b];
+}
+fn prm_eps_rate0(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 23u;
+    return params[b];
+}
+fn prm_T_melt(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 24u;
+    return params[b];
+}
+fn prm_T_room(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 25u;
+    return params[b];
+}
+fn prm_D1(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 26u;
+    return params[b];
+}
+fn prm_D2(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 27u;
+    return params[b];
+}
+fn prm_D3(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 28u;
+    return params[b];
+}
+fn prm_D4(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 29u;
+    return params[b];
+}
+fn prm_D5(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 30u;
     return params[b];
 }
 fn prm_failure_band(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 31u;
     return params[b];
 }
 fn prm_failure_band_spacing(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 32u;
     return params[b];
 }
 fn prm_C_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 33u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 34u;
     return params[b];
 }
 fn prm_taylor_quinney(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 34u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 35u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -394,7 +398,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var eps_p_i: f32 = ld_eps_p(i);
     var deps_p_i: f32 = ld_deps_p(i);
     let sig_eq = sqrt(((3.0 * 0.5) * ddot(s_i, s_i)));
-    let eps_p = eps_p_i;
+    let hardening_strain = select(eps_p_i, ld_eps_nl(i), ((prm_nonlocal_hardening(i) > 0.0) && (prm_damage_length(i) > 0.0)));
+    let eps_p = hardening_strain;
     let e = ld_edot(i);
     let d = dev(e);
     let rate_p = sqrt(((2.0 / 3.0) * ddot(d, d)));
@@ -475,6 +480,6 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     st_D(i, D_i);
     st_eps_p(i, eps_p_i);
     st_deps_p(i, deps_p_i);
-    st_T(i, T_i);
     st_eps_nl(i, eps_nl_i);
+    st_T(i, T_i);
 }
