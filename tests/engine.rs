@@ -995,6 +995,50 @@ fn nonlocal_hardening_returns_the_stress_to_the_flow_stress_of_the_nonlocal_plas
     assert!(local > 1e-3, "σ_eq off the surface of ε_p by only {local:e}: the bar does not tell them apart");
 }
 
+/// With `nonlocal_rate = 1` (and `nonlocal_hardening = 1`) the Johnson–Cook return hardens with the
+/// equivalent strain rate averaged over ℓ (rate_nl of damage/nonlocal_strain.sph, its Jacobi step
+/// taken in the same correction, before the return), not the particle's own. A Weldox bar with
+/// ε_p = 0.2 stretched at 10⁴ 1/s below 20 mm and 2·10⁴ 1/s beyond: every particle that flowed in
+/// the last step and has not failed, away from the ends, sits on
+/// (A + B ε̄_p^n)(1 + C ln(ε̄̇/ε̇0)) to 1e-9 with the rate_nl stored after the step, and the surface
+/// of its own rate (the 1D deviator's √(2/3) · 2/3 |ε̇_xx|) misses by more than 1e-3 on at least
+/// one of them (measured: 0.015).
+#[test]
+fn nonlocal_rate_returns_the_stress_to_the_flow_stress_of_the_averaged_strain_rate() {
+    let mut e = weldox_bar(
+        "nonlocal-rate",
+        0.5,
+        "damage_length = \"2 mm\"\nnonlocal_hardening = 1\nnonlocal_rate = 1",
+        "eps_p = \"0.2\", v = \"select(x.x < 0.02 [m], 10000 [1/s], 20000 [1/s]) * (x - vec(0.02 [m], 0 [m]))\"",
+        100,
+    );
+    let (_, eps_nl_before) = stored_field(&e.backend, "eps_nl");
+    let (_, eps_p_before) = stored_field(&e.backend, "eps_p");
+    e.step().unwrap_or_else(|err| panic!("step: {err}"));
+    let field = |name| stored_field(&e.backend, name).1;
+    let (x, s, eps_p, damage) = (field("x"), field("s"), field("eps_p"), field("D"));
+    let (edot, rate_nl) = (field("edot"), field("rate_nl"));
+    let (a, b, n, c, rate0) = (490e6, 807e6, 0.73, 0.0114, 5e-4);
+    let surface =
+        |rate: f64, i: usize| (a + b * eps_nl_before[i].max(0.0).powf(n)) * (1.0 + c * (rate / rate0).max(1.0).ln());
+    let (mut off_nonlocal, mut off_local, mut flowed) = (vec![], vec![], 0);
+    for i in 0..x.len() {
+        if eps_p[i] <= eps_p_before[i] || damage[i] >= 1.0 || x[i] < 0.004 || x[i] > 0.036 {
+            continue;
+        }
+        flowed += 1;
+        let sigma_eq = 1.5f64.sqrt() * s[i].abs();
+        let own_rate = (2.0f64 / 3.0).sqrt() * 2.0 / 3.0 * edot[i].abs();
+        off_nonlocal.push(sigma_eq / surface(rate_nl[i], i) - 1.0);
+        off_local.push(sigma_eq / surface(own_rate, i) - 1.0);
+    }
+    assert!(flowed > 10, "only {flowed} particles flowed in the bar's interior");
+    let nonlocal = pairsum::compare::max_abs(&off_nonlocal).unwrap_or_else(|e| panic!("nonlocal: {e}"));
+    let local = pairsum::compare::max_abs(&off_local).unwrap_or_else(|e| panic!("local: {e}"));
+    assert!(nonlocal < 1e-9, "σ_eq off the surface of the averaged rate by {nonlocal:e}");
+    assert!(local > 1e-3, "σ_eq off the surface of the own rate by only {local:e}: the bar does not tell them apart");
+}
+
 /// The density diffusion of the shaped Børvik plate (continuity/shaped_diffusion.sph) on a bar at
 /// rest whose density is ρ = ρ0 (1 + k x²): at every particle it is the sum
 /// δ h0 c0 Σ_j V_j 2 (ρ_i − ρ_j) (x_ij · ∇W_ij) / (r_ij² + 0.01 h0²) computed here from the stored

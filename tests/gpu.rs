@@ -476,16 +476,19 @@ fn taylor_bar_on_the_gpu_matches_the_cpu_against_its_wall_plane() {
 }
 
 #[test]
-fn borvik_perforation_with_nonlocal_damage_on_the_gpu_matches_the_cpu_in_contact() {
+fn borvik_perforation_with_nonlocal_damage_hardening_and_rate_on_the_gpu_matches_the_cpu_in_contact() {
     // Started 0.2 mm above the plate (0.7 µs at 298 m/s): 60 steps are 8.6 µs, nearly all in
     // contact. The damage is driven by the nonlocal plastic strain (damage_length 2 mm, the
-    // Laplacian's neighbour sum and its Jacobi step), which the CPU and GPU must agree on too.
+    // Laplacian's neighbour sum and its Jacobi step), which the CPU and GPU must agree on too, and
+    // the Johnson–Cook return hardens with it and with the strain rate averaged over the same
+    // length (`nonlocal_hardening`, `nonlocal_rate`: a second sum and Jacobi step).
     let path = std::path::PathBuf::from(case("borvik_perforation"));
-    let engines = run_both(&path, &[("gap", "0.2"), ("damage_length", "2")], 60);
+    let set = [("gap", "0.2"), ("damage_length", "2"), ("nonlocal_hardening", "1"), ("nonlocal_rate", "1")];
+    let engines = run_both(&path, &set, 60);
     let (_, eps_nl) = stored_field(&engines.0.backend, "eps_nl");
     let largest = common::largest("the CPU's nonlocal plastic strain after 60 steps", &eps_nl);
     assert!(largest > 0.05, "the plate has hardly flowed: largest nonlocal plastic strain {largest}");
-    engines_match(&path, engines, 60, &["p", "eps_p", "eps_nl", "D"], 5e-3);
+    engines_match(&path, engines, 60, &["p", "eps_p", "eps_nl", "rate_nl", "D"], 5e-3);
 }
 
 #[test]

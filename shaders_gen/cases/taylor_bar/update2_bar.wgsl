@@ -339,75 +339,75 @@ fn st_T_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 1u;
     return params[b];
 }
 fn prm_shape_floor(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 7u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 13u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 14u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 20u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 21u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 22u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 23u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 24u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 25u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 26u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 27u;
     return params[b];
 }
 fn prm_C_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 28u;
     return params[b];
 }
 fn prm_taylor_quinney(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 29u;
     return params[b];
 }
 fn prm__symmetry0(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 30u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm__symmetry1(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 32u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 33u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm__symmetry2(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 35u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 36u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 @compute @workgroup_size(64)
@@ -494,10 +494,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var deps_p_i: f32 = ld_deps_p(i);
     let sig_eq = sqrt(((3.0 * 0.5) * ddot(s_i, s_i)));
     let hardening_strain = eps_p_i;
-    let eps_p = hardening_strain;
     let e = ld_edot(i);
     let d = dev(e);
-    let rate_p = sqrt(((2.0 / 3.0) * ddot(d, d)));
+    let hardening_rate = sqrt(((2.0 / 3.0) * ddot(d, d)));
+    let eps_p = hardening_strain;
+    let rate_p = hardening_rate;
     let T = T_i;
     let hardening = (prm_jc_A(i) + (prm_jc_B(i) * pow(max(eps_p, 0.0), prm_jc_n(i))));
     let rate = (1.0 + (prm_jc_C(i) * log(max((rate_p / prm_eps_rate0(i)), 1.0))));

@@ -407,27 +407,27 @@ fn st_h(i: u32, v: f32) {
     data[b] = v;
 }
 fn ld_p(i: u32) -> f32 {
-    let b = u32(info[29 + G] + i32(i) * 1);
+    let b = u32(info[31 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p(i: u32, v: f32) {
-    let b = u32(info[29 + G] + i32(i) * 1);
+    let b = u32(info[31 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_c(i: u32) -> f32 {
-    let b = u32(info[31 + G] + i32(i) * 1);
+    let b = u32(info[33 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_c(i: u32, v: f32) {
-    let b = u32(info[31 + G] + i32(i) * 1);
+    let b = u32(info[33 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_tau(i: u32) -> mat3x3<f32> {
-    let b = u32(info[33 + G] + i32(i) * 6);
+    let b = u32(info[35 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_tau(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[33 + G] + i32(i) * 6);
+    let b = u32(info[35 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -436,11 +436,11 @@ fn st_tau(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_sigma(i: u32) -> mat3x3<f32> {
-    let b = u32(info[35 + G] + i32(i) * 6);
+    let b = u32(info[37 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_sigma(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[35 + G] + i32(i) * 6);
+    let b = u32(info[37 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -449,27 +449,27 @@ fn st_sigma(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_drho(i: u32) -> f32 {
-    let b = u32(info[37 + G] + i32(i) * 1);
+    let b = u32(info[39 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho(i: u32, v: f32) {
-    let b = u32(info[37 + G] + i32(i) * 1);
+    let b = u32(info[39 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_kernel_sum(i: u32) -> f32 {
-    let b = u32(info[41 + G] + i32(i) * 1);
+    let b = u32(info[43 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_kernel_sum(i: u32, v: f32) {
-    let b = u32(info[41 + G] + i32(i) * 1);
+    let b = u32(info[43 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_edot_visc(i: u32) -> mat3x3<f32> {
-    let b = u32(info[43 + G] + i32(i) * 6);
+    let b = u32(info[45 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_edot_visc(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[43 + G] + i32(i) * 6);
+    let b = u32(info[45 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -478,31 +478,31 @@ fn st_edot_visc(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_p_interface(i: u32) -> f32 {
-    let b = u32(info[45 + G] + i32(i) * 1);
+    let b = u32(info[47 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p_interface(i: u32, v: f32) {
-    let b = u32(info[45 + G] + i32(i) * 1);
+    let b = u32(info[47 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 0u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 21u;
     return params[b];
 }
 fn prm_p_cav(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 22u;
     return params[b];
 }
 fn prm_surface_threshold(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 23u;
     return params[b];
 }
 fn prm_mu(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 24u;
     return params[b];
 }
 @compute @workgroup_size(64)

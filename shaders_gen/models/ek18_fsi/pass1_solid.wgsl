@@ -427,19 +427,19 @@ fn st_spin(i: u32, v: mat3x3<f32>) {
     data[b + 2u] = v[2][1];
 }
 fn ld_drho(i: u32) -> f32 {
-    let b = u32(info[37 + G] + i32(i) * 1);
+    let b = u32(info[39 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho(i: u32, v: f32) {
-    let b = u32(info[37 + G] + i32(i) * 1);
+    let b = u32(info[39 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_ds(i: u32) -> mat3x3<f32> {
-    let b = u32(info[39 + G] + i32(i) * 6);
+    let b = u32(info[41 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_ds(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[39 + G] + i32(i) * 6);
+    let b = u32(info[41 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -448,7 +448,7 @@ fn st_ds(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 5u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -127,28 +127,36 @@ fn st_eps_nl(i: u32, v: f32) {
     let b = u32(info[15 + G] + i32(i) * 1);
     data[b] = v;
 }
-fn ld_T(i: u32) -> f32 {
+fn ld_rate_nl(i: u32) -> f32 {
     let b = u32(info[16 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_rate_nl(i: u32, v: f32) {
+    let b = u32(info[16 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_T(i: u32) -> f32 {
+    let b = u32(info[17 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_T(i: u32, v: f32) {
-    let b = u32(info[16 + G] + i32(i) * 1);
+    let b = u32(info[17 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_drho(i: u32) -> f32 {
-    let b = u32(info[17 + G] + i32(i) * 1);
+    let b = u32(info[18 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho(i: u32, v: f32) {
-    let b = u32(info[17 + G] + i32(i) * 1);
+    let b = u32(info[18 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_ds(i: u32) -> mat3x3<f32> {
-    let b = u32(info[18 + G] + i32(i) * 6);
+    let b = u32(info[19 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_ds(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[18 + G] + i32(i) * 6);
+    let b = u32(info[19 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -157,57 +165,57 @@ fn st_ds(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_de(i: u32) -> f32 {
-    let b = u32(info[19 + G] + i32(i) * 1);
+    let b = u32(info[20 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_de(i: u32, v: f32) {
-    let b = u32(info[19 + G] + i32(i) * 1);
+    let b = u32(info[20 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_dv(i: u32) -> vec3<f32> {
-    let b = u32(info[20 + G] + i32(i) * 3);
+    let b = u32(info[21 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_dv(i: u32, v: vec3<f32>) {
-    let b = u32(info[20 + G] + i32(i) * 3);
+    let b = u32(info[21 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_x_0(i: u32) -> vec3<f32> {
-    let b = u32(info[21 + G] + i32(i) * 3);
+    let b = u32(info[22 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_x_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[21 + G] + i32(i) * 3);
+    let b = u32(info[22 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_v_0(i: u32) -> vec3<f32> {
-    let b = u32(info[22 + G] + i32(i) * 3);
+    let b = u32(info[23 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_v_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[22 + G] + i32(i) * 3);
+    let b = u32(info[23 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_rho_0(i: u32) -> f32 {
-    let b = u32(info[23 + G] + i32(i) * 1);
+    let b = u32(info[24 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho_0(i: u32, v: f32) {
-    let b = u32(info[23 + G] + i32(i) * 1);
+    let b = u32(info[24 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s_0(i: u32) -> mat3x3<f32> {
-    let b = u32(info[24 + G] + i32(i) * 6);
+    let b = u32(info[25 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s_0(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[24 + G] + i32(i) * 6);
+    let b = u32(info[25 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -216,75 +224,79 @@ fn st_s_0(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_e_0(i: u32) -> f32 {
-    let b = u32(info[25 + G] + i32(i) * 1);
+    let b = u32(info[26 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_e_0(i: u32, v: f32) {
-    let b = u32(info[25 + G] + i32(i) * 1);
+    let b = u32(info[26 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 24u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 0u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 24u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 5u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 24u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 6u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 24u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 7u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 24u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 8u;
     return params[b];
 }
 fn prm_nonlocal_hardening(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 24u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 12u;
+    return params[b];
+}
+fn prm_nonlocal_rate(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 13u;
     return params[b];
 }
 fn prm_damage_length(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 24u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 14u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 24u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 15u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 24u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 16u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 24u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 17u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 24u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 18u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 24u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 19u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 24u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 20u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 24u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 21u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 24u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 22u;
     return params[b];
 }
 fn prm_C_v(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 24u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 23u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -319,10 +331,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var eps_p_i: f32 = ld_eps_p(i);
     let sig_eq = sqrt(((3.0 * 0.5) * ddot(s_i, s_i)));
     let hardening_strain = select(eps_p_i, ld_eps_nl(i), ((prm_nonlocal_hardening(i) > 0.0) && (prm_damage_length(i) > 0.0)));
-    let eps_p = hardening_strain;
     let e = ld_edot(i);
     let d = dev(e);
-    let rate_p = sqrt(((2.0 / 3.0) * ddot(d, d)));
+    let hardening_rate = select(sqrt(((2.0 / 3.0) * ddot(d, d))), ld_rate_nl(i), ((prm_nonlocal_rate(i) > 0.0) && (prm_damage_length(i) > 0.0)));
+    let eps_p = hardening_strain;
+    let rate_p = hardening_rate;
     let T = T_i;
     let hardening = (prm_jc_A(i) + (prm_jc_B(i) * pow(max(eps_p, 0.0), prm_jc_n(i))));
     let rate = (1.0 + (prm_jc_C(i) * log(max((rate_p / prm_eps_rate0(i)), 1.0))));

@@ -151,28 +151,36 @@ fn st_eps_nl(i: u32, v: f32) {
     let b = u32(info[19 + G] + i32(i) * 1);
     data[b] = v;
 }
-fn ld_T(i: u32) -> f32 {
+fn ld_rate_nl(i: u32) -> f32 {
     let b = u32(info[20 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_rate_nl(i: u32, v: f32) {
+    let b = u32(info[20 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_T(i: u32) -> f32 {
+    let b = u32(info[21 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_T(i: u32, v: f32) {
-    let b = u32(info[20 + G] + i32(i) * 1);
+    let b = u32(info[21 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_drho(i: u32) -> f32 {
-    let b = u32(info[21 + G] + i32(i) * 1);
+    let b = u32(info[22 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho(i: u32, v: f32) {
-    let b = u32(info[21 + G] + i32(i) * 1);
+    let b = u32(info[22 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_ds(i: u32) -> mat3x3<f32> {
-    let b = u32(info[22 + G] + i32(i) * 6);
+    let b = u32(info[23 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_ds(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[22 + G] + i32(i) * 6);
+    let b = u32(info[23 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -181,73 +189,81 @@ fn st_ds(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_de(i: u32) -> f32 {
-    let b = u32(info[23 + G] + i32(i) * 1);
+    let b = u32(info[24 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_de(i: u32, v: f32) {
-    let b = u32(info[23 + G] + i32(i) * 1);
+    let b = u32(info[24 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_dv(i: u32) -> vec3<f32> {
-    let b = u32(info[24 + G] + i32(i) * 3);
+    let b = u32(info[25 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_dv(i: u32, v: vec3<f32>) {
-    let b = u32(info[24 + G] + i32(i) * 3);
+    let b = u32(info[25 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_lap_sum(i: u32) -> f32 {
-    let b = u32(info[25 + G] + i32(i) * 1);
+    let b = u32(info[26 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_lap_sum(i: u32, v: f32) {
-    let b = u32(info[25 + G] + i32(i) * 1);
+    let b = u32(info[26 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_lap_weight(i: u32) -> f32 {
-    let b = u32(info[26 + G] + i32(i) * 1);
+    let b = u32(info[27 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_lap_weight(i: u32, v: f32) {
-    let b = u32(info[26 + G] + i32(i) * 1);
+    let b = u32(info[27 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_rate_lap_sum(i: u32) -> f32 {
+    let b = u32(info[28 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_rate_lap_sum(i: u32, v: f32) {
+    let b = u32(info[28 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_x_0(i: u32) -> vec3<f32> {
-    let b = u32(info[27 + G] + i32(i) * 3);
+    let b = u32(info[29 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_x_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[27 + G] + i32(i) * 3);
+    let b = u32(info[29 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_v_0(i: u32) -> vec3<f32> {
-    let b = u32(info[28 + G] + i32(i) * 3);
+    let b = u32(info[30 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_v_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[28 + G] + i32(i) * 3);
+    let b = u32(info[30 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_rho_0(i: u32) -> f32 {
-    let b = u32(info[29 + G] + i32(i) * 1);
+    let b = u32(info[31 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho_0(i: u32, v: f32) {
-    let b = u32(info[29 + G] + i32(i) * 1);
+    let b = u32(info[31 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s_0(i: u32) -> mat3x3<f32> {
-    let b = u32(info[30 + G] + i32(i) * 6);
+    let b = u32(info[32 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s_0(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[30 + G] + i32(i) * 6);
+    let b = u32(info[32 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -256,107 +272,111 @@ fn st_s_0(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_e_0(i: u32) -> f32 {
-    let b = u32(info[31 + G] + i32(i) * 1);
+    let b = u32(info[33 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_e_0(i: u32, v: f32) {
-    let b = u32(info[31 + G] + i32(i) * 1);
+    let b = u32(info[33 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 0u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 5u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 6u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 7u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 8u;
     return params[b];
 }
 fn prm_nonlocal_hardening(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 13u;
+    return params[b];
+}
+fn prm_nonlocal_rate(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 14u;
     return params[b];
 }
 fn prm_damage_length(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 15u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 16u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 17u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 18u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 19u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 20u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 21u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 22u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 23u;
     return params[b];
 }
 fn prm_p_spall(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 24u;
     return params[b];
 }
 fn prm_D1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 25u;
     return params[b];
 }
 fn prm_D2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 26u;
     return params[b];
 }
 fn prm_D3(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 27u;
     return params[b];
 }
 fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 28u;
     return params[b];
 }
 fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 29u;
     return params[b];
 }
 fn prm_failure_band(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 30u;
     return params[b];
 }
 fn prm_failure_band_spacing(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 31u;
     return params[b];
 }
 fn prm_C_v(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 32u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -384,6 +404,12 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     rho_i = (ld_rho_0(i) + (0.5 * (dt * rate_of_rho)));
     s_i = (ld_s_0(i) + (0.5 * (dt * rate_of_s)));
     e_i = (ld_e_0(i) + (0.5 * (dt * rate_of_e)));
+    // nonlocal_rate
+    var rate_nl_i: f32 = ld_rate_nl(i);
+    let l2 = (prm_damage_length(i) * prm_damage_length(i));
+    let e = ld_edot(i);
+    let d = dev(e);
+    rate_nl_i = ((sqrt(((2.0 / 3.0) * ddot(d, d))) + (l2 * ld_rate_lap_sum(i))) / (1.0 + (l2 * ld_lap_weight(i))));
     // temperature
     var T_i: f32 = ld_T(i);
     T_i = (prm_T_room(i) + (max(e_i, 0.0) / prm_C_v(i)));
@@ -392,28 +418,29 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var deps_p_i: f32 = ld_deps_p(i);
     let sig_eq = sqrt(((3.0 * 0.5) * ddot(s_i, s_i)));
     let hardening_strain = select(eps_p_i, ld_eps_nl(i), ((prm_nonlocal_hardening(i) > 0.0) && (prm_damage_length(i) > 0.0)));
+    let e_2 = ld_edot(i);
+    let d_2 = dev(e_2);
+    let hardening_rate = select(sqrt(((2.0 / 3.0) * ddot(d_2, d_2))), rate_nl_i, ((prm_nonlocal_rate(i) > 0.0) && (prm_damage_length(i) > 0.0)));
     let eps_p = hardening_strain;
-    let e = ld_edot(i);
-    let d = dev(e);
-    let rate_p = sqrt(((2.0 / 3.0) * ddot(d, d)));
+    let rate_p = hardening_rate;
     let T = T_i;
     let hardening = (prm_jc_A(i) + (prm_jc_B(i) * pow(max(eps_p, 0.0), prm_jc_n(i))));
     let rate = (1.0 + (prm_jc_C(i) * log(max((rate_p / prm_eps_rate0(i)), 1.0))));
     let T_2 = T;
     let sigma_y = ((hardening * rate) * (1.0 - pow(min(max(((T_2 - prm_T_room(i)) / (prm_T_melt(i) - prm_T_room(i))), 0.0), 1.0), prm_jc_m(i))));
     let c_y = min(1.0, (sigma_y / max(sig_eq, 1e-30)));
-    let d_2 = (((1.0 - c_y) / (3.0 * prm_G(i))) * sig_eq);
+    let d_3 = (((1.0 - c_y) / (3.0 * prm_G(i))) * sig_eq);
     s_i = (c_y * s_i);
-    eps_p_i = (eps_p_i + d_2);
-    deps_p_i = d_2;
+    eps_p_i = (eps_p_i + d_3);
+    deps_p_i = d_3;
     // damage
     var D_i: f32 = ld_D(i);
     var eps_nl_i: f32 = ld_eps_nl(i);
     let eps_p_2 = eps_p_i;
     let lap_sum = ld_lap_sum(i);
     let lap_weight = ld_lap_weight(i);
-    let l2 = (prm_damage_length(i) * prm_damage_length(i));
-    let nonlocal = select(eps_p_2, ((eps_p_2 + (l2 * lap_sum)) / (1.0 + (l2 * lap_weight))), (prm_damage_length(i) > 0.0));
+    let l2_2 = (prm_damage_length(i) * prm_damage_length(i));
+    let nonlocal = select(eps_p_2, ((eps_p_2 + (l2_2 * lap_sum)) / (1.0 + (l2_2 * lap_weight))), (prm_damage_length(i) > 0.0));
     let D = D_i;
     let eps_nl_new = nonlocal;
     let eps_nl = eps_nl_i;
@@ -429,9 +456,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let s_3 = s_2;
     let edot_2 = edot;
     let T_4 = T_3;
-    let e_2 = edot_2;
-    let d_3 = dev(e_2);
-    let rate_2 = (sqrt(((2.0 / 3.0) * ddot(d_3, d_3))) / prm_eps_rate0(i));
+    let e_3 = edot_2;
+    let d_4 = dev(e_3);
+    let rate_2 = (sqrt(((2.0 / 3.0) * ddot(d_4, d_4))) / prm_eps_rate0(i));
     let s_4 = s_3;
     let triax = ((-p_2) / max(sqrt((1.5 * ddot(s_4, s_4))), 1e-30));
     let T_5 = T_4;
@@ -461,5 +488,6 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     st_eps_p(i, eps_p_i);
     st_deps_p(i, deps_p_i);
     st_eps_nl(i, eps_nl_i);
+    st_rate_nl(i, rate_nl_i);
     st_T(i, T_i);
 }

@@ -214,46 +214,54 @@ fn st_eps_nl(i: u32, v: f32) {
     let b = u32(info[49 + G] + i32(i) * 1);
     data[b] = v;
 }
-fn ld_T(i: u32) -> f32 {
+fn ld_rate_nl(i: u32) -> f32 {
     let b = u32(info[51 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_rate_nl(i: u32, v: f32) {
+    let b = u32(info[51 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_T(i: u32) -> f32 {
+    let b = u32(info[53 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_T(i: u32, v: f32) {
-    let b = u32(info[51 + G] + i32(i) * 1);
+    let b = u32(info[53 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_drho(i: u32) -> f32 {
-    let b = u32(info[55 + G] + i32(i) * 1);
+    let b = u32(info[57 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho(i: u32, v: f32) {
-    let b = u32(info[55 + G] + i32(i) * 1);
+    let b = u32(info[57 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_de(i: u32) -> f32 {
-    let b = u32(info[57 + G] + i32(i) * 1);
+    let b = u32(info[59 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_de(i: u32, v: f32) {
-    let b = u32(info[57 + G] + i32(i) * 1);
+    let b = u32(info[59 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_dv(i: u32) -> vec3<f32> {
-    let b = u32(info[59 + G] + i32(i) * 3);
+    let b = u32(info[61 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_dv(i: u32, v: vec3<f32>) {
-    let b = u32(info[59 + G] + i32(i) * 3);
+    let b = u32(info[61 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_dkernel_shape(i: u32) -> mat3x3<f32> {
-    let b = u32(info[61 + G] + i32(i) * 9);
+    let b = u32(info[63 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_dkernel_shape(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[61 + G] + i32(i) * 9);
+    let b = u32(info[63 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -265,29 +273,29 @@ fn st_dkernel_shape(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ld_dv_hourglass(i: u32) -> vec3<f32> {
-    let b = u32(info[65 + G] + i32(i) * 3);
+    let b = u32(info[67 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_dv_hourglass(i: u32, v: vec3<f32>) {
-    let b = u32(info[65 + G] + i32(i) * 3);
+    let b = u32(info[67 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_drho_diffusion(i: u32) -> f32 {
-    let b = u32(info[69 + G] + i32(i) * 1);
+    let b = u32(info[71 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho_diffusion(i: u32, v: f32) {
-    let b = u32(info[69 + G] + i32(i) * 1);
+    let b = u32(info[71 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_ds(i: u32) -> mat3x3<f32> {
-    let b = u32(info[71 + G] + i32(i) * 6);
+    let b = u32(info[73 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_ds(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[71 + G] + i32(i) * 6);
+    let b = u32(info[73 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -296,65 +304,73 @@ fn st_ds(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_a_contact(i: u32) -> vec3<f32> {
-    let b = u32(info[77 + G] + i32(i) * 3);
+    let b = u32(info[79 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_a_contact(i: u32, v: vec3<f32>) {
-    let b = u32(info[77 + G] + i32(i) * 3);
+    let b = u32(info[79 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_lap_sum(i: u32) -> f32 {
-    let b = u32(info[79 + G] + i32(i) * 1);
+    let b = u32(info[81 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_lap_sum(i: u32, v: f32) {
-    let b = u32(info[79 + G] + i32(i) * 1);
+    let b = u32(info[81 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_lap_weight(i: u32) -> f32 {
-    let b = u32(info[81 + G] + i32(i) * 1);
+    let b = u32(info[83 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_lap_weight(i: u32, v: f32) {
-    let b = u32(info[81 + G] + i32(i) * 1);
+    let b = u32(info[83 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_rate_lap_sum(i: u32) -> f32 {
+    let b = u32(info[85 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_rate_lap_sum(i: u32, v: f32) {
+    let b = u32(info[85 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_x_0(i: u32) -> vec3<f32> {
-    let b = u32(info[83 + G] + i32(i) * 3);
+    let b = u32(info[87 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_x_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[83 + G] + i32(i) * 3);
+    let b = u32(info[87 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_v_0(i: u32) -> vec3<f32> {
-    let b = u32(info[85 + G] + i32(i) * 3);
+    let b = u32(info[89 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_v_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[85 + G] + i32(i) * 3);
+    let b = u32(info[89 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_rho_0(i: u32) -> f32 {
-    let b = u32(info[87 + G] + i32(i) * 1);
+    let b = u32(info[91 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho_0(i: u32, v: f32) {
-    let b = u32(info[87 + G] + i32(i) * 1);
+    let b = u32(info[91 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s_0(i: u32) -> mat3x3<f32> {
-    let b = u32(info[89 + G] + i32(i) * 6);
+    let b = u32(info[93 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s_0(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[89 + G] + i32(i) * 6);
+    let b = u32(info[93 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -363,19 +379,19 @@ fn st_s_0(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_e_0(i: u32) -> f32 {
-    let b = u32(info[91 + G] + i32(i) * 1);
+    let b = u32(info[95 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_e_0(i: u32, v: f32) {
-    let b = u32(info[91 + G] + i32(i) * 1);
+    let b = u32(info[95 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_kernel_shape_0(i: u32) -> mat3x3<f32> {
-    let b = u32(info[93 + G] + i32(i) * 9);
+    let b = u32(info[97 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_kernel_shape_0(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[93 + G] + i32(i) * 9);
+    let b = u32(info[97 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -387,109 +403,113 @@ fn st_kernel_shape_0(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ld_u_0(i: u32) -> vec3<f32> {
-    let b = u32(info[95 + G] + i32(i) * 3);
+    let b = u32(info[99 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_u_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[95 + G] + i32(i) * 3);
+    let b = u32(info[99 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 1u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 8u;
     return params[b];
 }
 fn prm_shape_floor(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 14u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 15u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 19u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 20u;
     return params[b];
 }
 fn prm_nonlocal_hardening(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 23u;
+    return params[b];
+}
+fn prm_nonlocal_rate(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 24u;
     return params[b];
 }
 fn prm_damage_length(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 25u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 26u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 27u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 28u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 29u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 30u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 31u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 32u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 32u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 33u;
     return params[b];
 }
 fn prm_D1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 33u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 34u;
     return params[b];
 }
 fn prm_D2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 34u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 35u;
     return params[b];
 }
 fn prm_D3(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 35u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 36u;
     return params[b];
 }
 fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 36u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 37u;
     return params[b];
 }
 fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 37u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 38u;
     return params[b];
 }
 fn prm_failure_band(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 38u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 39u;
     return params[b];
 }
 fn prm_failure_band_spacing(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 39u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 40u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -523,33 +543,40 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     s_i = (ld_s_0(i) + (0.5 * (dt * rate_of_s)));
     e_i = (ld_e_0(i) + (0.5 * (dt * rate_of_e)));
     kernel_shape_i = (ld_kernel_shape_0(i) + (0.5 * (dt * rate_of_kernel_shape)));
+    // nonlocal_rate
+    var rate_nl_i: f32 = ld_rate_nl(i);
+    let l2 = (prm_damage_length(i) * prm_damage_length(i));
+    let e = ld_edot(i);
+    let d = dev(e);
+    rate_nl_i = ((sqrt(((2.0 / 3.0) * ddot(d, d))) + (l2 * ld_rate_lap_sum(i))) / (1.0 + (l2 * ld_lap_weight(i))));
     // radial_return
     var eps_p_i: f32 = ld_eps_p(i);
     var deps_p_i: f32 = ld_deps_p(i);
     let sig_eq = sqrt(((3.0 * 0.5) * ddot(s_i, s_i)));
     let hardening_strain = select(eps_p_i, ld_eps_nl(i), ((prm_nonlocal_hardening(i) > 0.0) && (prm_damage_length(i) > 0.0)));
+    let e_2 = ld_edot(i);
+    let d_2 = dev(e_2);
+    let hardening_rate = select(sqrt(((2.0 / 3.0) * ddot(d_2, d_2))), rate_nl_i, ((prm_nonlocal_rate(i) > 0.0) && (prm_damage_length(i) > 0.0)));
     let eps_p = hardening_strain;
-    let e = ld_edot(i);
-    let d = dev(e);
-    let rate_p = sqrt(((2.0 / 3.0) * ddot(d, d)));
+    let rate_p = hardening_rate;
     let T = ld_T(i);
     let hardening = (prm_jc_A(i) + (prm_jc_B(i) * pow(max(eps_p, 0.0), prm_jc_n(i))));
     let rate = (1.0 + (prm_jc_C(i) * log(max((rate_p / prm_eps_rate0(i)), 1.0))));
     let T_2 = T;
     let sigma_y = ((hardening * rate) * (1.0 - pow(min(max(((T_2 - prm_T_room(i)) / (prm_T_melt(i) - prm_T_room(i))), 0.0), 1.0), prm_jc_m(i))));
     let c_y = min(1.0, (sigma_y / max(sig_eq, 1e-30)));
-    let d_2 = (((1.0 - c_y) / (3.0 * prm_G(i))) * sig_eq);
+    let d_3 = (((1.0 - c_y) / (3.0 * prm_G(i))) * sig_eq);
     s_i = (c_y * s_i);
-    eps_p_i = (eps_p_i + d_2);
-    deps_p_i = d_2;
+    eps_p_i = (eps_p_i + d_3);
+    deps_p_i = d_3;
     // damage
     var D_i: f32 = ld_D(i);
     var eps_nl_i: f32 = ld_eps_nl(i);
     let eps_p_2 = eps_p_i;
     let lap_sum = ld_lap_sum(i);
     let lap_weight = ld_lap_weight(i);
-    let l2 = (prm_damage_length(i) * prm_damage_length(i));
-    let nonlocal = select(eps_p_2, ((eps_p_2 + (l2 * lap_sum)) / (1.0 + (l2 * lap_weight))), (prm_damage_length(i) > 0.0));
+    let l2_2 = (prm_damage_length(i) * prm_damage_length(i));
+    let nonlocal = select(eps_p_2, ((eps_p_2 + (l2_2 * lap_sum)) / (1.0 + (l2_2 * lap_weight))), (prm_damage_length(i) > 0.0));
     let D = D_i;
     let eps_nl_new = nonlocal;
     let eps_nl = eps_nl_i;
@@ -565,9 +592,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let s_3 = s_2;
     let edot_2 = edot;
     let T_4 = T_3;
-    let e_2 = edot_2;
-    let d_3 = dev(e_2);
-    let rate_2 = (sqrt(((2.0 / 3.0) * ddot(d_3, d_3))) / prm_eps_rate0(i));
+    let e_3 = edot_2;
+    let d_4 = dev(e_3);
+    let rate_2 = (sqrt(((2.0 / 3.0) * ddot(d_4, d_4))) / prm_eps_rate0(i));
     let s_4 = s_3;
     let triax = ((-p_2) / max(sqrt((1.5 * ddot(s_4, s_4))), 1e-30));
     let T_5 = T_4;
@@ -646,4 +673,5 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     st_eps_p(i, eps_p_i);
     st_deps_p(i, deps_p_i);
     st_eps_nl(i, eps_nl_i);
+    st_rate_nl(i, rate_nl_i);
 }
