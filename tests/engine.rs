@@ -951,6 +951,50 @@ fn the_nonlocal_plastic_strain_of_a_step_converges_at_second_order_to_the_helmho
     assert!(errors[1] < 0.4 * errors[0], "not second order from 0.5 to 0.25 mm: {errors:?}");
 }
 
+/// The Weldox bar's Johnson–Cook flow stress (A + B ε^n)(1 + C ln(ε̇/ε̇0)) at strain `strain` and
+/// equivalent strain rate `rate`.
+fn weldox_flow_stress(strain: f64, rate: f64) -> f64 {
+    let (a, b, n, c, rate0) = (490e6, 807e6, 0.73, 0.0114, 5e-4);
+    (a + b * strain.max(0.0).powf(n)) * (1.0 + c * (rate / rate0).max(1.0).ln())
+}
+
+/// The fields of a bar around one more step, for its flow-surface tests.
+struct ReturnStep {
+    /// ε̄_p before the step, which the return reads.
+    eps_nl_before: Vec<f64>,
+    /// ε_p before the step.
+    eps_p_before: Vec<f64>,
+    /// The particles that flowed in the step and have not failed, three kernel radii (1.3 mm
+    /// each) or more from the ends, and their σ_eq after it.
+    flowed: Vec<(usize, f64)>,
+}
+
+/// Takes one more step of the bar `e` (1D) and reads what its flow-surface tests compare.
+fn one_more_return(e: &mut Engine<CpuBackend<f64>>) -> ReturnStep {
+    let (_, eps_nl_before) = stored_field(&e.backend, "eps_nl");
+    let (_, eps_p_before) = stored_field(&e.backend, "eps_p");
+    e.step().unwrap_or_else(|err| panic!("step: {err}"));
+    let field = |name| stored_field(&e.backend, name).1;
+    let (x, s, eps_p, damage) = (field("x"), field("s"), field("eps_p"), field("D"));
+    let flowed: Vec<(usize, f64)> = (0..x.len())
+        .filter(|&i| eps_p[i] > eps_p_before[i] && damage[i] < 1.0 && x[i] >= 0.004 && x[i] <= 0.036)
+        .map(|i| (i, 1.5f64.sqrt() * s[i].abs()))
+        .collect();
+    assert!(flowed.len() > 10, "only {} particles flowed in the bar's interior", flowed.len());
+    ReturnStep { eps_nl_before, eps_p_before, flowed }
+}
+
+/// The largest |σ_eq / σ_y − 1| over the flowed particles, σ_y = `surface(i)`.
+fn largest_misfit(step: &ReturnStep, what: &str, surface: impl Fn(usize) -> f64) -> f64 {
+    let misfits: Vec<f64> = step.flowed.iter().map(|&(i, sigma_eq)| sigma_eq / surface(i) - 1.0).collect();
+    pairsum::compare::max_abs(&misfits).unwrap_or_else(|e| panic!("{what}: {e}"))
+}
+
+/// The 1D deviator's equivalent rate √(2/3) · 2/3 |ε̇_xx| of a stored strain rate.
+fn equivalent_rate_1d(edot_xx: f64) -> f64 {
+    (2.0f64 / 3.0).sqrt() * 2.0 / 3.0 * edot_xx.abs()
+}
+
 /// With `nonlocal_hardening = 1` the Johnson–Cook return (plasticity/radial_return_jc.sph) hardens
 /// with the nonlocal plastic strain ε̄_p of the step before, not the particle's own ε_p. A Weldox
 /// bar stretched at 10⁴ 1/s with a step of ε_p (0.2 below 20 mm, 0 beyond) that ℓ = 2 mm
@@ -967,30 +1011,11 @@ fn nonlocal_hardening_returns_the_stress_to_the_flow_stress_of_the_nonlocal_plas
         "eps_p = \"select(x.x < 0.02 [m], 0.2, 0)\", v = \"10000 [1/s] * (x - vec(0.02 [m], 0 [m]))\"",
         300,
     );
-    let (_, eps_nl_before) = stored_field(&e.backend, "eps_nl");
-    let (_, eps_p_before) = stored_field(&e.backend, "eps_p");
-    e.step().unwrap_or_else(|err| panic!("step: {err}"));
-    let field = |name| stored_field(&e.backend, name).1;
-    let (x, s, eps_p, damage, edot) = (field("x"), field("s"), field("eps_p"), field("D"), field("edot"));
-    let (a, b, n, c, rate0) = (490e6, 807e6, 0.73, 0.0114, 5e-4);
-    let surface = |strain: f64, i: usize| {
-        let rate = (2.0f64 / 3.0).sqrt() * 2.0 / 3.0 * edot[i].abs();
-        (a + b * strain.max(0.0).powf(n)) * (1.0 + c * (rate / rate0).max(1.0).ln())
-    };
-    let (mut off_nonlocal, mut off_local, mut flowed) = (vec![], vec![], 0);
-    for i in 0..x.len() {
-        // Three kernel radii (1.3 mm each) from the ends.
-        if eps_p[i] <= eps_p_before[i] || damage[i] >= 1.0 || x[i] < 0.004 || x[i] > 0.036 {
-            continue;
-        }
-        flowed += 1;
-        let sigma_eq = 1.5f64.sqrt() * s[i].abs();
-        off_nonlocal.push(sigma_eq / surface(eps_nl_before[i], i) - 1.0);
-        off_local.push(sigma_eq / surface(eps_p_before[i], i) - 1.0);
-    }
-    assert!(flowed > 10, "only {flowed} particles flowed in the bar's interior");
-    let nonlocal = pairsum::compare::max_abs(&off_nonlocal).unwrap_or_else(|e| panic!("nonlocal: {e}"));
-    let local = pairsum::compare::max_abs(&off_local).unwrap_or_else(|e| panic!("local: {e}"));
+    let step = one_more_return(&mut e);
+    let edot = stored_field(&e.backend, "edot").1;
+    let rate = |i: usize| equivalent_rate_1d(edot[i]);
+    let nonlocal = largest_misfit(&step, "nonlocal", |i| weldox_flow_stress(step.eps_nl_before[i], rate(i)));
+    let local = largest_misfit(&step, "local", |i| weldox_flow_stress(step.eps_p_before[i], rate(i)));
     assert!(nonlocal < 1e-9, "σ_eq off the surface of ε̄_p by {nonlocal:e}");
     assert!(local > 1e-3, "σ_eq off the surface of ε_p by only {local:e}: the bar does not tell them apart");
 }
@@ -1012,31 +1037,13 @@ fn nonlocal_rate_returns_the_stress_to_the_flow_stress_of_the_averaged_strain_ra
         "eps_p = \"0.2\", v = \"select(x.x < 0.02 [m], 10000 [1/s], 20000 [1/s]) * (x - vec(0.02 [m], 0 [m]))\"",
         100,
     );
-    let (_, eps_nl_before) = stored_field(&e.backend, "eps_nl");
-    let (_, eps_p_before) = stored_field(&e.backend, "eps_p");
-    e.step().unwrap_or_else(|err| panic!("step: {err}"));
-    let field = |name| stored_field(&e.backend, name).1;
-    let (x, s, eps_p, damage) = (field("x"), field("s"), field("eps_p"), field("D"));
-    let (edot, rate_nl) = (field("edot"), field("rate_nl"));
-    let (a, b, n, c, rate0) = (490e6, 807e6, 0.73, 0.0114, 5e-4);
-    let surface =
-        |rate: f64, i: usize| (a + b * eps_nl_before[i].max(0.0).powf(n)) * (1.0 + c * (rate / rate0).max(1.0).ln());
-    let (mut off_nonlocal, mut off_local, mut flowed) = (vec![], vec![], 0);
-    for i in 0..x.len() {
-        if eps_p[i] <= eps_p_before[i] || damage[i] >= 1.0 || x[i] < 0.004 || x[i] > 0.036 {
-            continue;
-        }
-        flowed += 1;
-        let sigma_eq = 1.5f64.sqrt() * s[i].abs();
-        let own_rate = (2.0f64 / 3.0).sqrt() * 2.0 / 3.0 * edot[i].abs();
-        off_nonlocal.push(sigma_eq / surface(rate_nl[i], i) - 1.0);
-        off_local.push(sigma_eq / surface(own_rate, i) - 1.0);
-    }
-    assert!(flowed > 10, "only {flowed} particles flowed in the bar's interior");
-    let nonlocal = pairsum::compare::max_abs(&off_nonlocal).unwrap_or_else(|e| panic!("nonlocal: {e}"));
-    let local = pairsum::compare::max_abs(&off_local).unwrap_or_else(|e| panic!("local: {e}"));
-    assert!(nonlocal < 1e-9, "σ_eq off the surface of the averaged rate by {nonlocal:e}");
-    assert!(local > 1e-3, "σ_eq off the surface of the own rate by only {local:e}: the bar does not tell them apart");
+    let step = one_more_return(&mut e);
+    let (edot, rate_nl) = (stored_field(&e.backend, "edot").1, stored_field(&e.backend, "rate_nl").1);
+    let strain = |i: usize| step.eps_nl_before[i];
+    let averaged = largest_misfit(&step, "averaged", |i| weldox_flow_stress(strain(i), rate_nl[i]));
+    let own = largest_misfit(&step, "own", |i| weldox_flow_stress(strain(i), equivalent_rate_1d(edot[i])));
+    assert!(averaged < 1e-9, "σ_eq off the surface of the averaged rate by {averaged:e}");
+    assert!(own > 1e-3, "σ_eq off the surface of the own rate by only {own:e}: the bar does not tell them apart");
 }
 
 /// The density diffusion of the shaped Børvik plate (continuity/shaped_diffusion.sph) on a bar at
