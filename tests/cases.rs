@@ -1196,9 +1196,9 @@ fn total_lagrangian_beam_vibration_2d_keeps_its_amplitude_within_1_percent_over_
 /// A model's `require` holds for each material where it applies, checked when the case binds
 /// the parameters: the Børvik plate with a failure band beside a damage length (which replaces the
 /// local damage the band scales) is error C0048 naming the material, the reason and both values,
-/// and with either one alone the store builds.
+/// and with either one alone the store builds; a dimensionless value is shown without a unit.
 #[test]
-fn a_failure_band_beside_a_damage_length_is_error_c0048_naming_the_material_and_both_values() {
+fn a_failure_band_beside_a_damage_length_is_error_c0048_naming_the_material_and_both_values_in_their_units() {
     let store_with = |set: &[(&str, &str)]| {
         let (scene, plan) = prepare(&case("borvik_perforation"), &with_set(set)).unwrap_or_else(|e| panic!("{e}"));
         setup::build_store::<f64>(&plan, &scene.particles, &scene.materials).map(|_| ()).map_err(|e| e.to_string())
@@ -1211,6 +1211,8 @@ fn a_failure_band_beside_a_damage_length_is_error_c0048_naming_the_material_and_
     }
     assert_eq!(store_with(&[("failure_band", "1")]), Ok(()));
     assert_eq!(store_with(&[("damage_length", "2")]), Ok(()));
+    let err = store_with(&[("nonlocal_hardening", "1")]).expect_err("no damage length");
+    assert!(err.contains("(damage_length = 0 m, nonlocal_hardening = 1)"), "a dimensionless value has no unit: {err}");
 }
 
 /// The Børvik plate on kernels that follow the deformation (`models::ftlr19_perforation_shaped`,

@@ -373,7 +373,8 @@ fn check_requirements(
                     .iter()
                     .map(|p| {
                         let value = params[p.index()].as_ref().map_or("unbound".to_string(), |v| format!("{}", v[0]));
-                        format!("{} = {} {}", model.params[p.index()].name, value, model.params[p.index()].ty.unit)
+                        let param = &model.params[p.index()];
+                        format!("{} = {value} {}", param.name, param.ty.unit.label()).trim_end().to_string()
                     })
                     .collect();
                 shown.join(", ")
