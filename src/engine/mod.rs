@@ -111,7 +111,8 @@ impl std::fmt::Display for RunError {
                     Cause::TooFast { speed, bound, scale, scale_from } => write!(
                         f,
                         "particle {} (group {}) moves at `{}` = {speed:.3e} m/s, faster than the watchdog's bound \
-                         {bound:.3e} m/s ({:.3} × the case's speed scale, {scale:.3e} m/s, from {scale_from})",
+                         {bound:.3e} m/s ({:.3} × the case's speed scale, {scale:.3e} m/s, from {scale_from}; \
+                         where such a speed is real, a fragment thrown off, `[watchdog] speed_factor` raises the bound)",
                         u.particle,
                         u.group,
                         u.field,
