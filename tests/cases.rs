@@ -1212,7 +1212,7 @@ fn a_failure_band_beside_a_damage_length_is_error_c0048_naming_the_material_and_
     assert_eq!(store_with(&[("failure_band", "1")]), Ok(()));
     assert_eq!(store_with(&[("damage_length", "2")]), Ok(()));
     let err = store_with(&[("nonlocal_hardening", "1")]).expect_err("no damage length");
-    assert!(err.contains("(damage_length = 0 m, nonlocal_hardening = 1)"), "a dimensionless value has no unit: {err}");
+    assert!(err.contains("(nonlocal_hardening = 1, damage_length = 0 m)"), "a dimensionless value has no unit: {err}");
 }
 
 /// The Børvik plate on kernels that follow the deformation (`models::ftlr19_perforation_shaped`,
