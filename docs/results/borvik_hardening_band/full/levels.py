@@ -4,9 +4,12 @@
 
 Reads `histories.csv` of the runs stored beside this script (`8mm_1333um/`, `8mm_1mm/`, ...;
 how they were run: ../README.md, "full/") and prints, every 10 µs, the projectile's speed at each
-level, the steps between levels, and the observed order p and Richardson value through the
-three coarser levels and through the three finer ones (f = f0 + C Δx^p solved exactly through
-three levels of any spacings; `none` where the two steps differ in sign or no p in 0.05–12 fits).
+level, the steps between levels, the observed order p and Richardson value through each three
+consecutive levels (f = f0 + C Δx^p solved exactly through three levels of any spacings; `none`
+where the two steps differ in sign or no p in 0.05–12 fits), and, where four levels or more reach
+the time, the p, f0 and rms miss of the f0 + C Δx^p that fits them all best in the least-squares
+sense (`all:`; p searched over 0.25–6, `p=6 (bound)` where the best lies at the bound: the levels
+then follow no power of Δx, f0 is the finest levels' mean).
 """
 import os
 import sys
@@ -14,7 +17,7 @@ import sys
 import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-LEVELS = [("1333um", 4 / 3), ("1mm", 1.0), ("800um", 0.8), ("667um", 2 / 3)]
+LEVELS = [("1333um", 4 / 3), ("1mm", 1.0), ("800um", 0.8), ("667um", 2 / 3), ("571um", 4 / 7)]
 END = {"8mm": 150, "12mm": 100}
 
 
@@ -44,6 +47,19 @@ def order(h, f):
     return p, f[2] - d2 / (h[2] ** p - h[1] ** p) * h[2] ** p
 
 
+def least_squares(h, f):
+    """p, f0 and the rms miss of the f = f0 + C h^p that fits all levels best (p in 0.25–6)."""
+    h, f = np.asarray(h), np.asarray(f)
+    best = None
+    for p in np.arange(0.25, 6.0001, 0.01):
+        a = np.c_[np.ones_like(h), h**p]
+        c = np.linalg.lstsq(a, f, rcond=None)[0]
+        rms = np.sqrt(np.mean((f - a @ c) ** 2))
+        if best is None or rms < best[2]:
+            best = (p, c[0], rms)
+    return best
+
+
 def main(plate):
     runs = [(os.path.join(HERE, f"{plate}_{tag}"), h) for tag, h in LEVELS]
     runs = [(r, h) for r, h in runs if os.path.isdir(r)]
@@ -57,6 +73,10 @@ def main(plate):
         for k in range(len(f) - 2):
             p, r = order(h[k : k + 3], f[k : k + 3])
             line += f"  p{k + 1}={fmt(p)} R{k + 1}={fmt(r)}"
+        if len(f) > 3 and not np.isnan(f).any():
+            p, f0, rms = least_squares(h, f)
+            shown = f"{p:.2f}" if p < 5.995 else "6 (bound)"
+            line += f"  all: p={shown} f0={f0:.2f} rms={rms:.2f}"
         print(line)
 
 
