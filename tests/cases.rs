@@ -667,6 +667,36 @@ fn a_box_that_is_no_whole_number_of_spacings_is_warned_of() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// A graded plate whose coarse lattice does not fit its thickness: the Børvik plate (8 mm) at
+/// 2 mm with coarse spacing 6 mm holds one coarse layer, 6 mm of the 8, so its particles' volumes
+/// are all scaled up, the fine ones near the axis too. The case loads with warning C0050 at the
+/// plate, giving the scale that the fine particles' volume shows (over 2 mm cubed); with the
+/// 4 mm coarse lattice the case has (two layers) there is no warning and the fine particles keep
+/// their volume within 1 %.
+#[test]
+fn a_graded_plate_whose_coarse_lattice_does_not_fit_is_warned_of_with_its_fine_particles_scale() {
+    for (coarse_factor, warned) in [("3", true), ("2", false)] {
+        let opts = pairsum::scene::Options {
+            resolution: Some("fine".into()),
+            set: vec![("coarse_factor".into(), coarse_factor.into())],
+            ..Default::default()
+        };
+        let (scene, _) = prepare(&case("borvik_perforation"), &opts).expect("the case loads");
+        let plate = scene.bodies.iter().find(|b| b.name == "plate").expect("the plate");
+        let fine = plate.particles.clone().find(|i| scene.particles.dx[*i] < 2.5e-3).expect("a fine particle");
+        let scale = scene.particles.vol[fine] / 2e-3f64.powi(3);
+        let w = scene.warnings.concat();
+        if warned {
+            assert!(scale > 1.2, "one 6 mm layer for 8 mm: the volumes scaled by {scale}");
+            assert!(w.contains("C0050") && w.contains(&format!("scaled by {scale:.4}")), "{w}");
+            assert!(w.contains("borvik_perforation.toml:"), "{w}");
+        } else {
+            assert!((scale - 1.0).abs() < 0.01, "the fitting lattices scaled the fine volumes by {scale}");
+            assert!(!w.contains("C0050"), "{w}");
+        }
+    }
+}
+
 /// A Recht–Ipson fit may hold `a` and `p`, within their ranges; outside them it is C0031 at the
 /// result.
 #[test]

@@ -1472,8 +1472,14 @@ fn place_whole(
             budget.left,
         ),
     };
-    if let (Ok(cells), Primitive::Box { min, max }, None) = (&filled, &shape, &body.refine) {
-        warn_box_overhang(name, span.clone(), (min, max), spacing, cells.total_volume(), cx);
+    match (&filled, &shape, &body.refine) {
+        (Ok(cells), Primitive::Box { min, max }, None) => {
+            warn_box_overhang(name, span.clone(), (min, max), spacing, cells.total_volume(), cx)
+        }
+        (Ok(cells), _, Some(r)) => {
+            warn_graded_rescale(name, span.clone(), cells.volume_scale, (dx * r.factor, spacing), cx)
+        }
+        _ => {}
     }
     let filled = match body.fill_at() {
         case::FillAt::Cells => filled,
@@ -1744,6 +1750,26 @@ fn warn_box_overhang(
     let d = Diagnostic::warning("C0037", msg)
         .at(cx.span(span), "this box")
         .help("choose a spacing that divides the box, or a box that is a whole number of spacings");
+    cx.diags.push(d);
+}
+
+/// Warns (C0050) when a graded fill's lattices hold more than 1 % more or less volume than its
+/// shape: the fill scales every particle's volume, fine and coarse alike, to the shape's, so a
+/// coarse lattice that does not fit the shape changes the mass of the fine particles too (an 8 mm
+/// plate whose coarse spacing is 4.57 mm holds two coarse layers, 9.14 mm, and its fine particles
+/// near the axis lose a tenth of their mass).
+fn warn_graded_rescale(name: &str, span: std::ops::Range<usize>, scale: f64, (fine, coarse): (f64, f64), cx: &mut Ctx) {
+    if (scale - 1.0).abs() <= 0.01 {
+        return;
+    }
+    let more = if scale < 1.0 { "more" } else { "less" };
+    let msg = format!(
+        "body `{name}`: its graded lattices (fine {fine:.4e} m, coarse {coarse:.4e} m) hold {:.1} % {more} volume than its shape, so every particle's volume and mass, fine and coarse alike, is scaled by {scale:.4}",
+        100.0 * (1.0 / scale - 1.0).abs(),
+    );
+    let d = Diagnostic::warning("C0050", msg)
+        .at(cx.span(span), "this body")
+        .help("choose spacings that fit the shape: a plate a whole number of coarse spacings thick");
     cx.diags.push(d);
 }
 
