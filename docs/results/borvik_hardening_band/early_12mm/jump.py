@@ -1,12 +1,13 @@
-"""The 12 mm plate's first 11.5 µs: the five levels beside the runs that perturb one level.
+"""The 12 mm plate's first 11.5 µs: the six levels beside the runs that perturb one level.
 
     python3 jump.py
 
-Prints the projectile's speed at 4–11.5 µs of the full runs at each level (`../full/12mm_*/`) and
-of the runs stored beside this script (how they were run: ../README.md, "early_12mm/"), so that
-the step from 0.667 to 0.571 mm stands beside what the projectile's fill, its start and the time
-step change at one level. A run whose projectile started `gap` farther is read that much later
-(gap / 399.6 m/s), when it has flown as far as the others.
+Prints the projectile's speed at 4–11.5 µs of the full runs at each level (`../full/12mm_*/`),
+of a sixth level (0.5 mm) run to 12 µs, and of the runs stored beside this script (how they were
+run: ../README.md, "early_12mm/"), so that the step from 0.667 to 0.571 mm stands beside the
+next one and beside what the projectile's fill, its start and the time step change at one
+level. A run whose projectile started `gap` farther is read that much later (gap / 399.6 m/s),
+when it has flown as far as the others.
 """
 import os
 import sys
@@ -24,6 +25,7 @@ RUNS = [
     ("0.8 mm", os.path.join(FULL, "12mm_800um"), 0.0),
     ("0.667 mm", os.path.join(FULL, "12mm_667um"), 0.0),
     ("0.571 mm", os.path.join(FULL, "12mm_571um"), 0.0),
+    ("0.5 mm (to 12 us)", os.path.join(HERE, "nonlocal_hardening_500um_to_12us"), 0.0),
     ("0.667 mm, gap 2 mm", os.path.join(HERE, "nonlocal_hardening_667um_gap_2mm"), 0.5e-3),
     ("0.667 mm, cfl 0.24", os.path.join(HERE, "nonlocal_hardening_667um_cfl_0.24"), 0.0),
     ("0.571 mm, gap 2 mm", os.path.join(HERE, "nonlocal_hardening_571um_gap_2mm"), 0.5e-3),
