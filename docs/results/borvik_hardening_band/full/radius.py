@@ -1,30 +1,41 @@
-"""The 12 mm plate at 1 mm with the projectile's radius a quarter of a spacing shorter and longer.
+"""The 12 mm plate at 1 mm with the projectile's radius up to a quarter of a spacing either way.
 
     python3 radius.py
 
 Prints, every 10 µs, the projectile's speed of `12mm_1mm/` (R = 10 mm, R/Δx = 10) and of
-`12mm_1mm_radius_9750um/` and `12mm_1mm_radius_10250um/` (R/Δx 9.75 and 10.25; how they were run:
-../README.md, "full/"), the mean of the two, which is R = 10 mm up to the curvature in R, with its
-projectile's edge elsewhere on the plate's lattice, and that mean less the level's speed: how much
-where the edge falls moves the level, beside the steps between levels.
+`12mm_1mm_radius_*um/` (R = 9.75, 9.875, 10.125, 10.25 mm; how they were run: ../README.md,
+"full/"), then the straight line in R through them all (least squares) and each run's miss of it.
+Over ±2.5 % of R the projectile's own change is close to linear; what misses the line is where its
+edge falls on the plate's lattice: how much that moves a level, beside the steps between levels.
 """
 import os
 import sys
+
+import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.dont_write_bytecode = True  # nothing written beside the stored results
 sys.path.insert(0, HERE)
 from levels import speed  # noqa: E402
 
-RUNS = ["12mm_1mm", "12mm_1mm_radius_9750um", "12mm_1mm_radius_10250um"]
+RUNS = [
+    (9.75, "12mm_1mm_radius_9750um"),
+    (9.875, "12mm_1mm_radius_9875um"),
+    (10.0, "12mm_1mm"),
+    (10.125, "12mm_1mm_radius_10125um"),
+    (10.25, "12mm_1mm_radius_10250um"),
+]
 
 
 def main():
-    print(f"{'t (us)':>7}" + "".join(f"{r:>26}" for r in RUNS) + f"{'mean of the two':>17}{'less R = 10':>13}")
+    runs = [(r, os.path.join(HERE, f)) for r, f in RUNS if os.path.exists(os.path.join(HERE, f))]
+    radii = np.array([r for r, _ in runs])
+    print(f"{'t (us)':>7}" + "".join(f"{'R = %g' % r:>11}" for r in radii) + "   line: slope (m/s per mm), misses")
     for t in range(10, 90, 10):
-        v = [speed(os.path.join(HERE, r), t) for r in RUNS]
-        mean = 0.5 * (v[1] + v[2])
-        print(f"{t:7d}" + "".join(f"{x:26.2f}" for x in v) + f"{mean:17.2f}{mean - v[0]:+13.2f}")
+        v = np.array([speed(f, t) for _, f in runs])
+        slope, icept = np.polyfit(radii, v, 1)
+        miss = v - (icept + slope * radii)
+        print(f"{t:7d}" + "".join(f"{x:11.2f}" for x in v) + f"   {slope:6.2f}," + "".join(f"{m:+7.2f}" for m in miss))
 
 
 if __name__ == "__main__":
