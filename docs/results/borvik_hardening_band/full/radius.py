@@ -28,7 +28,7 @@ RUNS = [
 
 
 def main():
-    runs = [(r, os.path.join(HERE, f)) for r, f in RUNS if os.path.exists(os.path.join(HERE, f))]
+    runs = [(r, os.path.join(HERE, f)) for r, f in RUNS]
     radii = np.array([r for r, _ in runs])
     print(f"{'t (us)':>7}" + "".join(f"{'R = %g' % r:>11}" for r in radii) + "   line: slope (m/s per mm), misses")
     for t in range(10, 90, 10):
