@@ -24,6 +24,14 @@ enum Command {
         /// Treat warnings as errors
         #[arg(long)]
         deny_warnings: bool,
+        /// For case files: the resolution to check them at (a name from the case, a spacing, or
+        /// name@spacing), as `run` takes it
+        #[arg(long)]
+        resolution: Option<String>,
+        /// For case files: set a parameter (`${name}` in the case file), as `run` takes it:
+        /// --set coarse_factor=3
+        #[arg(long = "set", value_parser = parse_set)]
+        set: Vec<(String, String)>,
     },
     /// Run a case end to end; writes VTK output, report.json and report.md into --out
     Run {
@@ -155,7 +163,10 @@ pub fn main() -> i32 {
         }
     };
     let code = match cli.command {
-        Command::Check { paths, deny_warnings } => run_check(&paths, deny_warnings),
+        Command::Check { paths, deny_warnings, resolution, set } => {
+            let opts = crate::scene::Options { resolution, set, ..Default::default() };
+            run_check(&paths, deny_warnings, &opts)
+        }
         Command::Plan { path, dim, integrator, precision, resolution, set, domains } => {
             let opts = crate::scene::Options { resolution, set, ..Default::default() };
             run_plan(&find_input(&path), dim, &integrator, precision, &opts, domains)
@@ -242,9 +253,15 @@ pub fn sph_files(paths: &[PathBuf]) -> Vec<PathBuf> {
     out
 }
 
-fn run_check(paths: &[PathBuf], deny_warnings: bool) -> i32 {
+/// Checks model files and case files (the latter at `opts`' resolution and settings), prints the
+/// diagnostics and a count; the exit code (1 on errors, or on warnings when denied).
+fn run_check(paths: &[PathBuf], deny_warnings: bool, opts: &crate::scene::Options) -> i32 {
     let (cases, models): (Vec<PathBuf>, Vec<PathBuf>) =
         paths.iter().map(|p| find_input(p)).partition(|p| p.extension().is_some_and(|e| e == "toml"));
+    if cases.is_empty() && (opts.resolution.is_some() || !opts.set.is_empty()) {
+        eprintln!("error: `--resolution` and `--set` are for case files, and none was given");
+        return 2;
+    }
     let mut errors = 0;
     let mut warnings = 0;
     let mut n = 0;
@@ -260,7 +277,7 @@ fn run_check(paths: &[PathBuf], deny_warnings: bool) -> i32 {
     }
     for case in &cases {
         n += 1;
-        match crate::runner::check_file(case, &crate::scene::Options::default()) {
+        match crate::runner::check_file(case, opts) {
             Ok(w) => warnings += w,
             Err(e) => {
                 eprint!("{e}");

@@ -1,5 +1,5 @@
-//! The command line never loses a user's files, and takes a bundled case's name wherever it takes
-//! a case file. Each test runs the `pairsum` binary in a directory of its own.
+//! The command line never loses a user's files, takes a bundled case's name wherever it takes
+//! a case file, and checks a case at the resolution and settings it will run with. Each test runs the `pairsum` binary in a directory of its own.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -90,6 +90,28 @@ fn plan_emit_and_check_take_a_bundled_cases_name() {
     let o = pairsum(&d, &["check", "cantilever", "borvik_8mm"]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(stderr(&o).contains("checked 2 file(s): ok"), "{}", stderr(&o));
+    std::fs::remove_dir_all(&d).unwrap();
+}
+
+/// `check` takes `run`'s `--resolution` and `--set` for a case, so a case is checked as it will
+/// run: the Børvik plate at `fine` (2 mm) with a 6 mm coarse lattice, one layer for its 8 mm, is
+/// warned of (C0050), which `--deny-warnings` makes a failure; at the case's own 4 mm there is no
+/// warning. With no case file among the paths the two options are a usage error (exit 2).
+#[test]
+fn check_takes_a_resolution_and_settings_for_a_case_and_warns_as_the_run_would() {
+    let d = scratch("check-settings");
+    let fine = ["check", "borvik_perforation", "--resolution", "fine"];
+    let o = pairsum(&d, &[&fine[..], &["--set", "coarse_factor=3"]].concat());
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("C0050") && stderr(&o).contains("ok (1 warning(s))"), "{}", stderr(&o));
+    let o = pairsum(&d, &[&fine[..], &["--set", "coarse_factor=3", "--deny-warnings"]].concat());
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    let o = pairsum(&d, &fine);
+    assert!(o.status.success() && !stderr(&o).contains("C0050"), "{}", stderr(&o));
+    std::fs::write(d.join("m.sph"), MODEL).unwrap();
+    let o = pairsum(&d, &["check", "m.sph", "--set", "coarse_factor=3"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("for case files"), "{}", stderr(&o));
     std::fs::remove_dir_all(&d).unwrap();
 }
 
