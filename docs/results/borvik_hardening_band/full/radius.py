@@ -3,16 +3,17 @@
     python3 radius.py
 
 For each of those levels, prints every 10 µs the projectile's speed of the runs at R = 10 mm
-(`12mm_1333um/`, `12mm_1mm/`, `12mm_800um/`) and of `12mm_*_radius_*um/` (R moved by an eighth and a
-quarter of the level's spacing either way; how they were run: ../README.md, "full/"), then the
-straight line in R through them all (least squares), its slope and each run's miss of it.
+(`12mm_1333um/`, `12mm_1mm/`, `12mm_800um/`) and of those of `12mm_*_radius_*um/` that are stored
+(R moved by an eighth and a quarter of the level's spacing either way; at 0.8 mm by a quarter
+only; how they were run: ../README.md, "full/"), then the straight line in R through them all
+(least squares), its slope and each run's miss of it.
 
 Over a few per cent of R the projectile's own change is close to linear; what misses the line is
 where its edge falls on the plate's lattice. The line's value at R = 10 mm is the level's speed
-averaged over where the edge falls (the level's phase average). The next table sets those averages beside the
-R = 10 mm runs alone, with the order and Richardson value through the three levels; the last adds
-the finer levels' R = 10 mm runs (`12mm_667um/`, `12mm_571um/`) and fits f0 + C Δx^p through the
-four and the five levels by least squares (`levels.py`).
+averaged over where the edge falls (the level's phase average). The next table sets those
+averages beside the R = 10 mm runs alone, with the order and Richardson value through the three
+levels; the last adds the finer levels' R = 10 mm runs (`12mm_667um/`, `12mm_571um/`) and fits
+f0 + C Δx^p through the four and the five levels by least squares (`levels.py`).
 """
 import os
 import sys
