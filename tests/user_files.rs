@@ -1,5 +1,6 @@
 //! The command line never loses a user's files, takes a bundled case's name wherever it takes
-//! a case file, and checks a case at the resolution and settings it will run with. Each test runs the `pairsum` binary in a directory of its own.
+//! a case file, and checks a case at the resolution and settings it will run with. Each test runs
+//! the `pairsum` binary in a directory of its own.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};

@@ -1757,7 +1757,7 @@ fn warn_box_overhang(
 /// shape: the fill scales every particle's volume, fine and coarse alike, to the shape's, so a
 /// coarse lattice that does not fit the shape changes the mass of the fine particles too (an 8 mm
 /// plate whose coarse spacing is 4.57 mm holds two coarse layers, 9.14 mm, and its fine particles
-/// near the axis take 0.876 of their mass).
+/// near the axis keep 0.876 of their mass).
 fn warn_graded_rescale(name: &str, span: std::ops::Range<usize>, scale: f64, (fine, coarse): (f64, f64), cx: &mut Ctx) {
     if (scale - 1.0).abs() <= 0.01 {
         return;
