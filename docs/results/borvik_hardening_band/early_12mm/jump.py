@@ -51,7 +51,7 @@ FINER = [
 
 def radius_runs():
     """(Δx, [(R, run), ...]) of every level with runs at more than one radius."""
-    levels = [(h, runs(h, level)) for h, level in LEVELS]
+    levels = [(h, runs(h, f"12mm_{tag}")) for h, tag in LEVELS]
     for h, at10, name in FINER:
         found = [(r, os.path.join(HERE, name.format(round(r * 1000)))) for r in (10 - h / 4, 10 + h / 4)]
         found = [(r, f) for r, f in found if os.path.isdir(f)]
