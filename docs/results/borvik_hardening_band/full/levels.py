@@ -11,6 +11,7 @@ the time, the p, f0 and rms miss of the f0 + C Δx^p that fits them all best in 
 sense (`all:`; p searched over 0.25–6, `p=6 (bound)` where the best lies at the bound: the levels
 then follow no power of Δx, f0 is the finest levels' mean).
 """
+import functools
 import os
 import sys
 
@@ -21,11 +22,18 @@ LEVELS = [("1333um", 4 / 3), ("1mm", 1.0), ("800um", 0.8), ("667um", 2 / 3), ("5
 END = {"8mm": 150, "12mm": 100}
 
 
+@functools.lru_cache(maxsize=None)
+def history(run):
+    """Time (µs), the projectile's speed and the plug's (m/s) from a run's histories.csv, read once."""
+    d = np.genfromtxt(os.path.join(run, "histories.csv"), delimiter=",", names=True)
+    t, projectile, plug = (d[name] for name in d.dtype.names[:3])
+    return t * 1e6, -projectile, plug
+
+
 def speed(run, t_us):
     """The projectile's speed (m/s) at t_us, NaN past the run's last output."""
-    d = np.genfromtxt(os.path.join(run, "histories.csv"), delimiter=",", names=True)
-    t, v = d[d.dtype.names[0]], -d[d.dtype.names[1]]
-    return np.interp(t_us * 1e-6, t, v) if t[-1] >= (t_us - 1) * 1e-6 else np.nan
+    t, v, _ = history(run)
+    return np.interp(t_us, t, v) if t[-1] >= t_us - 1 else np.nan
 
 
 def order(h, f):
