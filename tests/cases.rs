@@ -1041,6 +1041,61 @@ fn spacing_divides_fills_at_the_largest_spacing_whole_in_the_length_so_the_edge_
     assert!(err.contains("C0049") && err.contains("`spacing_divides` fits a uniform fill"), "{err}");
 }
 
+/// The Børvik case with both bodies in rings (`fill = "rings"`, the plate's fine rings fitted to
+/// the projectile's radius by `spacing_divides = "10 mm"`): at 1.333, 1 and 0.8 mm the rings are
+/// 10/8, 10/10 and 10/13 mm wide, the projectile's outermost ring lies half a ring inside 10 mm and
+/// the plate's nearest rings half a ring either side of it, so the edge meets the plate the same
+/// way at every spacing; the plate's fine particles reach 24 mm at most, and each body's volumes
+/// sum to its quarter cylinder's to 1e-12, with no rescaling. A refine region off the body's axis,
+/// and rings on a box, are error C0051.
+#[test]
+fn a_ring_fill_puts_the_projectiles_edge_between_the_plates_rings_half_a_ring_each_side_at_every_spacing() {
+    let text = std::fs::read_to_string(case("borvik_perforation")).expect("case");
+    let (projectile, plate) = ("spacing_divides = \"${projectile_divides} mm\"", "spacing_factor = ${coarse_factor}");
+    assert!(text.contains(projectile) && text.contains(plate), "the Børvik case's bodies changed");
+    let rings = text
+        .replace(projectile, &format!("{projectile}\nfill = \"rings\""))
+        .replace(plate, &format!("{plate}\n{projectile}\nfill = \"rings\""));
+    let dir = out_dir("ring-fill");
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("borvik_perforation.toml");
+    std::fs::write(&path, &rings).unwrap();
+    let quarter = |r: f64, l: f64| std::f64::consts::PI * r * r * l / 4.0;
+    for (resolution, across) in [("refined_1333um", 8.0), ("refined", 10.0), ("refined_800um", 13.0)] {
+        let at = pairsum::scene::Options { resolution: Some(resolution.into()), ..Default::default() };
+        let (scene, _) = prepare(&path, &at).expect("the case loads");
+        let width = 0.01 / across;
+        for (name, exact) in [("projectile", quarter(0.01, 0.08)), ("plate", quarter(0.256, 0.008))] {
+            let body = scene.bodies.iter().find(|b| b.name == name).expect("the body");
+            let radii: Vec<f64> =
+                body.particles.clone().map(|k| scene.particles.x[k][0].hypot(scene.particles.x[k][1])).collect();
+            let inside = radii.iter().copied().filter(|&r| r < 0.01).fold(f64::NEG_INFINITY, f64::max);
+            assert!((0.01 - inside - width / 2.0).abs() < 1e-12, "{resolution}, {name}: a ring at {inside} m");
+            if name == "plate" {
+                let outside = radii.iter().copied().filter(|&r| r > 0.01).fold(f64::INFINITY, f64::min);
+                assert!((outside - 0.01 - width / 2.0).abs() < 1e-12, "{resolution}: the plate's ring at {outside} m");
+                let fine = body.particles.clone().filter(|&k| scene.particles.dx[k] < 0.002);
+                let reach = fine.map(|k| radii[k - body.particles.start]).fold(0.0, f64::max);
+                assert!(reach < 0.024 && reach > 0.024 - 2.0 * width, "{resolution}: fine rings reach {reach} m");
+            }
+            let volume: f64 = scene.particles.vol[body.particles.clone()].iter().sum();
+            assert!((volume / exact - 1.0).abs() < 1e-12, "{resolution}, {name}: volume {volume}, exact {exact}");
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+    let (from, off_axis) = ("base = [0, 0, \"-20 mm\"]", "base = [\"1 mm\", 0, \"-20 mm\"]");
+    assert!(rings.contains(from), "the plate's refine region changed");
+    let dir = out_dir("ring-fill-off-axis");
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("borvik_perforation.toml"), rings.replace(from, off_axis)).unwrap();
+    let err = prepare(&dir.join("borvik_perforation.toml"), &Default::default()).err().expect("an error").to_string();
+    let _ = std::fs::remove_dir_all(&dir);
+    assert!(err.contains("C0051") && err.contains("a cylinder on the body's axis"), "{err}");
+    let cube = "material = \"al6061\"";
+    let err = load_error_of_edited("cube_on_cube", cube, &format!("{cube}\nfill = \"rings\""));
+    assert!(err.contains("C0051") && err.contains("a ring fill takes a `cylinder`"), "{err}");
+}
+
 /// Two symmetry planes on one axis (clamped_plate_2d: the clamp at x = 0 keeping above, the
 /// mid-span at 0.2 m keeping below) keep a slab: 40 × 8 particles at 5 mm, the first and last
 /// columns half a spacing off their planes. Two planes that keep the same side, a third plane, and

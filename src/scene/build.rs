@@ -1295,21 +1295,100 @@ impl Budget {
 /// `spacing_divides = 0` is the plain `spacing_factor × dx`.
 fn body_spacing(body: &case::Body, dx: f64, cx: &mut Ctx) -> Option<f64> {
     let spacing = dx * body.spacing_factor.unwrap_or(1.0);
-    let Some(divides) = &body.spacing_divides else { return Some(spacing) };
+    let Some(length) = divides_length(body, cx)? else { return Some(spacing) };
+    match &body.refine {
+        None => Some(fitted(length, spacing)),
+        // A graded ring fill fits its fine rings' width ([`fill_in_rings`]).
+        Some(_) if body.fill_at() == case::FillAt::Rings => Some(spacing),
+        Some(refine) => {
+            let msg =
+                format!("body `{}`: `spacing_divides` fits a uniform fill; this one is graded", body.name.get_ref());
+            cx.err(refine.region.span(), "C0049", msg, "a graded fill");
+            None
+        }
+    }
+}
+
+/// The body's `spacing_divides` length (m), `Some(None)` when it has none or 0; `None` on an error.
+fn divides_length(body: &case::Body, cx: &mut Ctx) -> Option<Option<f64>> {
+    let Some(divides) = &body.spacing_divides else { return Some(None) };
     let what = format!("`spacing_divides` of body `{}`", body.name.get_ref());
     let length = cx.scalar(divides, unit("m"), &what)?;
     if length == 0.0 {
-        return Some(spacing);
+        return Some(None);
     }
-    let length = cx.positive(divides.span(), length, &what)?;
-    if let Some(refine) = &body.refine {
-        let msg = format!("body `{}`: `spacing_divides` fits a uniform fill; this one is graded", body.name.get_ref());
-        cx.err(refine.region.span(), "C0049", msg, "a graded fill");
+    cx.positive(divides.span(), length, &what).map(Some)
+}
+
+/// The largest spacing not above `spacing` that goes into `length` a whole number of times (a
+/// length already a whole number of spacings keeps it, up to round-off).
+fn fitted(length: f64, spacing: f64) -> f64 {
+    length / (length / spacing * (1.0 - 1e-9)).ceil().max(1.0)
+}
+
+/// A body filled in rings about its cylinder's axis (`fill = "rings"`, [`geometry::fill_rings`]):
+/// rings of the body's spacing (fitted already when uniform), or with `refine` the fine rings,
+/// their width fitted to `spacing_divides`, out to the refine cylinder's radius and coarse rings
+/// beyond.
+fn fill_in_rings(
+    body: &case::Body,
+    shape: &Primitive,
+    spacing: f64,
+    dx: f64,
+    budget: Budget,
+    cx: &mut Ctx,
+) -> Option<geometry::Particles> {
+    let name = body.name.get_ref();
+    let core = match &body.refine {
+        None => None,
+        Some(r) => {
+            let region = primitive(r.region.get_ref(), cx)?;
+            let Some(radius) = coaxial_radius(shape, &region) else {
+                let msg = format!(
+                    "body `{name}`: a ring fill's `refine` region must be a cylinder on the body's axis, at least as long"
+                );
+                cx.err(r.region.span(), "C0051", msg, "not a cylinder on the body's axis");
+                return None;
+            };
+            let fine = dx * r.factor;
+            let width = divides_length(body, cx)?.map_or(fine, |l| fitted(l, fine));
+            Some(geometry::Core { radius, spacing: fine, width })
+        }
+    };
+    let how = geometry::Rings { spacing, width: spacing, core };
+    match geometry::fill_rings(shape, &how, cx.dim, budget.left) {
+        Ok(p) => Some(p),
+        Err(geometry::GeometryError::TooManyParticles { count, estimated, .. }) => {
+            budget.exceeded(cx, body, count, estimated);
+            None
+        }
+        Err(e) => {
+            let span = body.fill.as_ref().map_or(body.shape.span(), |f| f.span());
+            cx.err(span, "C0051", format!("body `{name}`: {e}"), "a ring fill");
+            None
+        }
+    }
+}
+
+/// The radius of `region` when it is a cylinder on the axis of the cylinder `shape` that spans its
+/// whole length (the fine core of a graded ring fill).
+fn coaxial_radius(shape: &Primitive, region: &Primitive) -> Option<f64> {
+    let (
+        Primitive::Cylinder { base, axis, length, radius: outer },
+        Primitive::Cylinder { base: rb, axis: ra, radius, length: rl },
+    ) = (shape, region)
+    else {
         return None;
-    }
-    // A length already a whole number of spacings keeps it (up to round-off).
-    let whole = (length / spacing * (1.0 - 1e-9)).ceil().max(1.0);
-    Some(length / whole)
+    };
+    let ((k, [u, v]), (rk, _)) = (geometry::axis_index(*axis)?, geometry::axis_index(*ra)?);
+    let tol = 1e-9 * outer.max(*radius);
+    let span = |b: &[f64; 3], a: &[f64; 3], l: f64| {
+        let end = b[k] + a[k].signum() * l;
+        (b[k].min(end), b[k].max(end))
+    };
+    let ((lo, hi), (rlo, rhi)) = (span(base, axis, *length), span(rb, ra, *rl));
+    let on_axis = (base[u] - rb[u]).abs() <= tol && (base[v] - rb[v]).abs() <= tol;
+    (rk == k && on_axis && rlo <= lo + tol && rhi >= hi - tol).then_some(*radius)
 }
 
 /// Particles of one body: a primitive filled at its spacing (graded if asked), or a node list.
@@ -1353,6 +1432,7 @@ fn place(
                     "a node-centred fill puts particles on a plane through the body: use `fill = \"cells\"`"
                 }
                 (_, case::FillAt::Cells) => "a cell fill starts half a spacing off the plane; this one did not",
+                (_, case::FillAt::Rings) => "a ring fill keeps off the planes through its axis; this plane is not one of them",
             },
         );
         return None;
@@ -1435,6 +1515,9 @@ fn place_whole(
         };
     }
     let shape = primitive(body.shape.get_ref(), cx)?;
+    if body.fill_at() == case::FillAt::Rings {
+        return fill_in_rings(body, &shape, spacing, dx, budget, cx);
+    }
     // With symmetry planes the lattice's cells are anchored on the planes, so that the first row of
     // particles sits half a spacing off each plane, at the right distance from its mirror image.
     let corner = if mirrors.is_empty() {
@@ -1482,8 +1565,8 @@ fn place_whole(
         _ => {}
     }
     let filled = match body.fill_at() {
-        case::FillAt::Cells => filled,
         case::FillAt::Nodes => filled.map(|cells| geometry::at_corners(&cells, cx.dim)),
+        case::FillAt::Cells | case::FillAt::Rings => filled,
     };
     match filled {
         Ok(p) if p.len() as u64 > budget.left => {

@@ -129,7 +129,7 @@ pub struct Body {
     /// A finer spacing (a multiple of dx) inside this region of the body.
     #[serde(default)]
     pub refine: Option<Refine>,
-    /// Particles at the lattice's cell centres (default) or at its cells' corners.
+    /// Particles at the lattice's cell centres (default), at its cells' corners, or in rings.
     #[serde(default)]
     pub fill: Option<Spanned<FillAt>>,
 }
@@ -150,6 +150,9 @@ pub enum FillAt {
     Cells,
     /// At the cells' corners, each with its share of the cells around it (EK18's mesh nodes).
     Nodes,
+    /// In rings about a cylinder's axis, so that its circular edges lie the same way at every
+    /// spacing (`geometry::fill_rings`).
+    Rings,
 }
 
 #[derive(Deserialize, Debug)]

@@ -1,5 +1,6 @@
-//! Particle placement: primitives filled on a Cartesian lattice, graded (two-resolution) fills, and
-//! imported node lists (CSV, LS-DYNA `*NODE`).
+//! Particle placement: primitives filled on a Cartesian lattice, graded (two-resolution) fills,
+//! cylinders in rings about their axis ([`fill_rings`]), and imported node lists (CSV, LS-DYNA
+//! `*NODE`).
 //!
 //! # Conventions
 //!
@@ -49,11 +50,14 @@ mod fill;
 mod lattice;
 mod nodes;
 mod primitive;
+mod rings;
 mod spacing;
 
 pub use fill::{at_corners, fill, fill_graded, fill_graded_with_limit, fill_with, fill_with_limit, Fill, Particles};
 pub use nodes::{read_csv_nodes, read_lsdyna_nodes, NodeError, NodeList};
 pub use primitive::Primitive;
+pub(crate) use rings::axis_index;
+pub use rings::{fill_rings, Core, Rings};
 pub use spacing::estimate_spacing;
 
 use std::fmt;
