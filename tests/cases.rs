@@ -1036,13 +1036,13 @@ fn spacing_divides_fills_at_the_largest_spacing_whole_in_the_length_so_the_edge_
         assert!((volume / quarter - 1.0).abs() < 1e-9, "{edit}: volume {volume}, expected {quarter}");
     }
     let _ = std::fs::remove_dir_all(&dir);
-    let plate = "spacing_factor = ${coarse_factor}";
-    let err = load_error_of_edited("borvik_perforation", plate, &format!("{plate}\nspacing_divides = \"10 mm\""));
+    let plate = "spacing_divides = \"${plate_divides} mm\"";
+    let err = load_error_of_edited("borvik_perforation", plate, "spacing_divides = \"10 mm\"");
     assert!(err.contains("C0049") && err.contains("`spacing_divides` fits a uniform fill"), "{err}");
 }
 
-/// The Børvik case with both bodies in rings (`fill = "rings"`, the plate's fine rings fitted to
-/// the projectile's radius by `spacing_divides = "10 mm"`): at 1.333, 1 and 0.8 mm the rings are
+/// The Børvik case with both bodies in rings (`--set fill=rings --set plate_divides=10`: the
+/// plate's fine rings fitted to the projectile's radius by its `spacing_divides`): at 1.333, 1 and 0.8 mm the rings are
 /// 10/8, 10/10 and 10/13 mm wide, the projectile's outermost ring lies half a ring inside 10 mm and
 /// the plate's nearest rings half a ring either side of it, so the edge meets the plate the same
 /// way at every spacing; the plate's fine particles reach 24 mm at most, and each body's volumes
@@ -1050,20 +1050,12 @@ fn spacing_divides_fills_at_the_largest_spacing_whole_in_the_length_so_the_edge_
 /// and rings on a box, are error C0051.
 #[test]
 fn a_ring_fill_puts_the_projectiles_edge_between_the_plates_rings_half_a_ring_each_side_at_every_spacing() {
-    let text = std::fs::read_to_string(case("borvik_perforation")).expect("case");
-    let (projectile, plate) = ("spacing_divides = \"${projectile_divides} mm\"", "spacing_factor = ${coarse_factor}");
-    assert!(text.contains(projectile) && text.contains(plate), "the Børvik case's bodies changed");
-    let rings = text
-        .replace(projectile, &format!("{projectile}\nfill = \"rings\""))
-        .replace(plate, &format!("{plate}\n{projectile}\nfill = \"rings\""));
-    let dir = out_dir("ring-fill");
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join("borvik_perforation.toml");
-    std::fs::write(&path, &rings).unwrap();
+    let set = vec![("fill".to_string(), "rings".to_string()), ("plate_divides".to_string(), "10".to_string())];
     let quarter = |r: f64, l: f64| std::f64::consts::PI * r * r * l / 4.0;
     for (resolution, across) in [("refined_1333um", 8.0), ("refined", 10.0), ("refined_800um", 13.0)] {
-        let at = pairsum::scene::Options { resolution: Some(resolution.into()), ..Default::default() };
-        let (scene, _) = prepare(&path, &at).expect("the case loads");
+        let at =
+            pairsum::scene::Options { resolution: Some(resolution.into()), set: set.clone(), ..Default::default() };
+        let (scene, _) = prepare(&case("borvik_perforation"), &at).expect("the case loads");
         let width = 0.01 / across;
         for (name, exact) in [("projectile", quarter(0.01, 0.08)), ("plate", quarter(0.256, 0.008))] {
             let body = scene.bodies.iter().find(|b| b.name == name).expect("the body");
@@ -1082,13 +1074,14 @@ fn a_ring_fill_puts_the_projectiles_edge_between_the_plates_rings_half_a_ring_ea
             assert!((volume / exact - 1.0).abs() < 1e-12, "{resolution}, {name}: volume {volume}, exact {exact}");
         }
     }
-    let _ = std::fs::remove_dir_all(&dir);
+    let text = std::fs::read_to_string(case("borvik_perforation")).expect("case");
     let (from, off_axis) = ("base = [0, 0, \"-20 mm\"]", "base = [\"1 mm\", 0, \"-20 mm\"]");
-    assert!(rings.contains(from), "the plate's refine region changed");
+    assert!(text.contains(from), "the plate's refine region changed");
     let dir = out_dir("ring-fill-off-axis");
     std::fs::create_dir_all(&dir).unwrap();
-    std::fs::write(dir.join("borvik_perforation.toml"), rings.replace(from, off_axis)).unwrap();
-    let err = prepare(&dir.join("borvik_perforation.toml"), &Default::default()).err().expect("an error").to_string();
+    std::fs::write(dir.join("borvik_perforation.toml"), text.replace(from, off_axis)).unwrap();
+    let at = pairsum::scene::Options { set, ..Default::default() };
+    let err = prepare(&dir.join("borvik_perforation.toml"), &at).err().expect("an error").to_string();
     let _ = std::fs::remove_dir_all(&dir);
     assert!(err.contains("C0051") && err.contains("a cylinder on the body's axis"), "{err}");
     let cube = "material = \"al6061\"";
