@@ -1,15 +1,17 @@
 """The 8 mm plate with both bodies in rings, beside the lattice-filled levels averaged over where
 the projectile's edge falls.
 
-    python3 rings.py
+    python3 rings.py [8mm|12mm]     (both when none is given)
 
-Reads `histories.csv` of the ring-filled runs stored here (`8mm_1333um/`, `8mm_1mm/`, ...; how
-they were run: README.md) and prints every 10 µs the projectile's speed at each level, the steps
+Reads `histories.csv` of the ring-filled runs stored here (`8mm_1333um/`, `8mm_1mm/`, ...,
+`12mm_…`; how they were run: README.md) and prints every 10 µs the projectile's speed at each level, the steps
 between levels, and the order and Richardson value through each three consecutive levels (as
 ../borvik_hardening_band/full/levels.py: `none` where the steps differ in sign). Beside them, the
 lattice-filled (`fill = "cells"`) levels averaged over five projectile radii, the least-squares
 line in R at R = 10 mm (../borvik_hardening_band/full/radius.py), with their order the same way.
-Then, for each ring-filled run, when the plug first passes the projectile from 50 µs on, when it
+Then the ring-filled runs with the projectile's radius moved (`8mm_1mm_radius_*um/`, both bodies'
+rings fitted to it), with the least-squares line in R through them and each run's miss of it,
+beside the lattice's runs at the same radii. Then, for each ring-filled run, when the plug first passes the projectile from 50 µs on, when it
 last lags it, and the speed the projectile loses from 80 to 100 µs (../borvik_hardening_band/full/plug.py's reading: a
 plug slower than the projectile pushing it is still held by the plate).
 """
@@ -26,12 +28,12 @@ from levels import history, order, speed  # noqa: E402
 from radius import line, runs  # noqa: E402
 
 LEVELS = [(4 / 3, "1333um"), (1.0, "1mm"), (0.8, "800um"), (2 / 3, "667um")]
-TIMES = range(10, 110, 10)
+TIMES = {"8mm": range(10, 110, 10), "12mm": range(10, 90, 10)}
 
 
-def averaged(h, tag, t):
+def averaged(plate, h, tag, t):
     """The lattice-filled level's speed at t averaged over the projectile's radii (the line at R = 10 mm)."""
-    found = runs(h, f"8mm_{tag}")
+    found = runs(h, f"{plate}_{tag}")
     if len(found) < 3:
         return np.nan
     radii = np.array([r for r, _ in found])
@@ -47,32 +49,49 @@ def orders(hs, f):
     return "; ".join(out)
 
 
-def main():
-    stored = [(h, tag) for h, tag in LEVELS if os.path.isdir(os.path.join(HERE, f"8mm_{tag}"))]
+def main(plate):
+    print(f"\n== {plate}")
+    stored = [(h, tag) for h, tag in LEVELS if os.path.isdir(os.path.join(HERE, f"{plate}_{tag}"))]
     hs = [h for h, _ in stored]
     tags = " / ".join(tag for _, tag in stored)
     print(f"rings: {tags}; steps; order and Richardson value through each three; lattice averaged over R, the same")
-    for t in TIMES:
-        rings = np.array([speed(os.path.join(HERE, f"8mm_{tag}"), t) for _, tag in stored])
-        cells = np.array([averaged(h, tag, t) for h, tag in stored])
+    for t in TIMES[plate]:
+        rings = np.array([speed(os.path.join(HERE, f"{plate}_{tag}"), t) for _, tag in stored])
+        cells = np.array([averaged(plate, h, tag, t) for h, tag in stored])
         print(
             f"{t:4d} us  rings " + " / ".join(f"{x:.2f}" for x in rings)
             + "  steps " + ", ".join(f"{x:+.2f}" for x in np.diff(rings)) + f"  {orders(hs, rings)}"
             + "\n         cells " + " / ".join(f"{x:.2f}" for x in cells)
             + "  steps " + ", ".join(f"{x:+.2f}" for x in np.diff(cells)) + f"  {orders(hs, cells)}"
         )
-    print(f"\n{'run':12s} {'plug passes first (us)':>23s} {'lags last (us)':>15s} {'lost 80-100 us':>15s} {'v(100 us)':>10s}")
-    for _, tag in stored:
-        t, v, plug = history(os.path.join(HERE, f"8mm_{tag}"))
-        if t[-1] < 100:
+    for h, tag in stored:
+        moved = [(r, os.path.join(HERE, os.path.basename(f))) for r, f in runs(h, f"{plate}_{tag}")]
+        moved = [(r, f) for r, f in moved if os.path.isdir(f)]
+        if len(moved) < 3:
             continue
+        radii = np.array([r for r, _ in moved])
+        cells = [(r, f) for r, f in runs(h, f"{plate}_{tag}") if r in radii]
+        print(f"\n{plate}_{tag}, R = " + ", ".join(f"{r:.3f}" for r in radii) + " mm: speeds; the line's slope (m/s per mm) and misses")
+        for t in TIMES[plate]:
+            both = []
+            for name, found in (("rings", moved), ("cells", cells)):
+                v = np.array([speed(f, t) for _, f in found])
+                slope, _, miss = line(radii, v)
+                both.append(f"{name} " + " / ".join(f"{x:.2f}" for x in v) + f"  {slope:6.2f}," + "".join(f"{m:+6.2f}" for m in miss))
+            print(f"{t:4d} us  " + "   ".join(both))
+    ended = [tag for _, tag in stored if history(os.path.join(HERE, f"{plate}_{tag}"))[0][-1] >= 100]
+    if ended:
+        print(f"\n{'run':22s} {'plug passes first (us)':>23s} {'lags last (us)':>15s} {'lost 80-100 us':>15s} {'v(100 us)':>10s}")
+    for tag in ended:
+        t, v, plug = history(os.path.join(HERE, f"{plate}_{tag}"))
         window = (t > 50) & (t <= 100)
         passes, lags = np.where(window & (plug > v))[0], np.where(window & (plug < v))[0]
         first = t[passes[0]] if len(passes) else np.nan
         last = t[lags[-1]] if len(lags) else np.nan
         lost = np.interp(80, t, v) - np.interp(100, t, v)
-        print(f"8mm_{tag:8s} {first:23.1f} {last:15.1f} {lost:15.2f} {np.interp(100, t, v):10.2f}")
+        print(f"{plate}_{tag:16s} {first:23.1f} {last:15.1f} {lost:15.2f} {np.interp(100, t, v):10.2f}")
 
 
 if __name__ == "__main__":
-    main()
+    for plate in sys.argv[1:] or ["8mm", "12mm"]:
+        main(plate)
