@@ -1061,13 +1061,15 @@ fn a_ring_fill_puts_the_projectiles_edge_between_the_plates_rings_half_a_ring_ea
             let body = scene.bodies.iter().find(|b| b.name == name).expect("the body");
             let radii: Vec<f64> =
                 body.particles.clone().map(|k| scene.particles.x[k][0].hypot(scene.particles.x[k][1])).collect();
-            let inside = radii.iter().copied().filter(|&r| r < 0.01).fold(f64::NEG_INFINITY, f64::max);
+            let largest = |r: Vec<f64>| pairsum::compare::extremes(&r).expect("finite positions").1;
+            let smallest = |r: Vec<f64>| pairsum::compare::extremes(&r).expect("finite positions").0;
+            let inside = largest(radii.iter().copied().filter(|&r| r < 0.01).collect());
             assert!((0.01 - inside - width / 2.0).abs() < 1e-12, "{resolution}, {name}: a ring at {inside} m");
             if name == "plate" {
-                let outside = radii.iter().copied().filter(|&r| r > 0.01).fold(f64::INFINITY, f64::min);
+                let outside = smallest(radii.iter().copied().filter(|&r| r > 0.01).collect());
                 assert!((outside - 0.01 - width / 2.0).abs() < 1e-12, "{resolution}: the plate's ring at {outside} m");
                 let fine = body.particles.clone().filter(|&k| scene.particles.dx[k] < 0.002);
-                let reach = fine.map(|k| radii[k - body.particles.start]).fold(0.0, f64::max);
+                let reach = largest(fine.map(|k| radii[k - body.particles.start]).collect());
                 assert!(reach < 0.024 && reach > 0.024 - 2.0 * width, "{resolution}: fine rings reach {reach} m");
             }
             let volume: f64 = scene.particles.vol[body.particles.clone()].iter().sum();

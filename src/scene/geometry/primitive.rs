@@ -82,7 +82,7 @@ pub enum Primitive {
 }
 
 /// An axis component below this (of the unit axis) counts as zero when classifying an axis.
-const AXIS_EPS: f64 = 1e-12;
+pub(crate) const AXIS_EPS: f64 = 1e-12;
 
 /// The geometric kinds every primitive reduces to, in the model's `dim` axes (unused coordinates 0).
 #[derive(Clone, Debug)]
@@ -153,7 +153,7 @@ fn norm(p: [f64; 3]) -> f64 {
     (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt()
 }
 
-fn unit(name: &'static str, a: [f64; 3]) -> Result<[f64; 3], GeometryError> {
+pub(crate) fn unit(name: &'static str, a: [f64; 3]) -> Result<[f64; 3], GeometryError> {
     let a = finite_point(name, a)?;
     let big = a.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     if big == 0.0 {

@@ -11,7 +11,7 @@
 //! axes (a quarter or half model cut by them keeps whole sectors, none on a plane). The volumes
 //! sum to the cylinder's exactly, with no rescaling.
 
-use super::primitive::{positive, Primitive};
+use super::primitive::{positive, unit, Primitive, Shape, AXIS_EPS};
 use super::{GeometryError, Particles};
 use std::f64::consts::PI;
 
@@ -43,10 +43,10 @@ pub struct Core {
 type Ring = (f64, f64, f64);
 
 /// The axis a cylinder lies along (its index among x, y, z) and the other two, in order; `None`
-/// when its axis is oblique to the model's axes.
+/// when its axis is zero, not finite, or oblique to the model's axes.
 pub(crate) fn axis_index(axis: [f64; 3]) -> Option<(usize, [usize; 2])> {
-    let norm = axis.iter().map(|a| a * a).sum::<f64>().sqrt();
-    let k = (0..3).find(|&k| (axis[k].abs() - norm).abs() <= 1e-12 * norm && norm > 0.0)?;
+    let u = unit("axis", axis).ok()?;
+    let k = (0..3).find(|&k| u[k].abs() >= 1.0 - AXIS_EPS)?;
     let others = match k {
         0 => [1, 2],
         1 => [0, 2],
@@ -64,10 +64,11 @@ pub fn fill_rings(shape: &Primitive, how: &Rings, dim: usize, limit: u64) -> Res
     if dim != 3 {
         return Err(param(format!("a ring fill is for 3D cylinders; this model is {dim}D")));
     }
+    Shape::resolve(shape, dim)?; // the cylinder's own parameters, checked as for any fill
     let Some((k, [u, v])) = axis_index(*axis) else {
         return Err(param(format!("a ring fill needs a cylinder along x, y or z; its axis is {axis:?}")));
     };
-    let (radius, length) = (positive("radius", *radius)?, positive("length", *length)?);
+    let (radius, length) = (*radius, *length);
     let (spacing, width) = (positive("spacing", how.spacing)?, positive("width", how.width)?);
     let rings = rings(radius, spacing, width, how.core.as_ref())?;
     let layers = |s: f64| ((length / s).round() as u64).max(1);
@@ -173,7 +174,10 @@ mod tests {
         let has = |x: f64, y: f64| p.positions.iter().any(|q| (q[0] - x).abs() < 1e-9 && (q[1] - y).abs() < 1e-9);
         for q in &p.positions {
             assert!(has(-q[0], q[1]) && has(q[0], -q[1]), "{q:?} has no mirror image");
-            assert!(q[0].abs().min(q[1].abs()) > 0.25 * 0.8, "{q:?} lies within a quarter spacing of a plane");
+            assert!(
+                q[0].abs() > 0.25 * 0.8 && q[1].abs() > 0.25 * 0.8,
+                "{q:?} lies within a quarter spacing of a plane"
+            );
         }
     }
 
