@@ -614,31 +614,31 @@ fn st_rate_lap_sum(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 5u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 8u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 11u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 12u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 13u;
     return params[b];
 }
 fn prm_damage_coupling(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 14u;
     return params[b];
 }
 fn prm_K_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 15u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -785,7 +785,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 let f3 = select(0.0, ((mass * pen_rate) / dt), (pen_rate > 0.0));
                 a_contact = a_contact + (((K_p_i * max(max(f1, f2), f3)) / m_i) * n_2);
             }
-            // pairsum nonlocal_strain_laplacian (stdlib/damage/nonlocal_strain.sph:72)
+            // pairsum nonlocal_strain_laplacian (stdlib/damage/nonlocal_strain.sph:87)
             if (in_groups(2u, ints[j])) {
                 let m_j = ldj_m(j, sgn);
                 let rho_j = ldj_rho(j, sgn);
@@ -798,7 +798,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 weight = weight + k_2;
                 moment = moment + (k_2 * (r_ij * r_ij));
             }
-            // pairsum nonlocal_rate_laplacian (stdlib/damage/nonlocal_strain.sph:98)
+            // pairsum nonlocal_rate_laplacian (stdlib/damage/nonlocal_strain.sph:113)
             if (in_groups(2u, ints[j])) {
                 let m_j_2 = ldj_m(j, sgn);
                 let rho_j_2 = ldj_rho(j, sgn);

@@ -290,95 +290,99 @@ fn st_e_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 0u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 7u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 8u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 9u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 10u;
     return params[b];
 }
 fn prm_nonlocal_hardening(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 16u;
     return params[b];
 }
 fn prm_nonlocal_rate(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 17u;
     return params[b];
 }
 fn prm_damage_length(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 18u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 19u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 20u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 21u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 22u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 23u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 24u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 25u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 26u;
     return params[b];
 }
 fn prm_D1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 27u;
     return params[b];
 }
 fn prm_D2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 28u;
     return params[b];
 }
 fn prm_D3(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 29u;
     return params[b];
 }
 fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 30u;
     return params[b];
 }
 fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 31u;
     return params[b];
 }
 fn prm_failure_band(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 32u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 32u;
     return params[b];
 }
 fn prm_failure_band_spacing(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 33u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 33u;
+    return params[b];
+}
+fn prm_nonlocal_weight(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 34u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -446,7 +450,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let deps_p = deps_p_i;
     let spacing = select(ld_dx(i), prm_failure_band_spacing(i), (prm_failure_band_spacing(i) > 0.0));
     let local = select(deps_p, ((deps_p * spacing) / max(prm_failure_band(i), 1e-30)), (prm_failure_band(i) > 0.0));
-    let deps_p_2 = select(local, max((eps_nl_new - eps_nl), 0.0), (prm_damage_length(i) > 0.0));
+    let mixed = ((prm_nonlocal_weight(i) * (eps_nl_new - eps_nl)) + ((1.0 - prm_nonlocal_weight(i)) * deps_p));
+    let deps_p_2 = select(local, max(mixed, 0.0), (prm_damage_length(i) > 0.0));
     let p = ld_p(i);
     let s_2 = s_i;
     let edot = ld_edot(i);
