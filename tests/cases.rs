@@ -1295,6 +1295,25 @@ fn a_failure_band_beside_a_damage_length_is_error_c0048_naming_the_material_and_
     assert!(err.contains("(nonlocal_hardening = 1, damage_length = 0 m)"), "a dimensionless value has no unit: {err}");
 }
 
+/// The over-nonlocal damage driver's weight m (damage/nonlocal_strain.sph) mixes in ε̄_p, so it
+/// needs a damage length, and it is a share, so not negative: on the Børvik plate m = 2 without a
+/// damage length and m = −1 with one are each error C0048 naming the reason, and m = 2 with a
+/// 2 mm length builds the store.
+#[test]
+fn a_nonlocal_weight_without_a_damage_length_or_below_zero_is_error_c0048_and_two_with_one_builds() {
+    let store_with = |set: &[(&str, &str)]| {
+        let (scene, plan) = prepare(&case("borvik_perforation"), &with_set(set)).unwrap_or_else(|e| panic!("{e}"));
+        setup::build_store::<f64>(&plan, &scene.particles, &scene.materials).map(|_| ()).map_err(|e| e.to_string())
+    };
+    let err = store_with(&[("nonlocal_weight", "2")]).expect_err("no damage length");
+    for part in ["C0048", "material `weldox`", "set damage_length > 0", "nonlocal_weight = 2"] {
+        assert!(err.contains(part), "{part} not in: {err}");
+    }
+    let err = store_with(&[("nonlocal_weight", "-1"), ("damage_length", "2")]).expect_err("negative");
+    assert!(err.contains("C0048") && err.contains("m ≥ 0") && err.contains("nonlocal_weight = -1"), "{err}");
+    assert_eq!(store_with(&[("nonlocal_weight", "2"), ("damage_length", "2")]), Ok(()));
+}
+
 /// The Børvik plate on kernels that follow the deformation (`models::ftlr19_perforation_shaped`,
 /// CI resolution, a 0.5 mm failure band, 300 steps: about 27 µs): plate particles fail, every
 /// failed particle's kernel is round again (its shape exactly I) and no hourglass force pulls it

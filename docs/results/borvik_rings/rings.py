@@ -13,7 +13,8 @@ Then the ring-filled runs with the projectile's radius moved (`8mm_1mm_radius_*u
 rings fitted to it), with the least-squares line in R through them and each run's miss of it,
 beside the lattice's runs at the same radii. Then, for each ring-filled run, when the plug first passes the projectile from 50 µs on, when it
 last lags it, and the speed the projectile loses from 80 to 100 µs (../borvik_hardening_band/full/plug.py's reading: a
-plug slower than the projectile pushing it is still held by the plate).
+plug slower than the projectile pushing it is still held by the plate). Last, the ring-filled levels run with
+the over-nonlocal damage driver (`--set nonlocal_weight=2`, `8mm_<level>_m2/`) beside the same levels with m = 1.
 """
 import os
 import sys
@@ -92,6 +93,29 @@ def main(plate):
         print(f"{plate}_{tag:16s} {first:23.1f} {last:15.1f} {lost:15.2f} {np.interp(100, t, v):10.2f}")
 
 
+def over_nonlocal(plate):
+    """The ring-filled levels with the over-nonlocal damage driver (`--set nonlocal_weight=2`,
+    `<plate>_<level>_m2/`) beside the same levels with m = 1, every 10 µs, with their steps and
+    orders; then when each m = 2 run's plug first passes the projectile, as above."""
+    stored = [(h, tag) for h, tag in LEVELS if os.path.isdir(os.path.join(HERE, f"{plate}_{tag}_m2"))]
+    if not stored:
+        return
+    hs = [h for h, _ in stored]
+    print(f"\n== {plate}, nonlocal_weight m = 2 beside m = 1 (rings, " + " / ".join(tag for _, tag in stored) + ")")
+    for t in TIMES[plate]:
+        rows = []
+        for name, suffix in (("m=1", ""), ("m=2", "_m2")):
+            v = np.array([speed(os.path.join(HERE, f"{plate}_{tag}{suffix}"), t) for _, tag in stored])
+            rows.append(f"{name} " + " / ".join(f"{x:.2f}" for x in v) + "  steps " + ", ".join(f"{x:+.2f}" for x in np.diff(v)) + f"  {orders(hs, v)}")
+        print(f"{t:4d} us  " + "\n         ".join(rows))
+    for _, tag in stored:
+        t, v, plug = history(os.path.join(HERE, f"{plate}_{tag}_m2"))
+        passes = np.where((t > 50) & (t <= 100) & (plug > v))[0]
+        first = f"{t[passes[0]]:.1f} us" if len(passes) else "not by the run's end"
+        print(f"{plate}_{tag}_m2: the plug first passes the projectile {first}; v({t[-1]:.0f} us) = {v[-1]:.2f} m/s")
+
+
 if __name__ == "__main__":
     for plate in sys.argv[1:] or ["8mm", "12mm"]:
         main(plate)
+        over_nonlocal(plate)

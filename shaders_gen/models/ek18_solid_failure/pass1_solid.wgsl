@@ -713,7 +713,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let pi_ij_2 = select(0.0, (((((-visc_a_i) * c_bar_2) * phi_2) + (visc_b_i * (phi_2 * phi_2))) / rho_bar_2), (vr_2 < 0.0));
             let p4 = ldj_rho(j, sgn);
             dv = dv + (ldj_m(j, sgn) * (((div_m(sig_i_2, (rho_i * rho_i)) + div_m(sig_j_2, (p4 * p4))) - (pi_ij_2 * eye())) * gradW_ij));
-            // pairsum nonlocal_strain_laplacian (stdlib/damage/nonlocal_strain.sph:87)
+            // pairsum nonlocal_strain_laplacian (stdlib/damage/nonlocal_strain.sph:94)
             if ((body_i == ldj_body(j, sgn))) {
                 let m_j = ldj_m(j, sgn);
                 let rho_j = ldj_rho(j, sgn);
@@ -726,7 +726,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 weight = weight + k_2;
                 moment = moment + (k_2 * (r_ij * r_ij));
             }
-            // pairsum nonlocal_rate_laplacian (stdlib/damage/nonlocal_strain.sph:113)
+            // pairsum nonlocal_rate_laplacian (stdlib/damage/nonlocal_strain.sph:120)
             if ((body_i == ldj_body(j, sgn))) {
                 let m_j_2 = ldj_m(j, sgn);
                 let rho_j_2 = ldj_rho(j, sgn);

@@ -1,0 +1,55 @@
+"""The plate's damage and plastic strain in a ring-filled Børvik run, from its VTK output.
+
+    python3 band.py RUN [RUN ...]     (each RUN the --out folder of a run, its vtk/ still there)
+
+For each output time after the first: over the plate (body 1) the largest D, the number of
+failed particles (D = 1), and the largest ε_p with where that particle started (its distance from
+the axis r0 and its depth z0, the plate's top face at z = 0, in mm). The runs' VTK output is not
+kept here (README.md has the figures this printed); rerun a case to read it.
+"""
+import base64
+import os
+import re
+import struct
+import sys
+
+import numpy as np
+
+TYPES = {"Float64": "<f8", "Int64": "<i8", "UInt8": "u1"}
+
+
+def read(path):
+    """The binary (base64, UInt64 header) data arrays of a .vtu file, by name."""
+    text = open(path).read()
+    arrays = {}
+    pattern = r'<DataArray type="(\w+)" Name="(\w+)" NumberOfComponents="(\d+)" format="binary">\s*([A-Za-z0-9+/=]+)\s*</DataArray>'
+    for kind, name, components, data in re.findall(pattern, text):
+        raw = base64.b64decode(data)
+        size = struct.unpack("<Q", raw[:8])[0]
+        a = np.frombuffer(raw[8 : 8 + size], dtype=TYPES[kind])
+        arrays[name] = a.reshape(-1, int(components)) if int(components) > 1 else a
+    return arrays
+
+
+def main(run):
+    vtk = os.path.join(run, "vtk")
+    pvd = open(os.path.join(vtk, "borvik_perforation.pvd")).read()
+    outputs = re.findall(r'timestep="([^"]+)"[^>]*file="([^"]+)"', pvd)
+    first = read(os.path.join(vtk, outputs[0][1]))
+    start = dict(zip(first["id"], first["Points"] * 1e3))
+    for t, name in outputs[1:]:
+        d = read(os.path.join(vtk, name))
+        plate = d["body"] == 1
+        ids, eps, damage = d["id"][plate], d["eps_p"][plate], d["D"][plate]
+        i = np.argmax(eps)
+        x0 = start[ids[i]]
+        print(
+            f"{float(t) * 1e6:6.1f} us  D max {damage.max():.3f}  failed {np.sum(damage >= 1):4d}  "
+            f"eps_p max {eps[i]:.3f} from r0 {np.hypot(x0[0], x0[1]):.2f} mm, z0 {x0[2]:.2f} mm"
+        )
+
+
+if __name__ == "__main__":
+    for run in sys.argv[1:]:
+        print("==", run)
+        main(run)
