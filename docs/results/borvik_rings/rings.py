@@ -14,7 +14,8 @@ rings fitted to it), with the least-squares line in R through them and each run'
 beside the lattice's runs at the same radii. Then, for each ring-filled run, when the plug first passes the projectile from 50 µs on, when it
 last lags it, and the speed the projectile loses from 80 to 100 µs (../borvik_hardening_band/full/plug.py's reading: a
 plug slower than the projectile pushing it is still held by the plate). Last, the ring-filled levels run with
-the over-nonlocal damage driver (`--set nonlocal_weight=2`, `8mm_<level>_m2/`) beside the same levels with m = 1.
+the over-nonlocal damage driver (`--set nonlocal_weight=2`, `8mm_<level>_m2/`) beside the same levels with m = 1,
+and the 0.667 mm level on the lattice at two radii beside the ring-filled one.
 """
 import os
 import sys
@@ -115,7 +116,27 @@ def over_nonlocal(plate):
         print(f"{plate}_{tag}_m2: the plug first passes the projectile {first}; v({t[-1]:.0f} us) = {v[-1]:.2f} m/s")
 
 
+def lattice_667um():
+    """The 8 mm plate's 0.667 mm level on the lattice at R = 10 mm (../borvik_hardening_band/full/8mm_667um/)
+    and R = 9.917 mm (`8mm_667um_cells_radius_9917um/`, stop 87) beside the ring-filled level with m = 1 and
+    the lattice's 0.8 mm level at R = 10 mm, every 10 µs."""
+    here = os.path.join(HERE, "8mm_667um_cells_radius_9917um")
+    if not os.path.isdir(here):
+        return
+    columns = [
+        ("cells R=10", os.path.join(FULL, "8mm_667um")),
+        ("cells R=9.917", here),
+        ("rings", os.path.join(HERE, "8mm_667um")),
+        ("cells 0.8 mm R=10", os.path.join(FULL, "8mm_800um")),
+    ]
+    print("\n== 8mm at 0.667 mm: " + " / ".join(name for name, _ in columns))
+    for t in TIMES["8mm"]:
+        print(f"{t:4d} us  " + " / ".join(f"{speed(f, t):.2f}" for _, f in columns))
+
+
 if __name__ == "__main__":
     for plate in sys.argv[1:] or ["8mm", "12mm"]:
         main(plate)
         over_nonlocal(plate)
+        if plate == "8mm":
+            lattice_667um()
