@@ -7,28 +7,20 @@ failed particles (D = 1), and the largest ε_p with where that particle started 
 the axis r0 and its depth z0, the plate's top face at z = 0, in mm). The runs' VTK output is not
 kept here (README.md has the figures this printed); rerun a case to read it.
 """
-import base64
 import os
 import re
-import struct
 import sys
 
 import numpy as np
 
-TYPES = {"Float64": "<f8", "Int64": "<i8", "UInt8": "u1"}
+sys.dont_write_bytecode = True  # nothing written beside the stored results
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "..", "scripts"))
+from shear_band import read_vtu  # noqa: E402
 
 
 def read(path):
-    """The binary (base64, UInt64 header) data arrays of a .vtu file, by name."""
-    text = open(path).read()
-    arrays = {}
-    pattern = r'<DataArray type="(\w+)" Name="(\w+)" NumberOfComponents="(\d+)" format="binary">\s*([A-Za-z0-9+/=]+)\s*</DataArray>'
-    for kind, name, components, data in re.findall(pattern, text):
-        raw = base64.b64decode(data)
-        size = struct.unpack("<Q", raw[:8])[0]
-        a = np.frombuffer(raw[8 : 8 + size], dtype=TYPES[kind])
-        arrays[name] = a.reshape(-1, int(components)) if int(components) > 1 else a
-    return arrays
+    """The Float64 arrays of a VTU file pairsum wrote (scripts/shear_band.py's reader), as numpy arrays."""
+    return {name: np.array(values) for name, values in read_vtu(path).items()}
 
 
 def main(run):

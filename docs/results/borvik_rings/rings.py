@@ -51,6 +51,11 @@ def orders(hs, f):
     return "; ".join(out)
 
 
+def series(hs, v):
+    """A level series as text: its values, the steps between them, and orders()."""
+    return " / ".join(f"{x:.2f}" for x in v) + "  steps " + ", ".join(f"{x:+.2f}" for x in np.diff(v)) + f"  {orders(hs, v)}"
+
+
 def main(plate):
     print(f"\n== {plate}")
     stored = [(h, tag) for h, tag in LEVELS if os.path.isdir(os.path.join(HERE, f"{plate}_{tag}"))]
@@ -60,12 +65,7 @@ def main(plate):
     for t in TIMES[plate]:
         rings = np.array([speed(os.path.join(HERE, f"{plate}_{tag}"), t) for _, tag in stored])
         cells = np.array([averaged(plate, h, tag, t) for h, tag in stored])
-        print(
-            f"{t:4d} us  rings " + " / ".join(f"{x:.2f}" for x in rings)
-            + "  steps " + ", ".join(f"{x:+.2f}" for x in np.diff(rings)) + f"  {orders(hs, rings)}"
-            + "\n         cells " + " / ".join(f"{x:.2f}" for x in cells)
-            + "  steps " + ", ".join(f"{x:+.2f}" for x in np.diff(cells)) + f"  {orders(hs, cells)}"
-        )
+        print(f"{t:4d} us  rings {series(hs, rings)}\n         cells {series(hs, cells)}")
     for h, tag in stored:
         moved = [(r, os.path.join(HERE, os.path.basename(f))) for r, f in runs(h, f"{plate}_{tag}")]
         moved = [(r, f) for r, f in moved if os.path.isdir(f)]
@@ -107,7 +107,7 @@ def over_nonlocal(plate):
         rows = []
         for name, suffix in (("m=1", ""), ("m=2", "_m2")):
             v = np.array([speed(os.path.join(HERE, f"{plate}_{tag}{suffix}"), t) for _, tag in stored])
-            rows.append(f"{name} " + " / ".join(f"{x:.2f}" for x in v) + "  steps " + ", ".join(f"{x:+.2f}" for x in np.diff(v)) + f"  {orders(hs, v)}")
+            rows.append(f"{name} {series(hs, v)}")
         print(f"{t:4d} us  " + "\n         ".join(rows))
     for _, tag in stored:
         t, v, plug = history(os.path.join(HERE, f"{plate}_{tag}_m2"))
