@@ -127,6 +127,18 @@ enum Command {
         #[arg(long, default_value_t = 5)]
         reps: usize,
     },
+    /// The numerical uncertainty of the finest of four or more levels of a convergence study (any
+    /// quantity, from any code): power laws in the spacing fitted through every level in the
+    /// least-squares sense, as a convergence report's "Numerical uncertainty" table does
+    Uncertainty {
+        /// Each level as SPACING=VALUE, in any order and any one unit of spacing: 1.333=219.73
+        /// 1=222.78 0.8=222.76 0.667=222.91
+        #[arg(required = true, value_parser = parse_level)]
+        levels: Vec<(f64, f64)>,
+        /// A reference value: whether it lies within the finest value ± U
+        #[arg(long)]
+        reference: Option<f64>,
+    },
     /// Print the plan of a step: passes, fused equations, fields read and written, bytes per particle
     Plan {
         /// A model (.sph), a case (.toml) or a bundled case's name
@@ -215,6 +227,7 @@ pub fn main() -> i32 {
             let path = path.map(|p| find_input(&p));
             run_emit(path.as_deref(), &target, out.as_deref(), dim, all, force)
         }
+        Command::Uncertainty { levels, reference } => run_uncertainty(&levels, reference),
         Command::Bench { particles, reps } => match crate::bench::run(&particles, reps.max(1)) {
             Ok(table) => {
                 say(&table);
@@ -228,6 +241,46 @@ pub fn main() -> i32 {
     };
     crate::backend::transport::finalise();
     code
+}
+
+/// `SPACING=VALUE`, both numbers.
+fn parse_level(s: &str) -> Result<(f64, f64), String> {
+    let number = |t: &str| t.trim().parse::<f64>().map_err(|_| format!("`{t}` is not a number"));
+    let (h, v) = s.split_once('=').ok_or_else(|| format!("`{s}` is not SPACING=VALUE (for example 0.8=222.76)"))?;
+    Ok((number(h)?, number(v)?))
+}
+
+/// Prints the numerical uncertainty of the finest of `levels`; 1 where there is none.
+fn run_uncertainty(levels: &[(f64, f64)], reference: Option<f64>) -> i32 {
+    let Some(u) = crate::report::uncertainty::uncertainty(levels) else {
+        eprintln!(
+            "error: no uncertainty: it needs four levels or more, each spacing positive and given once, each value finite"
+        );
+        return 1;
+    };
+    let fit = &u.chosen;
+    say(&format!("observed order p (least squares, all {} levels): {:.3}\n", levels.len(), u.order()));
+    say(&format!(
+        "error estimated with: {}, {}weighted; f0 = {}, scatter σ = {}\n",
+        fit.law.describe(),
+        if fit.weighted { "" } else { "un" },
+        fit.limit(),
+        fit.sigma
+    ));
+    say(&format!(
+        "data range Δφ = {}, error of the finest ε = {}, safety factor {}\n",
+        u.data_range, u.error, u.safety
+    ));
+    say(&format!("finest (Δx = {}): {} ± {}\n", u.finest.0, u.finest.1, u.u));
+    if let Some(r) = reference {
+        let miss = (u.finest.1 - r).abs();
+        say(&if miss <= u.u {
+            format!("the reference {r} lies within it\n")
+        } else {
+            format!("the reference {r} lies {} beyond it\n", miss - u.u)
+        });
+    }
+    0
 }
 
 /// Every .sph file under the given paths, sorted.

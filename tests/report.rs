@@ -106,3 +106,30 @@ fn vtk_series_lists_files() {
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn the_uncertainty_command_prints_a_power_laws_order_limit_and_u_and_rejects_three_levels_or_a_bad_level() {
+    use std::process::Command;
+    // 5 − 0.3 Δx^1.3 at four spacings: order 1.3, f0 5, U = 1.25 × 0.3 × 0.5^1.3 = 0.1523…
+    let levels: Vec<String> =
+        [2.0, 1.5, 1.0, 0.5f64].iter().map(|h| format!("{h}={}", 5.0 - 0.3 * h.powf(1.3))).collect();
+    let out = Command::new(env!("CARGO_BIN_EXE_pairsum"))
+        .arg("uncertainty")
+        .args(&levels)
+        .args(["--reference", "4.9"])
+        .output()
+        .expect("runs");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}{}", String::from_utf8_lossy(&out.stderr));
+    assert!(text.contains("observed order p (least squares, all 4 levels): 1.300"), "{text}");
+    let u: f64 = text.lines().find_map(|l| l.split(" ± ").nth(1)).expect("finest ± U").trim().parse().expect("U");
+    assert!((u - 1.25 * 0.3 * 0.5f64.powf(1.3)).abs() < 1e-5, "{u}");
+    assert!(text.contains("the reference 4.9 lies within it"), "4.9 is 0.023 from the finest value: {text}");
+    let three = Command::new(env!("CARGO_BIN_EXE_pairsum")).args(["uncertainty", "3=1", "2=2", "1=2.5"]).output();
+    let three = three.expect("runs");
+    assert_eq!(three.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&three.stderr).contains("it needs four levels or more"));
+    let bad = Command::new(env!("CARGO_BIN_EXE_pairsum")).args(["uncertainty", "1=2", "0.5:3"]).output().expect("runs");
+    assert_eq!(bad.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("`0.5:3` is not SPACING=VALUE"));
+}

@@ -5,6 +5,7 @@
 
 use super::json::{Curve, History, ResultRow, RunReport, Table};
 use super::markdown::{fmt_num, fmt_percent};
+use super::uncertainty::{uncertainty, Uncertainty};
 
 /// How three values, coarse to fine, behave.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -227,10 +228,14 @@ pub fn analyse(levels: &[(String, RunReport)]) -> Convergence {
         .to_vec(),
         rows: summary,
     });
+    if h.len() >= 4 {
+        out.tables.push(uncertainty_table(&h, &followed));
+    }
     out.histories = error_plots(&levels, &followed);
     out.notes = vec![
         "Observed order p: through the three finest spacings, f(Δx) = f0 + C Δx^p; none when their differences change sign or do not shrink enough for p in [0.05, 10]. Richardson estimate: that f0. It is trustworthy only in the asymptotic range: a p far from the scheme's order, or from the error order q, says the spacings are not there yet.".into(),
         "p through the three coarser: the observed order one level back (with four or more spacings). The order holds when both triples converge and their orders are within a factor of 1.5 of each other: a p that moves more than that as a level is added is not yet the scheme's order, and its Richardson estimate is not a limit.".into(),
+        "Numerical uncertainty U (four or more spacings): power laws in Δx fitted through every level in the least-squares sense (after Eça & Hoekstra 2014; the rules in src/report/uncertainty.rs), so that a level's own scatter averages out where three levels' exact fit follows it; U bounds the finest value's distance from f0, and σ, the fit's standard deviation, is that scatter. A reference beyond the finest value ± U is missed by the model, not by the spacing.".into(),
         "Error order q: the least-squares slope of ln |error| against ln Δx over every resolution (the error falls as Δx^q); none when the error changes sign or does not fall at every refinement, or when the values do not converge (no observed order p: an error that falls while the differences grow is passing through the reference).".into(),
     ];
     out
@@ -242,6 +247,73 @@ fn order_holds(finest: Trend, coarser: Trend) -> &'static str {
     match (finest, coarser) {
         (Trend::Converging { order: p, .. }, Trend::Converging { order: q, .. }) if p.max(q) <= 1.5 * p.min(q) => "yes",
         _ => "no",
+    }
+}
+
+/// Each result's numerical uncertainty over every level (`h`, coarse to fine).
+fn uncertainty_table(h: &[f64], followed: &[Followed]) -> Table {
+    let rows = followed
+        .iter()
+        .map(|q| {
+            let row = q.finest;
+            let points: Vec<(f64, f64)> = h.iter().copied().zip(q.values.iter().copied()).collect();
+            let Some(u) = uncertainty(&points) else {
+                let mut none = vec![String::new(); 8];
+                (none[0], none[1]) = (row.quantity.clone(), "none: a value is missing".into());
+                return none;
+            };
+            vec![
+                row.quantity.clone(),
+                if u.data_range == 0.0 { "none: unchanged".into() } else { describe_order(u.order()) },
+                u.chosen.law.describe(),
+                fmt_num(u.chosen.limit()),
+                fmt_num(u.chosen.sigma),
+                fmt_num(u.u),
+                format!("{} ± {}", fmt_num(u.finest.1), fmt_num(u.u)),
+                row.reference.filter(|r| r.is_finite()).map(|r| covers(&u, r)).unwrap_or_default(),
+            ]
+        })
+        .collect();
+    Table {
+        title: "Numerical uncertainty of the finest value (least squares through every level)".into(),
+        header: [
+            "quantity",
+            "observed order p (all levels)",
+            "error estimated with",
+            "f0",
+            "scatter σ",
+            "U",
+            "finest value ± U",
+            "reference within it",
+        ]
+        .map(String::from)
+        .to_vec(),
+        rows,
+    }
+}
+
+/// The observed order, marked where it lies at the search's bound (no power law fits better).
+fn describe_order(p: f64) -> String {
+    use super::uncertainty::ORDERS;
+    if p >= ORDERS.1 * (1.0 - 1e-6) {
+        format!("≥ {} (the search's bound)", ORDERS.1)
+    } else if p <= ORDERS.0 * (1.0 + 1e-6) {
+        format!("≤ {} (the search's bound)", ORDERS.0)
+    } else {
+        format!("{p:.2}")
+    }
+}
+
+/// Whether the reference `r` lies within the finest value ± U, and if not by how much the
+/// finest value misses it.
+fn covers(u: &Uncertainty, r: f64) -> String {
+    let miss = u.finest.1 - r;
+    if miss.abs() <= u.u {
+        "yes".into()
+    } else if r != 0.0 {
+        format!("no: {:.2} % of it beyond U", 100.0 * (miss.abs() - u.u) / r.abs())
+    } else {
+        format!("no: {} beyond U", fmt_num(miss.abs() - u.u))
     }
 }
 
@@ -387,6 +459,26 @@ mod tests {
             level("d", 0.667, 251.76, 1.0),
         ];
         assert_eq!(analyse(&alternating).tables[2].rows[0][6..], ["none: oscillates", "no"]);
+    }
+
+    #[test]
+    fn four_levels_or_more_add_the_finest_values_numerical_uncertainty_and_whether_it_covers_the_reference() {
+        // crater = 10 − 4 Δx^1.5 at five spacings: order 1.5, f0 = 10, U = 1.25 × 4 × 0.25^1.5.
+        let levels: Vec<_> =
+            [2.0, 1.0, 0.5, 0.35, 0.25].iter().map(|h: &f64| level("l", *h, 10.0 - 4.0 * h.powf(1.5), 1.0)).collect();
+        let c = analyse(&levels);
+        let table = c.tables.iter().find(|t| t.title.starts_with("Numerical uncertainty")).expect("the table");
+        let row = &table.rows[0];
+        assert_eq!((row[0].as_str(), row[1].as_str()), ("crater", "1.50"));
+        let u: f64 = row[5].parse().expect("U");
+        assert!((u - 1.25 * 4.0 * 0.25f64.powf(1.5)).abs() < 1e-5, "{u}");
+        assert_eq!(c.tables[3].rows[1][1], "1.50", "gap = 2 crater: the same order");
+        assert_eq!(row[7], "yes", "the reference, 10, lies 0.5 from the finest value, 9.5: within U = 0.625");
+        // 12 − 4 Δx^1.5: the finest value, 11.5, misses the reference by 1.5, 0.875 beyond U.
+        let above: Vec<_> = levels.iter().map(|(n, r)| level(n, r.dx, r.results[0].value + 2.0, 1.0)).collect();
+        let row = &analyse(&above).tables[3].rows[0];
+        assert_eq!(row[7], "no: 8.75 % of it beyond U");
+        assert!(analyse(&levels[1..4]).tables.iter().all(|t| !t.title.starts_with("Numerical")), "three levels: none");
     }
 
     fn level(name: &str, dx: f64, value: f64, wall: f64) -> (String, RunReport) {

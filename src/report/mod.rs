@@ -7,6 +7,8 @@
 //! - [`markdown`]: the human-readable run report (`report.md`) with embedded plots.
 //! - [`plot`]: SVG line plots of time histories.
 //! - [`convergence`]: a case run at several resolutions: error at each, observed order, Richardson.
+//! - [`uncertainty`]: the numerical uncertainty of a study's finest value, from least-squares fits through
+//!   four or more levels.
 //! - [`csv`]: the time histories as `histories.csv`, one column per probe.
 //!
 //! [`write`] writes a whole report directory: `report.json`, `report.md`, `histories.csv` and one
@@ -17,6 +19,7 @@ pub mod csv;
 pub mod json;
 pub mod markdown;
 pub mod plot;
+pub mod uncertainty;
 pub mod vtk;
 
 use std::io;

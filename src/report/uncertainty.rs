@@ -1,0 +1,335 @@
+//! The numerical uncertainty of a convergence study's finest value, from power laws in the
+//! spacing fitted in the least-squares sense through all of its levels (four or more), after
+//! Eça & Hoekstra (J. Comput. Phys. 262 (2014) 104–130).
+//!
+//! Three levels fix `f0 + C Δx^p` exactly, so a level's own scatter (where a body's edge falls
+//! on the lattice, which particle fails first) moves the order and the Richardson value at will,
+//! and scatter as large as the steps leaves no order at all. Fitted through every level, the
+//! scatter averages out and its size, the fit's standard deviation σ, enters the uncertainty.
+//!
+//! The procedure, as implemented here:
+//! - Each law is fitted twice, unweighted and with the weights `w_i ∝ 1/Δx_i` (the finer levels
+//!   count more), and the one with the smaller σ is kept; σ² = n Σ w_i r_i² / (n − k) for `n`
+//!   levels, `k` fitted constants and the residuals `r_i`.
+//! - The observed order `p` is that of the best `f0 + α Δx^p`, `p` searched over [0.05, 8].
+//! - The error is estimated with that fit where 0.95 ≤ p ≤ 2.05. Otherwise an order outside the
+//!   range SPH's kernel sums reach says the levels are not yet in the asymptotic range, and the
+//!   error is estimated with the fit of the smallest σ among laws of fixed order: where p > 2.05,
+//!   `f0 + α Δx` and `f0 + α Δx²`; where p < 0.95, `f0 + α Δx` and the observed-order fit (not
+//!   where p lies at the search's lower bound: levels whose steps do not shrink follow no power); and
+//!   with five levels or more, `f0 + α1 Δx + α2 Δx²` too (through four, its one degree of
+//!   freedom rates it on a single residual, and it bends to follow a coarse level's kink).
+//!   These choices among the fixed-order laws are this code's; the fits, their weighting, σ, the
+//!   data range and the safety factors are Eça & Hoekstra's.
+//! - The error of the finest value is `ε = |fit(Δx_1) − f0|`; the data's range is
+//!   `Δφ = (max f − min f) / (n − 1)`.
+//! - Where σ < Δφ the uncertainty is `U = Fs ε + σ + |f_1 − fit(Δx_1)|`, with the safety factor
+//!   `Fs` 1.25 where 0.5 ≤ p < 2.1 and 3 otherwise; where the scatter is as large as the data's
+//!   range, `U = 3 (σ/Δφ) (ε + σ + |f_1 − fit(Δx_1)|)`.
+
+/// The power law a [`Fit`] fits in the spacing.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Law {
+    /// `f0 + α Δx^p`, `p` fitted too.
+    Power(f64),
+    /// `f0 + α Δx`.
+    First,
+    /// `f0 + α Δx²`.
+    Second,
+    /// `f0 + α1 Δx + α2 Δx²`.
+    FirstSecond,
+}
+
+impl Law {
+    /// The law's terms other than the constant at `h`.
+    fn terms(&self, h: f64) -> Vec<f64> {
+        match self {
+            Law::Power(p) => vec![h.powf(*p)],
+            Law::First => vec![h],
+            Law::Second => vec![h * h],
+            Law::FirstSecond => vec![h, h * h],
+        }
+    }
+
+    /// How many constants it fits: `f0`, the α's, and `p` for [`Law::Power`].
+    fn constants(&self) -> usize {
+        match self {
+            Law::First | Law::Second => 2,
+            Law::Power(_) | Law::FirstSecond => 3,
+        }
+    }
+
+    pub fn describe(&self) -> String {
+        match self {
+            Law::Power(p) => format!("f0 + α Δx^{p:.2}"),
+            Law::First => "f0 + α Δx".into(),
+            Law::Second => "f0 + α Δx²".into(),
+            Law::FirstSecond => "f0 + α1 Δx + α2 Δx²".into(),
+        }
+    }
+}
+
+/// A law fitted through the levels.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Fit {
+    pub law: Law,
+    /// `f0`, then the α's, for the spacing over the finest level's.
+    pub constants: Vec<f64>,
+    /// Whether the finer levels were weighted more (`w_i ∝ 1/Δx_i`).
+    pub weighted: bool,
+    /// The fit's standard deviation.
+    pub sigma: f64,
+}
+
+impl Fit {
+    /// The fitted value at spacing `h` (over the finest level's).
+    pub fn at(&self, h: f64) -> f64 {
+        self.constants[0] + self.law.terms(h).iter().zip(&self.constants[1..]).map(|(t, a)| t * a).sum::<f64>()
+    }
+
+    /// The value at zero spacing.
+    pub fn limit(&self) -> f64 {
+        self.constants[0]
+    }
+}
+
+/// The finest level's numerical uncertainty.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Uncertainty {
+    /// The best `f0 + α Δx^p`: the observed order.
+    pub observed: Fit,
+    /// The fit the error is estimated with.
+    pub chosen: Fit,
+    /// The finest level's spacing and value, as given.
+    pub finest: (f64, f64),
+    /// `(max f − min f) / (n − 1)`.
+    pub data_range: f64,
+    /// The finest level's error estimate, `|fit(Δx_1) − f0|`.
+    pub error: f64,
+    /// The safety factor, 1.25 or 3 (`U`'s second form has none).
+    pub safety: f64,
+    /// The uncertainty `U`: the value at zero spacing lies within the finest value ± U.
+    pub u: f64,
+}
+
+impl Uncertainty {
+    /// The observed order.
+    pub fn order(&self) -> f64 {
+        match self.observed.law {
+            Law::Power(p) => p,
+            _ => unreachable!("the observed fit is a power law"),
+        }
+    }
+}
+
+/// The uncertainty of the finest of `points` (spacing, value; any order), or `None` with fewer
+/// than four levels, a spacing repeated or not positive, or a value not finite.
+pub fn uncertainty(points: &[(f64, f64)]) -> Option<Uncertainty> {
+    let n = points.len();
+    let valid = points.iter().all(|(h, f)| *h > 0.0 && h.is_finite() && f.is_finite());
+    let mut sorted: Vec<f64> = points.iter().map(|p| p.0).collect();
+    sorted.sort_by(f64::total_cmp);
+    if n < 4 || !valid || sorted.windows(2).any(|w| w[1] <= w[0] * (1.0 + 1e-9)) {
+        return None;
+    }
+    let finest = *points.iter().min_by(|a, b| a.0.total_cmp(&b.0))?;
+    // Spacings over the finest's: the fits' equations stay well scaled whatever the unit.
+    let scaled: Vec<(f64, f64)> = points.iter().map(|(h, f)| (h / finest.0, *f)).collect();
+    let points = &scaled[..];
+    let observed = best_power(points)?;
+    let p = match observed.law {
+        Law::Power(p) => p,
+        _ => unreachable!(),
+    };
+    let mut candidates = vec![];
+    if (0.95..=2.05).contains(&p) {
+        candidates.push(observed.clone());
+    } else {
+        candidates.push(best_weighting(points, Law::First)?);
+        if p > 2.05 {
+            candidates.push(best_weighting(points, Law::Second)?);
+        } else if p > ORDERS.0 * (1.0 + 1e-6) {
+            candidates.push(observed.clone());
+        }
+        if n >= 5 {
+            candidates.push(best_weighting(points, Law::FirstSecond)?);
+        }
+    }
+    let chosen = candidates.into_iter().min_by(|a, b| a.sigma.total_cmp(&b.sigma))?;
+    let (lo, hi) = points.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, q| (a.0.min(q.1), a.1.max(q.1)));
+    let data_range = (hi - lo) / (n - 1) as f64;
+    let fitted = chosen.at(1.0);
+    let error = (fitted - chosen.limit()).abs();
+    let miss = (finest.1 - fitted).abs();
+    let sigma = chosen.sigma;
+    let good = (0.5..2.1).contains(&p) && sigma < data_range;
+    let safety = if good { 1.25 } else { 3.0 };
+    let u = if data_range == 0.0 {
+        0.0
+    } else if sigma < data_range {
+        safety * error + sigma + miss
+    } else {
+        3.0 * sigma / data_range * (error + sigma + miss)
+    };
+    Some(Uncertainty { observed, chosen, finest, data_range, error, safety, u })
+}
+
+/// The orders the observed order is searched over.
+pub const ORDERS: (f64, f64) = (0.05, 8.0);
+
+/// The best `f0 + α Δx^p` over `p` in [`ORDERS`], of the two weightings.
+fn best_power(points: &[(f64, f64)]) -> Option<Fit> {
+    let (lo, hi) = ORDERS;
+    let grid = 400;
+    let p_at = |k: usize| lo * (hi / lo).powf(k as f64 / grid as f64);
+    let mut best: Option<Fit> = None;
+    for weighted in [false, true] {
+        let sum = |p: f64| fit(points, Law::Power(p), weighted).map_or(f64::INFINITY, |f| f.sigma);
+        let k = (0..=grid).min_by(|a, b| sum(p_at(*a)).total_cmp(&sum(p_at(*b))))?;
+        // Golden-section search between the grid's neighbours of the best.
+        let (mut a, mut b) = (p_at(k.saturating_sub(1)), p_at((k + 1).min(grid)));
+        let g = 0.5 * (5f64.sqrt() - 1.0);
+        for _ in 0..80 {
+            let (c, d) = (b - g * (b - a), a + g * (b - a));
+            if sum(c) <= sum(d) {
+                b = d;
+            } else {
+                a = c;
+            }
+        }
+        let p = 0.5 * (a + b);
+        let candidate = fit(points, Law::Power(p), weighted)?;
+        if best.as_ref().is_none_or(|b| candidate.sigma < b.sigma) {
+            best = Some(candidate);
+        }
+    }
+    best
+}
+
+/// `law` fitted both ways; the one with the smaller σ.
+fn best_weighting(points: &[(f64, f64)], law: Law) -> Option<Fit> {
+    let (a, b) = (fit(points, law, false)?, fit(points, law, true)?);
+    Some(if b.sigma < a.sigma { b } else { a })
+}
+
+/// `law` fitted through `points` in the least-squares sense, unweighted or with `w_i ∝ 1/Δx_i`.
+fn fit(points: &[(f64, f64)], law: Law, weighted: bool) -> Option<Fit> {
+    let n = points.len();
+    let inverse: f64 = points.iter().map(|p| 1.0 / p.0).sum();
+    let weight = |h: f64| if weighted { 1.0 / h / inverse } else { 1.0 / n as f64 };
+    let rows: Vec<Vec<f64>> = points.iter().map(|(h, _)| [vec![1.0], law.terms(*h)].concat()).collect();
+    let m = rows[0].len();
+    let (mut a, mut b) = (vec![vec![0.0; m]; m], vec![0.0; m]);
+    for ((h, f), row) in points.iter().zip(&rows) {
+        let w = weight(*h);
+        for i in 0..m {
+            b[i] += w * row[i] * f;
+            for j in 0..m {
+                a[i][j] += w * row[i] * row[j];
+            }
+        }
+    }
+    let constants = solve(a, b)?;
+    let residuals: f64 = points
+        .iter()
+        .zip(&rows)
+        .map(|((h, f), row)| weight(*h) * (f - row.iter().zip(&constants).map(|(t, k)| t * k).sum::<f64>()).powi(2))
+        .sum();
+    let dof = n.checked_sub(law.constants()).filter(|d| *d > 0)?;
+    let sigma = (n as f64 * residuals / dof as f64).sqrt();
+    sigma.is_finite().then_some(Fit { law, constants, weighted, sigma })
+}
+
+/// `x` with `a x = b` by Gaussian elimination with partial pivoting (the fits' normal
+/// equations, at most 3 × 3); `None` where `a` is singular.
+fn solve(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Option<Vec<f64>> {
+    let m = b.len();
+    for k in 0..m {
+        let pivot = (k..m).max_by(|i, j| a[*i][k].abs().total_cmp(&a[*j][k].abs()))?;
+        if a[pivot][k].abs() <= 1e-300 || a[pivot][k].is_nan() {
+            return None;
+        }
+        a.swap(k, pivot);
+        b.swap(k, pivot);
+        let (upper, lower) = a.split_at_mut(k + 1);
+        let row = &upper[k];
+        for (i, other) in lower.iter_mut().enumerate() {
+            let factor = other[k] / row[k];
+            for (x, y) in other[k..].iter_mut().zip(&row[k..]) {
+                *x -= factor * y;
+            }
+            b[k + 1 + i] -= factor * b[k];
+        }
+    }
+    let mut x = vec![0.0; m];
+    for k in (0..m).rev() {
+        x[k] = (b[k] - (k + 1..m).map(|j| a[k][j] * x[j]).sum::<f64>()) / a[k][k];
+    }
+    Some(x)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_exact_power_law_gives_its_order_and_limit_and_an_uncertainty_of_1_25_its_error() {
+        let h: [f64; 5] = [2.0, 1.5, 1.0, 0.75, 0.5];
+        let points: Vec<(f64, f64)> = h.iter().map(|h| (*h, 5.0 - 0.3 * h.powf(1.3))).collect();
+        let u = uncertainty(&points).expect("five levels");
+        assert!((u.order() - 1.3).abs() < 1e-4, "{}", u.order());
+        assert_eq!(u.chosen.law, u.observed.law, "p within 0.95–2.05: the observed-order fit");
+        assert!((u.chosen.limit() - 5.0).abs() < 1e-6, "{}", u.chosen.limit());
+        assert!(u.chosen.sigma < 1e-6, "{}", u.chosen.sigma);
+        let error = 0.3 * 0.5f64.powf(1.3);
+        assert!((u.u - 1.25 * error).abs() < 1e-5, "{} vs {}", u.u, 1.25 * error);
+    }
+
+    #[test]
+    fn the_first_order_fit_is_ordinary_least_squares_in_the_spacing() {
+        // An independent computation: the textbook slope and intercept of a regression line.
+        let points = [(1.333, 10.9), (1.0, 11.8), (0.8, 11.4), (0.667, 12.1)];
+        let n = points.len() as f64;
+        let (mx, my) = (points.iter().map(|p| p.0).sum::<f64>() / n, points.iter().map(|p| p.1).sum::<f64>() / n);
+        let sxy: f64 = points.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
+        let sxx: f64 = points.iter().map(|p| (p.0 - mx).powi(2)).sum();
+        let (slope, intercept) = (sxy / sxx, my - sxy / sxx * mx);
+        let line = fit(&points, Law::First, false).expect("a line");
+        assert!((line.constants[1] - slope).abs() < 1e-12 && (line.limit() - intercept).abs() < 1e-12);
+        let rss: f64 = points.iter().map(|p| (p.1 - intercept - slope * p.0).powi(2)).sum();
+        assert!((line.sigma - (rss / (n - 2.0)).sqrt()).abs() < 1e-12, "σ with n − 2 degrees of freedom");
+    }
+
+    #[test]
+    fn an_order_above_2_05_is_estimated_with_a_first_or_second_order_law_and_a_safety_factor_of_3() {
+        let points: Vec<(f64, f64)> = [1.6, 1.3, 1.0, 0.8].iter().map(|h: &f64| (*h, 1.0 + h.powi(3))).collect();
+        let u = uncertainty(&points).expect("four levels");
+        assert!((u.order() - 3.0).abs() < 1e-4, "{}", u.order());
+        assert!(matches!(u.chosen.law, Law::First | Law::Second), "four levels: {:?}", u.chosen.law);
+        assert_eq!(u.safety, 3.0);
+        assert!(u.u >= 0.8f64.powi(3), "U {} covers the true error {}", u.u, 0.8f64.powi(3));
+    }
+
+    #[test]
+    fn scatter_as_large_as_the_trend_gives_an_uncertainty_covering_every_level() {
+        // Alternating levels about a flat line: σ is as large as the data's range.
+        let points = [(1.333, 222.0), (1.0, 224.0), (0.8, 222.2), (0.667, 223.8), (0.571, 222.4)];
+        let u = uncertainty(&points).expect("five levels");
+        assert!(u.chosen.sigma >= u.data_range, "σ {} against Δφ {}", u.chosen.sigma, u.data_range);
+        let spread = points.iter().map(|p| (p.1 - 222.4f64).abs()).fold(0.0, f64::max);
+        assert!(u.u >= spread, "U {} against the levels' largest distance from the finest {spread}", u.u);
+    }
+
+    #[test]
+    fn fewer_than_four_levels_a_repeated_spacing_or_a_missing_value_give_none() {
+        assert_eq!(uncertainty(&[(3.0, 1.0), (2.0, 2.0), (1.0, 2.5)]), None);
+        assert_eq!(uncertainty(&[(3.0, 1.0), (2.0, 2.0), (2.0, 2.1), (1.0, 2.5)]), None);
+        assert_eq!(uncertainty(&[(4.0, 0.5), (3.0, 1.0), (2.0, f64::NAN), (1.0, 2.5)]), None);
+    }
+
+    #[test]
+    fn levels_that_do_not_change_have_no_uncertainty() {
+        let u = uncertainty(&[(4.0, 7.0), (3.0, 7.0), (2.0, 7.0), (1.0, 7.0)]).expect("four levels");
+        assert_eq!((u.u, u.chosen.limit()), (0.0, 7.0));
+    }
+}
