@@ -108,7 +108,7 @@ pub struct Uncertainty {
     pub error: f64,
     /// The safety factor, 1.25 or 3 (`U`'s second form has none).
     pub safety: f64,
-    /// The uncertainty `U`: the value at zero spacing lies within the finest value ± U.
+    /// The uncertainty `U`: the finest value ± U is meant to hold the value at zero spacing.
     pub u: f64,
 }
 
