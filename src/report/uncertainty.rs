@@ -17,8 +17,10 @@
 //!   error is estimated with the fit of the smallest σ among laws of fixed order: where p > 2.05,
 //!   `f0 + α Δx` and `f0 + α Δx²`; where p < 0.95, `f0 + α Δx` and the observed-order fit (not
 //!   where p lies at the search's lower bound: levels whose steps do not shrink follow no power); and
-//!   with five levels or more, `f0 + α1 Δx + α2 Δx²` too (through four, its one degree of
-//!   freedom rates it on a single residual, and it bends to follow a coarse level's kink).
+//!   with five levels or more, `f0 + α1 Δx + α2 Δx²` too, where it has no extremum between zero
+//!   and the coarsest spacing (through four levels its one degree of freedom rates it on a single
+//!   residual, and one that turns back bends to follow a coarse level's kink and extrapolates past
+//!   every level).
 //!   These choices among the fixed-order laws are this code's; the fits, their weighting, σ, the
 //!   data range and the safety factors are Eça & Hoekstra's.
 //! - The error of the finest value is `ε = |fit(Δx_1) − f0|`; the data's range is
@@ -151,8 +153,9 @@ pub fn uncertainty(points: &[(f64, f64)]) -> Option<Uncertainty> {
         } else if p > ORDERS.0 * (1.0 + 1e-6) {
             candidates.push(observed.clone());
         }
+        let coarsest = points.iter().fold(0.0f64, |a, q| a.max(q.0));
         if n >= 5 {
-            candidates.push(best_weighting(points, Law::FirstSecond)?);
+            candidates.extend(best_weighting(points, Law::FirstSecond).filter(|f| monotone(f, coarsest)));
         }
     }
     let chosen = candidates.into_iter().min_by(|a, b| a.sigma.total_cmp(&b.sigma))?;
@@ -204,6 +207,14 @@ fn best_power(points: &[(f64, f64)]) -> Option<Fit> {
         }
     }
     best
+}
+
+/// Whether `f0 + α1 Δx + α2 Δx²` has no extremum between zero spacing and `coarsest`: one that
+/// turns back extrapolates past the levels it bends to follow (a coarse level's kink).
+fn monotone(fit: &Fit, coarsest: f64) -> bool {
+    let (a1, a2) = (fit.constants[1], fit.constants[2]);
+    let turn = -a1 / (2.0 * a2);
+    !(turn > 0.0 && turn < coarsest)
 }
 
 /// `law` fitted both ways; the one with the smaller σ.
@@ -318,6 +329,19 @@ mod tests {
         assert!(u.chosen.sigma >= u.data_range, "σ {} against Δφ {}", u.chosen.sigma, u.data_range);
         let spread = points.iter().map(|p| (p.1 - 222.4f64).abs()).fold(0.0, f64::max);
         assert!(u.u >= spread, "U {} against the levels' largest distance from the finest {spread}", u.u);
+    }
+
+    #[test]
+    fn a_first_and_second_order_law_that_turns_back_between_the_levels_is_not_used() {
+        // A coarse level 2.5 below four that agree within 0.5 (the 8 mm Børvik plate at 40 µs):
+        // f0 + α1 Δx + α2 Δx² fits them by turning back between the levels and extrapolates
+        // below every level; the law used does not.
+        let points = [(4.0 / 3.0, 241.30), (1.0, 243.80), (0.8, 243.63), (2.0 / 3.0, 243.52), (4.0 / 7.0, 243.96)];
+        let bent = best_weighting(&points, Law::FirstSecond).expect("a fit");
+        assert!(!monotone(&bent, 4.0 / 3.0), "the fit turns back: {:?}", bent.constants);
+        let u = uncertainty(&points).expect("five levels");
+        assert!(matches!(u.chosen.law, Law::First | Law::Second), "{:?}", u.chosen.law);
+        assert!(u.chosen.limit() > 243.0, "f0 {} lies with the finer levels", u.chosen.limit());
     }
 
     #[test]
