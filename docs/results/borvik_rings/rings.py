@@ -15,7 +15,7 @@ beside the lattice's runs at the same radii. Then, for each ring-filled run, whe
 last lags it, and the speed the projectile loses from 80 to 100 µs (../borvik_hardening_band/full/plug.py's reading: a
 plug slower than the projectile pushing it is still held by the plate). Last, the ring-filled levels run with
 the over-nonlocal damage driver (`--set nonlocal_weight=2`, `8mm_<level>_m2/`) beside the same levels with m = 1,
-and the 0.667 mm level on the lattice at two radii beside the ring-filled one.
+and the 0.667 mm level on the lattice at three radii beside the ring-filled one.
 """
 import os
 import sys
@@ -117,21 +117,20 @@ def over_nonlocal(plate):
 
 
 def lattice_667um():
-    """The 8 mm plate's 0.667 mm level on the lattice at R = 10 mm (../borvik_hardening_band/full/8mm_667um/)
-    and R = 9.917 mm (`8mm_667um_cells_radius_9917um/`, stop 87) beside the ring-filled level with m = 1 and
-    the lattice's 0.8 mm level at R = 10 mm, every 10 µs."""
-    here = os.path.join(HERE, "8mm_667um_cells_radius_9917um")
-    if not os.path.isdir(here):
+    """The 8 mm plate's 0.667 mm level on the lattice at R = 10 mm (../borvik_hardening_band/full/8mm_667um/),
+    9.917 mm (stop 87) and 10.083 mm (stop 88; `8mm_667um_radius_<R>um/` there), their least-squares line in R
+    at R = 10 mm (`averaged`), beside the ring-filled level with m = 1 and the lattice's 0.8 mm level averaged
+    the same way, every 10 µs."""
+    found = runs(2 / 3, "8mm_667um")
+    if len(found) < 2:
         return
-    columns = [
-        ("cells R=10", os.path.join(FULL, "8mm_667um")),
-        ("cells R=9.917", here),
-        ("rings", os.path.join(HERE, "8mm_667um")),
-        ("cells 0.8 mm R=10", os.path.join(FULL, "8mm_800um")),
-    ]
+    columns = [(f"cells R={r:.3f}", lambda t, f=f: speed(f, t)) for r, f in found]
+    columns.append(("their line at R=10", lambda t: averaged("8mm", 2 / 3, "667um", t)))
+    columns.append(("rings", lambda t: speed(os.path.join(HERE, "8mm_667um"), t)))
+    columns.append(("cells 0.8 mm averaged", lambda t: averaged("8mm", 0.8, "800um", t)))
     print("\n== 8mm at 0.667 mm: " + " / ".join(name for name, _ in columns))
     for t in TIMES["8mm"]:
-        print(f"{t:4d} us  " + " / ".join(f"{speed(f, t):.2f}" for _, f in columns))
+        print(f"{t:4d} us  " + " / ".join(f"{value(t):.2f}" for _, value in columns))
 
 
 if __name__ == "__main__":
