@@ -259,7 +259,7 @@ fn run_uncertainty(levels: &[(f64, f64)], reference: Option<f64>) -> i32 {
         return 1;
     };
     let fit = &u.chosen;
-    say(&format!("observed order p (least squares, all {} levels): {:.3}\n", levels.len(), u.order()));
+    say(&format!("observed order p (least squares, all {} levels): {}\n", levels.len(), u.describe_order()));
     say(&format!(
         "error estimated with: {}, {}weighted; f0 = {}, scatter σ = {}\n",
         fit.law.describe(),

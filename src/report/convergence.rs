@@ -264,7 +264,7 @@ fn uncertainty_table(h: &[f64], followed: &[Followed]) -> Table {
             };
             vec![
                 row.quantity.clone(),
-                if u.data_range == 0.0 { "none: unchanged".into() } else { describe_order(u.order()) },
+                u.describe_order(),
                 u.chosen.law.describe(),
                 fmt_num(u.chosen.limit()),
                 fmt_num(u.chosen.sigma),
@@ -289,18 +289,6 @@ fn uncertainty_table(h: &[f64], followed: &[Followed]) -> Table {
         .map(String::from)
         .to_vec(),
         rows,
-    }
-}
-
-/// The observed order, marked where it lies at the search's bound (no power law fits better).
-fn describe_order(p: f64) -> String {
-    use super::uncertainty::ORDERS;
-    if p >= ORDERS.1 * (1.0 - 1e-6) {
-        format!("≥ {} (the search's bound)", ORDERS.1)
-    } else if p <= ORDERS.0 * (1.0 + 1e-6) {
-        format!("≤ {} (the search's bound)", ORDERS.0)
-    } else {
-        format!("{p:.2}")
     }
 }
 

@@ -122,6 +122,21 @@ impl Uncertainty {
             _ => unreachable!("the observed fit is a power law"),
         }
     }
+
+    /// The observed order as text: marked where it lies at the search's bound (no power fits
+    /// better), none where the levels are all equal.
+    pub fn describe_order(&self) -> String {
+        let p = self.order();
+        if self.data_range == 0.0 {
+            "none: unchanged".into()
+        } else if p >= ORDERS.1 * (1.0 - 1e-6) {
+            format!("≥ {} (the search's bound)", ORDERS.1)
+        } else if p <= ORDERS.0 * (1.0 + 1e-6) {
+            format!("≤ {} (the search's bound)", ORDERS.0)
+        } else {
+            format!("{p:.2}")
+        }
+    }
 }
 
 /// The uncertainty of the finest of `points` (spacing, value; any order), or `None` with fewer
