@@ -273,11 +273,11 @@ fn run_uncertainty(levels: &[(f64, f64)], reference: Option<f64>) -> i32 {
     ));
     say(&format!("finest (Δx = {}): {} ± {}\n", u.finest.0, u.finest.1, u.u));
     if let Some(r) = reference {
-        let miss = (u.finest.1 - r).abs();
-        say(&if miss <= u.u {
+        let beyond = u.beyond(r);
+        say(&if beyond <= 0.0 {
             format!("the reference {r} lies within it\n")
         } else {
-            format!("the reference {r} lies {} beyond it\n", miss - u.u)
+            format!("the reference {r} lies {beyond} beyond it\n")
         });
     }
     0

@@ -295,13 +295,13 @@ fn uncertainty_table(h: &[f64], followed: &[Followed]) -> Table {
 /// Whether the reference `r` lies within the finest value ± U, and if not by how much the
 /// finest value misses it.
 fn covers(u: &Uncertainty, r: f64) -> String {
-    let miss = u.finest.1 - r;
-    if miss.abs() <= u.u {
+    let beyond = u.beyond(r);
+    if beyond <= 0.0 {
         "yes".into()
     } else if r != 0.0 {
-        format!("no: {:.2} % of it beyond U", 100.0 * (miss.abs() - u.u) / r.abs())
+        format!("no: {:.2} % of it beyond U", 100.0 * beyond / r.abs())
     } else {
-        format!("no: {} beyond U", fmt_num(miss.abs() - u.u))
+        format!("no: {} beyond U", fmt_num(beyond))
     }
 }
 

@@ -123,6 +123,11 @@ impl Uncertainty {
         }
     }
 
+    /// How far the reference `r` lies beyond the finest value ± U; zero or less where within.
+    pub fn beyond(&self, r: f64) -> f64 {
+        (self.finest.1 - r).abs() - self.u
+    }
+
     /// The observed order as text: marked where it lies at the search's bound (no power fits
     /// better), none where the levels are all equal.
     pub fn describe_order(&self) -> String {
@@ -203,7 +208,8 @@ fn best_power(points: &[(f64, f64)]) -> Option<Fit> {
     let mut best: Option<Fit> = None;
     for weighted in [false, true] {
         let sum = |p: f64| fit(points, Law::Power(p), weighted).map_or(f64::INFINITY, |f| f.sigma);
-        let k = (0..=grid).min_by(|a, b| sum(p_at(*a)).total_cmp(&sum(p_at(*b))))?;
+        let sums: Vec<f64> = (0..=grid).map(|k| sum(p_at(k))).collect();
+        let k = (0..=grid).min_by(|a, b| sums[*a].total_cmp(&sums[*b]))?;
         // Golden-section search between the grid's neighbours of the best.
         let (mut a, mut b) = (p_at(k.saturating_sub(1)), p_at((k + 1).min(grid)));
         let g = 0.5 * (5f64.sqrt() - 1.0);
@@ -342,7 +348,7 @@ mod tests {
         let points = [(1.333, 222.0), (1.0, 224.0), (0.8, 222.2), (0.667, 223.8), (0.571, 222.4)];
         let u = uncertainty(&points).expect("five levels");
         assert!(u.chosen.sigma >= u.data_range, "σ {} against Δφ {}", u.chosen.sigma, u.data_range);
-        let spread = points.iter().map(|p| (p.1 - 222.4f64).abs()).fold(0.0, f64::max);
+        let spread = crate::scene::max_keeping_nan(0.0, points.iter().map(|p| (p.1 - 222.4f64).abs()));
         assert!(u.u >= spread, "U {} against the levels' largest distance from the finest {spread}", u.u);
     }
 
