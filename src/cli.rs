@@ -138,6 +138,9 @@ enum Command {
         /// A reference value: whether it lies within the finest value ± U
         #[arg(long)]
         reference: Option<f64>,
+        /// Print one JSON object (for scripts) instead of the text
+        #[arg(long)]
+        json: bool,
     },
     /// Print the plan of a step: passes, fused equations, fields read and written, bytes per particle
     Plan {
@@ -227,7 +230,7 @@ pub fn main() -> i32 {
             let path = path.map(|p| find_input(&p));
             run_emit(path.as_deref(), &target, out.as_deref(), dim, all, force)
         }
-        Command::Uncertainty { levels, reference } => run_uncertainty(&levels, reference),
+        Command::Uncertainty { levels, reference, json } => run_uncertainty(&levels, reference, json),
         Command::Bench { particles, reps } => match crate::bench::run(&particles, reps.max(1)) {
             Ok(table) => {
                 say(&table);
@@ -250,37 +253,72 @@ fn parse_level(s: &str) -> Result<(f64, f64), String> {
     Ok((number(h)?, number(v)?))
 }
 
-/// Prints the numerical uncertainty of the finest of `levels`; 1 where there is none.
-fn run_uncertainty(levels: &[(f64, f64)], reference: Option<f64>) -> i32 {
+/// Prints the numerical uncertainty of the finest of `levels`, as text or one JSON object; 1
+/// where there is none.
+fn run_uncertainty(levels: &[(f64, f64)], reference: Option<f64>, json: bool) -> i32 {
     let Some(u) = crate::report::uncertainty::uncertainty(levels) else {
         eprintln!(
             "error: no uncertainty: it needs four levels or more, each spacing positive and given once, each value finite"
         );
         return 1;
     };
+    say(&if json {
+        uncertainty_json(&u, levels.len(), reference)
+    } else {
+        uncertainty_text(&u, levels.len(), reference)
+    });
+    0
+}
+
+fn uncertainty_text(u: &crate::report::uncertainty::Uncertainty, levels: usize, reference: Option<f64>) -> String {
     let fit = &u.chosen;
-    say(&format!("observed order p (least squares, all {} levels): {}\n", levels.len(), u.describe_order()));
-    say(&format!(
+    let mut text = format!("observed order p (least squares, all {levels} levels): {}\n", u.describe_order());
+    text += &format!(
         "error estimated with: {}, {}weighted; f0 = {}, scatter σ = {}\n",
         fit.law.describe(),
         if fit.weighted { "" } else { "un" },
         fit.limit(),
         fit.sigma
-    ));
-    say(&format!(
-        "data range Δφ = {}, error of the finest ε = {}, safety factor {}\n",
-        u.data_range, u.error, u.safety
-    ));
-    say(&format!("finest (Δx = {}): {} ± {}\n", u.finest.0, u.finest.1, u.u));
+    );
+    text +=
+        &format!("data range Δφ = {}, error of the finest ε = {}, safety factor {}\n", u.data_range, u.error, u.safety);
+    text += &format!("finest (Δx = {}): {} ± {}\n", u.finest.0, u.finest.1, u.u);
     if let Some(r) = reference {
         let beyond = u.beyond(r);
-        say(&if beyond <= 0.0 {
+        text += &if beyond <= 0.0 {
             format!("the reference {r} lies within it\n")
         } else {
             format!("the reference {r} lies {beyond} beyond it\n")
-        });
+        };
     }
-    0
+    text
+}
+
+/// The same as one JSON object: the observed order (and its text, which marks the search's
+/// bounds), the law the error is estimated with, its f0 and σ, Δφ, ε, Fs, the finest level and U,
+/// and with a reference how far it lies beyond the finest value ± U (≤ 0 within).
+fn uncertainty_json(u: &crate::report::uncertainty::Uncertainty, levels: usize, reference: Option<f64>) -> String {
+    let fit = &u.chosen;
+    let mut object = serde_json::json!({
+        "levels": levels,
+        "order": u.order(),
+        "order_text": u.describe_order(),
+        "law": fit.law.describe(),
+        "weighted": fit.weighted,
+        "f0": fit.limit(),
+        "sigma": fit.sigma,
+        "data_range": u.data_range,
+        "error": u.error,
+        "safety": u.safety,
+        "finest_spacing": u.finest.0,
+        "finest_value": u.finest.1,
+        "u": u.u,
+    });
+    if let Some(r) = reference {
+        object["reference"] = r.into();
+        object["beyond"] = u.beyond(r).into();
+    }
+    format!("{object}\n")
 }
 
 /// Every .sph file under the given paths, sorted.

@@ -133,3 +133,30 @@ fn the_uncertainty_command_prints_a_power_laws_order_limit_and_u_and_rejects_thr
     assert_eq!(bad.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&bad.stderr).contains("`0.5:3` is not SPACING=VALUE"));
 }
+
+#[test]
+fn the_uncertainty_commands_json_gives_a_power_laws_order_limit_u_and_the_references_distance_beyond_it() {
+    use std::process::Command;
+    // 5 − 0.3 Δx^1.3 at four spacings, as above; the reference 5.5 lies 0.5 − U beyond 4.9 … ± U
+    let levels: Vec<String> =
+        [2.0, 1.5, 1.0, 0.5f64].iter().map(|h| format!("{h}={}", 5.0 - 0.3 * h.powf(1.3))).collect();
+    let out = Command::new(env!("CARGO_BIN_EXE_pairsum"))
+        .arg("uncertainty")
+        .args(&levels)
+        .args(["--reference", "5.5", "--json"])
+        .output()
+        .expect("runs");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}{}", String::from_utf8_lossy(&out.stderr));
+    let json: serde_json::Value = serde_json::from_str(&text).expect("one JSON object");
+    let number = |key: &str| json[key].as_f64().unwrap_or_else(|| panic!("{key} in {text}"));
+    let finest = 5.0 - 0.3 * 0.5f64.powf(1.3);
+    let u = 1.25 * 0.3 * 0.5f64.powf(1.3);
+    assert!((number("order") - 1.3).abs() < 1e-3, "{text}");
+    assert_eq!(json["order_text"], "1.30");
+    assert!((number("f0") - 5.0).abs() < 1e-6, "{text}");
+    assert!((number("finest_value") - finest).abs() < 1e-12 && number("finest_spacing") == 0.5, "{text}");
+    assert!((number("u") - u).abs() < 1e-5, "{text}");
+    assert!((number("beyond") - (5.5 - finest - u)).abs() < 1e-5, "{text}");
+    assert_eq!(json["levels"], 4);
+}

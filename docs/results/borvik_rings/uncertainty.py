@@ -12,6 +12,7 @@ observed order over every level, the law the error is estimated with, f0, the fi
 U, the finest level's uncertainty. Where the coarsest level is out of the asymptotic range (the
 8 mm plate's 1.333 mm level, whose plug the plate held to 81–85 µs), the same without it.
 """
+import json
 import os
 import subprocess
 import sys
@@ -39,17 +40,13 @@ def level(plate, h, tag, t):
 
 
 def uncertainty(hs, v):
-    """`pairsum uncertainty`'s answer for these levels, on one line."""
+    """`pairsum uncertainty --json`'s answer for these levels, on one line."""
     args = [f"{float(h)!r}={float(x)!r}" for h, x in zip(hs, v)]
-    out = subprocess.run([PAIRSUM, "uncertainty", *args], capture_output=True, text=True)
+    out = subprocess.run([PAIRSUM, "uncertainty", "--json", *args], capture_output=True, text=True)
     if out.returncode != 0:
         return out.stderr.strip()
-    lines = out.stdout.splitlines()
-    p = lines[0].split(": ")[-1]
-    law = lines[1].split("; ")[0].removeprefix("error estimated with: ")
-    f0, sigma = (x.split(" = ")[1] for x in lines[1].split("; ")[1].split(", "))
-    u = lines[3].split(" ± ")[1]
-    return f"p {p}, {law}: f0 {float(f0):.2f}, σ {float(sigma):.2f}, U {float(u):.2f}"
+    u = json.loads(out.stdout)
+    return f"p {u['order_text']}, {u['law']}: f0 {u['f0']:.2f}, σ {u['sigma']:.2f}, U {u['u']:.2f}"
 
 
 def main(plate):
