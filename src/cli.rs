@@ -273,6 +273,9 @@ fn run_uncertainty(levels: &[(f64, f64)], reference: Option<f64>, json: bool) ->
 fn uncertainty_text(u: &crate::report::uncertainty::Uncertainty, levels: usize, reference: Option<f64>) -> String {
     let fit = &u.chosen;
     let mut text = format!("observed order p (least squares, all {levels} levels): {}\n", u.describe_order());
+    if let Some(range) = u.describe_order_without_one() {
+        text += &format!("observed order leaving out one level at a time: {range}\n");
+    }
     text += &format!(
         "error estimated with: {}, {}weighted; f0 = {}, scatter σ = {}\n",
         fit.law.describe(),
@@ -303,6 +306,7 @@ fn uncertainty_json(u: &crate::report::uncertainty::Uncertainty, levels: usize, 
         "levels": levels,
         "order": u.order(),
         "order_text": u.describe_order(),
+        "order_without_one": u.order_without_one.map(|(lo, hi)| [lo, hi]),
         "law": fit.law.describe(),
         "weighted": fit.weighted,
         "f0": fit.limit(),

@@ -159,4 +159,5 @@ fn the_uncertainty_commands_json_gives_a_power_laws_order_limit_u_and_the_refere
     assert!((number("u") - u).abs() < 1e-5, "{text}");
     assert!((number("beyond") - (5.5 - finest - u)).abs() < 1e-5, "{text}");
     assert_eq!(json["levels"], 4);
+    assert!(json["order_without_one"].is_null(), "four levels: no order leaving one out: {text}");
 }

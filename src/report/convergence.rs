@@ -258,13 +258,14 @@ fn uncertainty_table(h: &[f64], followed: &[Followed]) -> Table {
             let row = q.finest;
             let points: Vec<(f64, f64)> = h.iter().copied().zip(q.values.iter().copied()).collect();
             let Some(u) = uncertainty(&points) else {
-                let mut none = vec![String::new(); 8];
+                let mut none = vec![String::new(); 9];
                 (none[0], none[1]) = (row.quantity.clone(), "none: a value is missing".into());
                 return none;
             };
             vec![
                 row.quantity.clone(),
                 u.describe_order(),
+                u.describe_order_without_one().unwrap_or_else(|| "— (five levels or more)".into()),
                 u.chosen.law.describe(),
                 fmt_num(u.chosen.limit()),
                 fmt_num(u.chosen.sigma),
@@ -279,6 +280,7 @@ fn uncertainty_table(h: &[f64], followed: &[Followed]) -> Table {
         header: [
             "quantity",
             "observed order p (all levels)",
+            "p leaving out one level",
             "error estimated with",
             "f0",
             "scatter σ",
@@ -458,14 +460,15 @@ mod tests {
         let table = c.tables.iter().find(|t| t.title.starts_with("Numerical uncertainty")).expect("the table");
         let row = &table.rows[0];
         assert_eq!((row[0].as_str(), row[1].as_str()), ("crater", "1.50"));
-        let u: f64 = row[5].parse().expect("U");
+        assert_eq!(row[2], "1.50–1.50", "any one level left out: the same order");
+        let u: f64 = row[6].parse().expect("U");
         assert!((u - 1.25 * 4.0 * 0.25f64.powf(1.5)).abs() < 1e-5, "{u}");
         assert_eq!(c.tables[3].rows[1][1], "1.50", "gap = 2 crater: the same order");
-        assert_eq!(row[7], "yes", "the reference, 10, lies 0.5 from the finest value, 9.5: within U = 0.625");
+        assert_eq!(row[8], "yes", "the reference, 10, lies 0.5 from the finest value, 9.5: within U = 0.625");
         // 12 − 4 Δx^1.5: the finest value, 11.5, misses the reference by 1.5, 0.875 beyond U.
         let above: Vec<_> = levels.iter().map(|(n, r)| level(n, r.dx, r.results[0].value + 2.0, 1.0)).collect();
         let row = &analyse(&above).tables[3].rows[0];
-        assert_eq!(row[7], "no: 8.75 % of it beyond U");
+        assert_eq!(row[8], "no: 8.75 % of it beyond U");
         assert!(analyse(&levels[1..4]).tables.iter().all(|t| !t.title.starts_with("Numerical")), "three levels: none");
     }
 

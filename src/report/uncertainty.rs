@@ -28,6 +28,10 @@
 //! - Where σ < Δφ the uncertainty is `U = Fs ε + σ + |f_1 − fit(Δx_1)|`, with the safety factor
 //!   `Fs` 1.25 where 0.5 ≤ p < 2.1 and 3 otherwise; where the scatter is as large as the data's
 //!   range, `U = 3 (σ/Δφ) (ε + σ + |f_1 − fit(Δx_1)|)`.
+//! - With five levels or more, the observed order is also fitted leaving out each level in turn
+//!   ([`Uncertainty::order_without_one`]): an order that holds moves little whichever level is left
+//!   out, and one that rests on a single level (the coarsest, out of the asymptotic range; the
+//!   finest, off by its own scatter) swings. This check is ours, not Eça & Hoekstra's.
 
 /// The power law a [`Fit`] fits in the spacing.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -112,6 +116,9 @@ pub struct Uncertainty {
     pub safety: f64,
     /// The uncertainty `U`: the finest value ± U is meant to hold the value at zero spacing.
     pub u: f64,
+    /// With five levels or more, the least and the greatest observed order of the fits leaving
+    /// out one level each: how far the order rests on any one level.
+    pub order_without_one: Option<(f64, f64)>,
 }
 
 impl Uncertainty {
@@ -123,6 +130,13 @@ impl Uncertainty {
         }
     }
 
+    /// The least and greatest order leaving out one level, as text (`0.96–1.65`), each marked
+    /// as [`Uncertainty::describe_order`] marks the search's bounds; none with four levels.
+    pub fn describe_order_without_one(&self) -> Option<String> {
+        let (lo, hi) = self.order_without_one?;
+        Some(format!("{}–{}", describe_order(lo), describe_order(hi)))
+    }
+
     /// How far the reference `r` lies beyond the finest value ± U; zero or less where within.
     pub fn beyond(&self, r: f64) -> f64 {
         (self.finest.1 - r).abs() - self.u
@@ -131,16 +145,33 @@ impl Uncertainty {
     /// The observed order as text: marked where it lies at the search's bound (no power fits
     /// better), none where the levels are all equal.
     pub fn describe_order(&self) -> String {
-        let p = self.order();
         if self.data_range == 0.0 {
             "none: unchanged".into()
-        } else if p >= ORDERS.1 * (1.0 - 1e-6) {
-            format!("≥ {} (the search's bound)", ORDERS.1)
-        } else if p <= ORDERS.0 * (1.0 + 1e-6) {
-            format!("≤ {} (the search's bound)", ORDERS.0)
         } else {
-            format!("{p:.2}")
+            let p = self.order();
+            let text = describe_order(p);
+            if at_bound(p) {
+                format!("{text} (the search's bound)")
+            } else {
+                text
+            }
         }
+    }
+}
+
+/// Whether an order lies at a bound of the search ([`ORDERS`]): no power fits better.
+fn at_bound(p: f64) -> bool {
+    p >= ORDERS.1 * (1.0 - 1e-6) || p <= ORDERS.0 * (1.0 + 1e-6)
+}
+
+/// An order to two decimals, `≥ 8` or `≤ 0.05` at the search's bounds.
+fn describe_order(p: f64) -> String {
+    if p >= ORDERS.1 * (1.0 - 1e-6) {
+        format!("≥ {}", ORDERS.1)
+    } else if p <= ORDERS.0 * (1.0 + 1e-6) {
+        format!("≤ {}", ORDERS.0)
+    } else {
+        format!("{p:.2}")
     }
 }
 
@@ -194,7 +225,19 @@ pub fn uncertainty(points: &[(f64, f64)]) -> Option<Uncertainty> {
     } else {
         3.0 * sigma / data_range * (error + sigma + miss)
     };
-    Some(Uncertainty { observed, chosen, finest, data_range, error, safety, u })
+    let order_without_one = (n >= 5).then(|| leave_one_out(points)).flatten();
+    Some(Uncertainty { observed, chosen, finest, data_range, error, safety, u, order_without_one })
+}
+
+/// The least and the greatest observed order of the fits through `points` less one level each.
+fn leave_one_out(points: &[(f64, f64)]) -> Option<(f64, f64)> {
+    let mut range = (f64::INFINITY, f64::NEG_INFINITY);
+    for k in 0..points.len() {
+        let rest: Vec<(f64, f64)> = points.iter().enumerate().filter(|(i, _)| *i != k).map(|(_, q)| *q).collect();
+        let Law::Power(p) = best_power(&rest)?.law else { return None };
+        range = (range.0.min(p), range.1.max(p));
+    }
+    Some(range)
 }
 
 /// The orders the observed order is searched over.
@@ -315,6 +358,29 @@ mod tests {
         assert!(u.chosen.sigma < 1e-6, "{}", u.chosen.sigma);
         let error = 0.3 * 0.5f64.powf(1.3);
         assert!((u.u - 1.25 * error).abs() < 1e-5, "{} vs {}", u.u, 1.25 * error);
+    }
+
+    #[test]
+    fn leaving_out_any_one_level_of_an_exact_power_law_keeps_its_order_and_four_levels_have_no_such_range() {
+        let h: [f64; 5] = [2.0, 1.5, 1.0, 0.75, 0.5];
+        let points: Vec<(f64, f64)> = h.iter().map(|h| (*h, 5.0 - 0.3 * h.powf(1.3))).collect();
+        let (lo, hi) = uncertainty(&points).and_then(|u| u.order_without_one).expect("five levels");
+        assert!((lo - 1.3).abs() < 1e-4 && (hi - 1.3).abs() < 1e-4, "{lo}–{hi}");
+        assert_eq!(uncertainty(&points[1..]).map(|u| u.order_without_one), Some(None));
+    }
+
+    #[test]
+    fn an_order_that_rests_on_one_level_swings_when_that_level_is_left_out() {
+        // 5 − 0.3 Δx^1.3 with the coarsest of six levels 0.3 high: left out, the order is 1.3
+        // again; in, the fits flatten.
+        let h: [f64; 6] = [2.0, 1.5, 1.0, 0.75, 0.6, 0.5];
+        let mut points: Vec<(f64, f64)> = h.iter().map(|h| (*h, 5.0 - 0.3 * h.powf(1.3))).collect();
+        points[0].1 += 0.3;
+        let u = uncertainty(&points).expect("six levels");
+        let (lo, hi) = u.order_without_one.expect("six levels");
+        assert!(lo < 1.3 && (hi - 1.3).abs() < 1e-4, "{lo}–{hi}: the coarsest left out gives 1.3");
+        assert!(hi - lo > 0.5, "{lo}–{hi}");
+        assert!(u.order() < 1.0, "with it the order falls: {}", u.order());
     }
 
     #[test]
