@@ -107,20 +107,27 @@ fn vtk_series_lists_files() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// `pairsum uncertainty` with `args` on 5 − 0.3 Δx^1.3 at Δx = 2, 1.5, 1 and 0.5: its standard
+/// output, after asserting that it succeeded.
+fn uncertainty_of_a_power_law(args: &[&str]) -> String {
+    let levels: Vec<String> =
+        [2.0, 1.5, 1.0, 0.5f64].iter().map(|h| format!("{h}={}", 5.0 - 0.3 * h.powf(1.3))).collect();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_pairsum"))
+        .arg("uncertainty")
+        .args(&levels)
+        .args(args)
+        .output()
+        .expect("runs");
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(out.status.success(), "{text}{}", String::from_utf8_lossy(&out.stderr));
+    text
+}
+
 #[test]
 fn the_uncertainty_command_prints_a_power_laws_order_limit_and_u_and_rejects_three_levels_or_a_bad_level() {
     use std::process::Command;
     // 5 − 0.3 Δx^1.3 at four spacings: order 1.3, f0 5, U = 1.25 × 0.3 × 0.5^1.3 = 0.1523…
-    let levels: Vec<String> =
-        [2.0, 1.5, 1.0, 0.5f64].iter().map(|h| format!("{h}={}", 5.0 - 0.3 * h.powf(1.3))).collect();
-    let out = Command::new(env!("CARGO_BIN_EXE_pairsum"))
-        .arg("uncertainty")
-        .args(&levels)
-        .args(["--reference", "4.9"])
-        .output()
-        .expect("runs");
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{text}{}", String::from_utf8_lossy(&out.stderr));
+    let text = uncertainty_of_a_power_law(&["--reference", "4.9"]);
     assert!(text.contains("observed order p (least squares, all 4 levels): 1.30\n"), "{text}");
     let u: f64 = text.lines().find_map(|l| l.split(" ± ").nth(1)).expect("finest ± U").trim().parse().expect("U");
     assert!((u - 1.25 * 0.3 * 0.5f64.powf(1.3)).abs() < 1e-5, "{u}");
@@ -136,18 +143,8 @@ fn the_uncertainty_command_prints_a_power_laws_order_limit_and_u_and_rejects_thr
 
 #[test]
 fn the_uncertainty_commands_json_gives_a_power_laws_order_limit_u_and_the_references_distance_beyond_it() {
-    use std::process::Command;
     // 5 − 0.3 Δx^1.3 at four spacings, as above; the reference 5.5 lies 0.5 − U beyond 4.9 … ± U
-    let levels: Vec<String> =
-        [2.0, 1.5, 1.0, 0.5f64].iter().map(|h| format!("{h}={}", 5.0 - 0.3 * h.powf(1.3))).collect();
-    let out = Command::new(env!("CARGO_BIN_EXE_pairsum"))
-        .arg("uncertainty")
-        .args(&levels)
-        .args(["--reference", "5.5", "--json"])
-        .output()
-        .expect("runs");
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{text}{}", String::from_utf8_lossy(&out.stderr));
+    let text = uncertainty_of_a_power_law(&["--reference", "5.5", "--json"]);
     let json: serde_json::Value = serde_json::from_str(&text).expect("one JSON object");
     let number = |key: &str| json[key].as_f64().unwrap_or_else(|| panic!("{key} in {text}"));
     let finest = 5.0 - 0.3 * 0.5f64.powf(1.3);
