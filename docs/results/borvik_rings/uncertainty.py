@@ -26,8 +26,8 @@ sys.path.insert(0, HERE)
 from rings import FULL, averaged  # noqa: E402
 from levels import speed  # noqa: E402
 
-LEVELS = [(4 / 3, "1333um"), (1.0, "1mm"), (0.8, "800um"), (2 / 3, "667um"), (4 / 7, "571um")]
-TIMES = {"8mm": range(40, 110, 10), "12mm": range(40, 90, 10)}
+LEVELS = [(4 / 3, "1333um"), (1.0, "1mm"), (0.8, "800um"), (2 / 3, "667um"), (4 / 7, "571um"), (0.5, "500um")]
+TIMES = {"8mm": range(40, 110, 10), "12mm": range(20, 90, 10)}
 PAIRSUM = os.environ.get("PAIRSUM", os.path.join(HERE, "..", "..", "..", "target", "release", "pairsum"))
 
 
