@@ -252,13 +252,26 @@ fn order_holds(finest: Trend, coarser: Trend) -> &'static str {
 
 /// Each result's numerical uncertainty over every level (`h`, coarse to fine).
 fn uncertainty_table(h: &[f64], followed: &[Followed]) -> Table {
+    let header: Vec<String> = [
+        "quantity",
+        "observed order p (all levels)",
+        "p leaving out one level",
+        "error estimated with",
+        "f0",
+        "scatter σ",
+        "U",
+        "finest value ± U",
+        "reference within it",
+    ]
+    .map(String::from)
+    .to_vec();
     let rows = followed
         .iter()
         .map(|q| {
             let row = q.finest;
             let points: Vec<(f64, f64)> = h.iter().copied().zip(q.values.iter().copied()).collect();
             let Some(u) = uncertainty(&points) else {
-                let mut none = vec![String::new(); 9];
+                let mut none = vec![String::new(); header.len()];
                 (none[0], none[1]) = (row.quantity.clone(), "none: a value is missing".into());
                 return none;
             };
@@ -277,19 +290,7 @@ fn uncertainty_table(h: &[f64], followed: &[Followed]) -> Table {
         .collect();
     Table {
         title: "Numerical uncertainty of the finest value (least squares through every level)".into(),
-        header: [
-            "quantity",
-            "observed order p (all levels)",
-            "p leaving out one level",
-            "error estimated with",
-            "f0",
-            "scatter σ",
-            "U",
-            "finest value ± U",
-            "reference within it",
-        ]
-        .map(String::from)
-        .to_vec(),
+        header,
         rows,
     }
 }

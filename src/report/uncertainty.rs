@@ -146,33 +146,34 @@ impl Uncertainty {
     /// better), none where the levels are all equal.
     pub fn describe_order(&self) -> String {
         if self.data_range == 0.0 {
-            "none: unchanged".into()
-        } else {
-            let p = self.order();
-            let text = describe_order(p);
-            if at_bound(p) {
-                format!("{text} (the search's bound)")
-            } else {
-                text
-            }
+            return "none: unchanged".into();
+        }
+        match bound(self.order()) {
+            Some(b) => format!("{b} (the search's bound)"),
+            None => format!("{:.2}", self.order()),
         }
     }
 }
 
-/// Whether an order lies at a bound of the search ([`ORDERS`]): no power fits better.
-fn at_bound(p: f64) -> bool {
-    p >= ORDERS.1 * (1.0 - 1e-6) || p <= ORDERS.0 * (1.0 + 1e-6)
+/// An order at the search's lower bound ([`ORDERS`]): no power fits better than the flattest.
+fn at_lower_bound(p: f64) -> bool {
+    p <= ORDERS.0 * (1.0 + 1e-6)
 }
 
-/// An order to two decimals, `≥ 8` or `≤ 0.05` at the search's bounds.
-fn describe_order(p: f64) -> String {
+/// `≥ 8` or `≤ 0.05` where an order lies at a bound of the search ([`ORDERS`]).
+fn bound(p: f64) -> Option<String> {
     if p >= ORDERS.1 * (1.0 - 1e-6) {
-        format!("≥ {}", ORDERS.1)
-    } else if p <= ORDERS.0 * (1.0 + 1e-6) {
-        format!("≤ {}", ORDERS.0)
+        Some(format!("≥ {}", ORDERS.1))
+    } else if at_lower_bound(p) {
+        Some(format!("≤ {}", ORDERS.0))
     } else {
-        format!("{p:.2}")
+        None
     }
+}
+
+/// An order to two decimals, or its bound.
+fn describe_order(p: f64) -> String {
+    bound(p).unwrap_or_else(|| format!("{p:.2}"))
 }
 
 /// The uncertainty of the finest of `points` (spacing, value; any order), or `None` with fewer
@@ -201,11 +202,11 @@ pub fn uncertainty(points: &[(f64, f64)]) -> Option<Uncertainty> {
         candidates.push(best_weighting(points, Law::First)?);
         if p > 2.05 {
             candidates.push(best_weighting(points, Law::Second)?);
-        } else if p > ORDERS.0 * (1.0 + 1e-6) {
+        } else if !at_lower_bound(p) {
             candidates.push(observed.clone());
         }
-        let coarsest = points.iter().fold(0.0f64, |a, q| a.max(q.0));
         if n >= 5 {
+            let coarsest = points.iter().fold(0.0f64, |a, q| a.max(q.0));
             candidates.extend(best_weighting(points, Law::FirstSecond).filter(|f| monotone(f, coarsest)));
         }
     }

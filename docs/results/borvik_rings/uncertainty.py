@@ -8,7 +8,7 @@ The levels are the lattice-filled runs of ../borvik_hardening_band/full/ (how th
 folder's README): a level's speed is its runs' least-squares line in the projectile's radius at
 R = 10 mm where three radii or more were run (rings.py's `averaged`), else its one run at R = 10 mm.
 Every 10 µs it prints the speed at each level and what `pairsum uncertainty` makes of them: the
-observed order over every level (and with five levels, its least and greatest value leaving
+observed order over every level (and with five levels or more, its least and greatest value leaving
 out one level at a time), the law the error is estimated with, f0, the fits' scatter σ and
 U, the finest level's uncertainty. Where the coarsest level is out of the asymptotic range (the
 8 mm plate's 1.333 mm level, whose plug the plate held to 81–85 µs), the same without it.
@@ -47,10 +47,10 @@ def uncertainty(hs, v):
     if out.returncode != 0:
         return out.stderr.strip()
     u = json.loads(out.stdout)
-    out = f"p {u['order_text']}, {u['law']}: f0 {u['f0']:.2f}, σ {u['sigma']:.2f}, U {u['u']:.2f}"
+    text = f"p {u['order_text']}, {u['law']}: f0 {u['f0']:.2f}, σ {u['sigma']:.2f}, U {u['u']:.2f}"
     if u["order_without_one"]:
-        out += " (p leaving out one level: {:.2f}–{:.2f})".format(*u["order_without_one"])
-    return out
+        text += " (p leaving out one level: {:.2f}–{:.2f})".format(*u["order_without_one"])
+    return text
 
 
 def main(plate):
