@@ -298,7 +298,7 @@ fn uncertainty_text(u: &crate::report::uncertainty::Uncertainty, levels: usize, 
 }
 
 /// The same as one JSON object: the observed order (and its text, which marks the search's
-/// bounds), the law the error is estimated with, its f0 and σ, Δφ, ε, Fs, the finest level and U,
+/// bounds), with five levels or more its range leaving out one level (and its text), the law the error is estimated with, its f0 and σ, Δφ, ε, Fs, the finest level and U,
 /// and with a reference how far it lies beyond the finest value ± U (≤ 0 within).
 fn uncertainty_json(u: &crate::report::uncertainty::Uncertainty, levels: usize, reference: Option<f64>) -> String {
     let fit = &u.chosen;
@@ -307,6 +307,7 @@ fn uncertainty_json(u: &crate::report::uncertainty::Uncertainty, levels: usize, 
         "order": u.order(),
         "order_text": u.describe_order(),
         "order_without_one": u.order_without_one.map(|(lo, hi)| [lo, hi]),
+        "order_without_one_text": u.describe_order_without_one(),
         "law": fit.law.describe(),
         "weighted": fit.weighted,
         "f0": fit.limit(),

@@ -107,11 +107,10 @@ fn vtk_series_lists_files() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
-/// `pairsum uncertainty` with `args` on 5 − 0.3 Δx^1.3 at Δx = 2, 1.5, 1 and 0.5: its standard
-/// output, after asserting that it succeeded.
-fn uncertainty_of_a_power_law(args: &[&str]) -> String {
-    let levels: Vec<String> =
-        [2.0, 1.5, 1.0, 0.5f64].iter().map(|h| format!("{h}={}", 5.0 - 0.3 * h.powf(1.3))).collect();
+/// `pairsum uncertainty` with `args` on 5 − 0.3 Δx^1.3 at the `spacings`: its standard output,
+/// after asserting that it succeeded.
+fn uncertainty_of_a_power_law(spacings: &[f64], args: &[&str]) -> String {
+    let levels: Vec<String> = spacings.iter().map(|h| format!("{h}={}", 5.0 - 0.3 * h.powf(1.3))).collect();
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_pairsum"))
         .arg("uncertainty")
         .args(&levels)
@@ -127,7 +126,7 @@ fn uncertainty_of_a_power_law(args: &[&str]) -> String {
 fn the_uncertainty_command_prints_a_power_laws_order_limit_and_u_and_rejects_three_levels_or_a_bad_level() {
     use std::process::Command;
     // 5 − 0.3 Δx^1.3 at four spacings: order 1.3, f0 5, U = 1.25 × 0.3 × 0.5^1.3 = 0.1523…
-    let text = uncertainty_of_a_power_law(&["--reference", "4.9"]);
+    let text = uncertainty_of_a_power_law(&[2.0, 1.5, 1.0, 0.5], &["--reference", "4.9"]);
     assert!(text.contains("observed order p (least squares, all 4 levels): 1.30\n"), "{text}");
     let u: f64 = text.lines().find_map(|l| l.split(" ± ").nth(1)).expect("finest ± U").trim().parse().expect("U");
     assert!((u - 1.25 * 0.3 * 0.5f64.powf(1.3)).abs() < 1e-5, "{u}");
@@ -144,7 +143,7 @@ fn the_uncertainty_command_prints_a_power_laws_order_limit_and_u_and_rejects_thr
 #[test]
 fn the_uncertainty_commands_json_gives_a_power_laws_order_limit_u_and_the_references_distance_beyond_it() {
     // 5 − 0.3 Δx^1.3 at four spacings, as above; the reference 5.5 lies 0.5 − U beyond 4.9 … ± U
-    let text = uncertainty_of_a_power_law(&["--reference", "5.5", "--json"]);
+    let text = uncertainty_of_a_power_law(&[2.0, 1.5, 1.0, 0.5], &["--reference", "5.5", "--json"]);
     let json: serde_json::Value = serde_json::from_str(&text).expect("one JSON object");
     let number = |key: &str| json[key].as_f64().unwrap_or_else(|| panic!("{key} in {text}"));
     let finest = 5.0 - 0.3 * 0.5f64.powf(1.3);
@@ -156,5 +155,21 @@ fn the_uncertainty_commands_json_gives_a_power_laws_order_limit_u_and_the_refere
     assert!((number("u") - u).abs() < 1e-5, "{text}");
     assert!((number("beyond") - (5.5 - finest - u)).abs() < 1e-5, "{text}");
     assert_eq!(json["levels"], 4);
-    assert!(json["order_without_one"].is_null(), "four levels: no order leaving one out: {text}");
+    assert!(
+        json["order_without_one"].is_null() && json["order_without_one_text"].is_null(),
+        "four levels: no order leaving one out: {text}"
+    );
+}
+
+#[test]
+fn the_uncertainty_commands_json_gives_five_levels_of_a_power_law_the_same_order_leaving_out_any_one() {
+    // 5 − 0.3 Δx^1.3 at five spacings: every fit leaving out one level is exact, order 1.3
+    let text = uncertainty_of_a_power_law(&[2.0, 1.5, 1.0, 0.75, 0.5], &["--json"]);
+    let json: serde_json::Value = serde_json::from_str(&text).expect("one JSON object");
+    let range = json["order_without_one"].as_array().unwrap_or_else(|| panic!("a range in {text}"));
+    for p in range {
+        assert!((p.as_f64().expect("a number") - 1.3).abs() < 1e-3, "{text}");
+    }
+    assert_eq!(json["order_without_one_text"], "1.30–1.30", "{text}");
+    assert_eq!(json["levels"], 5);
 }

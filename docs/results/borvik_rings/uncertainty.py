@@ -48,8 +48,8 @@ def uncertainty(hs, v):
         return out.stderr.strip()
     u = json.loads(out.stdout)
     text = f"p {u['order_text']}, {u['law']}: f0 {u['f0']:.2f}, σ {u['sigma']:.2f}, U {u['u']:.2f}"
-    if u["order_without_one"]:
-        text += " (p leaving out one level: {:.2f}–{:.2f})".format(*u["order_without_one"])
+    if u["order_without_one_text"]:
+        text += f" (p leaving out one level: {u['order_without_one_text']})"
     return text
 
 
