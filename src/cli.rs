@@ -298,8 +298,9 @@ fn uncertainty_text(u: &crate::report::uncertainty::Uncertainty, levels: usize, 
 }
 
 /// The same as one JSON object: the observed order (and its text, which marks the search's
-/// bounds), with five levels or more its range leaving out one level (and its text), the law the error is estimated with, its f0 and σ, Δφ, ε, Fs, the finest level and U,
-/// and with a reference how far it lies beyond the finest value ± U (≤ 0 within).
+/// bounds), with five levels or more its range leaving out one level (and its text), the law the
+/// error is estimated with, its f0 and σ, Δφ, ε, Fs, the finest level and U, and with a reference
+/// how far it lies beyond the finest value ± U (≤ 0 within).
 fn uncertainty_json(u: &crate::report::uncertainty::Uncertainty, levels: usize, reference: Option<f64>) -> String {
     let fit = &u.chosen;
     let mut object = serde_json::json!({

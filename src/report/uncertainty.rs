@@ -148,10 +148,8 @@ impl Uncertainty {
         if self.data_range == 0.0 {
             return "none: unchanged".into();
         }
-        match bound(self.order()) {
-            Some(b) => format!("{b} (the search's bound)"),
-            None => format!("{:.2}", self.order()),
-        }
+        let p = self.order();
+        bound(p).map_or_else(|| describe_order(p), |b| format!("{b} (the search's bound)"))
     }
 }
 
