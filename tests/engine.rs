@@ -1095,35 +1095,6 @@ fn an_over_nonlocal_weight_of_two_damages_each_particle_by_twice_the_nonlocal_in
     assert!(low < 0.5 && high > 1.5, "the factors span only {low}–{high}: the bar does not tell m apart");
 }
 
-/// With `nonlocal_indicator = 1` the damage grows by the increments of ω̄, the damage indicator
-/// ω = Σ Δε_p / ε_f averaged over ℓ by the same Helmholtz equation as ε̄_p
-/// (damage/nonlocal_strain.sph). A Weldox bar at rest with the same step in ε_p and in ω (1 for
-/// x < 20 mm, 0 beyond) and ℓ = 2 mm, after 300 steps: ω stays the step (no flow), ω̄ is ε̄_p at
-/// every particle to 1e-12 (one Jacobi step each from 0, the same source and Laplacian), and D is
-/// ω̄ (each Jacobi step from 0 raises ω̄, and D adds its increments), which has spread the step:
-/// D runs from below 0.1 to above 0.9.
-#[test]
-fn a_nonlocal_damage_indicator_at_rest_is_damaged_by_its_helmholtz_average_as_the_plastic_strain_is_averaged() {
-    let e = weldox_bar(
-        "nonlocal-indicator",
-        0.5,
-        "damage_length = \"2 mm\"\nnonlocal_indicator = 1",
-        "eps_p = \"select(x.x < 0.02 [m], 1, 0)\", indicator = \"select(x.x < 0.02 [m], 1, 0)\"",
-        300,
-    );
-    let field = |name| stored_field(&e.backend, name).1;
-    let (x, indicator, averaged, eps_nl, damage) =
-        (field("x"), field("indicator"), field("indicator_nl"), field("eps_nl"), field("D"));
-    let step: Vec<f64> = x.iter().map(|x| if *x < 0.02 { 1.0 } else { 0.0 }).collect();
-    assert_eq!(indicator, step, "ω moved in a bar at rest");
-    let off = pairsum::compare::max_abs_diff(&averaged, &eps_nl).unwrap_or_else(|e| panic!("ω̄ against ε̄_p: {e}"));
-    assert!(off < 1e-12, "ω̄ off ε̄_p of the same step by {off:e}");
-    let off = pairsum::compare::max_abs_diff(&damage, &averaged).unwrap_or_else(|e| panic!("D against ω̄: {e}"));
-    assert!(off < 1e-12, "D off ω̄ by {off:e}");
-    let (low, high) = pairsum::compare::extremes(&damage).unwrap_or_else(|e| panic!("D: {e}"));
-    assert!(low < 0.1 && high > 0.9, "D spans only {low}–{high}: the step did not spread");
-}
-
 /// The density diffusion of the shaped Børvik plate (continuity/shaped_diffusion.sph) on a bar at
 /// rest whose density is ρ = ρ0 (1 + k x²): at every particle it is the sum
 /// δ h0 c0 Σ_j V_j 2 (ρ_i − ρ_j) (x_ij · ∇W_ij) / (r_ij² + 0.01 h0²) computed here from the stored

@@ -492,20 +492,6 @@ fn borvik_perforation_with_nonlocal_damage_hardening_and_rate_on_the_gpu_matches
 }
 
 #[test]
-fn borvik_perforation_with_a_nonlocal_damage_indicator_on_the_gpu_matches_the_cpu_in_contact() {
-    // As the test above, with the damage grown by the Johnson–Cook indicator Σ Δε_p/ε_f averaged
-    // over 2 mm (`nonlocal_indicator`, damage/nonlocal_strain.sph: a second Laplacian sum and its
-    // Jacobi step in the damage's correction) instead of by the nonlocal plastic strain.
-    let path = std::path::PathBuf::from(case("borvik_perforation"));
-    let set = [("gap", "0.2"), ("damage_length", "2"), ("nonlocal_indicator", "1")];
-    let engines = run_both(&path, &set, 60);
-    let (_, averaged) = stored_field(&engines.0.backend, "indicator_nl");
-    let largest = common::largest("the CPU's averaged damage indicator after 60 steps", &averaged);
-    assert!(largest > 0.01, "the plate is hardly damaged: largest averaged indicator {largest}");
-    engines_match(&path, engines, 60, &["p", "eps_p", "indicator", "indicator_nl", "D"], 5e-3);
-}
-
-#[test]
 fn borvik_perforation_on_shaped_kernels_with_a_failure_band_on_the_gpu_matches_the_cpu_in_contact() {
     // models::ftlr19_perforation_shaped: the plate's kernels follow its deformation, their
     // hourglass pull spares failed pairs, and a failed particle's kernel is round again; a 0.5 mm

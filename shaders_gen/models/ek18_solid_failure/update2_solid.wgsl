@@ -167,36 +167,20 @@ fn st_T(i: u32, v: f32) {
     let b = u32(info[21 + G] + i32(i) * 1);
     data[b] = v;
 }
-fn ld_indicator(i: u32) -> f32 {
-    let b = u32(info[22 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_indicator(i: u32, v: f32) {
-    let b = u32(info[22 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ld_indicator_nl(i: u32) -> f32 {
-    let b = u32(info[23 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_indicator_nl(i: u32, v: f32) {
-    let b = u32(info[23 + G] + i32(i) * 1);
-    data[b] = v;
-}
 fn ld_drho(i: u32) -> f32 {
-    let b = u32(info[24 + G] + i32(i) * 1);
+    let b = u32(info[22 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho(i: u32, v: f32) {
-    let b = u32(info[24 + G] + i32(i) * 1);
+    let b = u32(info[22 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_ds(i: u32) -> mat3x3<f32> {
-    let b = u32(info[25 + G] + i32(i) * 6);
+    let b = u32(info[23 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_ds(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[25 + G] + i32(i) * 6);
+    let b = u32(info[23 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -205,89 +189,81 @@ fn st_ds(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_de(i: u32) -> f32 {
-    let b = u32(info[26 + G] + i32(i) * 1);
+    let b = u32(info[24 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_de(i: u32, v: f32) {
-    let b = u32(info[26 + G] + i32(i) * 1);
+    let b = u32(info[24 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_dv(i: u32) -> vec3<f32> {
-    let b = u32(info[27 + G] + i32(i) * 3);
+    let b = u32(info[25 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_dv(i: u32, v: vec3<f32>) {
-    let b = u32(info[27 + G] + i32(i) * 3);
+    let b = u32(info[25 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_lap_sum(i: u32) -> f32 {
-    let b = u32(info[28 + G] + i32(i) * 1);
+    let b = u32(info[26 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_lap_sum(i: u32, v: f32) {
-    let b = u32(info[28 + G] + i32(i) * 1);
+    let b = u32(info[26 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_lap_weight(i: u32) -> f32 {
-    let b = u32(info[29 + G] + i32(i) * 1);
+    let b = u32(info[27 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_lap_weight(i: u32, v: f32) {
-    let b = u32(info[29 + G] + i32(i) * 1);
+    let b = u32(info[27 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_rate_lap_sum(i: u32) -> f32 {
-    let b = u32(info[30 + G] + i32(i) * 1);
+    let b = u32(info[28 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rate_lap_sum(i: u32, v: f32) {
-    let b = u32(info[30 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ld_indicator_lap_sum(i: u32) -> f32 {
-    let b = u32(info[31 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_indicator_lap_sum(i: u32, v: f32) {
-    let b = u32(info[31 + G] + i32(i) * 1);
+    let b = u32(info[28 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_x_0(i: u32) -> vec3<f32> {
-    let b = u32(info[32 + G] + i32(i) * 3);
+    let b = u32(info[29 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_x_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[32 + G] + i32(i) * 3);
+    let b = u32(info[29 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_v_0(i: u32) -> vec3<f32> {
-    let b = u32(info[33 + G] + i32(i) * 3);
+    let b = u32(info[30 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_v_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[33 + G] + i32(i) * 3);
+    let b = u32(info[30 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_rho_0(i: u32) -> f32 {
-    let b = u32(info[34 + G] + i32(i) * 1);
+    let b = u32(info[31 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho_0(i: u32, v: f32) {
-    let b = u32(info[34 + G] + i32(i) * 1);
+    let b = u32(info[31 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s_0(i: u32) -> mat3x3<f32> {
-    let b = u32(info[35 + G] + i32(i) * 6);
+    let b = u32(info[32 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s_0(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[35 + G] + i32(i) * 6);
+    let b = u32(info[32 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -296,159 +272,139 @@ fn st_s_0(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_e_0(i: u32) -> f32 {
-    let b = u32(info[36 + G] + i32(i) * 1);
+    let b = u32(info[33 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_e_0(i: u32, v: f32) {
-    let b = u32(info[36 + G] + i32(i) * 1);
+    let b = u32(info[33 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_D_0(i: u32) -> f32 {
-    let b = u32(info[37 + G] + i32(i) * 1);
+    let b = u32(info[34 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_D_0(i: u32, v: f32) {
-    let b = u32(info[37 + G] + i32(i) * 1);
+    let b = u32(info[34 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_eps_p_0(i: u32) -> f32 {
-    let b = u32(info[38 + G] + i32(i) * 1);
+    let b = u32(info[35 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_eps_p_0(i: u32, v: f32) {
-    let b = u32(info[38 + G] + i32(i) * 1);
+    let b = u32(info[35 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_eps_nl_0(i: u32) -> f32 {
-    let b = u32(info[39 + G] + i32(i) * 1);
+    let b = u32(info[36 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_eps_nl_0(i: u32, v: f32) {
-    let b = u32(info[39 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ld_indicator_0(i: u32) -> f32 {
-    let b = u32(info[40 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_indicator_0(i: u32, v: f32) {
-    let b = u32(info[40 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ld_indicator_nl_0(i: u32) -> f32 {
-    let b = u32(info[41 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_indicator_nl_0(i: u32, v: f32) {
-    let b = u32(info[41 + G] + i32(i) * 1);
+    let b = u32(info[36 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 0u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 5u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 6u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 7u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 8u;
     return params[b];
 }
 fn prm_nonlocal_hardening(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 13u;
     return params[b];
 }
 fn prm_nonlocal_rate(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 14u;
     return params[b];
 }
 fn prm_damage_length(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 15u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 16u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 17u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 18u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 19u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 20u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 21u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 22u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 23u;
     return params[b];
 }
 fn prm_p_spall(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 24u;
     return params[b];
 }
 fn prm_D1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 25u;
     return params[b];
 }
 fn prm_D2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 26u;
     return params[b];
 }
 fn prm_D3(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 27u;
     return params[b];
 }
 fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 28u;
     return params[b];
 }
 fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 29u;
     return params[b];
 }
 fn prm_failure_band(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 30u;
     return params[b];
 }
 fn prm_failure_band_spacing(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 31u;
     return params[b];
 }
 fn prm_nonlocal_weight(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 32u;
-    return params[b];
-}
-fn prm_nonlocal_indicator(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 33u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 32u;
     return params[b];
 }
 fn prm_C_v(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 34u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 33u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -485,12 +441,6 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // restore eps_nl
     var eps_nl_i: f32 = ld_eps_nl(i);
     eps_nl_i = ld_eps_nl_0(i);
-    // restore indicator
-    var indicator_i: f32 = ld_indicator(i);
-    indicator_i = ld_indicator_0(i);
-    // restore indicator_nl
-    var indicator_nl_i: f32 = ld_indicator_nl(i);
-    indicator_nl_i = ld_indicator_nl_0(i);
     // nonlocal_rate
     var rate_nl_i: f32 = ld_rate_nl(i);
     let l2 = (prm_damage_length(i) * prm_damage_length(i));
@@ -525,8 +475,14 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let lap_weight = ld_lap_weight(i);
     let l2_2 = (prm_damage_length(i) * prm_damage_length(i));
     let nonlocal = select(eps_p_2, ((eps_p_2 + (l2_2 * lap_sum)) / (1.0 + (l2_2 * lap_weight))), (prm_damage_length(i) > 0.0));
-    let indicator = indicator_i;
+    let D = D_i;
+    let eps_nl_new = nonlocal;
+    let eps_nl = eps_nl_i;
     let deps_p = deps_p_i;
+    let spacing = select(ld_dx(i), prm_failure_band_spacing(i), (prm_failure_band_spacing(i) > 0.0));
+    let local = select(deps_p, ((deps_p * spacing) / max(prm_failure_band(i), 1e-30)), (prm_failure_band(i) > 0.0));
+    let mixed = ((prm_nonlocal_weight(i) * (eps_nl_new - eps_nl)) + ((1.0 - prm_nonlocal_weight(i)) * deps_p));
+    let deps_p_2 = select(local, max(mixed, 0.0), (prm_damage_length(i) > 0.0));
     let p = ld_p(i);
     let s_2 = s_i;
     let edot = ld_edot(i);
@@ -541,48 +497,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let s_4 = s_3;
     let triax = ((-p_2) / max(sqrt((1.5 * ddot(s_4, s_4))), 1e-30));
     let T_5 = T_4;
-    let indicator_new = (indicator + (deps_p / max((((prm_D1(i) + (prm_D2(i) * exp((prm_D3(i) * triax)))) * (1.0 + (prm_D4(i) * log(max(rate_2, 1.0))))) * (1.0 + (prm_D5(i) * min(max(((T_5 - prm_T_room(i)) / (prm_T_melt(i) - prm_T_room(i))), 0.0), 1.0)))), 1e-12)));
-    let indicator_new_2 = indicator_new;
-    let indicator_lap_sum = ld_indicator_lap_sum(i);
-    let lap_weight_2 = ld_lap_weight(i);
-    let l2_3 = (prm_damage_length(i) * prm_damage_length(i));
-    let averaged = ((indicator_new_2 + (l2_3 * indicator_lap_sum)) / (1.0 + (l2_3 * lap_weight_2)));
-    let D = D_i;
-    let eps_nl_new = nonlocal;
-    let eps_nl = eps_nl_i;
-    let averaged_2 = averaged;
-    let indicator_nl = indicator_nl_i;
-    let deps_p_2 = deps_p_i;
-    let p_3 = ld_p(i);
-    let s_5 = s_i;
-    let edot_3 = ld_edot(i);
-    let T_6 = T_i;
-    let D_2 = D;
-    let eps_nl_new_2 = eps_nl_new;
-    let eps_nl_2 = eps_nl;
-    let deps_p_3 = deps_p_2;
-    let spacing = select(ld_dx(i), prm_failure_band_spacing(i), (prm_failure_band_spacing(i) > 0.0));
-    let local = select(deps_p_3, ((deps_p_3 * spacing) / max(prm_failure_band(i), 1e-30)), (prm_failure_band(i) > 0.0));
-    let mixed = ((prm_nonlocal_weight(i) * (eps_nl_new_2 - eps_nl_2)) + ((1.0 - prm_nonlocal_weight(i)) * deps_p_3));
-    let deps_p_4 = select(local, max(mixed, 0.0), (prm_damage_length(i) > 0.0));
-    let p_4 = p_3;
-    let s_6 = s_5;
-    let edot_4 = edot_3;
-    let T_7 = T_6;
-    let p_5 = p_4;
-    let s_7 = s_6;
-    let edot_5 = edot_4;
-    let T_8 = T_7;
-    let e_4 = edot_5;
-    let d_5 = dev(e_4);
-    let rate_3 = (sqrt(((2.0 / 3.0) * ddot(d_5, d_5))) / prm_eps_rate0(i));
-    let s_8 = s_7;
-    let triax_2 = ((-p_5) / max(sqrt((1.5 * ddot(s_8, s_8))), 1e-30));
-    let T_9 = T_8;
-    D_i = select(select(min((D_2 + (deps_p_4 / max((((prm_D1(i) + (prm_D2(i) * exp((prm_D3(i) * triax_2)))) * (1.0 + (prm_D4(i) * log(max(rate_3, 1.0))))) * (1.0 + (prm_D5(i) * min(max(((T_9 - prm_T_room(i)) / (prm_T_melt(i) - prm_T_room(i))), 0.0), 1.0)))), 1e-12))), 1.0), min((D + max((averaged_2 - indicator_nl), 0.0)), 1.0), ((prm_nonlocal_indicator(i) > 0.0) && (prm_damage_length(i) > 0.0))), 1.0, (ld_p(i) <= (-prm_p_spall(i))));
+    let jc = min((D + (deps_p_2 / max((((prm_D1(i) + (prm_D2(i) * exp((prm_D3(i) * triax)))) * (1.0 + (prm_D4(i) * log(max(rate_2, 1.0))))) * (1.0 + (prm_D5(i) * min(max(((T_5 - prm_T_room(i)) / (prm_T_melt(i) - prm_T_room(i))), 0.0), 1.0)))), 1e-12))), 1.0);
+    D_i = select(jc, 1.0, (ld_p(i) <= (-prm_p_spall(i))));
     eps_nl_i = nonlocal;
-    indicator_i = indicator_new;
-    indicator_nl_i = averaged;
     // eos
     var p_i: f32 = ld_p(i);
     var c_i: f32 = ld_c(i);
@@ -608,6 +525,4 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     st_eps_nl(i, eps_nl_i);
     st_rate_nl(i, rate_nl_i);
     st_T(i, T_i);
-    st_indicator(i, indicator_i);
-    st_indicator_nl(i, indicator_nl_i);
 }

@@ -167,36 +167,20 @@ fn st_T(i: u32, v: f32) {
     let b = u32(info[43 + G] + i32(i) * 1);
     data[b] = v;
 }
-fn ld_indicator(i: u32) -> f32 {
-    let b = u32(info[45 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_indicator(i: u32, v: f32) {
-    let b = u32(info[45 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ld_indicator_nl(i: u32) -> f32 {
-    let b = u32(info[47 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_indicator_nl(i: u32, v: f32) {
-    let b = u32(info[47 + G] + i32(i) * 1);
-    data[b] = v;
-}
 fn ld_drho(i: u32) -> f32 {
-    let b = u32(info[51 + G] + i32(i) * 1);
+    let b = u32(info[47 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho(i: u32, v: f32) {
-    let b = u32(info[51 + G] + i32(i) * 1);
+    let b = u32(info[47 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_ds(i: u32) -> mat3x3<f32> {
-    let b = u32(info[53 + G] + i32(i) * 6);
+    let b = u32(info[49 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_ds(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[53 + G] + i32(i) * 6);
+    let b = u32(info[49 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -205,99 +189,91 @@ fn st_ds(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_de(i: u32) -> f32 {
-    let b = u32(info[55 + G] + i32(i) * 1);
+    let b = u32(info[51 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_de(i: u32, v: f32) {
-    let b = u32(info[55 + G] + i32(i) * 1);
+    let b = u32(info[51 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_dv(i: u32) -> vec3<f32> {
-    let b = u32(info[57 + G] + i32(i) * 3);
+    let b = u32(info[53 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_dv(i: u32, v: vec3<f32>) {
-    let b = u32(info[57 + G] + i32(i) * 3);
+    let b = u32(info[53 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_a_contact(i: u32) -> vec3<f32> {
-    let b = u32(info[59 + G] + i32(i) * 3);
+    let b = u32(info[55 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_a_contact(i: u32, v: vec3<f32>) {
-    let b = u32(info[59 + G] + i32(i) * 3);
+    let b = u32(info[55 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_lap_sum(i: u32) -> f32 {
-    let b = u32(info[61 + G] + i32(i) * 1);
+    let b = u32(info[57 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_lap_sum(i: u32, v: f32) {
-    let b = u32(info[61 + G] + i32(i) * 1);
+    let b = u32(info[57 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_lap_weight(i: u32) -> f32 {
-    let b = u32(info[63 + G] + i32(i) * 1);
+    let b = u32(info[59 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_lap_weight(i: u32, v: f32) {
-    let b = u32(info[63 + G] + i32(i) * 1);
+    let b = u32(info[59 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_rate_lap_sum(i: u32) -> f32 {
-    let b = u32(info[65 + G] + i32(i) * 1);
+    let b = u32(info[61 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rate_lap_sum(i: u32, v: f32) {
-    let b = u32(info[65 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ld_indicator_lap_sum(i: u32) -> f32 {
-    let b = u32(info[67 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_indicator_lap_sum(i: u32, v: f32) {
-    let b = u32(info[67 + G] + i32(i) * 1);
+    let b = u32(info[61 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_x_0(i: u32) -> vec3<f32> {
-    let b = u32(info[69 + G] + i32(i) * 3);
+    let b = u32(info[63 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_x_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[69 + G] + i32(i) * 3);
+    let b = u32(info[63 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_v_0(i: u32) -> vec3<f32> {
-    let b = u32(info[71 + G] + i32(i) * 3);
+    let b = u32(info[65 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_v_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[71 + G] + i32(i) * 3);
+    let b = u32(info[65 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_rho_0(i: u32) -> f32 {
-    let b = u32(info[73 + G] + i32(i) * 1);
+    let b = u32(info[67 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho_0(i: u32, v: f32) {
-    let b = u32(info[73 + G] + i32(i) * 1);
+    let b = u32(info[67 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s_0(i: u32) -> mat3x3<f32> {
-    let b = u32(info[75 + G] + i32(i) * 6);
+    let b = u32(info[69 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s_0(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[75 + G] + i32(i) * 6);
+    let b = u32(info[69 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -306,119 +282,115 @@ fn st_s_0(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_e_0(i: u32) -> f32 {
-    let b = u32(info[77 + G] + i32(i) * 1);
+    let b = u32(info[71 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_e_0(i: u32, v: f32) {
-    let b = u32(info[77 + G] + i32(i) * 1);
+    let b = u32(info[71 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 0u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 7u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 8u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 9u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 10u;
     return params[b];
 }
 fn prm_nonlocal_hardening(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 16u;
     return params[b];
 }
 fn prm_nonlocal_rate(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 17u;
     return params[b];
 }
 fn prm_damage_length(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 18u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 19u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 20u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 21u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 22u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 23u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 24u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 25u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 26u;
     return params[b];
 }
 fn prm_D1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 27u;
     return params[b];
 }
 fn prm_D2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 28u;
     return params[b];
 }
 fn prm_D3(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 29u;
     return params[b];
 }
 fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 30u;
     return params[b];
 }
 fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 31u;
     return params[b];
 }
 fn prm_failure_band(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 32u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 32u;
     return params[b];
 }
 fn prm_failure_band_spacing(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 33u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 33u;
     return params[b];
 }
 fn prm_nonlocal_weight(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 34u;
-    return params[b];
-}
-fn prm_nonlocal_indicator(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 35u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 34u;
     return params[b];
 }
 fn prm_C_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 37u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 36u;
     return params[b];
 }
 fn prm_taylor_quinney(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 38u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 37u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -487,15 +459,19 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // damage
     var D_i: f32 = ld_D(i);
     var eps_nl_i: f32 = ld_eps_nl(i);
-    var indicator_i: f32 = ld_indicator(i);
-    var indicator_nl_i: f32 = ld_indicator_nl(i);
     let eps_p_3 = eps_p_i;
     let lap_sum = ld_lap_sum(i);
     let lap_weight = ld_lap_weight(i);
     let l2_2 = (prm_damage_length(i) * prm_damage_length(i));
     let nonlocal = select(eps_p_3, ((eps_p_3 + (l2_2 * lap_sum)) / (1.0 + (l2_2 * lap_weight))), (prm_damage_length(i) > 0.0));
-    let indicator = indicator_i;
+    let D = D_i;
+    let eps_nl_new = nonlocal;
+    let eps_nl = eps_nl_i;
     let deps_p = deps_p_i;
+    let spacing = select(ld_dx(i), prm_failure_band_spacing(i), (prm_failure_band_spacing(i) > 0.0));
+    let local = select(deps_p, ((deps_p * spacing) / max(prm_failure_band(i), 1e-30)), (prm_failure_band(i) > 0.0));
+    let mixed = ((prm_nonlocal_weight(i) * (eps_nl_new - eps_nl)) + ((1.0 - prm_nonlocal_weight(i)) * deps_p));
+    let deps_p_2 = select(local, max(mixed, 0.0), (prm_damage_length(i) > 0.0));
     let p = ld_p(i);
     let s_2 = s_i;
     let edot = ld_edot(i);
@@ -510,48 +486,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let s_4 = s_3;
     let triax = ((-p_2) / max(sqrt((1.5 * ddot(s_4, s_4))), 1e-30));
     let T_7 = T_6;
-    let indicator_new = (indicator + (deps_p / max((((prm_D1(i) + (prm_D2(i) * exp((prm_D3(i) * triax)))) * (1.0 + (prm_D4(i) * log(max(rate_3, 1.0))))) * (1.0 + (prm_D5(i) * min(max(((T_7 - prm_T_room(i)) / (prm_T_melt(i) - prm_T_room(i))), 0.0), 1.0)))), 1e-12)));
-    let indicator_new_2 = indicator_new;
-    let indicator_lap_sum = ld_indicator_lap_sum(i);
-    let lap_weight_2 = ld_lap_weight(i);
-    let l2_3 = (prm_damage_length(i) * prm_damage_length(i));
-    let averaged = ((indicator_new_2 + (l2_3 * indicator_lap_sum)) / (1.0 + (l2_3 * lap_weight_2)));
-    let D = D_i;
-    let eps_nl_new = nonlocal;
-    let eps_nl = eps_nl_i;
-    let averaged_2 = averaged;
-    let indicator_nl = indicator_nl_i;
-    let deps_p_2 = deps_p_i;
-    let p_3 = ld_p(i);
-    let s_5 = s_i;
-    let edot_3 = ld_edot(i);
-    let T_8 = T_i;
-    let D_2 = D;
-    let eps_nl_new_2 = eps_nl_new;
-    let eps_nl_2 = eps_nl;
-    let deps_p_3 = deps_p_2;
-    let spacing = select(ld_dx(i), prm_failure_band_spacing(i), (prm_failure_band_spacing(i) > 0.0));
-    let local = select(deps_p_3, ((deps_p_3 * spacing) / max(prm_failure_band(i), 1e-30)), (prm_failure_band(i) > 0.0));
-    let mixed = ((prm_nonlocal_weight(i) * (eps_nl_new_2 - eps_nl_2)) + ((1.0 - prm_nonlocal_weight(i)) * deps_p_3));
-    let deps_p_4 = select(local, max(mixed, 0.0), (prm_damage_length(i) > 0.0));
-    let p_4 = p_3;
-    let s_6 = s_5;
-    let edot_4 = edot_3;
-    let T_9 = T_8;
-    let p_5 = p_4;
-    let s_7 = s_6;
-    let edot_5 = edot_4;
-    let T_10 = T_9;
-    let e_5 = edot_5;
-    let d_6 = dev(e_5);
-    let rate_4 = (sqrt(((2.0 / 3.0) * ddot(d_6, d_6))) / prm_eps_rate0(i));
-    let s_8 = s_7;
-    let triax_2 = ((-p_5) / max(sqrt((1.5 * ddot(s_8, s_8))), 1e-30));
-    let T_11 = T_10;
-    D_i = select(min((D_2 + (deps_p_4 / max((((prm_D1(i) + (prm_D2(i) * exp((prm_D3(i) * triax_2)))) * (1.0 + (prm_D4(i) * log(max(rate_4, 1.0))))) * (1.0 + (prm_D5(i) * min(max(((T_11 - prm_T_room(i)) / (prm_T_melt(i) - prm_T_room(i))), 0.0), 1.0)))), 1e-12))), 1.0), min((D + max((averaged_2 - indicator_nl), 0.0)), 1.0), ((prm_nonlocal_indicator(i) > 0.0) && (prm_damage_length(i) > 0.0)));
+    D_i = min((D + (deps_p_2 / max((((prm_D1(i) + (prm_D2(i) * exp((prm_D3(i) * triax)))) * (1.0 + (prm_D4(i) * log(max(rate_3, 1.0))))) * (1.0 + (prm_D5(i) * min(max(((T_7 - prm_T_room(i)) / (prm_T_melt(i) - prm_T_room(i))), 0.0), 1.0)))), 1e-12))), 1.0);
     eps_nl_i = nonlocal;
-    indicator_i = indicator_new;
-    indicator_nl_i = averaged;
     // failed_density_floor
     rho_i = select(rho_i, max(rho_i, prm_rho0(i)), (D_i >= 1.0));
     // eos
@@ -579,6 +515,4 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     st_eps_nl(i, eps_nl_i);
     st_rate_nl(i, rate_nl_i);
     st_T(i, T_i);
-    st_indicator(i, indicator_i);
-    st_indicator_nl(i, indicator_nl_i);
 }
