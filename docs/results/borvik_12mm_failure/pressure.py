@@ -23,8 +23,9 @@ def main(run):
             for i in failed:
                 dist = np.linalg.norm(x - x[i], axis=1)
                 nb = (dist < 1.3) & (dist > 0)
-                print(f"  failed at r {r[i]:.2f} z {x[i, 2]:.2f} mm, p {p[i]:.0f} MPa; {nb.sum()} neighbours "
-                      f"D {damage[nb].min():.2f}-{damage[nb].max():.2f}, p {p[nb].min():.0f} to {p[nb].max():.0f} MPa")
+                around = (f"D {damage[nb].min():.2f}-{damage[nb].max():.2f}, p {p[nb].min():.0f} to {p[nb].max():.0f} MPa"
+                          if nb.any() else "none within 1.3 mm")
+                print(f"  failed at r {r[i]:.2f} z {x[i, 2]:.2f} mm, p {p[i]:.0f} MPa; {nb.sum()} neighbours: {around}")
 
 
 if __name__ == '__main__':
