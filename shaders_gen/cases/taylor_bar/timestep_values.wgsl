@@ -59,11 +59,11 @@ fn st_hourglass_rate2(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_C_cfl(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 8u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 9u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -74,7 +74,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     if (i >= n) { return; }
     let t = globals[0u];
     let dt = globals[1u];
-    let scratch = u32(info[40]);
+    let scratch = u32(info[39]);
     data[scratch + 0u * n + i] = (prm_C_cfl(i) * ld_h_short(i));
     data[scratch + 1u * n + i] = (prm_c0(i) + length(ld_v(i)));
     data[scratch + 2u * n + i] = (prm_C_cfl(i) / (0.3 * sqrt((2.0 * ld_hourglass_rate2(i)))));

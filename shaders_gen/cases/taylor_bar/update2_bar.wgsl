@@ -174,19 +174,19 @@ fn st_u(i: u32, v: vec3<f32>) {
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
-fn ld_deps_p(i: u32) -> f32 {
-    let b = u32(info[21 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_deps_p(i: u32, v: f32) {
-    let b = u32(info[21 + G] + i32(i) * 1);
-    data[b] = v;
-}
 fn ld_eps_p(i: u32) -> f32 {
-    let b = u32(info[22 + G] + i32(i) * 1);
+    let b = u32(info[21 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_eps_p(i: u32, v: f32) {
+    let b = u32(info[21 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_deps_p(i: u32) -> f32 {
+    let b = u32(info[22 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_deps_p(i: u32, v: f32) {
     let b = u32(info[22 + G] + i32(i) * 1);
     data[b] = v;
 }
@@ -234,30 +234,20 @@ fn st_dv_hourglass(i: u32, v: vec3<f32>) {
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
-fn ld_du_reference(i: u32) -> vec3<f32> {
-    let b = u32(info[29 + G] + i32(i) * 3);
-    return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
-}
-fn st_du_reference(i: u32, v: vec3<f32>) {
-    let b = u32(info[29 + G] + i32(i) * 3);
-    data[b] = v[0];
-    data[b + 1u] = v[1];
-    data[b + 2u] = v[2];
-}
 fn ld_drho(i: u32) -> f32 {
-    let b = u32(info[30 + G] + i32(i) * 1);
+    let b = u32(info[29 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho(i: u32, v: f32) {
-    let b = u32(info[30 + G] + i32(i) * 1);
+    let b = u32(info[29 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_ds(i: u32) -> mat3x3<f32> {
-    let b = u32(info[31 + G] + i32(i) * 6);
+    let b = u32(info[30 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_ds(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[31 + G] + i32(i) * 6);
+    let b = u32(info[30 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -266,39 +256,39 @@ fn st_ds(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_x_0(i: u32) -> vec3<f32> {
-    let b = u32(info[32 + G] + i32(i) * 3);
+    let b = u32(info[31 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_x_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[32 + G] + i32(i) * 3);
+    let b = u32(info[31 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_v_0(i: u32) -> vec3<f32> {
-    let b = u32(info[33 + G] + i32(i) * 3);
+    let b = u32(info[32 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_v_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[33 + G] + i32(i) * 3);
+    let b = u32(info[32 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_rho_0(i: u32) -> f32 {
-    let b = u32(info[34 + G] + i32(i) * 1);
+    let b = u32(info[33 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho_0(i: u32, v: f32) {
-    let b = u32(info[34 + G] + i32(i) * 1);
+    let b = u32(info[33 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s_0(i: u32) -> mat3x3<f32> {
-    let b = u32(info[35 + G] + i32(i) * 6);
+    let b = u32(info[34 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s_0(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[35 + G] + i32(i) * 6);
+    let b = u32(info[34 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -307,11 +297,11 @@ fn st_s_0(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_kernel_shape_0(i: u32) -> mat3x3<f32> {
-    let b = u32(info[36 + G] + i32(i) * 9);
+    let b = u32(info[35 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_kernel_shape_0(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[36 + G] + i32(i) * 9);
+    let b = u32(info[35 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -323,101 +313,101 @@ fn st_kernel_shape_0(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ld_u_0(i: u32) -> vec3<f32> {
-    let b = u32(info[37 + G] + i32(i) * 3);
+    let b = u32(info[36 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_u_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[37 + G] + i32(i) * 3);
+    let b = u32(info[36 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_eps_p_0(i: u32) -> f32 {
-    let b = u32(info[38 + G] + i32(i) * 1);
+    let b = u32(info[37 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_eps_p_0(i: u32, v: f32) {
-    let b = u32(info[38 + G] + i32(i) * 1);
+    let b = u32(info[37 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_T_0(i: u32) -> f32 {
-    let b = u32(info[39 + G] + i32(i) * 1);
+    let b = u32(info[38 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_T_0(i: u32, v: f32) {
-    let b = u32(info[39 + G] + i32(i) * 1);
+    let b = u32(info[38 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 1u;
     return params[b];
 }
 fn prm_shape_floor(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 7u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 13u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 14u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 20u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 21u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 22u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 23u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 24u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 25u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 26u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 27u;
     return params[b];
 }
 fn prm_C_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 28u;
     return params[b];
 }
 fn prm_taylor_quinney(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 29u;
     return params[b];
 }
 fn prm__symmetry0(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 30u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm__symmetry1(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 34u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 33u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm__symmetry2(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 37u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 36u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 @compute @workgroup_size(64)
@@ -437,7 +427,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var kernel_shape_i: mat3x3<f32> = ld_kernel_shape(i);
     var u_i: vec3<f32> = ld_u(i);
     let rate_of_x = v_i;
-    let rate_of_u = (v_i + ld_du_reference(i));
+    let rate_of_u = v_i;
     let rate_of_v = (ld_dv(i) + ld_dv_hourglass(i));
     let rate_of_rho = ld_drho(i);
     let rate_of_s = ld_ds(i);
@@ -547,7 +537,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     st_kernel_norm(i, kernel_norm_i);
     st_h_short(i, h_short_i);
     st_u(i, u_i);
-    st_deps_p(i, deps_p_i);
     st_eps_p(i, eps_p_i);
+    st_deps_p(i, deps_p_i);
     st_T(i, T_i);
 }

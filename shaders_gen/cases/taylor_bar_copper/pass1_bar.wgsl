@@ -291,30 +291,20 @@ fn st_hourglass_rate2(i: u32, v: f32) {
     let b = u32(info[28 + G] + i32(i) * 1);
     data[b] = v;
 }
-fn ld_du_reference(i: u32) -> vec3<f32> {
-    let b = u32(info[29 + G] + i32(i) * 3);
-    return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
-}
-fn st_du_reference(i: u32, v: vec3<f32>) {
-    let b = u32(info[29 + G] + i32(i) * 3);
-    data[b] = v[0];
-    data[b + 1u] = v[1];
-    data[b + 2u] = v[2];
-}
 fn ld_drho(i: u32) -> f32 {
-    let b = u32(info[30 + G] + i32(i) * 1);
+    let b = u32(info[29 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho(i: u32, v: f32) {
-    let b = u32(info[30 + G] + i32(i) * 1);
+    let b = u32(info[29 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_ds(i: u32) -> mat3x3<f32> {
-    let b = u32(info[31 + G] + i32(i) * 6);
+    let b = u32(info[30 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_ds(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[31 + G] + i32(i) * 6);
+    let b = u32(info[30 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -323,27 +313,27 @@ fn st_ds(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 1u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 5u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 13u;
     return params[b];
 }
 fn prm_hourglass_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 15u;
     return params[b];
 }
 fn prm_hourglass_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 16u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -365,8 +355,6 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // pairsum shaped_hourglass: accumulators
     var dv_hourglass: vec3<f32> = vec3<f32>(0.0);
     var hourglass_rate2: f32 = 0.0;
-    var du_reference: vec3<f32> = vec3<f32>(0.0);
-    var K: mat3x3<f32> = mat3x3<f32>();
     let rho0_i = prm_rho0(i);
     let h_ratio_i = prm_h_ratio(i);
     let hourglass_alpha_i = prm_hourglass_alpha(i);
@@ -434,7 +422,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             L = L + neg_m(((ldj_m(j, sgn) / ldj_rho(j, sgn)) * outer(g, x_ij)));
             grad_v = grad_v + outer((ldj_v(j, sgn) - v_i), ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * g));
         }
-        // pairsum shaped_hourglass (stdlib/solid/shaped_hourglass.sph:40)
+        // pairsum shaped_hourglass (stdlib/solid/shaped_hourglass.sph:32)
         if ((((body_i == ldj_body(j, sgn)) && (0.0 < 1.0)) && (0.0 < 1.0))) {
             let X_ij = (x_ij - (u_i - ldj_u(j, sgn)));
             let r0 = max(length(X_ij), 1e-9);
@@ -443,7 +431,6 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let k_2 = (((((hourglass_alpha_i * ldj_m(j, sgn)) / rho0_i) * kernel_w_at(r0, (h_ratio_i * (0.5 * (dx_i + ldj_dx(j, sgn)))))) * hourglass_E_i) / (rho0_i * (r0 * r0)));
             dv_hourglass = dv_hourglass + ((k_2 * miss) * along);
             hourglass_rate2 = hourglass_rate2 + k_2;
-            K = K + (k_2 * sym(outer(along, along)));
         }
     }
     // then shaped_velocity_gradient
@@ -452,15 +439,6 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     edot = sym(gv);
     spin = skew(gv);
     dkernel_shape = (gv * kernel_shape_i);
-    // then shaped_hourglass
-    let K_2 = K;
-    let k_sum = hourglass_rate2;
-    let pull = dv_hourglass;
-    let share = 0.0;
-    let Kn = div_m(K_2, max(k_sum, 1e-30));
-    let usable = (((k_sum > 0.0) && (abs(determinant(Kn)) > 1e-6)) && (share > 0.0));
-    let move_ = ((inv(kernel_shape_i) * (inv(Kn) * pull)) / max(k_sum, 1e-30));
-    du_reference = select((dt * (0.0 * pull)), ((share / dt) * move_), usable);
     // then continuity_from_strain_rate
     var drho_i: f32 = ld_drho(i);
     drho_i = ((-ld_rho(i)) * trace(edot));
@@ -477,7 +455,6 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     st_compression(i, compression_i);
     st_dv_hourglass(i, dv_hourglass);
     st_hourglass_rate2(i, hourglass_rate2);
-    st_du_reference(i, du_reference);
     st_drho(i, drho_i);
     st_ds(i, ds_i);
 }

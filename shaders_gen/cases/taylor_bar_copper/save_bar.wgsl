@@ -101,11 +101,11 @@ fn st_u(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn ld_eps_p(i: u32) -> f32 {
-    let b = u32(info[22 + G] + i32(i) * 1);
+    let b = u32(info[21 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_eps_p(i: u32, v: f32) {
-    let b = u32(info[22 + G] + i32(i) * 1);
+    let b = u32(info[21 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_T(i: u32) -> f32 {
@@ -117,39 +117,39 @@ fn st_T(i: u32, v: f32) {
     data[b] = v;
 }
 fn ld_x_0(i: u32) -> vec3<f32> {
-    let b = u32(info[32 + G] + i32(i) * 3);
+    let b = u32(info[31 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_x_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[32 + G] + i32(i) * 3);
+    let b = u32(info[31 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_v_0(i: u32) -> vec3<f32> {
-    let b = u32(info[33 + G] + i32(i) * 3);
+    let b = u32(info[32 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_v_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[33 + G] + i32(i) * 3);
+    let b = u32(info[32 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_rho_0(i: u32) -> f32 {
-    let b = u32(info[34 + G] + i32(i) * 1);
+    let b = u32(info[33 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho_0(i: u32, v: f32) {
-    let b = u32(info[34 + G] + i32(i) * 1);
+    let b = u32(info[33 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s_0(i: u32) -> mat3x3<f32> {
-    let b = u32(info[35 + G] + i32(i) * 6);
+    let b = u32(info[34 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s_0(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[35 + G] + i32(i) * 6);
+    let b = u32(info[34 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -158,11 +158,11 @@ fn st_s_0(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_kernel_shape_0(i: u32) -> mat3x3<f32> {
-    let b = u32(info[36 + G] + i32(i) * 9);
+    let b = u32(info[35 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_kernel_shape_0(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[36 + G] + i32(i) * 9);
+    let b = u32(info[35 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -174,29 +174,29 @@ fn st_kernel_shape_0(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ld_u_0(i: u32) -> vec3<f32> {
-    let b = u32(info[37 + G] + i32(i) * 3);
+    let b = u32(info[36 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_u_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[37 + G] + i32(i) * 3);
+    let b = u32(info[36 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_eps_p_0(i: u32) -> f32 {
-    let b = u32(info[38 + G] + i32(i) * 1);
+    let b = u32(info[37 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_eps_p_0(i: u32, v: f32) {
-    let b = u32(info[38 + G] + i32(i) * 1);
+    let b = u32(info[37 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_T_0(i: u32) -> f32 {
-    let b = u32(info[39 + G] + i32(i) * 1);
+    let b = u32(info[38 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_T_0(i: u32, v: f32) {
-    let b = u32(info[39 + G] + i32(i) * 1);
+    let b = u32(info[38 + G] + i32(i) * 1);
     data[b] = v;
 }
 @compute @workgroup_size(64)

@@ -507,11 +507,11 @@ fn st_de(i: u32, v: f32) {
     data[b] = v;
 }
 fn ld_ds(i: u32) -> mat3x3<f32> {
-    let b = u32(info[75 + G] + i32(i) * 6);
+    let b = u32(info[73 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_ds(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[75 + G] + i32(i) * 6);
+    let b = u32(info[73 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -520,51 +520,51 @@ fn st_ds(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_colour_other(i: u32) -> f32 {
-    let b = u32(info[77 + G] + i32(i) * 1);
+    let b = u32(info[75 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_colour_other(i: u32, v: f32) {
-    let b = u32(info[77 + G] + i32(i) * 1);
+    let b = u32(info[75 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_p_contact(i: u32) -> f32 {
-    let b = u32(info[79 + G] + i32(i) * 1);
+    let b = u32(info[77 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p_contact(i: u32, v: f32) {
-    let b = u32(info[79 + G] + i32(i) * 1);
+    let b = u32(info[77 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 5u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 6u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 9u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 10u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 11u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 15u;
     return params[b];
 }
 fn prm_contact_colour(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 21u;
     return params[b];
 }
 fn prm_contact_stiffness(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 22u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -576,14 +576,6 @@ fn ldj_D(j: u32, sgn: vec3<f32>) -> f32 {
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
-fn ld_deps_p(i: u32) -> f32 {
-    let b = u32(info[45 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_deps_p(i: u32, v: f32) {
-    let b = u32(info[45 + G] + i32(i) * 1);
-    data[b] = v;
-}
 fn ldj_eps_nl(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[49u + ints[j]];
     if (base == -2147483648) { return 0.0; }
@@ -646,30 +638,20 @@ fn st_hourglass_rate2(i: u32, v: f32) {
     let b = u32(info[69 + G] + i32(i) * 1);
     data[b] = v;
 }
-fn ld_du_reference(i: u32) -> vec3<f32> {
-    let b = u32(info[71 + G] + i32(i) * 3);
-    return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
-}
-fn st_du_reference(i: u32, v: vec3<f32>) {
-    let b = u32(info[71 + G] + i32(i) * 3);
-    data[b] = v[0];
-    data[b + 1u] = v[1];
-    data[b + 2u] = v[2];
-}
 fn ld_drho_diffusion(i: u32) -> f32 {
-    let b = u32(info[73 + G] + i32(i) * 1);
+    let b = u32(info[71 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho_diffusion(i: u32, v: f32) {
-    let b = u32(info[73 + G] + i32(i) * 1);
+    let b = u32(info[71 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_ds(i: u32) -> mat3x3<f32> {
-    let b = u32(info[75 + G] + i32(i) * 6);
+    let b = u32(info[73 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_ds(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[75 + G] + i32(i) * 6);
+    let b = u32(info[73 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -678,91 +660,87 @@ fn st_ds(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_colour_other(i: u32) -> f32 {
-    let b = u32(info[77 + G] + i32(i) * 1);
+    let b = u32(info[75 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_colour_other(i: u32, v: f32) {
-    let b = u32(info[77 + G] + i32(i) * 1);
+    let b = u32(info[75 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_p_contact(i: u32) -> f32 {
-    let b = u32(info[79 + G] + i32(i) * 1);
+    let b = u32(info[77 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p_contact(i: u32, v: f32) {
-    let b = u32(info[79 + G] + i32(i) * 1);
+    let b = u32(info[77 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_lap_sum(i: u32) -> f32 {
-    let b = u32(info[83 + G] + i32(i) * 1);
+    let b = u32(info[81 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_lap_sum(i: u32, v: f32) {
-    let b = u32(info[83 + G] + i32(i) * 1);
+    let b = u32(info[81 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_lap_weight(i: u32) -> f32 {
-    let b = u32(info[85 + G] + i32(i) * 1);
+    let b = u32(info[83 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_lap_weight(i: u32, v: f32) {
-    let b = u32(info[85 + G] + i32(i) * 1);
+    let b = u32(info[83 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_rate_lap_sum(i: u32) -> f32 {
-    let b = u32(info[87 + G] + i32(i) * 1);
+    let b = u32(info[85 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rate_lap_sum(i: u32, v: f32) {
-    let b = u32(info[87 + G] + i32(i) * 1);
+    let b = u32(info[85 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 1u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 5u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 6u;
     return params[b];
 }
 fn prm_delta(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 7u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 8u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 15u;
     return params[b];
 }
 fn prm_hourglass_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 16u;
     return params[b];
 }
 fn prm_hourglass_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 17u;
-    return params[b];
-}
-fn prm_hourglass_relax(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 17u;
     return params[b];
 }
 fn prm_contact_colour(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 21u;
     return params[b];
 }
 fn prm_contact_stiffness(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 22u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -784,8 +762,6 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // pairsum shaped_hourglass: accumulators
     var dv_hourglass: vec3<f32> = vec3<f32>(0.0);
     var hourglass_rate2: f32 = 0.0;
-    var du_reference: vec3<f32> = vec3<f32>(0.0);
-    var K: mat3x3<f32> = mat3x3<f32>();
     // pairsum shaped_density_diffusion: accumulators
     var drho_diffusion: f32 = 0.0;
     var sum: f32 = 0.0;
@@ -884,7 +860,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                     grad_v_2 = grad_v_2 + outer((ldj_v(j, sgn) - v_i), ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * g));
                 }
             }
-            // pairsum shaped_hourglass (stdlib/solid/shaped_hourglass.sph:40)
+            // pairsum shaped_hourglass (stdlib/solid/shaped_hourglass.sph:32)
             if (in_groups(2u, ints[j])) {
                 if ((((body_i == ldj_body(j, sgn)) && (D_i < 1.0)) && (ldj_D(j, sgn) < 1.0))) {
                     let X_ij = (x_ij - (u_i - ldj_u(j, sgn)));
@@ -894,7 +870,6 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                     let k_2 = (((((hourglass_alpha_i * ldj_m(j, sgn)) / rho0_i) * kernel_w_at(r0, (h_ratio_i * (0.5 * (dx_i + ldj_dx(j, sgn)))))) * hourglass_E_i) / (rho0_i * (r0 * r0)));
                     dv_hourglass = dv_hourglass + ((k_2 * miss) * along);
                     hourglass_rate2 = hourglass_rate2 + k_2;
-                    K = K + (k_2 * sym(outer(along, along)));
                 }
             }
             // pairsum shaped_density_diffusion (stdlib/continuity/shaped_diffusion.sph:29)
@@ -960,15 +935,6 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     edot = sym(gv);
     spin = skew(gv);
     dkernel_shape = (gv * kernel_shape_i);
-    // then shaped_hourglass
-    let K_2 = K;
-    let k_sum = hourglass_rate2;
-    let pull = dv_hourglass;
-    let share = select(0.0, min((ld_deps_p(i) / max(prm_hourglass_relax(i), 1e-30)), 1.0), (prm_hourglass_relax(i) > 0.0));
-    let Kn = div_m(K_2, max(k_sum, 1e-30));
-    let usable = (((k_sum > 0.0) && (abs(determinant(Kn)) > 1e-6)) && (share > 0.0));
-    let move_ = ((inv(kernel_shape_i) * (inv(Kn) * pull)) / max(k_sum, 1e-30));
-    du_reference = select((dt * (0.0 * pull)), ((share / dt) * move_), usable);
     // then continuity_from_strain_rate
     var drho_i: f32 = ld_drho(i);
     drho_i = ((-rho_i) * trace(edot));
@@ -997,7 +963,6 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     st_compression(i, compression_i);
     st_dv_hourglass(i, dv_hourglass);
     st_hourglass_rate2(i, hourglass_rate2);
-    st_du_reference(i, du_reference);
     st_drho_diffusion(i, drho_diffusion);
     st_ds(i, ds_i);
     st_colour_other(i, colour_other);

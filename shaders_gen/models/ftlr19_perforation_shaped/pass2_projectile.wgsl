@@ -508,46 +508,46 @@ fn st_dv(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn ld_p_contact(i: u32) -> f32 {
-    let b = u32(info[79 + G] + i32(i) * 1);
+    let b = u32(info[77 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p_contact(i: u32, v: f32) {
-    let b = u32(info[79 + G] + i32(i) * 1);
+    let b = u32(info[77 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_p_contact(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[79u];
+    let base = info[77u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
 fn ld_a_contact(i: u32) -> vec3<f32> {
-    let b = u32(info[81 + G] + i32(i) * 3);
+    let b = u32(info[79 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_a_contact(i: u32, v: vec3<f32>) {
-    let b = u32(info[81 + G] + i32(i) * 3);
+    let b = u32(info[79 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn prm_delta(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 7u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 8u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 9u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 10u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 11u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -190,19 +190,19 @@ fn st_D(i: u32, v: f32) {
     let b = u32(info[43 + G] + i32(i) * 1);
     data[b] = v;
 }
-fn ld_deps_p(i: u32) -> f32 {
-    let b = u32(info[45 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_deps_p(i: u32, v: f32) {
-    let b = u32(info[45 + G] + i32(i) * 1);
-    data[b] = v;
-}
 fn ld_eps_p(i: u32) -> f32 {
-    let b = u32(info[47 + G] + i32(i) * 1);
+    let b = u32(info[45 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_eps_p(i: u32, v: f32) {
+    let b = u32(info[45 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_deps_p(i: u32) -> f32 {
+    let b = u32(info[47 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_deps_p(i: u32, v: f32) {
     let b = u32(info[47 + G] + i32(i) * 1);
     data[b] = v;
 }
@@ -282,30 +282,20 @@ fn st_dv_hourglass(i: u32, v: vec3<f32>) {
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
-fn ld_du_reference(i: u32) -> vec3<f32> {
-    let b = u32(info[71 + G] + i32(i) * 3);
-    return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
-}
-fn st_du_reference(i: u32, v: vec3<f32>) {
-    let b = u32(info[71 + G] + i32(i) * 3);
-    data[b] = v[0];
-    data[b + 1u] = v[1];
-    data[b + 2u] = v[2];
-}
 fn ld_drho_diffusion(i: u32) -> f32 {
-    let b = u32(info[73 + G] + i32(i) * 1);
+    let b = u32(info[71 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho_diffusion(i: u32, v: f32) {
-    let b = u32(info[73 + G] + i32(i) * 1);
+    let b = u32(info[71 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_ds(i: u32) -> mat3x3<f32> {
-    let b = u32(info[75 + G] + i32(i) * 6);
+    let b = u32(info[73 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_ds(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[75 + G] + i32(i) * 6);
+    let b = u32(info[73 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -314,73 +304,73 @@ fn st_ds(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_a_contact(i: u32) -> vec3<f32> {
-    let b = u32(info[81 + G] + i32(i) * 3);
+    let b = u32(info[79 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_a_contact(i: u32, v: vec3<f32>) {
-    let b = u32(info[81 + G] + i32(i) * 3);
+    let b = u32(info[79 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_lap_sum(i: u32) -> f32 {
-    let b = u32(info[83 + G] + i32(i) * 1);
+    let b = u32(info[81 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_lap_sum(i: u32, v: f32) {
-    let b = u32(info[83 + G] + i32(i) * 1);
+    let b = u32(info[81 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_lap_weight(i: u32) -> f32 {
-    let b = u32(info[85 + G] + i32(i) * 1);
+    let b = u32(info[83 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_lap_weight(i: u32, v: f32) {
-    let b = u32(info[85 + G] + i32(i) * 1);
+    let b = u32(info[83 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_rate_lap_sum(i: u32) -> f32 {
-    let b = u32(info[87 + G] + i32(i) * 1);
+    let b = u32(info[85 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rate_lap_sum(i: u32, v: f32) {
-    let b = u32(info[87 + G] + i32(i) * 1);
+    let b = u32(info[85 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_x_0(i: u32) -> vec3<f32> {
-    let b = u32(info[89 + G] + i32(i) * 3);
+    let b = u32(info[87 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_x_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[89 + G] + i32(i) * 3);
+    let b = u32(info[87 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_v_0(i: u32) -> vec3<f32> {
-    let b = u32(info[91 + G] + i32(i) * 3);
+    let b = u32(info[89 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_v_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[91 + G] + i32(i) * 3);
+    let b = u32(info[89 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_rho_0(i: u32) -> f32 {
-    let b = u32(info[93 + G] + i32(i) * 1);
+    let b = u32(info[91 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho_0(i: u32, v: f32) {
-    let b = u32(info[93 + G] + i32(i) * 1);
+    let b = u32(info[91 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s_0(i: u32) -> mat3x3<f32> {
-    let b = u32(info[95 + G] + i32(i) * 6);
+    let b = u32(info[93 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s_0(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[95 + G] + i32(i) * 6);
+    let b = u32(info[93 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -389,19 +379,19 @@ fn st_s_0(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_e_0(i: u32) -> f32 {
-    let b = u32(info[97 + G] + i32(i) * 1);
+    let b = u32(info[95 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_e_0(i: u32, v: f32) {
-    let b = u32(info[97 + G] + i32(i) * 1);
+    let b = u32(info[95 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_kernel_shape_0(i: u32) -> mat3x3<f32> {
-    let b = u32(info[99 + G] + i32(i) * 9);
+    let b = u32(info[97 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_kernel_shape_0(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[99 + G] + i32(i) * 9);
+    let b = u32(info[97 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -413,141 +403,141 @@ fn st_kernel_shape_0(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ld_u_0(i: u32) -> vec3<f32> {
-    let b = u32(info[101 + G] + i32(i) * 3);
+    let b = u32(info[99 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_u_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[101 + G] + i32(i) * 3);
+    let b = u32(info[99 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_D_0(i: u32) -> f32 {
-    let b = u32(info[103 + G] + i32(i) * 1);
+    let b = u32(info[101 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_D_0(i: u32, v: f32) {
-    let b = u32(info[103 + G] + i32(i) * 1);
+    let b = u32(info[101 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_eps_p_0(i: u32) -> f32 {
-    let b = u32(info[105 + G] + i32(i) * 1);
+    let b = u32(info[103 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_eps_p_0(i: u32, v: f32) {
-    let b = u32(info[105 + G] + i32(i) * 1);
+    let b = u32(info[103 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_eps_nl_0(i: u32) -> f32 {
-    let b = u32(info[107 + G] + i32(i) * 1);
+    let b = u32(info[105 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_eps_nl_0(i: u32, v: f32) {
-    let b = u32(info[107 + G] + i32(i) * 1);
+    let b = u32(info[105 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 1u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 8u;
     return params[b];
 }
 fn prm_shape_floor(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 14u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 15u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 19u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 20u;
     return params[b];
 }
 fn prm_nonlocal_hardening(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 23u;
     return params[b];
 }
 fn prm_nonlocal_rate(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 24u;
     return params[b];
 }
 fn prm_damage_length(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 25u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 26u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 27u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 28u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 29u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 30u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 32u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 31u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 33u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 32u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 34u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 33u;
     return params[b];
 }
 fn prm_D1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 35u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 34u;
     return params[b];
 }
 fn prm_D2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 36u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 35u;
     return params[b];
 }
 fn prm_D3(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 37u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 36u;
     return params[b];
 }
 fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 38u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 37u;
     return params[b];
 }
 fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 39u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 38u;
     return params[b];
 }
 fn prm_failure_band(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 40u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 39u;
     return params[b];
 }
 fn prm_failure_band_spacing(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 41u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 40u;
     return params[b];
 }
 fn prm_nonlocal_weight(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 42u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 41u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -568,7 +558,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var kernel_shape_i: mat3x3<f32> = ld_kernel_shape(i);
     var u_i: vec3<f32> = ld_u(i);
     let rate_of_x = v_i;
-    let rate_of_u = (v_i + ld_du_reference(i));
+    let rate_of_u = v_i;
     let rate_of_v = ((ld_dv(i) + ld_a_contact(i)) + ld_dv_hourglass(i));
     let rate_of_rho = (ld_drho(i) + ld_drho_diffusion(i));
     let rate_of_s = ld_ds(i);
@@ -715,8 +705,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     st_h_short(i, h_short_i);
     st_u(i, u_i);
     st_D(i, D_i);
-    st_deps_p(i, deps_p_i);
     st_eps_p(i, eps_p_i);
+    st_deps_p(i, deps_p_i);
     st_eps_nl(i, eps_nl_i);
     st_rate_nl(i, rate_nl_i);
 }
