@@ -44,6 +44,13 @@ def read_vtu(path):
     return out
 
 
+def outputs(run):
+    """The VTK outputs of a run (its --out folder), in time order: [(time in s, path of the VTU)]."""
+    vtk = Path(run) / "vtk"
+    pvd = next(vtk.glob("*.pvd")).read_text()
+    return [(float(t), vtk / f) for t, f in re.findall(r'timestep="([^"]*)"[^>]*file="([^"]*)"', pvd)]
+
+
 def band(d, dx_mm):
     rings = {}
     strain = high = failed = 0.0
@@ -76,13 +83,12 @@ def main(dirs):
     for run in dirs:
         run = Path(run)
         dx_mm = 1000.0 * json.loads((run / "report.json").read_text())["dx"]
-        pvd = next((run / "vtk").glob("*.pvd")).read_text()
-        for t, f in re.findall(r'timestep="([^"]*)"[^>]*file="([^"]*)"', pvd):
-            if float(t) == 0.0:
+        for t, f in outputs(run):
+            if t == 0.0:
                 continue
-            peak, r, width, strain, high, failed, vfailed, top_eps, top_D = band(read_vtu(run / "vtk" / f), dx_mm)
+            peak, r, width, strain, high, failed, vfailed, top_eps, top_D = band(read_vtu(f), dx_mm)
             print(
-                f"{run} | {1e6 * float(t):.0f} | {peak:.3f} | {r:.1f} | {width:.2f} | {strain:.0f} | {high:.0f} | {failed:.0f} | {vfailed:.0f}"
+                f"{run} | {1e6 * t:.0f} | {peak:.3f} | {r:.1f} | {width:.2f} | {strain:.0f} | {high:.0f} | {failed:.0f} | {vfailed:.0f}"
                 f" | {top_eps:.2f} | {top_D:.2f}"
             )
 

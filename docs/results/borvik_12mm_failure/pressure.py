@@ -4,18 +4,18 @@ beyond 3 GPa, and at the first output with a failed particle, each failed partic
 pressure range of its neighbours within 1.3 mm. Usage: python3 pressure.py RUN..."""
 import os, sys
 import numpy as np
-from failed import frames, read
+from failed import outputs, read
 
 
 def main(run):
     reported = False
-    for t, f in frames(run)[1:]:
+    for t, f in outputs(run)[1:]:
         d = read(f)
         plate = d['body'] == 1
         x, p, damage = d['Points'][plate] * 1e3, d['p'][plate] / 1e6, d['D'][plate]
         r = np.hypot(x[:, 0], x[:, 1])
         near = r < 15
-        print(f"{run} {t:.0f} us: within 15 mm p {p[near].min():.0f} to {p[near].max():.0f} MPa, "
+        print(f"{run} {t * 1e6:.0f} us: within 15 mm p {p[near].min():.0f} to {p[near].max():.0f} MPa, "
               f"{(near & (p < -2000)).sum()} below -2 GPa, {(near & (p > 3000)).sum()} above 3 GPa")
         failed = np.flatnonzero(damage >= 0.999)
         if len(failed) and not reported:

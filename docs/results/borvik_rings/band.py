@@ -8,14 +8,13 @@ the axis r0 and its depth z0, the plate's top face at z = 0, in mm). The runs' V
 kept here (README.md has the figures this printed); rerun a case to read it.
 """
 import os
-import re
 import sys
 
 import numpy as np
 
 sys.dont_write_bytecode = True  # nothing written beside the stored results
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "..", "scripts"))
-from shear_band import read_vtu  # noqa: E402
+from shear_band import outputs, read_vtu  # noqa: E402
 
 
 def read(path):
@@ -24,19 +23,17 @@ def read(path):
 
 
 def main(run):
-    vtk = os.path.join(run, "vtk")
-    pvd = open(os.path.join(vtk, "borvik_perforation.pvd")).read()
-    outputs = re.findall(r'timestep="([^"]+)"[^>]*file="([^"]+)"', pvd)
-    first = read(os.path.join(vtk, outputs[0][1]))
+    frames = outputs(run)
+    first = read(frames[0][1])
     start = dict(zip(first["id"], first["Points"] * 1e3))
-    for t, name in outputs[1:]:
-        d = read(os.path.join(vtk, name))
+    for t, path in frames[1:]:
+        d = read(path)
         plate = d["body"] == 1
         ids, eps, damage = d["id"][plate], d["eps_p"][plate], d["D"][plate]
         i = np.argmax(eps)
         x0 = start[ids[i]]
         print(
-            f"{float(t) * 1e6:6.1f} us  D max {damage.max():.3f}  failed {np.sum(damage >= 1):4d}  "
+            f"{t * 1e6:6.1f} us  D max {damage.max():.3f}  failed {np.sum(damage >= 1):4d}  "
             f"eps_p max {eps[i]:.3f} from r0 {np.hypot(x0[0], x0[1]):.2f} mm, z0 {x0[2]:.2f} mm"
         )
 
