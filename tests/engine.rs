@@ -1046,6 +1046,32 @@ fn nonlocal_rate_returns_the_stress_to_the_flow_stress_of_the_averaged_strain_ra
     assert!(own > 1e-3, "σ_eq off the surface of the own rate by only {own:e}: the bar does not tell them apart");
 }
 
+/// With `nonlocal_hardening` m ≠ 0, 1 the return hardens with the blend m ε̄_p + (1 − m) ε_p
+/// (floored at 0); m = −1, 2 ε_p − ε̄_p, is a gradient hardening: where ε_p peaks above its
+/// average (ε̄_p − ε_p ≈ ℓ² ∇²ε̄_p) the flow stress rises. The bar of
+/// `nonlocal_hardening_returns_the_stress_to_the_flow_stress_of_the_nonlocal_plastic_strain` with m = −1:
+/// every particle that flowed in the last step and has not failed, away from the ends, sits on the
+/// surface of max(2 ε_p − ε̄_p, 0) to 1e-9, and the surface of ε̄_p alone misses by more than 1e-3
+/// on at least one of them.
+#[test]
+fn a_negative_nonlocal_hardening_returns_the_stress_to_the_flow_stress_of_the_blended_plastic_strain() {
+    let mut e = weldox_bar(
+        "gradient-hardening",
+        0.5,
+        "damage_length = \"2 mm\"\nnonlocal_hardening = -1",
+        "eps_p = \"select(x.x < 0.02 [m], 0.2, 0)\", v = \"10000 [1/s] * (x - vec(0.02 [m], 0 [m]))\"",
+        300,
+    );
+    let step = one_more_return(&mut e);
+    let edot = stored_field(&e.backend, "edot").1;
+    let rate = |i: usize| equivalent_rate_1d(edot[i]);
+    let blend = |i: usize| (2.0 * step.eps_p_before[i] - step.eps_nl_before[i]).max(0.0);
+    let blended = largest_misfit(&step, "blended", |i| weldox_flow_stress(blend(i), rate(i)));
+    let nonlocal = largest_misfit(&step, "nonlocal", |i| weldox_flow_stress(step.eps_nl_before[i], rate(i)));
+    assert!(blended < 1e-9, "σ_eq off the surface of max(2 ε_p − ε̄_p, 0) by {blended:e}");
+    assert!(nonlocal > 1e-3, "σ_eq off the surface of ε̄_p by only {nonlocal:e}: the bar does not tell them apart");
+}
+
 /// The fields of the stretched bar of `an_over_nonlocal_weight_…` with `nonlocal_weight` m, before
 /// and after its 61st step: ε̄_p, ε_p and D before, then after.
 fn over_nonlocal_step(weight: f64) -> [Vec<f64>; 6] {

@@ -330,7 +330,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // radial_return
     var eps_p_i: f32 = ld_eps_p(i);
     let sig_eq = sqrt(((3.0 * 0.5) * ddot(s_i, s_i)));
-    let hardening_strain = select(eps_p_i, ld_eps_nl(i), ((prm_nonlocal_hardening(i) > 0.0) && (prm_damage_length(i) > 0.0)));
+    let blend = ((prm_nonlocal_hardening(i) * ld_eps_nl(i)) + ((1.0 - prm_nonlocal_hardening(i)) * eps_p_i));
+    let hardening_strain = select(eps_p_i, max(blend, 0.0), ((prm_nonlocal_hardening(i) != 0.0) && (prm_damage_length(i) > 0.0)));
     let e = ld_edot(i);
     let d = dev(e);
     let hardening_rate = select(sqrt(((2.0 / 3.0) * ddot(d, d))), ld_rate_nl(i), ((prm_nonlocal_rate(i) > 0.0) && (prm_damage_length(i) > 0.0)));

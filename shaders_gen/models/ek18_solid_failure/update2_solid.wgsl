@@ -453,7 +453,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // radial_return
     var deps_p_i: f32 = ld_deps_p(i);
     let sig_eq = sqrt(((3.0 * 0.5) * ddot(s_i, s_i)));
-    let hardening_strain = select(eps_p_i, eps_nl_i, ((prm_nonlocal_hardening(i) > 0.0) && (prm_damage_length(i) > 0.0)));
+    let blend = ((prm_nonlocal_hardening(i) * eps_nl_i) + ((1.0 - prm_nonlocal_hardening(i)) * eps_p_i));
+    let hardening_strain = select(eps_p_i, max(blend, 0.0), ((prm_nonlocal_hardening(i) != 0.0) && (prm_damage_length(i) > 0.0)));
     let e_2 = ld_edot(i);
     let d_2 = dev(e_2);
     let hardening_rate = select(sqrt(((2.0 / 3.0) * ddot(d_2, d_2))), rate_nl_i, ((prm_nonlocal_rate(i) > 0.0) && (prm_damage_length(i) > 0.0)));
