@@ -278,7 +278,7 @@ fn uncertainty_table(h: &[f64], followed: &[Followed]) -> Table {
             vec![
                 row.quantity.clone(),
                 u.describe_order(),
-                u.describe_order_without_one().unwrap_or_else(|| "— (five levels or more)".into()),
+                u.describe_order_without_one().unwrap_or_else(|| "— (it needs five levels)".into()),
                 u.chosen.law.describe(),
                 fmt_num(u.chosen.limit()),
                 fmt_num(u.chosen.sigma),
