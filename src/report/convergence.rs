@@ -473,6 +473,15 @@ mod tests {
         assert!(analyse(&levels[1..4]).tables.iter().all(|t| !t.title.starts_with("Numerical")), "three levels: none");
     }
 
+    #[test]
+    fn with_four_levels_the_order_leaving_out_one_level_reads_that_it_needs_five() {
+        let levels: Vec<_> =
+            [1.0, 0.5, 0.35, 0.25].iter().map(|h: &f64| level("l", *h, 10.0 - 4.0 * h.powf(1.5), 1.0)).collect();
+        let c = analyse(&levels);
+        let table = c.tables.iter().find(|t| t.title.starts_with("Numerical uncertainty")).expect("the table");
+        assert_eq!(table.rows[0][2], "— (it needs five levels)");
+    }
+
     fn level(name: &str, dx: f64, value: f64, wall: f64) -> (String, RunReport) {
         let report = RunReport {
             dx,
