@@ -995,6 +995,22 @@ fn equivalent_rate_1d(edot_xx: f64) -> f64 {
     (2.0f64 / 3.0).sqrt() * 2.0 / 3.0 * edot_xx.abs()
 }
 
+/// The Weldox bar of the nonlocal hardening tests with `nonlocal_hardening` m: a step of ε_p (0.2
+/// below 20 mm, 0 beyond) stretched at 10⁴ 1/s for 300 steps, then one more return, with each
+/// particle's equivalent strain rate from its stored strain rate.
+fn return_of_the_stepped_plastic_strain_bar(tag: &str, m: f64) -> (ReturnStep, Vec<f64>) {
+    let mut e = weldox_bar(
+        tag,
+        0.5,
+        &format!("damage_length = \"2 mm\"\nnonlocal_hardening = {m}"),
+        "eps_p = \"select(x.x < 0.02 [m], 0.2, 0)\", v = \"10000 [1/s] * (x - vec(0.02 [m], 0 [m]))\"",
+        300,
+    );
+    let step = one_more_return(&mut e);
+    let rate = stored_field(&e.backend, "edot").1.iter().map(|&d| equivalent_rate_1d(d)).collect();
+    (step, rate)
+}
+
 /// With `nonlocal_hardening = 1` the Johnson–Cook return (plasticity/radial_return_jc.sph) hardens
 /// with the nonlocal plastic strain ε̄_p of the step before, not the particle's own ε_p. A Weldox
 /// bar stretched at 10⁴ 1/s with a step of ε_p (0.2 below 20 mm, 0 beyond) that ℓ = 2 mm
@@ -1004,18 +1020,9 @@ fn equivalent_rate_1d(edot_xx: f64) -> f64 {
 /// on at least one of them.
 #[test]
 fn nonlocal_hardening_returns_the_stress_to_the_flow_stress_of_the_nonlocal_plastic_strain() {
-    let mut e = weldox_bar(
-        "nonlocal-hardening",
-        0.5,
-        "damage_length = \"2 mm\"\nnonlocal_hardening = 1",
-        "eps_p = \"select(x.x < 0.02 [m], 0.2, 0)\", v = \"10000 [1/s] * (x - vec(0.02 [m], 0 [m]))\"",
-        300,
-    );
-    let step = one_more_return(&mut e);
-    let edot = stored_field(&e.backend, "edot").1;
-    let rate = |i: usize| equivalent_rate_1d(edot[i]);
-    let nonlocal = largest_misfit(&step, "nonlocal", |i| weldox_flow_stress(step.eps_nl_before[i], rate(i)));
-    let local = largest_misfit(&step, "local", |i| weldox_flow_stress(step.eps_p_before[i], rate(i)));
+    let (step, rate) = return_of_the_stepped_plastic_strain_bar("nonlocal-hardening", 1.0);
+    let nonlocal = largest_misfit(&step, "nonlocal", |i| weldox_flow_stress(step.eps_nl_before[i], rate[i]));
+    let local = largest_misfit(&step, "local", |i| weldox_flow_stress(step.eps_p_before[i], rate[i]));
     assert!(nonlocal < 1e-9, "σ_eq off the surface of ε̄_p by {nonlocal:e}");
     assert!(local > 1e-3, "σ_eq off the surface of ε_p by only {local:e}: the bar does not tell them apart");
 }
@@ -1055,19 +1062,10 @@ fn nonlocal_rate_returns_the_stress_to_the_flow_stress_of_the_averaged_strain_ra
 /// on at least one of them.
 #[test]
 fn a_negative_nonlocal_hardening_returns_the_stress_to_the_flow_stress_of_the_blended_plastic_strain() {
-    let mut e = weldox_bar(
-        "gradient-hardening",
-        0.5,
-        "damage_length = \"2 mm\"\nnonlocal_hardening = -1",
-        "eps_p = \"select(x.x < 0.02 [m], 0.2, 0)\", v = \"10000 [1/s] * (x - vec(0.02 [m], 0 [m]))\"",
-        300,
-    );
-    let step = one_more_return(&mut e);
-    let edot = stored_field(&e.backend, "edot").1;
-    let rate = |i: usize| equivalent_rate_1d(edot[i]);
+    let (step, rate) = return_of_the_stepped_plastic_strain_bar("gradient-hardening", -1.0);
     let blend = |i: usize| (2.0 * step.eps_p_before[i] - step.eps_nl_before[i]).max(0.0);
-    let blended = largest_misfit(&step, "blended", |i| weldox_flow_stress(blend(i), rate(i)));
-    let nonlocal = largest_misfit(&step, "nonlocal", |i| weldox_flow_stress(step.eps_nl_before[i], rate(i)));
+    let blended = largest_misfit(&step, "blended", |i| weldox_flow_stress(blend(i), rate[i]));
+    let nonlocal = largest_misfit(&step, "nonlocal", |i| weldox_flow_stress(step.eps_nl_before[i], rate[i]));
     assert!(blended < 1e-9, "σ_eq off the surface of max(2 ε_p − ε̄_p, 0) by {blended:e}");
     assert!(nonlocal > 1e-3, "σ_eq off the surface of ε̄_p by only {nonlocal:e}: the bar does not tell them apart");
 }
