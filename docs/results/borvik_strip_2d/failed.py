@@ -9,12 +9,8 @@ import sys
 import numpy as np
 
 sys.dont_write_bytecode = True
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "..", "scripts"))
-from shear_band import outputs, read_vtu  # noqa: E402
-
-
-def read(path):
-    return {name: np.array(values) for name, values in read_vtu(path).items()}
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "borvik_rings"))
+from band import outputs, read  # noqa: E402
 
 
 def main(run):
