@@ -1,7 +1,7 @@
 //! The corrected kernel gradient (stdlib correction/kernel_gradient.sph) reproduces the gradient
 //! of a linear field to round-off in f64, inside a body and at its free surface, in 2D and 3D; and
 //! the kernels that follow the deformation (stdlib solid/shaped_kernel.sph) follow a homogeneous
-//! squeeze exactly, with that gradient still exact; and their hourglass stiffness
+//! squeeze exactly, with that gradient still exact, floored or bounded in aspect; and their hourglass stiffness
 //! (solid/shaped_hourglass.sph) pulls a zig-zag back as its formula says and leaves a homogeneous
 //! stretch alone.
 
@@ -97,15 +97,10 @@ particle squeeze -> a: vec [m/s^2] {
 integrate { x' = v  v' = a  kernel_shape' = dkernel_shape }
 ";
 
-/// `common::block_case`'s 6 × 6 block squeezed along x and stretched along y for 24 ms at 100 1/s:
-/// every particle's kernel shape is exp(G t) = diag(e^−2.4, e^2.4) (0.0907 and 11.0) to the
-/// integrator's error; its corrected velocity gradient is G to round-off on a lattice squeezed
-/// elevenfold (corners and edges included); its time step's length is held at the squeeze floor,
-/// 0.2 h0, and its search length is h0 √(e^4.8 + 0.2² − e^−4.8), B's largest axis once the floor
-/// has lifted its smallest.
-#[test]
-fn shaped_kernels_follow_a_squeeze_keep_the_velocity_gradient_exact_and_stop_at_the_floor() {
-    let dir = Scratch::new("gradient-squeeze");
+/// `common::block_case`'s 6 × 6 block squeezed along x and stretched along y for 24 ms at 100 1/s,
+/// with `material` further keys of its material: each probe below at the end of the run.
+fn squeezed_block(tag: &str, material: &str) -> impl Fn(&str) -> f64 {
+    let dir = Scratch::new(&format!("gradient-squeeze-{tag}"));
     std::fs::write(dir.join("squeeze.sph"), SQUEEZE_MODEL).unwrap();
     let probes = block_probes(&[
         ("axx", "kernel_shape.xx", "min"),
@@ -119,6 +114,10 @@ fn shaped_kernels_follow_a_squeeze_keep_the_velocity_gradient_exact_and_stop_at_
         ("eyy_max", "edot.yy", "max"),
         ("h_max", "h", "max"),
         ("h_short_min", "h_short", "min"),
+        ("h_short_max", "h_short", "max"),
+        // With the aspect bound r = 4: how far h_short / h misses the bound's ratio (`BOUND_MISS`).
+        ("bound_miss_max", &bound_miss(), "max"),
+        ("bound_miss_min", &bound_miss(), "min"),
     ]);
     // The prescribed squeeze feeds energy in; the watchdog would stop it as a blow-up.
     let probes = probes + "[watchdog]\nspeed_factor = inf\nenergy_factor = inf\n";
@@ -126,16 +125,24 @@ fn shaped_kernels_follow_a_squeeze_keep_the_velocity_gradient_exact_and_stop_at_
     let body = "initial = { v = \"100 [1/s] * vec(-dot(x, vec(1, 0)), dot(x, vec(0, 1)))\" }";
     let case = common::block_case("squeeze.sph", top, body, &probes).replace(
         "rho0 = \"1000 kg/m^3\"",
-        "rho0 = \"1000 kg/m^3\"\nc0 = \"10 m/s\"\nbulk = \"1e5 Pa\"\nrate = \"100 1/s\"\nh_ratio = 1.3",
+        &format!(
+            "rho0 = \"1000 kg/m^3\"\nc0 = \"10 m/s\"\nbulk = \"1e5 Pa\"\nrate = \"100 1/s\"\nh_ratio = 1.3\n{material}"
+        ),
     );
     let outcome = common::run_case_text_on_cpu(&dir, &case);
-    let last = |probe: &str| -> f64 {
+    let t = outcome.histories[0].1.last().expect("a point").0;
+    assert!((t - 0.024).abs() < 1e-9, "the run ended at t = {t}");
+    move |probe: &str| -> f64 {
         let points = &outcome.histories.iter().find(|(n, _)| n == probe).expect("probe").1;
         assert!(points.iter().all(|(_, v)| v.is_finite()), "{probe}: {points:?}");
         points.last().expect("a point").1
-    };
-    let t = outcome.histories[0].1.last().expect("a point").0;
-    assert!((t - 0.024).abs() < 1e-9, "the run ended at t = {t}");
+    }
+}
+
+/// The squeezed block's kernel shape is exp(G t) = diag(e^−2.4, e^2.4) (0.0907 and 11.0) to the
+/// integrator's error and its corrected velocity gradient G to round-off on a lattice squeezed
+/// elevenfold (corners and edges included), whatever bounds the kernel's axes.
+fn assert_the_shape_and_gradient_follow_the_squeeze(last: &impl Fn(&str) -> f64) {
     let (squeezed, stretched) = ((-2.4f64).exp(), 2.4f64.exp());
     for (probe, exact) in [("axx", squeezed), ("axx_max", squeezed), ("ayy", stretched), ("ayy_max", stretched)] {
         let rel = (last(probe) / exact - 1.0).abs();
@@ -146,10 +153,51 @@ fn shaped_kernels_follow_a_squeeze_keep_the_velocity_gradient_exact_and_stop_at_
         let rel = (last(probe) / exact - 1.0).abs();
         assert!(rel < 1e-9, "{probe} = {} against {exact} 1/s", last(probe));
     }
+}
+
+/// The squeeze with the default bounds: the time step's length is held at the squeeze floor,
+/// 0.2 h0, and the search length is h0 √(e^4.8 + 0.2² − e^−4.8), B's largest axis once the floor
+/// has lifted its smallest.
+#[test]
+fn shaped_kernels_follow_a_squeeze_keep_the_velocity_gradient_exact_and_stop_at_the_floor() {
+    let last = squeezed_block("floor", "");
+    assert_the_shape_and_gradient_follow_the_squeeze(&last);
+    let (squeezed, stretched) = ((-2.4f64).exp(), 2.4f64.exp());
     let h0 = 1.3 * 0.01;
     let longest = h0 * (stretched * stretched + 0.04 - squeezed * squeezed).sqrt();
     assert!((last("h_max") / longest - 1.0).abs() < 1e-4, "h = {} against {longest}", last("h_max"));
     assert!((last("h_short_min") / (h0 * 0.2) - 1.0).abs() < 1e-12, "h_short = {}", last("h_short_min"));
+}
+
+/// h_short / h − (√λ₊ / 4) / √(λ₊ (1 + 1/16) − λ₋) at a particle, with λ± the eigenvalues of
+/// A Aᵀ of its shape A (from its trace and determinant, 2D): the aspect bound r = 4's ratio of the
+/// shortest axis to the search length, B = A Aᵀ + (λ₊/16 − λ₋) I.
+const BOUND_MISS: &str = "h_short / h - sqrt(lmax) / 4 / sqrt(lmax * 17 / 16 - lmin)";
+
+fn bound_miss() -> String {
+    let trace = "(kernel_shape.xx^2 + kernel_shape.xy^2 + kernel_shape.yx^2 + kernel_shape.yy^2)";
+    let det = "(kernel_shape.xx * kernel_shape.yy - kernel_shape.xy * kernel_shape.yx)";
+    let root = format!("sqrt({trace}^2 - 4 * {det}^2)");
+    BOUND_MISS
+        .replace("lmax", &format!("(({trace} + {root}) / 2)"))
+        .replace("lmin", &format!("(({trace} - {root}) / 2)"))
+}
+
+/// The squeeze with the aspect bound r = 4 (`shape_aspect`): every kernel's shortest axis is held
+/// at a quarter of its shape's longest stretch, h_short = h0 √λ₊ / 4, while its search length is
+/// B's largest axis once the bound has lifted its smallest: their ratio at each particle, from its
+/// own shape A, within 1e-9 (`BOUND_MISS`). (That shape is not exp(G t) here: a kernel a quarter
+/// as wide as it is long overhangs the squeezed block, six particles thinner than its short axis,
+/// and where its L falls below det_min the gradient is left uncorrected; the bound still acts,
+/// A_yy / A_xx above 6.)
+#[test]
+fn shaped_kernels_aspect_bound_holds_the_short_axis_at_a_quarter_of_the_longest_stretch() {
+    let last = squeezed_block("aspect", "shape_aspect = 4");
+    let (axx, ayy) = (last("axx_max"), last("ayy"));
+    assert!(ayy / axx > 6.0, "the shape {axx} × {ayy} is not long enough for the bound to act");
+    for probe in ["bound_miss_max", "bound_miss_min"] {
+        assert!(last(probe).abs() < 1e-9, "{probe}: h_short / h misses the bound's ratio by {}", last(probe));
+    }
 }
 
 /// The hourglass stiffness of the shaped kernels (solid/shaped_hourglass.sph), at rest.

@@ -323,63 +323,63 @@ fn st_u_0(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 1u;
     return params[b];
 }
 fn prm_shape_floor(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 7u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 14u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 15u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 21u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 22u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 23u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 24u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 25u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 26u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 27u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 28u;
     return params[b];
 }
 fn prm_C_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 29u;
     return params[b];
 }
 fn prm_taylor_quinney(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 30u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -416,6 +416,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var kernel_norm_i: f32 = ld_kernel_norm(i);
     var h_short_i: f32 = ld_h_short(i);
     let AAt = sym((kernel_shape_i * transpose(kernel_shape_i)));
+    let bound = 0.0;
     let p1 = prm_shape_floor(i);
     let C = AAt;
     let sign = -1.0;
@@ -426,7 +427,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let angle = (acos(min(max((determinant(div_m(b, unit)) / 2.0), -1.0), 1.0)) / 3.0);
     let largest = (q + ((2.0 * spread) * cos(angle)));
     let smallest = (q + ((2.0 * spread) * cos((angle + ((2.0 * 3.1415927) / 3.0)))));
-    let B = (AAt + (max(((p1 * p1) - select(smallest, largest, (sign > 0.0))), 0.0) * eye()));
+    let B = (AAt + (max((max((p1 * p1), bound) - select(smallest, largest, (sign > 0.0))), 0.0) * eye()));
     kernel_metric_i = sym(inv(B));
     kernel_norm_i = (1.0 / sqrt(determinant(B)));
     let C_2 = B;

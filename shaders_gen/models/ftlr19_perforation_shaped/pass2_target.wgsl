@@ -586,27 +586,27 @@ fn st_a_contact(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 1u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 9u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 10u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 11u;
     return params[b];
 }
 fn prm_visc_share(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 13u;
     return params[b];
 }
 fn prm_damage_coupling(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 19u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -413,107 +413,111 @@ fn st_u_0(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 1u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 8u;
     return params[b];
 }
 fn prm_shape_floor(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 14u;
+    return params[b];
+}
+fn prm_shape_aspect(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 15u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 16u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 20u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 21u;
     return params[b];
 }
 fn prm_nonlocal_hardening(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 24u;
     return params[b];
 }
 fn prm_nonlocal_rate(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 25u;
     return params[b];
 }
 fn prm_damage_length(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 26u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 27u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 28u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 29u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 30u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 31u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 32u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 32u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 33u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 33u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 34u;
     return params[b];
 }
 fn prm_D1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 34u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 35u;
     return params[b];
 }
 fn prm_D2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 35u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 36u;
     return params[b];
 }
 fn prm_D3(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 36u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 37u;
     return params[b];
 }
 fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 37u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 38u;
     return params[b];
 }
 fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 38u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 39u;
     return params[b];
 }
 fn prm_failure_band(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 39u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 40u;
     return params[b];
 }
 fn prm_failure_band_spacing(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 40u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 41u;
     return params[b];
 }
 fn prm_nonlocal_weight(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 41u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 42u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -616,9 +620,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var kernel_norm_i: f32 = ld_kernel_norm(i);
     var h_short_i: f32 = ld_h_short(i);
     let AAt = sym((kernel_shape_i * transpose(kernel_shape_i)));
-    let p1 = prm_shape_floor(i);
     let C = AAt;
-    let sign = -1.0;
+    let sign = 1.0;
     let q = (trace(C) / 3.0);
     let b = (C - (q * eye()));
     let spread = sqrt((ddot(b, b) / select(2.0, 6.0, (3.0 == 3.0))));
@@ -626,11 +629,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let angle = (acos(min(max((determinant(div_m(b, unit)) / 2.0), -1.0), 1.0)) / 3.0);
     let largest = select((q + spread), (q + ((2.0 * spread) * cos(angle))), (3.0 == 3.0));
     let smallest = select((q - spread), (q + ((2.0 * spread) * cos((angle + ((2.0 * 3.1415927) / 3.0))))), (3.0 == 3.0));
-    let B = (AAt + (max(((p1 * p1) - select(smallest, largest, (sign > 0.0))), 0.0) * eye()));
-    kernel_metric_i = sym(inv(B));
-    kernel_norm_i = (1.0 / sqrt(determinant(B)));
-    let C_2 = B;
-    let sign_2 = 1.0;
+    let p1 = max(prm_shape_aspect(i), 1.0);
+    let bound = select(0.0, (select(smallest, largest, (sign > 0.0)) / (p1 * p1)), (prm_shape_aspect(i) > 0.0));
+    let p2 = prm_shape_floor(i);
+    let C_2 = AAt;
+    let sign_2 = -1.0;
     let q_2 = (trace(C_2) / 3.0);
     let b_2 = (C_2 - (q_2 * eye()));
     let spread_2 = sqrt((ddot(b_2, b_2) / select(2.0, 6.0, (3.0 == 3.0))));
@@ -638,9 +641,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let angle_2 = (acos(min(max((determinant(div_m(b_2, unit_2)) / 2.0), -1.0), 1.0)) / 3.0);
     let largest_2 = select((q_2 + spread_2), (q_2 + ((2.0 * spread_2) * cos(angle_2))), (3.0 == 3.0));
     let smallest_2 = select((q_2 - spread_2), (q_2 + ((2.0 * spread_2) * cos((angle_2 + ((2.0 * 3.1415927) / 3.0))))), (3.0 == 3.0));
-    h_i = ((prm_h_ratio(i) * ld_dx(i)) * sqrt(max(select(smallest_2, largest_2, (sign_2 > 0.0)), 1.0)));
+    let B = (AAt + (max((max((p2 * p2), bound) - select(smallest_2, largest_2, (sign_2 > 0.0))), 0.0) * eye()));
+    kernel_metric_i = sym(inv(B));
+    kernel_norm_i = (1.0 / sqrt(determinant(B)));
     let C_3 = B;
-    let sign_3 = -1.0;
+    let sign_3 = 1.0;
     let q_3 = (trace(C_3) / 3.0);
     let b_3 = (C_3 - (q_3 * eye()));
     let spread_3 = sqrt((ddot(b_3, b_3) / select(2.0, 6.0, (3.0 == 3.0))));
@@ -648,17 +653,27 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let angle_3 = (acos(min(max((determinant(div_m(b_3, unit_3)) / 2.0), -1.0), 1.0)) / 3.0);
     let largest_3 = select((q_3 + spread_3), (q_3 + ((2.0 * spread_3) * cos(angle_3))), (3.0 == 3.0));
     let smallest_3 = select((q_3 - spread_3), (q_3 + ((2.0 * spread_3) * cos((angle_3 + ((2.0 * 3.1415927) / 3.0))))), (3.0 == 3.0));
-    let p2 = prm_shape_floor(i);
-    h_short_i = ((prm_h_ratio(i) * ld_dx(i)) * sqrt(max(select(smallest_3, largest_3, (sign_3 > 0.0)), (p2 * p2))));
+    h_i = ((prm_h_ratio(i) * ld_dx(i)) * sqrt(max(select(smallest_3, largest_3, (sign_3 > 0.0)), 1.0)));
+    let C_4 = B;
+    let sign_4 = -1.0;
+    let q_4 = (trace(C_4) / 3.0);
+    let b_4 = (C_4 - (q_4 * eye()));
+    let spread_4 = sqrt((ddot(b_4, b_4) / select(2.0, 6.0, (3.0 == 3.0))));
+    let unit_4 = select(1.0, spread_4, (spread_4 > 0.0));
+    let angle_4 = (acos(min(max((determinant(div_m(b_4, unit_4)) / 2.0), -1.0), 1.0)) / 3.0);
+    let largest_4 = select((q_4 + spread_4), (q_4 + ((2.0 * spread_4) * cos(angle_4))), (3.0 == 3.0));
+    let smallest_4 = select((q_4 - spread_4), (q_4 + ((2.0 * spread_4) * cos((angle_4 + ((2.0 * 3.1415927) / 3.0))))), (3.0 == 3.0));
+    let p3 = prm_shape_floor(i);
+    h_short_i = ((prm_h_ratio(i) * ld_dx(i)) * sqrt(max(select(smallest_4, largest_4, (sign_4 > 0.0)), (p3 * p3))));
     // eos
     var p_i: f32 = ld_p(i);
     var c_i: f32 = ld_c(i);
     let eta = ((rho_i / prm_rho0(i)) - 1.0);
-    let p3 = prm_c0(i);
-    let a0 = (prm_rho0(i) * (p3 * p3));
+    let p4 = prm_c0(i);
+    let a0 = (prm_rho0(i) * (p4 * p4));
     let b0 = (a0 * (1.0 + (2.0 * (prm_S_s(i) - 1.0))));
-    let p4 = (prm_S_s(i) - 1.0);
-    let c0_h = (a0 * ((2.0 * (prm_S_s(i) - 1.0)) + (3.0 * (p4 * p4))));
+    let p5 = (prm_S_s(i) - 1.0);
+    let c0_h = (a0 * ((2.0 * (prm_S_s(i) - 1.0)) + (3.0 * (p5 * p5))));
     let p_h = select((a0 * eta), (((a0 * eta) + (b0 * (eta * eta))) + (c0_h * (eta * eta * eta))), (eta > 0.0));
     p_i = (((1.0 - ((0.5 * prm_gamma0(i)) * eta)) * p_h) + ((prm_gamma0(i) * rho_i) * e_i));
     c_i = prm_c0(i);
