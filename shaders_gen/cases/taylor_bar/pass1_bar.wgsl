@@ -398,7 +398,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         if (r2 >= rc * rc || r2 == 0.0) { continue; }
         let x_ij = (dxv * sgn);
         let r_ij = sqrt(r2);
-        // pairsum shaped_velocity_gradient (stdlib/solid/shaped_kernel.sph:112)
+        // pairsum shaped_velocity_gradient (stdlib/solid/shaped_kernel.sph:114)
         if ((body_i == ldj_body(j, sgn))) {
             let M = kernel_metric_i;
             let norm = kernel_norm_i;

@@ -834,7 +834,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let r_ij = sqrt(r2);
             let W_ij = kernel_w(r_ij, h_ij);
             let gradW_ij = kernel_grad(r_ij, h_ij) * x_ij;
-            // pairsum shaped_velocity_gradient (stdlib/solid/shaped_kernel.sph:112)
+            // pairsum shaped_velocity_gradient (stdlib/solid/shaped_kernel.sph:114)
             if (in_groups(2u, ints[j])) {
                 if ((body_i == ldj_body(j, sgn))) {
                     let M = kernel_metric_i;
