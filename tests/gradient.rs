@@ -115,7 +115,7 @@ fn squeezed_block(tag: &str, material: &str) -> impl Fn(&str) -> f64 {
         ("h_max", "h", "max"),
         ("h_short_min", "h_short", "min"),
         ("h_short_max", "h_short", "max"),
-        // With the aspect bound r = 4: how far h_short / h misses the bound's ratio (`BOUND_MISS`).
+        // With the aspect bound r = 4: how far h_short / h misses the bound's ratio (`bound_miss`).
         ("bound_miss_max", &bound_miss(), "max"),
         ("bound_miss_min", &bound_miss(), "min"),
     ]);
@@ -139,10 +139,14 @@ fn squeezed_block(tag: &str, material: &str) -> impl Fn(&str) -> f64 {
     }
 }
 
-/// The squeezed block's kernel shape is exp(G t) = diag(e^−2.4, e^2.4) (0.0907 and 11.0) to the
-/// integrator's error and its corrected velocity gradient G to round-off on a lattice squeezed
-/// elevenfold (corners and edges included), whatever bounds the kernel's axes.
-fn assert_the_shape_and_gradient_follow_the_squeeze(last: &impl Fn(&str) -> f64) {
+/// The squeeze with the default bounds: every particle's kernel shape is exp(G t) =
+/// diag(e^−2.4, e^2.4) (0.0907 and 11.0) to the integrator's error; its corrected velocity
+/// gradient is G to round-off on a lattice squeezed elevenfold (corners and edges included); its
+/// time step's length is held at the squeeze floor, 0.2 h0, and its search length is
+/// h0 √(e^4.8 + 0.2² − e^−4.8), B's largest axis once the floor has lifted its smallest.
+#[test]
+fn shaped_kernels_follow_a_squeeze_keep_the_velocity_gradient_exact_and_stop_at_the_floor() {
+    let last = squeezed_block("floor", "");
     let (squeezed, stretched) = ((-2.4f64).exp(), 2.4f64.exp());
     for (probe, exact) in [("axx", squeezed), ("axx_max", squeezed), ("ayy", stretched), ("ayy_max", stretched)] {
         let rel = (last(probe) / exact - 1.0).abs();
@@ -153,16 +157,6 @@ fn assert_the_shape_and_gradient_follow_the_squeeze(last: &impl Fn(&str) -> f64)
         let rel = (last(probe) / exact - 1.0).abs();
         assert!(rel < 1e-9, "{probe} = {} against {exact} 1/s", last(probe));
     }
-}
-
-/// The squeeze with the default bounds: the time step's length is held at the squeeze floor,
-/// 0.2 h0, and the search length is h0 √(e^4.8 + 0.2² − e^−4.8), B's largest axis once the floor
-/// has lifted its smallest.
-#[test]
-fn shaped_kernels_follow_a_squeeze_keep_the_velocity_gradient_exact_and_stop_at_the_floor() {
-    let last = squeezed_block("floor", "");
-    assert_the_shape_and_gradient_follow_the_squeeze(&last);
-    let (squeezed, stretched) = ((-2.4f64).exp(), 2.4f64.exp());
     let h0 = 1.3 * 0.01;
     let longest = h0 * (stretched * stretched + 0.04 - squeezed * squeezed).sqrt();
     assert!((last("h_max") / longest - 1.0).abs() < 1e-4, "h = {} against {longest}", last("h_max"));
@@ -170,23 +164,20 @@ fn shaped_kernels_follow_a_squeeze_keep_the_velocity_gradient_exact_and_stop_at_
 }
 
 /// h_short / h − (√λ₊ / 4) / √(λ₊ (1 + 1/16) − λ₋) at a particle, with λ± the eigenvalues of
-/// A Aᵀ of its shape A (from its trace and determinant, 2D): the aspect bound r = 4's ratio of the
-/// shortest axis to the search length, B = A Aᵀ + (λ₊/16 − λ₋) I.
-const BOUND_MISS: &str = "h_short / h - sqrt(lmax) / 4 / sqrt(lmax * 17 / 16 - lmin)";
-
+/// A Aᵀ of its shape A (from its trace and determinant, 2D): how far the ratio of its shortest
+/// axis to its search length misses the aspect bound r = 4's, B = A Aᵀ + (λ₊/16 − λ₋) I.
 fn bound_miss() -> String {
     let trace = "(kernel_shape.xx^2 + kernel_shape.xy^2 + kernel_shape.yx^2 + kernel_shape.yy^2)";
     let det = "(kernel_shape.xx * kernel_shape.yy - kernel_shape.xy * kernel_shape.yx)";
     let root = format!("sqrt({trace}^2 - 4 * {det}^2)");
-    BOUND_MISS
-        .replace("lmax", &format!("(({trace} + {root}) / 2)"))
-        .replace("lmin", &format!("(({trace} - {root}) / 2)"))
+    let (lmax, lmin) = (format!("(({trace} + {root}) / 2)"), format!("(({trace} - {root}) / 2)"));
+    format!("h_short / h - sqrt({lmax}) / 4 / sqrt({lmax} * 17 / 16 - {lmin})")
 }
 
 /// The squeeze with the aspect bound r = 4 (`shape_aspect`): every kernel's shortest axis is held
 /// at a quarter of its shape's longest stretch, h_short = h0 √λ₊ / 4, while its search length is
 /// B's largest axis once the bound has lifted its smallest: their ratio at each particle, from its
-/// own shape A, within 1e-9 (`BOUND_MISS`). (That shape is not exp(G t) here: a kernel a quarter
+/// own shape A, within 1e-9 (`bound_miss`). (That shape is not exp(G t) here: a kernel a quarter
 /// as wide as it is long overhangs the squeezed block, six particles thinner than its short axis,
 /// and where its L falls below det_min the gradient is left uncorrected; the bound still acts,
 /// A_yy / A_xx above 6.)
