@@ -176,8 +176,12 @@ impl Evaluator<'_> {
     fn call(&mut self, f: Builtin, args: &[Expr]) -> Result<Vec<f64>, String> {
         let a: Vec<Vec<f64>> = args.iter().map(|x| self.value(x)).collect::<Result<_, _>>()?;
         let scalar = |g: fn(f64) -> f64| vec![g(a[0][0])];
+        // A symtensor or skewtensor stores each off-diagonal pair once; a vec and a full tensor store
+        // every component.
         let weights = |e: &Expr| -> Vec<f64> {
-            ir::component_indices(e.ty.shape, self.dim).iter().map(|(r, c)| if r == c { 1.0 } else { 2.0 }).collect()
+            let halved = matches!(e.ty.shape, Shape::SymTensor | Shape::SkewTensor);
+            let indices = ir::component_indices(e.ty.shape, self.dim);
+            indices.iter().map(|(r, c)| if halved && r != c { 2.0 } else { 1.0 }).collect()
         };
         Ok(match f {
             Builtin::Sqrt => scalar(f64::sqrt),
@@ -188,7 +192,7 @@ impl Evaluator<'_> {
             Builtin::Min => a[1..].iter().fold(a[0].clone(), |m, x| m.iter().zip(x).map(|(p, q)| p.min(*q)).collect()),
             Builtin::Max => a[1..].iter().fold(a[0].clone(), |m, x| m.iter().zip(x).map(|(p, q)| p.max(*q)).collect()),
             Builtin::Dot => vec![a[0].iter().zip(&a[1]).map(|(x, y)| x * y).sum()],
-            // A tensor's Frobenius norm counts each stored off-diagonal component twice.
+            // A vec's length; a tensor's Frobenius norm over all its components.
             Builtin::Norm => vec![a[0].iter().zip(weights(&args[0])).map(|(x, w)| w * x * x).sum::<f64>().sqrt()],
             Builtin::Trace => {
                 let diagonal = ir::component_indices(args[0].ty.shape, self.dim);
@@ -202,8 +206,8 @@ impl Evaluator<'_> {
 
 #[cfg(test)]
 mod tests {
-    use super::constant;
-    use crate::ir::{Builtin, Expr, ExprKind, Global, Shape, Type};
+    use super::{constant, eval, Leaves};
+    use crate::ir::{Builtin, Expr, ExprKind, FieldId, Global, ParamId, Reduce, Shape, Side, Type};
     use crate::units::Unit;
 
     #[test]
@@ -220,5 +224,47 @@ mod tests {
         let v = call("vec", vec![c(1.0), c(2.0)]);
         let v = Expr { ty: Type::new(Shape::Vec, Unit::ONE), ..v };
         assert_eq!(constant(&call("norm", vec![v])), None, "a vec's length depends on the dimension");
+    }
+
+    /// `norm` of a field of each shape, in 2D and 3D, with the stored components 1, 2, 3, …: the
+    /// length, or the Frobenius norm, of the whole vec or tensor those components stand for.
+    #[test]
+    fn norm_is_the_length_of_a_vec_and_the_frobenius_norm_of_each_kind_of_tensor() {
+        struct Counting(usize);
+        impl Leaves for Counting {
+            fn field(&mut self, _: FieldId) -> Result<Vec<f64>, String> {
+                Ok((1..=self.0).map(|k| k as f64).collect())
+            }
+            fn param(&mut self, _: ParamId) -> Result<Vec<f64>, String> {
+                Err("no parameter".into())
+            }
+            fn global(&mut self, _: Global) -> Result<f64, String> {
+                Err("no global".into())
+            }
+            fn reduction(&mut self, _: Reduce, _: &Expr) -> Result<f64, String> {
+                Err("no reduction".into())
+            }
+        }
+        for dim in [2, 3] {
+            for shape in [Shape::Vec, Shape::SymTensor, Shape::SkewTensor, Shape::Tensor] {
+                let ty = Type::new(shape, Unit::ONE);
+                let field = Expr::new(ExprKind::Field(FieldId(0), Side::I), ty);
+                let norm = Expr::new(ExprKind::Call(Builtin::Norm, vec![field]), Type::scalar(Unit::ONE));
+                let n = crate::ir::components(shape, dim);
+                let got = eval(&norm, dim, &mut Counting(n)).unwrap()[0];
+                // The whole matrix (a vec as its one column), entry by entry from the stored ones.
+                let mut squares = 0.0;
+                for (k, (r, c)) in crate::ir::component_indices(shape, dim).into_iter().enumerate() {
+                    let stored = (k + 1) as f64;
+                    let mirrored = matches!(shape, Shape::SymTensor | Shape::SkewTensor) && r != c;
+                    squares += stored * stored * if mirrored { 2.0 } else { 1.0 };
+                }
+                assert_eq!(got, squares.sqrt(), "norm of a {shape:?} in {dim}D");
+                if shape == Shape::Vec {
+                    let length = (1..=dim).map(|k| (k * k) as f64).sum::<f64>().sqrt();
+                    assert_eq!(got, length, "the length of a vec in {dim}D");
+                }
+            }
+        }
     }
 }
