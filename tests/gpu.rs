@@ -470,6 +470,22 @@ fn copper_taylor_bar_with_shaped_kernels_and_their_hourglass_stiffness_on_the_gp
 }
 
 #[test]
+fn copper_taylor_bar_with_the_shaped_kernels_hourglass_viscosity_on_the_gpu_matches_the_cpu() {
+    // The same bar with solid/shaped_kernel.sph's hourglass viscosity at β = 0.5: each pair reads
+    // its neighbour's velocity gradient (edot and spin), sign-flipped across the wall's and the
+    // quarter model's symmetry planes.
+    let dir = Scratch::new("gpu-hourglass-visc");
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("cases");
+    let text = std::fs::read_to_string(root.join("taylor_bar_copper.toml")).expect("case");
+    let with = text.replacen("visc_b = ${visc_b}\n", "visc_b = ${visc_b}\nhourglass_visc = 0.5\n", 1);
+    assert_ne!(with, text, "the copper's material has no `visc_b` line to set β after");
+    std::fs::write(dir.join("taylor_bar_copper.toml"), with).expect("case");
+    std::fs::copy(root.join("taylor_bar_shaped_hourglass.sph"), dir.join("taylor_bar_shaped_hourglass.sph"))
+        .expect("model");
+    case_file_matches_cpu(&dir.join("taylor_bar_copper.toml"), &[], 30, &["p", "eps_p", "h", "u"], 2e-3);
+}
+
+#[test]
 fn taylor_bar_on_the_gpu_matches_the_cpu_against_its_wall_plane() {
     // The bar starts on the wall, a symmetry plane: 30 steps are 1.9 µs of flow against it, heated.
     case_matches_cpu("taylor_bar", &[], 30, &["p", "eps_p", "T"], 2e-3);

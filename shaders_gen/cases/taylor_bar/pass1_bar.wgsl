@@ -313,27 +313,27 @@ fn st_ds(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 1u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 5u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 15u;
     return params[b];
 }
 fn prm_hourglass_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 17u;
     return params[b];
 }
 fn prm_hourglass_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 18u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -398,7 +398,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         if (r2 >= rc * rc || r2 == 0.0) { continue; }
         let x_ij = (dxv * sgn);
         let r_ij = sqrt(r2);
-        // pairsum shaped_velocity_gradient (stdlib/solid/shaped_kernel.sph:114)
+        // pairsum shaped_velocity_gradient (stdlib/solid/shaped_kernel.sph:128)
         if ((body_i == ldj_body(j, sgn))) {
             let M = kernel_metric_i;
             let norm = kernel_norm_i;

@@ -158,6 +158,39 @@ fn ldj_s(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
     let b = u32(base + i32(j) * 6);
     return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u])), sgn);
 }
+fn ld_edot(i: u32) -> mat3x3<f32> {
+    let b = u32(info[13 + G] + i32(i) * 6);
+    return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
+}
+fn st_edot(i: u32, v: mat3x3<f32>) {
+    let b = u32(info[13 + G] + i32(i) * 6);
+    data[b] = v[0][0];
+    data[b + 1u] = v[1][0];
+    data[b + 2u] = v[2][0];
+    data[b + 3u] = v[1][1];
+    data[b + 4u] = v[2][1];
+    data[b + 5u] = v[2][2];
+}
+fn ldj_edot(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
+    let base = info[13u];
+    let b = u32(base + i32(j) * 6);
+    return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u])), sgn);
+}
+fn ld_spin(i: u32) -> mat3x3<f32> {
+    let b = u32(info[14 + G] + i32(i) * 3);
+    return mat3x3<f32>(vec3<f32>(0.0, -data[b], -data[b + 1u]), vec3<f32>(data[b], 0.0, -data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 2u], 0.0));
+}
+fn st_spin(i: u32, v: mat3x3<f32>) {
+    let b = u32(info[14 + G] + i32(i) * 3);
+    data[b] = v[1][0];
+    data[b + 1u] = v[2][0];
+    data[b + 2u] = v[2][1];
+}
+fn ldj_spin(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
+    let base = info[14u];
+    let b = u32(base + i32(j) * 3);
+    return flip_m(mat3x3<f32>(vec3<f32>(0.0, -data[b], -data[b + 1u]), vec3<f32>(data[b], 0.0, -data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 2u], 0.0)), sgn);
+}
 fn ld_kernel_metric(i: u32) -> mat3x3<f32> {
     let b = u32(info[16 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
@@ -229,19 +262,23 @@ fn st_dv(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 1u;
+    return params[b];
+}
+fn prm_hourglass_visc(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 7u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 12u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 13u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 14u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -256,6 +293,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // pairsum momentum_shaped: accumulators
     var dv: vec3<f32> = vec3<f32>(0.0);
     let h_ratio_i = prm_h_ratio(i);
+    let hourglass_visc_i = prm_hourglass_visc(i);
     let visc_a_i = prm_visc_a(i);
     let visc_b_i = prm_visc_b(i);
     let eta_ratio_i = prm_eta_ratio(i);
@@ -266,6 +304,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let p_i = ld_p(i);
     let c_i = ld_c(i);
     let s_i = ld_s(i);
+    let edot_i = ld_edot(i);
+    let spin_i = ld_spin(i);
     let kernel_metric_i = ld_kernel_metric(i);
     let kernel_norm_i = ld_kernel_norm(i);
     let L_inv_i = ld_L_inv(i);
@@ -316,6 +356,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let p2 = (eta_ratio_i * hh);
             let phi = ((hh * vr) / ((r_ij * r_ij) + (p2 * p2)));
             let share = (0.5 * (compression_i + ldj_compression(j, sgn)));
+            let beyond_linear = dot(((v_i - ldj_v(j, sgn)) - (div_m((((edot_i + spin_i) + ldj_edot(j, sgn)) + ldj_spin(j, sgn)), 2.0) * x_ij)), x_ij);
+            let p3 = (eta_ratio_i * hh);
+            let phi_hourglass = ((hh * beyond_linear) / ((r_ij * r_ij) + (p3 * p3)));
             let M_3 = kernel_metric_i;
             let norm = kernel_norm_i;
             let x_4 = x_ij;
@@ -334,7 +377,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let q_2 = sqrt(dot(x_7, (M_6 * x_7)));
             let axis_3 = vec3<f32>(1.0, 0.0, 0.0);
             let slope_2 = dot(kernel_grad_at((q_2 * axis_3), h0_2), axis_3);
-            dv = dv + ((ldj_m(j, sgn) * ((div_m(sig_i, (rho_i * rho_i)) + div_m(sig_j, (p1 * p1))) - ((share * select(0.0, ((((((-visc_a_i) * (c_i + ldj_c(j, sgn))) / 2.0) * phi) + (visc_b_i * (phi * phi))) / (0.5 * (rho_i + ldj_rho(j, sgn)))), (vr < 0.0))) * eye()))) * (L_inv_i * ((select(((0.0 * x_4) / 1.0), (((slope / max(q, 1e-30)) * norm) * (M_3 * x_4)), (q > 0.0)) + select(((0.0 * x_6) / 1.0), (((slope_2 / max(q_2, 1e-30)) * norm_2) * (M_5 * x_6)), (q_2 > 0.0))) / 2.0)));
+            dv = dv + ((ldj_m(j, sgn) * ((div_m(sig_i, (rho_i * rho_i)) + div_m(sig_j, (p1 * p1))) - (((share * select(0.0, ((((((-visc_a_i) * (c_i + ldj_c(j, sgn))) / 2.0) * phi) + (visc_b_i * (phi * phi))) / (0.5 * (rho_i + ldj_rho(j, sgn)))), (vr < 0.0))) - ((((hourglass_visc_i * (c_i + ldj_c(j, sgn))) / 2.0) * phi_hourglass) / (0.5 * (rho_i + ldj_rho(j, sgn))))) * eye()))) * (L_inv_i * ((select(((0.0 * x_4) / 1.0), (((slope / max(q, 1e-30)) * norm) * (M_3 * x_4)), (q > 0.0)) + select(((0.0 * x_6) / 1.0), (((slope_2 / max(q_2, 1e-30)) * norm_2) * (M_5 * x_6)), (q_2 > 0.0))) / 2.0)));
         }
     }
     st_dv(i, dv);

@@ -339,75 +339,75 @@ fn st_T_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 1u;
     return params[b];
 }
 fn prm_shape_floor(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 8u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 15u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 16u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 22u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 23u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 24u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 25u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 26u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 27u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 28u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 29u;
     return params[b];
 }
 fn prm_C_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 30u;
     return params[b];
 }
 fn prm_taylor_quinney(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 31u;
     return params[b];
 }
 fn prm__symmetry0(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 32u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm__symmetry1(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 34u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 35u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm__symmetry2(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 37u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 38u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 @compute @workgroup_size(64)

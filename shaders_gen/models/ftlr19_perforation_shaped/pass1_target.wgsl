@@ -700,47 +700,47 @@ fn st_rate_lap_sum(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 1u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 5u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 6u;
     return params[b];
 }
 fn prm_delta(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 7u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 8u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 17u;
     return params[b];
 }
 fn prm_hourglass_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 18u;
     return params[b];
 }
 fn prm_hourglass_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 19u;
     return params[b];
 }
 fn prm_contact_colour(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 23u;
     return params[b];
 }
 fn prm_contact_stiffness(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 24u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -834,7 +834,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let r_ij = sqrt(r2);
             let W_ij = kernel_w(r_ij, h_ij);
             let gradW_ij = kernel_grad(r_ij, h_ij) * x_ij;
-            // pairsum shaped_velocity_gradient (stdlib/solid/shaped_kernel.sph:114)
+            // pairsum shaped_velocity_gradient (stdlib/solid/shaped_kernel.sph:128)
             if (in_groups(2u, ints[j])) {
                 if ((body_i == ldj_body(j, sgn))) {
                     let M = kernel_metric_i;

@@ -483,6 +483,39 @@ fn ldj_s(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
     let b = u32(base + i32(j) * 6);
     return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u])), sgn);
 }
+fn ld_edot(i: u32) -> mat3x3<f32> {
+    let b = u32(info[29 + G] + i32(i) * 6);
+    return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
+}
+fn st_edot(i: u32, v: mat3x3<f32>) {
+    let b = u32(info[29 + G] + i32(i) * 6);
+    data[b] = v[0][0];
+    data[b + 1u] = v[1][0];
+    data[b + 2u] = v[2][0];
+    data[b + 3u] = v[1][1];
+    data[b + 4u] = v[2][1];
+    data[b + 5u] = v[2][2];
+}
+fn ldj_edot(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
+    let base = info[29u];
+    let b = u32(base + i32(j) * 6);
+    return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u])), sgn);
+}
+fn ld_spin(i: u32) -> mat3x3<f32> {
+    let b = u32(info[31 + G] + i32(i) * 3);
+    return mat3x3<f32>(vec3<f32>(0.0, -data[b], -data[b + 1u]), vec3<f32>(data[b], 0.0, -data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 2u], 0.0));
+}
+fn st_spin(i: u32, v: mat3x3<f32>) {
+    let b = u32(info[31 + G] + i32(i) * 3);
+    data[b] = v[1][0];
+    data[b + 1u] = v[2][0];
+    data[b + 2u] = v[2][1];
+}
+fn ldj_spin(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
+    let base = info[31u];
+    let b = u32(base + i32(j) * 3);
+    return flip_m(mat3x3<f32>(vec3<f32>(0.0, -data[b], -data[b + 1u]), vec3<f32>(data[b], 0.0, -data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 2u], 0.0)), sgn);
+}
 fn ld_kernel_metric(i: u32) -> mat3x3<f32> {
     let b = u32(info[35 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
@@ -586,27 +619,31 @@ fn st_a_contact(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 1u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 9u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 10u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 11u;
     return params[b];
 }
 fn prm_visc_share(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 13u;
+    return params[b];
+}
+fn prm_hourglass_visc(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 14u;
     return params[b];
 }
 fn prm_damage_coupling(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 20u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -628,6 +665,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let visc_b_i = prm_visc_b(i);
     let eta_ratio_i = prm_eta_ratio(i);
     let visc_share_i = prm_visc_share(i);
+    let hourglass_visc_i = prm_hourglass_visc(i);
     let damage_coupling_i = prm_damage_coupling(i);
     let v_i = ld_v(i);
     let dx_i = ld_dx(i);
@@ -637,6 +675,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let p_i = ld_p(i);
     let c_i = ld_c(i);
     let s_i = ld_s(i);
+    let edot_i = ld_edot(i);
+    let spin_i = ld_spin(i);
     let kernel_metric_i = ld_kernel_metric(i);
     let kernel_norm_i = ld_kernel_norm(i);
     let D_i = ld_D(i);
@@ -714,7 +754,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                     let p2 = (eta_ratio_i * hh);
                     let phi = ((hh * vr) / ((r_ij * r_ij) + (p2 * p2)));
                     let share = select(1.0, (0.5 * (compression_i + ldj_compression(j, sgn))), (visc_share_i > 0.0));
-                    let A = ((div_m(sig_i, (rho_i * rho_i)) + div_m(sig_j, (p1 * p1))) - ((share * select(0.0, ((((((-visc_a_i) * (c_i + ldj_c(j, sgn))) / 2.0) * phi) + (visc_b_i * (phi * phi))) / (0.5 * (rho_i + ldj_rho(j, sgn)))), (vr < 0.0))) * eye()));
+                    let beyond_linear = dot(((v_i - ldj_v(j, sgn)) - (div_m((((edot_i + spin_i) + ldj_edot(j, sgn)) + ldj_spin(j, sgn)), 2.0) * x_ij)), x_ij);
+                    let p3 = (eta_ratio_i * hh);
+                    let phi_hourglass = ((hh * beyond_linear) / ((r_ij * r_ij) + (p3 * p3)));
+                    let A = ((div_m(sig_i, (rho_i * rho_i)) + div_m(sig_j, (p1 * p1))) - (((share * select(0.0, ((((((-visc_a_i) * (c_i + ldj_c(j, sgn))) / 2.0) * phi) + (visc_b_i * (phi * phi))) / (0.5 * (rho_i + ldj_rho(j, sgn)))), (vr < 0.0))) - ((((hourglass_visc_i * (c_i + ldj_c(j, sgn))) / 2.0) * phi_hourglass) / (0.5 * (rho_i + ldj_rho(j, sgn))))) * eye()));
                     let M_3 = kernel_metric_i;
                     let norm = kernel_norm_i;
                     let x_4 = x_ij;

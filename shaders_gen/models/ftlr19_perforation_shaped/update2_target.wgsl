@@ -437,111 +437,111 @@ fn st_eps_nl_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 1u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 8u;
     return params[b];
 }
 fn prm_shape_floor(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 15u;
     return params[b];
 }
 fn prm_shape_aspect(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 16u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 17u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 21u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 22u;
     return params[b];
 }
 fn prm_nonlocal_hardening(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 25u;
     return params[b];
 }
 fn prm_nonlocal_rate(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 26u;
     return params[b];
 }
 fn prm_damage_length(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 27u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 28u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 29u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 30u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 31u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 32u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 32u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 33u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 33u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 34u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 34u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 35u;
     return params[b];
 }
 fn prm_D1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 35u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 36u;
     return params[b];
 }
 fn prm_D2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 36u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 37u;
     return params[b];
 }
 fn prm_D3(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 37u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 38u;
     return params[b];
 }
 fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 38u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 39u;
     return params[b];
 }
 fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 39u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 40u;
     return params[b];
 }
 fn prm_failure_band(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 40u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 41u;
     return params[b];
 }
 fn prm_failure_band_spacing(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 41u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 42u;
     return params[b];
 }
 fn prm_nonlocal_weight(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 42u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 43u;
     return params[b];
 }
 @compute @workgroup_size(64)
