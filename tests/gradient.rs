@@ -1,9 +1,10 @@
 //! The corrected kernel gradient (stdlib correction/kernel_gradient.sph) reproduces the gradient
 //! of a linear field to round-off in f64, inside a body and at its free surface, in 2D and 3D; and
 //! the kernels that follow the deformation (stdlib solid/shaped_kernel.sph) follow a homogeneous
-//! squeeze exactly, with that gradient still exact, floored or bounded in aspect; and their hourglass stiffness
+//! squeeze exactly, with that gradient still exact, floored or bounded in aspect; their hourglass stiffness
 //! (solid/shaped_hourglass.sph) pulls a zig-zag back as its formula says and leaves a homogeneous
-//! stretch alone.
+//! stretch alone; and their hourglass viscosity damps a zig-zag velocity as its formula says and
+//! leaves a linear velocity field alone.
 
 mod common;
 use common::*;
