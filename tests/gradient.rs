@@ -204,27 +204,41 @@ param C_cfl: scalar [-] = 0.3
 integrate { x' = v  u' = v  v' = dv_hourglass  kernel_shape' = dkernel_shape }
 ";
 
-/// `common::block_case`'s 6 × 6 block at rest, run one step of 1 ns, with `initial` its
-/// particles' initial values: the largest |a| of the hourglass stiffness, the largest and the
-/// smallest a · u, each at the end.
-fn hourglass_pull(tag: &str, initial: &str) -> [f64; 3] {
-    let dir = Scratch::new(&format!("gradient-hourglass-{tag}"));
-    std::fs::write(dir.join("hourglass.sph"), HOURGLASS_MODEL).unwrap();
-    let probes = block_probes(&[
-        ("pull", "norm(dv_hourglass)", "max"),
-        ("against_u_max", "dot(dv_hourglass, u)", "max"),
-        ("against_u_min", "dot(dv_hourglass, u)", "min"),
-    ]);
+/// `common::block_case`'s 6 × 6 block run one step of 1 ns with the model `model`, `initial` its
+/// particles' initial values and `material` further keys of its material (ρ0 1000 kg/m³, c0 10 m/s,
+/// h_ratio 1.3 already): each of `probes` (name, expression, reduction) at the end.
+fn one_step_of_the_block<const N: usize>(
+    tag: &str,
+    model: &str,
+    initial: &str,
+    material: &str,
+    probes: [(&str, &str, &str); N],
+) -> [f64; N] {
+    let dir = Scratch::new(&format!("gradient-{tag}"));
+    std::fs::write(dir.join("model.sph"), model).unwrap();
     let top = "integrator = \"predictor_corrector\"\nend_time = \"1 ns\"";
-    let case = common::block_case("hourglass.sph", top, &format!("initial = {{ {initial} }}"), &probes).replace(
-        "rho0 = \"1000 kg/m^3\"",
-        "rho0 = \"1000 kg/m^3\"\nc0 = \"10 m/s\"\nbulk = \"2e5 Pa\"\nG = \"1e5 Pa\"\nh_ratio = 1.3",
-    );
+    let case = common::block_case("model.sph", top, &format!("initial = {{ {initial} }}"), &block_probes(&probes))
+        .replace(
+            "rho0 = \"1000 kg/m^3\"",
+            &format!("rho0 = \"1000 kg/m^3\"\nc0 = \"10 m/s\"\nh_ratio = 1.3\n{material}"),
+        );
     let outcome = common::run_case_text_on_cpu(&dir, &case);
-    ["pull", "against_u_max", "against_u_min"].map(|probe| {
+    probes.map(|(probe, ..)| {
         let points = &outcome.histories.iter().find(|(n, _)| n == probe).expect("probe").1;
         points.last().expect("a point").1
     })
+}
+
+/// The block at rest with `initial` its particles' initial values: the largest |a| of the
+/// hourglass stiffness, the largest and the smallest a · u, each at the end.
+fn hourglass_pull(tag: &str, initial: &str) -> [f64; 3] {
+    let probes = [
+        ("pull", "norm(dv_hourglass)", "max"),
+        ("against_u_max", "dot(dv_hourglass, u)", "max"),
+        ("against_u_min", "dot(dv_hourglass, u)", "min"),
+    ];
+    let material = "bulk = \"2e5 Pa\"\nG = \"1e5 Pa\"";
+    one_step_of_the_block(&format!("hourglass-{tag}"), HOURGLASS_MODEL, initial, material, probes)
 }
 
 /// A zig-zag along x of 1 mm (a tenth of the spacing) from a reference the kernels' shape (I)
@@ -292,26 +306,22 @@ pairsum hourglass_damping -> a_hourglass: vec [m/s^2] {
 integrate { x' = v  kernel_shape' = dkernel_shape }
 ";
 
-/// `common::block_case`'s 6 × 6 block, β = 0.5, run one step of 1 ns with the velocity `v`: the
-/// largest |a| of the hourglass viscosity, the largest a · v and the power Σ m a · v, at the end.
+/// The block with β = 0.5 and the velocity `v`: the largest |a| of the hourglass viscosity, the
+/// largest a · v and the power Σ m a · v, at the end.
 fn hourglass_damping(tag: &str, v: &str) -> [f64; 3] {
-    let dir = Scratch::new(&format!("gradient-hourglass-visc-{tag}"));
-    std::fs::write(dir.join("damping.sph"), HOURGLASS_VISC_MODEL).unwrap();
-    let probes = block_probes(&[
+    let probes = [
         ("damping", "norm(a_hourglass)", "max"),
         ("along_v_max", "dot(a_hourglass, v)", "max"),
         ("power", "m * dot(a_hourglass, v)", "sum"),
-    ]);
-    let top = "integrator = \"predictor_corrector\"\nend_time = \"1 ns\"";
-    let case = common::block_case("damping.sph", top, &format!("initial = {{ v = \"{v}\" }}"), &probes).replace(
-        "rho0 = \"1000 kg/m^3\"",
-        "rho0 = \"1000 kg/m^3\"\nc0 = \"10 m/s\"\nbulk = \"2e5 Pa\"\nh_ratio = 1.3\nvisc_a = 0\nvisc_b = 0\nhourglass_visc = 0.5",
-    );
-    let outcome = common::run_case_text_on_cpu(&dir, &case);
-    ["damping", "along_v_max", "power"].map(|probe| {
-        let points = &outcome.histories.iter().find(|(n, _)| n == probe).expect("probe").1;
-        points.last().expect("a point").1
-    })
+    ];
+    let material = "bulk = \"2e5 Pa\"\nvisc_a = 0\nvisc_b = 0\nhourglass_visc = 0.5";
+    one_step_of_the_block(
+        &format!("hourglass-visc-{tag}"),
+        HOURGLASS_VISC_MODEL,
+        &format!("v = \"{v}\""),
+        material,
+        probes,
+    )
 }
 
 /// The module's hourglass acceleration on the lattice at 5, 15, …, 55 mm with the velocity `v`,
