@@ -229,6 +229,12 @@ fn one_step_of_the_block<const N: usize>(
     })
 }
 
+/// The block's particles at step 0: the 6 × 6 lattice at 5, 15, …, 55 mm.
+fn block_lattice() -> Vec<[f64; 2]> {
+    let dx = 0.01;
+    (0..36).map(|k| [(k % 6) as f64 * dx + dx / 2.0, (k / 6) as f64 * dx + dx / 2.0]).collect()
+}
+
 /// The block at rest with `initial` its particles' initial values: the largest |a| of the
 /// hourglass stiffness, the largest and the smallest a · u, each at the end.
 fn hourglass_pull(tag: &str, initial: &str) -> [f64; 3] {
@@ -255,7 +261,7 @@ fn the_shaped_hourglass_stiffness_pulls_a_zig_zag_back_as_its_formula_says_and_l
     let (dx, h0, alpha) = (0.01, 0.013, 0.01);
     let (bulk, g, rho0) = (2e5, 1e5, 1000.0);
     let e = 9.0 * bulk * g / (3.0 * bulk + g);
-    let x: Vec<[f64; 2]> = (0..36).map(|k| [(k % 6) as f64 * dx + dx / 2.0, (k / 6) as f64 * dx + dx / 2.0]).collect();
+    let x = block_lattice();
     let u = |p: [f64; 2]| [1e-3 * (std::f64::consts::PI * p[0] / dx).sin(), 0.0];
     let pulls: Vec<f64> = x
         .iter()
@@ -331,7 +337,7 @@ fn hourglass_damping(tag: &str, v: &str) -> [f64; 3] {
 fn hourglass_damping_formula(v: impl Fn([f64; 2]) -> [f64; 2]) -> Vec<[f64; 2]> {
     let (dx, h0, beta, rho) = (0.01, 0.013, 0.5, 1000.0);
     let (c, volume) = ((2e5f64 / rho).sqrt(), dx * dx);
-    let x: Vec<[f64; 2]> = (0..36).map(|k| [(k % 6) as f64 * dx + dx / 2.0, (k / 6) as f64 * dx + dx / 2.0]).collect();
+    let x = block_lattice();
     let grad_w = |xij: [f64; 2]| {
         let r = xij[0].hypot(xij[1]);
         let q = r / h0;
