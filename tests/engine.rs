@@ -1315,3 +1315,48 @@ fn the_plan_names_a_pair_sum_that_sees_fewer_groups_than_its_pass() {
     assert!(text.contains("on fluid from fluid|wall: shepard, summation_density"), "{text}");
     assert!(text.contains("on wall from fluid|wall: shepard, summation_density (from fluid)"), "{text}");
 }
+
+/// The intact and failed particles of a Weldox bar of `models::ftlr19_perforation_shaped`,
+/// stretched from its middle at 2,000 1/s (0.5 mm, 400 steps, 15 µs) with the material lines
+/// `spall`: after each step, (least pressure of an intact particle, number failed).
+fn spall_of_a_stretched_shaped_bar(spall: &str) -> Vec<(f64, usize)> {
+    let tag = if spall.is_empty() { "spall-none" } else { "spall" };
+    let mut e = weldox_bar_of(
+        "models::ftlr19_perforation_shaped",
+        tag,
+        0.5,
+        spall,
+        "v = \"2000 [1/s] * (x - vec(0.02 [m], 0 [m]))\"",
+        0,
+    );
+    (0..400)
+        .map(|k| {
+            e.step().unwrap_or_else(|err| panic!("step {k}: {err}"));
+            let (_, p) = stored_field(&e.backend, "p");
+            let (_, d) = stored_field(&e.backend, "D");
+            let intact: Vec<f64> = p.iter().zip(&d).filter(|(_, d)| **d < 1.0).map(|(p, _)| *p).collect();
+            let least = intact.iter().copied().fold(f64::INFINITY, |a, b| if b.is_nan() { b } else { a.min(b) });
+            (least, d.iter().filter(|d| **d >= 1.0).count())
+        })
+        .collect()
+}
+
+/// The shaped Børvik plate's spall (damage/johnson_cook_or_spall_now.sph): with `p_spall` = 1 GPa
+/// no intact particle of a stretched bar carries more tension than 1 GPa after any step, and some
+/// failed; with none (the default) the same bar is pulled beyond 1 GPa with every particle intact.
+/// Read from the pressure field a predictor–corrector step behind, as damage/johnson_cook_or_spall.sph
+/// does, the spall failed 2 particles and left 12 intact at −1.2 to −14 GPa: the predictor failed
+/// them and floored their density, and the corrector read the floored pressure.
+#[test]
+fn the_shaped_plates_spall_leaves_no_intact_particle_in_tension_beyond_p_spall_after_any_step() {
+    let none = spall_of_a_stretched_shaped_bar("");
+    let least = none.iter().map(|s| s.0).fold(f64::INFINITY, f64::min);
+    assert!(least < -1.1e9, "without spall the bar is pulled only to {least:e} Pa");
+    assert!(none.iter().all(|s| s.1 == 0), "a particle failed without spall: {none:?}");
+    let spall = spall_of_a_stretched_shaped_bar("p_spall = \"1 GPa\"");
+    for (k, (least, _)) in spall.iter().enumerate() {
+        assert!(*least > -1e9, "after step {k} an intact particle carries {least:e} Pa");
+    }
+    let failed = spall.last().map_or(0, |s| s.1);
+    assert!(failed >= 10, "only {failed} particles spalled");
+}

@@ -381,14 +381,16 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // eos
     var p_i: f32 = ld_p(i);
     var c_i: f32 = ld_c(i);
-    let eta = ((rho_i / prm_rho0(i)) - 1.0);
+    let rho_2 = rho_i;
+    let e_2 = e_i;
+    let eta = ((rho_2 / prm_rho0(i)) - 1.0);
     let p1 = prm_c0(i);
     let a0 = (prm_rho0(i) * (p1 * p1));
     let b0 = (a0 * (1.0 + (2.0 * (prm_S_s(i) - 1.0))));
     let p2 = (prm_S_s(i) - 1.0);
     let c0_h = (a0 * ((2.0 * (prm_S_s(i) - 1.0)) + (3.0 * (p2 * p2))));
     let p_h = select((a0 * eta), (((a0 * eta) + (b0 * (eta * eta))) + (c0_h * (eta * eta * eta))), (eta > 0.0));
-    p_i = (((1.0 - ((0.5 * prm_gamma0(i)) * eta)) * p_h) + ((prm_gamma0(i) * rho_i) * e_i));
+    p_i = (((1.0 - ((0.5 * prm_gamma0(i)) * eta)) * p_h) + ((prm_gamma0(i) * rho_2) * e_2));
     c_i = prm_c0(i);
     st_x(i, x_i);
     st_v(i, v_i);

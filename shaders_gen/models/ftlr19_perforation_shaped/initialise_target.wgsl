@@ -66,19 +66,19 @@ fn st_e(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 0u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 9u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 22u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 23u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -93,14 +93,16 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // eos
     var p_i: f32 = ld_p(i);
     var c_i: f32 = ld_c(i);
-    let eta = ((ld_rho(i) / prm_rho0(i)) - 1.0);
+    let rho = ld_rho(i);
+    let e = ld_e(i);
+    let eta = ((rho / prm_rho0(i)) - 1.0);
     let p1 = prm_c0(i);
     let a0 = (prm_rho0(i) * (p1 * p1));
     let b0 = (a0 * (1.0 + (2.0 * (prm_S_s(i) - 1.0))));
     let p2 = (prm_S_s(i) - 1.0);
     let c0_h = (a0 * ((2.0 * (prm_S_s(i) - 1.0)) + (3.0 * (p2 * p2))));
     let p_h = select((a0 * eta), (((a0 * eta) + (b0 * (eta * eta))) + (c0_h * (eta * eta * eta))), (eta > 0.0));
-    p_i = (((1.0 - ((0.5 * prm_gamma0(i)) * eta)) * p_h) + ((prm_gamma0(i) * ld_rho(i)) * ld_e(i)));
+    p_i = (((1.0 - ((0.5 * prm_gamma0(i)) * eta)) * p_h) + ((prm_gamma0(i) * rho) * e));
     c_i = prm_c0(i);
     st_p(i, p_i);
     st_c(i, c_i);

@@ -437,111 +437,115 @@ fn st_eps_nl_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 1u;
+    return params[b];
+}
+fn prm_p_spall(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 6u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 9u;
     return params[b];
 }
 fn prm_shape_floor(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 16u;
     return params[b];
 }
 fn prm_shape_aspect(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 17u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 18u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 22u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 23u;
     return params[b];
 }
 fn prm_nonlocal_hardening(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 26u;
     return params[b];
 }
 fn prm_nonlocal_rate(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 27u;
     return params[b];
 }
 fn prm_damage_length(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 28u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 29u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 30u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 31u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 32u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 32u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 33u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 33u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 34u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 34u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 35u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 35u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 36u;
     return params[b];
 }
 fn prm_D1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 36u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 37u;
     return params[b];
 }
 fn prm_D2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 37u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 38u;
     return params[b];
 }
 fn prm_D3(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 38u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 39u;
     return params[b];
 }
 fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 39u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 40u;
     return params[b];
 }
 fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 40u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 41u;
     return params[b];
 }
 fn prm_failure_band(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 41u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 42u;
     return params[b];
 }
 fn prm_failure_band_spacing(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 42u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 43u;
     return params[b];
 }
 fn prm_nonlocal_weight(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 43u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 44u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -638,10 +642,22 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let s_4 = s_3;
     let triax = ((-p_2) / max(sqrt((1.5 * ddot(s_4, s_4))), 1e-30));
     let T_5 = T_4;
-    D_i = min((D + (deps_p_2 / max((((prm_D1(i) + (prm_D2(i) * exp((prm_D3(i) * triax)))) * (1.0 + (prm_D4(i) * log(max(rate_2, 1.0))))) * (1.0 + (prm_D5(i) * min(max(((T_5 - prm_T_room(i)) / (prm_T_melt(i) - prm_T_room(i))), 0.0), 1.0)))), 1e-12))), 1.0);
+    let jc = min((D + (deps_p_2 / max((((prm_D1(i) + (prm_D2(i) * exp((prm_D3(i) * triax)))) * (1.0 + (prm_D4(i) * log(max(rate_2, 1.0))))) * (1.0 + (prm_D5(i) * min(max(((T_5 - prm_T_room(i)) / (prm_T_melt(i) - prm_T_room(i))), 0.0), 1.0)))), 1e-12))), 1.0);
+    let rho = rho_i;
+    let e_4 = e_i;
+    let eta = ((rho / prm_rho0(i)) - 1.0);
+    let p1 = prm_c0(i);
+    let a0 = (prm_rho0(i) * (p1 * p1));
+    let b0 = (a0 * (1.0 + (2.0 * (prm_S_s(i) - 1.0))));
+    let p2 = (prm_S_s(i) - 1.0);
+    let c0_h = (a0 * ((2.0 * (prm_S_s(i) - 1.0)) + (3.0 * (p2 * p2))));
+    let p_h = select((a0 * eta), (((a0 * eta) + (b0 * (eta * eta))) + (c0_h * (eta * eta * eta))), (eta > 0.0));
+    let failed = select(jc, 1.0, ((((1.0 - ((0.5 * prm_gamma0(i)) * eta)) * p_h) + ((prm_gamma0(i) * rho) * e_4)) <= (-prm_p_spall(i))));
+    D_i = failed;
     eps_nl_i = nonlocal;
-    // failed_density_floor
-    rho_i = select(rho_i, max(rho_i, prm_rho0(i)), (D_i >= 1.0));
+    let rho_2 = rho_i;
+    let D_2 = failed;
+    rho_i = select(rho_2, max(rho_2, prm_rho0(i)), (D_2 >= 1.0));
     // round_failed_kernels
     kernel_shape_i = sel_m(kernel_shape_i, eye(), (D_i >= 1.0));
     // shape_kernel
@@ -659,9 +675,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let angle = (acos(min(max((determinant(div_m(b, unit)) / 2.0), -1.0), 1.0)) / 3.0);
     let largest = select((q + spread), (q + ((2.0 * spread) * cos(angle))), (3.0 == 3.0));
     let smallest = select((q - spread), (q + ((2.0 * spread) * cos((angle + ((2.0 * 3.1415927) / 3.0))))), (3.0 == 3.0));
-    let p1 = max(prm_shape_aspect(i), 1.0);
-    let bound = select(0.0, (select(smallest, largest, (sign > 0.0)) / (p1 * p1)), (prm_shape_aspect(i) > 0.0));
-    let p2 = prm_shape_floor(i);
+    let p3 = max(prm_shape_aspect(i), 1.0);
+    let bound = select(0.0, (select(smallest, largest, (sign > 0.0)) / (p3 * p3)), (prm_shape_aspect(i) > 0.0));
+    let p4 = prm_shape_floor(i);
     let C_2 = AAt;
     let sign_2 = -1.0;
     let q_2 = (trace(C_2) / 3.0);
@@ -671,7 +687,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let angle_2 = (acos(min(max((determinant(div_m(b_2, unit_2)) / 2.0), -1.0), 1.0)) / 3.0);
     let largest_2 = select((q_2 + spread_2), (q_2 + ((2.0 * spread_2) * cos(angle_2))), (3.0 == 3.0));
     let smallest_2 = select((q_2 - spread_2), (q_2 + ((2.0 * spread_2) * cos((angle_2 + ((2.0 * 3.1415927) / 3.0))))), (3.0 == 3.0));
-    let B = (AAt + (max((max((p2 * p2), bound) - select(smallest_2, largest_2, (sign_2 > 0.0))), 0.0) * eye()));
+    let B = (AAt + (max((max((p4 * p4), bound) - select(smallest_2, largest_2, (sign_2 > 0.0))), 0.0) * eye()));
     kernel_metric_i = sym(inv(B));
     kernel_norm_i = (1.0 / sqrt(determinant(B)));
     let C_3 = B;
@@ -693,19 +709,21 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let angle_4 = (acos(min(max((determinant(div_m(b_4, unit_4)) / 2.0), -1.0), 1.0)) / 3.0);
     let largest_4 = select((q_4 + spread_4), (q_4 + ((2.0 * spread_4) * cos(angle_4))), (3.0 == 3.0));
     let smallest_4 = select((q_4 - spread_4), (q_4 + ((2.0 * spread_4) * cos((angle_4 + ((2.0 * 3.1415927) / 3.0))))), (3.0 == 3.0));
-    let p3 = prm_shape_floor(i);
-    h_short_i = ((prm_h_ratio(i) * ld_dx(i)) * sqrt(max(select(smallest_4, largest_4, (sign_4 > 0.0)), (p3 * p3))));
+    let p5 = prm_shape_floor(i);
+    h_short_i = ((prm_h_ratio(i) * ld_dx(i)) * sqrt(max(select(smallest_4, largest_4, (sign_4 > 0.0)), (p5 * p5))));
     // eos
     var p_i: f32 = ld_p(i);
     var c_i: f32 = ld_c(i);
-    let eta = ((rho_i / prm_rho0(i)) - 1.0);
-    let p4 = prm_c0(i);
-    let a0 = (prm_rho0(i) * (p4 * p4));
-    let b0 = (a0 * (1.0 + (2.0 * (prm_S_s(i) - 1.0))));
-    let p5 = (prm_S_s(i) - 1.0);
-    let c0_h = (a0 * ((2.0 * (prm_S_s(i) - 1.0)) + (3.0 * (p5 * p5))));
-    let p_h = select((a0 * eta), (((a0 * eta) + (b0 * (eta * eta))) + (c0_h * (eta * eta * eta))), (eta > 0.0));
-    p_i = (((1.0 - ((0.5 * prm_gamma0(i)) * eta)) * p_h) + ((prm_gamma0(i) * rho_i) * e_i));
+    let rho_3 = rho_i;
+    let e_5 = e_i;
+    let eta_2 = ((rho_3 / prm_rho0(i)) - 1.0);
+    let p6 = prm_c0(i);
+    let a0_2 = (prm_rho0(i) * (p6 * p6));
+    let b0_2 = (a0_2 * (1.0 + (2.0 * (prm_S_s(i) - 1.0))));
+    let p7 = (prm_S_s(i) - 1.0);
+    let c0_h_2 = (a0_2 * ((2.0 * (prm_S_s(i) - 1.0)) + (3.0 * (p7 * p7))));
+    let p_h_2 = select((a0_2 * eta_2), (((a0_2 * eta_2) + (b0_2 * (eta_2 * eta_2))) + (c0_h_2 * (eta_2 * eta_2 * eta_2))), (eta_2 > 0.0));
+    p_i = (((1.0 - ((0.5 * prm_gamma0(i)) * eta_2)) * p_h_2) + ((prm_gamma0(i) * rho_3) * e_5));
     c_i = prm_c0(i);
     st_x(i, x_i);
     st_v(i, v_i);
