@@ -1362,6 +1362,54 @@ fn a_material_no_body_uses_is_a_warning_not_an_unknown_parameter_error() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// `cases/borvik_perforation.toml` lists the shaped model's keys as its weldox material's
+/// `optional` ones: the shaped model binds `--set p_spall=6` (as 6 GPa), the round model leaves
+/// the key out at its default, and `--set p_spall=6` under the round model is error C0007.
+#[test]
+fn the_borvik_cases_optional_p_spall_binds_under_the_shaped_model_and_is_c0007_set_under_the_round_one() {
+    let weldox_p_spall = |set: &[(&str, &str)]| {
+        let (scene, _) = prepare(&case("borvik_perforation"), &with_set(set)).unwrap_or_else(|e| panic!("{e}"));
+        let id = scene.model.param_id("p_spall");
+        let weldox = scene.materials.iter().find(|m| m.name == "weldox").expect("weldox");
+        id.map(|id| weldox.values.get(&id).cloned())
+    };
+    let shaped = ("model", "models::ftlr19_perforation_shaped");
+    assert_eq!(weldox_p_spall(&[shaped, ("p_spall", "6")]), Some(Some(vec![6e9])));
+    assert_eq!(weldox_p_spall(&[shaped]), Some(Some(vec![1e29])));
+    assert_eq!(weldox_p_spall(&[]), None, "the round model takes p_spall");
+    let err = prepare(&case("borvik_perforation"), &with_set(&[("p_spall", "6")]))
+        .err()
+        .map(|e| e.to_string())
+        .unwrap_or_default();
+    assert!(
+        err.contains("C0007") && err.contains("`p_spall`, which the model `models::ftlr19_perforation` does not take"),
+        "{err}"
+    );
+}
+
+/// A material key that `optional` does not list is checked against the model as any other (C0007
+/// at its default), and `optional` naming a key the material does not set is error C0052.
+#[test]
+fn a_material_key_optional_does_not_list_is_c0007_and_listing_an_unset_key_is_c0052() {
+    let dir = out_dir("optional-keys");
+    std::fs::create_dir_all(&dir).expect("dir");
+    let path = dir.join("borvik.toml");
+    let text = std::fs::read_to_string(case("borvik_perforation")).expect("case");
+    let listed = r#"optional = ["shape_aspect", "hourglass_visc", "p_spall"]"#;
+    assert!(text.contains(listed), "the case's weldox material no longer lists its optional keys");
+    let error_of = |replacement: &str| {
+        std::fs::write(&path, text.replace(listed, replacement)).expect("write");
+        prepare(&path, &Default::default()).err().map(|e| e.to_string()).unwrap_or_default()
+    };
+    let err = error_of(r#"optional = ["hourglass_visc", "p_spall"]"#);
+    assert!(err.contains("C0007") && err.contains("`shape_aspect`, which is not a parameter"), "{err}");
+    let err = error_of(r#"optional = ["shape_aspect", "hourglass_visc", "p_spall", "p_spal"]"#);
+    assert!(err.contains("C0052") && err.contains("lists `p_spal`, which it does not set"), "{err}");
+    let err = error_of(r#"optional = "p_spall""#);
+    assert!(err.contains("C0052") && err.contains("must be a list"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// The exact solution of Sod's problem (γ = 1.4; ρ, u, p = 1, 0, 1 left of x = 0 and 0.125, 0,
 /// 0.1 right of it) at x / t = `xi`: Toro's exact Riemann solver, written out here apart from
 /// scripts/riemann_exact.py.

@@ -15,6 +15,7 @@ use crate::engine::RunConfig;
 use crate::ir::{self, FieldId, GroupSet, Model, Shape};
 use crate::schedule::{Constraint, IntegratorKind, Load, SceneSpec, Search, Target};
 use crate::units::Unit;
+use std::collections::BTreeMap;
 use std::path::Path;
 
 struct Ctx<'a> {
@@ -25,6 +26,10 @@ struct Ctx<'a> {
     cli: &'a CommandLine,
     /// The case text (placeholders expanded): what spans in `file` index.
     text: &'a str,
+    /// The materials as the case's own parameters and the resolution's `set` give them, without
+    /// `--set` or a study run's values: what a material's `optional` keys may keep under a model
+    /// that does not take them. None where nothing was set.
+    default_materials: Option<&'a BTreeMap<String, BTreeMap<String, Value>>>,
 }
 
 /// The options a case was loaded with, written out as a source of their own (`<command line>`)
@@ -263,6 +268,7 @@ pub fn load_text(
     let mut set = resolution_set(text, opts);
     let from_case = set.len();
     set.extend(opts.set.iter().cloned());
+    let text_unexpanded = text;
     let text = match super::template::expand(text, &set) {
         Ok(t) => t,
         Err(e) => {
@@ -303,7 +309,8 @@ pub fn load_text(
         return Err(diags);
     }
     let cli = CommandLine::new(opts, sources);
-    let mut cx = Ctx { file, dim, diags: &mut diags, cli: &cli, text: &text };
+    let defaults = default_materials(text_unexpanded, &set[..from_case], opts);
+    let mut cx = Ctx { file, dim, diags: &mut diags, cli: &cli, text: &text, default_materials: defaults.as_ref() };
     let scene = build(&case, path, &dir, model, opts, limits, &mut cx);
     match scene {
         Some(mut s) if !diags.iter().any(|d| d.is_error()) => {
@@ -312,6 +319,65 @@ pub fn load_text(
         }
         _ => Err(diags),
     }
+}
+
+/// The material key that lists the keys only some of a case's models take.
+const OPTIONAL: &str = "optional";
+
+/// A material's `optional = ["p_spall", …]`: keys of its own that only some of the case's models
+/// take (a case that switches models with a parameter). Error C0052 for a list that is not one of
+/// its keys' names.
+fn optional_keys(mat: &str, values: &BTreeMap<String, Value>, cx: &mut Ctx) -> Vec<String> {
+    let Some(list) = values.get(OPTIONAL) else { return vec![] };
+    let names = list.get_ref().as_array().map(|a| a.iter().map(|k| k.as_str()).collect::<Option<Vec<_>>>());
+    let Some(Some(names)) = names else {
+        let msg = format!("material `{mat}`: `{OPTIONAL}` must be a list of its keys' names");
+        cx.err(list.span(), "C0052", msg, "here");
+        return vec![];
+    };
+    for name in &names {
+        if !values.contains_key(*name) || *name == OPTIONAL {
+            let msg = format!("material `{mat}`: `{OPTIONAL}` lists `{name}`, which it does not set");
+            cx.err(list.span(), "C0052", msg, "in this list");
+        }
+    }
+    names.into_iter().map(str::to_string).collect()
+}
+
+/// Whether a material's key that the model does not take is one of its `optional` keys at the
+/// case's default value, and so left out. Set away from it (`--set`, a study run) it is error
+/// C0007: the run would not do what was asked.
+fn optional_left_out(mat: &str, key: &str, v: &Value, optional: &[String], case: &CaseFile, cx: &mut Ctx) -> bool {
+    if !optional.iter().any(|k| k == key) {
+        return false;
+    }
+    let default = cx.default_materials.map_or(Some(v), |m| m.get(mat).and_then(|vals| vals.get(key)));
+    if default.is_some_and(|d| d.get_ref() == v.get_ref()) {
+        return true;
+    }
+    let model = case.model.get_ref();
+    let d =
+        Diagnostic::error("C0007", format!("material `{mat}` sets `{key}`, which the model `{model}` does not take"))
+            .at(cx.span(v.span()), "set away from the case's default")
+            .help(format!(
+        "`{key}` is one of the material's `{OPTIONAL}` keys: under a model without it, it may only keep its default"
+    ));
+    cx.diags.push(d);
+    true
+}
+
+/// The materials of the case with only its own parameters and the resolution's `set` (see
+/// [`Ctx::default_materials`]); None where `--set` or a study run changed nothing.
+fn default_materials(
+    text: &str,
+    resolution_set: &[(String, String)],
+    opts: &Options,
+) -> Option<BTreeMap<String, BTreeMap<String, Value>>> {
+    if opts.set.is_empty() {
+        return None;
+    }
+    let text = super::template::expand(text, resolution_set).ok()?;
+    toml::from_str::<CaseFile>(&text).ok().map(|c| c.materials)
 }
 
 /// The keys serde's "unknown field" message lists after the key: "expected `a`", "expected `a`
@@ -491,9 +557,13 @@ fn build(
             let msg = format!("material `{mat_name}` is used by no body: its keys are not checked against the model");
             cx.diags.push(Diagnostic::warning("C0042", msg).at(cx.span(first.span()), "in this material"));
         }
+        let optional = optional_keys(mat_name, values, cx);
         for (key, v) in values {
+            if key == OPTIONAL {
+                continue;
+            }
             let Some(p) = model.param_id(key) else {
-                if unused {
+                if unused || optional_left_out(mat_name, key, v, &optional, case, cx) {
                     continue;
                 }
                 let names: Vec<&str> = model.params.iter().map(|p| p.name.as_str()).collect();
