@@ -309,7 +309,7 @@ pub fn load_text(
         return Err(diags);
     }
     let cli = CommandLine::new(opts, sources);
-    let defaults = default_materials(text_unexpanded, &set[..from_case], opts);
+    let defaults = default_materials(text_unexpanded, &set[..from_case], opts, &case);
     let mut cx = Ctx { file, dim, diags: &mut diags, cli: &cli, text: &text, default_materials: defaults.as_ref() };
     let scene = build(&case, path, &dir, model, opts, limits, &mut cx);
     match scene {
@@ -367,13 +367,15 @@ fn optional_left_out(mat: &str, key: &str, v: &Value, optional: &[String], case:
 }
 
 /// The materials of the case with only its own parameters and the resolution's `set` (see
-/// [`Ctx::default_materials`]); None where `--set` or a study run changed nothing.
+/// [`Ctx::default_materials`]); None where `--set` or a study run changed nothing, or where no
+/// material has `optional` keys to compare.
 fn default_materials(
     text: &str,
     resolution_set: &[(String, String)],
     opts: &Options,
+    case: &CaseFile,
 ) -> Option<BTreeMap<String, BTreeMap<String, Value>>> {
-    if opts.set.is_empty() {
+    if opts.set.is_empty() || !case.materials.values().any(|m| m.contains_key(OPTIONAL)) {
         return None;
     }
     let text = super::template::expand(text, resolution_set).ok()?;
