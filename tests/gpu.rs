@@ -558,6 +558,26 @@ fn graded_sphere_plate_on_the_gpu_matches_the_cpu_with_variable_h() {
     case_matches_cpu("sphere_plate_graded", &[("plate_coarse", "2")], 60, &["p", "h"], 2e-3);
 }
 
+/// Kept lists take room from one pool by each particle's own candidates: on the graded plate a
+/// coarse particle sees many fine ones, and lists of one length for all (twice the most plus 16
+/// each, the rule before the pool) would take more than twice the pool. The first full build
+/// hands out no more than the pool holds, and the run with these lists matches the CPU (above).
+#[test]
+fn the_gpus_kept_lists_on_graded_particles_share_a_pool_under_half_of_one_length_for_all() {
+    use pairsum::engine::Engine;
+    let opts = pairsum::scene::Options { set: vec![("plate_coarse".into(), "4".into())], ..Default::default() };
+    let (scene, plan) = pairsum::runner::prepare(Path::new(&case("sphere_plate_graded")), &opts).expect("case");
+    let store = build_store::<f32>(&plan, &scene.particles, &scene.materials).expect("store");
+    let n = store.n as u64;
+    let mut gpu = Engine::new(GpuBackend::new(gpu(), plan, store, &scene.mirrors).expect("gpu"), scene.config.clone());
+    gpu.initialise().expect("gpu init");
+    gpu.step().expect("a step");
+    let pool = gpu.backend.list_pool().expect("the case keeps Verlet lists").expect("the pool's header");
+    assert!(pool.taken > 0 && pool.taken <= pool.capacity, "{pool:?}");
+    let one_length = n * (2 * pool.largest as u64 + 16);
+    assert!(2 * pool.capacity as u64 <= one_length, "{pool:?}: {n} lists of one length would take {one_length}");
+}
+
 // Water meeting a plate through interface particles (EK18 Eq 31): 150 steps are 2.2 µs of the
 // jet's impact, through the water hammer and the plate's first reflections; the water's free
 // surface and cavitation limit, the per-group total stress and the solid's energy across the

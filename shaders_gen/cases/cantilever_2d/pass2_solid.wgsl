@@ -244,8 +244,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let hi = h_of(i);
     let mirrors = u32(globals[72u]);
     let n_all = u32(info[0]);
-    let stride = lists[0u];
-    let list_start = 16u + n_all + i * stride;
+    let list_start = 16u + 3u * n_all + lists[16u + n_all + i];
     for (var k_list = list_start; k_list < list_start + lists[16u + i]; k_list++) {
         let entry = lists[k_list];
         let j = entry & 0x3ffffffu;

@@ -12,23 +12,29 @@
 //!    the same rule in WGSL); it counts full builds and records the skin's length.
 //! 4. `build` (per particle): rebuilds the list of every particle on a full build, and on the
 //!    adaptive search the lists of the particles whose field grew by more than the threshold since
-//!    their last rebuild. A list holds at most `stride` entries; the largest count seen is kept,
-//!    and the runtime stops the run with an error when it exceeds the stride.
+//!    their last rebuild. On a full build each particle first counts its candidates and takes room
+//!    for them from one pool (an atomic counter: lists of every length packed end to end, so that
+//!    a few coarse particles among fine ones, which see thousands, do not size every list), as
+//!    [`room`] says; on the adaptive search its later rebuilds fill that room. A particle
+//!    with more candidates than its room, or none left in the pool, records its count, and the
+//!    runtime stops the run with an error.
 //!
 //! # The `lists` buffer (u32 words)
-//! `[STRIDE]` entries per particle, `[BUILT]` 1 once built, `[REBUILD]` this evaluation's full
+//! `[CAPACITY]` entries the pool holds, `[BUILT]` 1 once built, `[REBUILD]` this evaluation's full
 //! build flag, `[DISPLACEMENT]`/`[H_GROWTH]` the drift maxima (f32 bits), `[LARGEST]` the largest
-//! candidate count, `[FULL_BUILDS]`/`[PARTICLE_REBUILDS]`/`[EVALUATIONS]` counters, `[SKIN_LEN]` the skin's length
-//! (f32 bits); from `HEADER` the `n` counts, then `n × stride` entries, each the neighbour's index
-//! with the mirror transform of its image in the top bits (as the CPU's
-//! [`crate::backend::cpu::lists`]).
+//! candidate count, `[FULL_BUILDS]`/`[PARTICLE_REBUILDS]`/`[EVALUATIONS]` counters, `[SKIN_LEN]` the
+//! skin's length (f32 bits), `[TAKEN]` the entries handed out since the last full build, `[SHORT]`
+//! the most candidates of a particle whose list could not hold them all (0: none); from `HEADER`
+//! the `n` counts, the `n` starts (in the pool), the `n` rooms, then the pool from `HEADER + 3n`:
+//! each entry the neighbour's index with the mirror transform of its image in the top bits (as the
+//! CPU's [`crate::backend::cpu::lists`]).
 
 use super::device::{Gpu, GpuError};
 use crate::schedule::Search;
 
 pub use crate::backend::cpu::lists::{INDEX_MASK, TRANSFORM_SHIFT};
 
-pub const STRIDE: usize = 0;
+pub const CAPACITY: usize = 0;
 pub const BUILT: usize = 1;
 pub const REBUILD: usize = 2;
 pub const DISPLACEMENT: usize = 3;
@@ -38,6 +44,8 @@ pub const FULL_BUILDS: usize = 6;
 pub const PARTICLE_REBUILDS: usize = 7;
 pub const SKIN_LEN: usize = 8;
 pub const EVALUATIONS: usize = 9;
+pub const TAKEN: usize = 10;
+pub const SHORT: usize = 11;
 /// Words before the counts.
 pub const HEADER: usize = 16;
 
@@ -108,6 +116,7 @@ fn main() {
     lists[2] = select(0u, 1u, rebuild);
     if (rebuild) {
         lists[6] += 1u;
+        lists[10] = 0u;
         lists[8] = bitcast<u32>(params.skin * params.support * bitcast<f32>(grid[9]));
     }
     lists[1] = 1u;
@@ -135,37 +144,9 @@ fn pos(p: u32) -> vec3<f32> {
     return v;
 }
 
-@compute @workgroup_size(64)
-fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
-        @builtin(local_invocation_index) li: u32) {
-    let i = (wg.x + wg.y * nwg.x) * 64u + li;
-    let n = params.n;
-    if (i >= n) { return; }
-    let all = atomicLoad(&lists[2]) == 1u;
-    // The adaptive field of particle i (NaN where its group does not store it).
-    var f = bitcast<f32>(0x7fc00000u);
-    if (params.field_base >= 0) {
-        let base = info[u32(params.field_base) + ints[i]];
-        if (base != i32(-2147483648)) { f = data[u32(base) + i]; }
-    }
-    let grown = params.mode == 2u && f - state[4u * n + i] > params.threshold;
-    if (!all && !grown) { return; }
-    let xi = pos(i);
-    let hi = data[params.h_offset + i];
-    if (all) {
-        for (var k = 0u; k < 3u; k++) { state[i * 3u + k] = xi[k]; }
-        state[3u * n + i] = hi;
-    } else {
-        atomicAdd(&lists[7], 1u);
-    }
-    state[4u * n + i] = f;
-    let h_max = bitcast<f32>(grid[9]);
-    // The walk's cells hold everything within grid[14] cell sizes: a skin from an earlier full
-    // build, with a larger h_max then, may not reach further (the adaptive search's rebuilds).
-    let skin_len = bitcast<f32>(atomicLoad(&lists[8]));
-    let radius = min(params.support * 0.5 * (hi + h_max) + skin_len, f32(grid[14]) * bitcast<f32>(grid[3]));
-    let stride = atomicLoad(&lists[0]);
-    let first = 16u + n + i * stride;
+// Particle i's candidates within `radius` (each pair's own reach within it): their count, the
+// first `room` stored from word `first` when `keep`.
+fn walk(i: u32, xi: vec3<f32>, hi: f32, radius: f32, skin_len: f32, first: u32, room: u32, keep: bool) -> u32 {
     var count = 0u;
     for (var tr = 0u; tr < (1u << params.mirrors); tr++) {
         var yi = xi;
@@ -200,21 +181,91 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 // Each pair's own reach: its cut-off support · h_ij plus the skin.
                 let reach = min(params.support * 0.5 * (hi + data[params.h_offset + j]) + skin_len, radius);
                 if (dot(d, d) < reach * reach) {
-                    if (count < stride) { atomicStore(&lists[first + count], j | (tr << TRANSFORM_SHIFTu)); }
+                    if (keep && count < room) { atomicStore(&lists[first + count], j | (tr << TRANSFORM_SHIFTu)); }
                     count++;
                 }
             }
         }}}
     }
-    atomicStore(&lists[16u + i], min(count, stride));
+    return count;
+}
+
+@compute @workgroup_size(64)
+fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+        @builtin(local_invocation_index) li: u32) {
+    let i = (wg.x + wg.y * nwg.x) * 64u + li;
+    let n = params.n;
+    if (i >= n) { return; }
+    let all = atomicLoad(&lists[2]) == 1u;
+    // The adaptive field of particle i (NaN where its group does not store it).
+    var f = bitcast<f32>(0x7fc00000u);
+    if (params.field_base >= 0) {
+        let base = info[u32(params.field_base) + ints[i]];
+        if (base != i32(-2147483648)) { f = data[u32(base) + i]; }
+    }
+    let grown = params.mode == 2u && f - state[4u * n + i] > params.threshold;
+    if (!all && !grown) { return; }
+    let xi = pos(i);
+    let hi = data[params.h_offset + i];
+    if (all) {
+        for (var k = 0u; k < 3u; k++) { state[i * 3u + k] = xi[k]; }
+        state[3u * n + i] = hi;
+    } else {
+        atomicAdd(&lists[7], 1u);
+    }
+    state[4u * n + i] = f;
+    let h_max = bitcast<f32>(grid[9]);
+    // The walk's cells hold everything within grid[14] cell sizes: a skin from an earlier full
+    // build, with a larger h_max then, may not reach further (the adaptive search's rebuilds).
+    let skin_len = bitcast<f32>(atomicLoad(&lists[8]));
+    let radius = min(params.support * 0.5 * (hi + h_max) + skin_len, f32(grid[14]) * bitcast<f32>(grid[3]));
+    var start = atomicLoad(&lists[16u + n + i]);
+    var room = atomicLoad(&lists[16u + 2u * n + i]);
+    if (all) {
+        // Room from the pool (`room` on the host): none when the pool has run out.
+        let wanted = walk(i, xi, hi, radius, skin_len, 0u, 0u, false);
+        room = select(wanted + wanted / 8u + 8u, 2u * wanted + 16u, params.mode == 2u);
+        start = atomicAdd(&lists[10], room);
+        let capacity = atomicLoad(&lists[0]);
+        if (start > capacity || room > capacity - start) { room = 0u; }
+        atomicStore(&lists[16u + n + i], start);
+        atomicStore(&lists[16u + 2u * n + i], room);
+    }
+    let count = walk(i, xi, hi, radius, skin_len, 16u + 3u * n + start, room, true);
+    atomicStore(&lists[16u + i], min(count, room));
     atomicMax(&lists[5], count);
+    if (count > room) { atomicMax(&lists[11], count); }
 }
 "#;
+
+/// The room a particle with `count` candidates takes from the pool at a full build (the build
+/// kernel's rule, in WGSL there): with Verlet lists, rebuilt only whole, its count and an eighth
+/// more plus 8, since the walk that counts and the walk that stores may round a pair at the
+/// cut-off differently (a compiler may contract one and not the other: lavapipe did, by one
+/// candidate); on the adaptive search, whose particles rebuild their own lists in their room,
+/// twice the count plus 16.
+pub fn room(count: u64, adaptive: bool) -> u64 {
+    if adaptive {
+        2 * count + 16
+    } else {
+        count + count / 8 + 8
+    }
+}
+
+/// The pool of entries every list takes its room from: its size, the entries handed out since the
+/// last full build, and the most candidates any particle had (the header's words).
+#[derive(Clone, Copy, Debug)]
+pub struct ListPool {
+    pub capacity: u32,
+    pub taken: u32,
+    pub largest: u32,
+}
 
 /// The device's lists and the kernels that keep them.
 pub struct GpuLists {
     n: u32,
-    pub stride: u32,
+    /// Entries the pool holds.
+    capacity: u32,
     lists: wgpu::Buffer,
     state: wgpu::Buffer,
     params: wgpu::Buffer,
@@ -233,30 +284,31 @@ pub struct ListScene<'a> {
     pub mirrors: &'a [crate::backend::Mirror],
     /// Index in `info` of the adaptive field's base on group 0, when the search is adaptive.
     pub field_base: Option<usize>,
-    /// Entries per particle.
-    pub stride: u32,
+    /// Entries the pool holds, for every list together.
+    pub capacity: u32,
 }
 
 /// The dispatches of [`GpuLists::record`]: drift, decide, build.
 pub const DISPATCHES: usize = 3;
 
 impl GpuLists {
-    /// The buffers for `n` particles with `stride` entries each, `(name, bytes)`.
-    pub fn planned_buffers(n: usize, stride: u32) -> Vec<(&'static str, u64)> {
+    /// The buffers for `n` particles with a pool of `capacity` entries, `(name, bytes)`.
+    pub fn planned_buffers(n: usize, capacity: u32) -> Vec<(&'static str, u64)> {
         vec![
-            ("neighbour lists", 4 * (HEADER as u64 + n as u64 * (1 + stride as u64))),
+            ("neighbour lists", 4 * (HEADER as u64 + 3 * n as u64 + capacity as u64)),
             ("neighbour lists: state at the build", 4 * 5 * n as u64),
         ]
     }
 
     pub fn new(gpu: &Gpu, search: &Search, scene: &ListScene, cell_helpers: &str) -> Result<GpuLists, GpuError> {
-        let (n, stride) = (scene.n, scene.stride);
-        gpu.estimate_fits(&GpuLists::planned_buffers(n, stride))?;
+        let (n, capacity) = (scene.n, scene.capacity);
+        let planned = GpuLists::planned_buffers(n, capacity);
+        gpu.estimate_fits(&planned)?;
         let none = wgpu::BufferUsages::empty();
-        let lists = gpu.storage_buffer("neighbour lists", 4 * (HEADER + n * (1 + stride as usize)) as u64, none)?;
+        let lists = gpu.storage_buffer("neighbour lists", planned[0].1, none)?;
         let state = gpu.storage_buffer("neighbour lists: state at the build", 4 * 5 * n.max(1) as u64, none)?;
         let mut header = [0u32; HEADER];
-        header[STRIDE] = stride;
+        header[CAPACITY] = capacity;
         gpu.upload(&lists, 0, &header)?;
         let (mode, threshold) = match search {
             Search::Cells => (0u32, 0.0f32),
@@ -301,7 +353,7 @@ impl GpuLists {
             ),
             "main",
         )?;
-        Ok(GpuLists { n: n as u32, stride, lists, state, params, drift, decide, build })
+        Ok(GpuLists { n: n as u32, capacity, lists, state, params, drift, decide, build })
     }
 
     pub fn buffer(&self) -> &wgpu::Buffer {
@@ -345,25 +397,33 @@ impl GpuLists {
     /// An error when a particle had more candidates than its list holds (its list was cut short,
     /// so the last evaluation missed pairs).
     pub fn check_overflow(&self, gpu: &Gpu) -> Result<(), GpuError> {
-        self.check_largest(self.header(gpu)?[LARGEST])
+        self.check_short(self.header(gpu)?[SHORT])
     }
 
-    /// Records a copy of the largest candidate count (the word [`GpuLists::check_largest`] takes)
-    /// into `to` at byte `at`, so that a step's own read-back carries it.
-    pub fn record_largest_copy(&self, encoder: &mut wgpu::CommandEncoder, to: &wgpu::Buffer, at: u64) {
-        encoder.copy_buffer_to_buffer(&self.lists, 4 * LARGEST as u64, to, at, 4);
+    /// Records a copy of the most candidates of a list cut short (the word
+    /// [`GpuLists::check_short`] takes) into `to` at byte `at`, so that a step's own read-back
+    /// carries it.
+    pub fn record_short_copy(&self, encoder: &mut wgpu::CommandEncoder, to: &wgpu::Buffer, at: u64) {
+        encoder.copy_buffer_to_buffer(&self.lists, 4 * SHORT as u64, to, at, 4);
     }
 
-    /// An error if a particle found more candidates than its list holds.
-    pub fn check_largest(&self, largest: u32) -> Result<(), GpuError> {
-        if largest > self.stride {
+    /// An error if a particle found more candidates than its list could hold (`short`: their
+    /// count, 0 when every list held all of its own).
+    pub fn check_short(&self, short: u32) -> Result<(), GpuError> {
+        if short > 0 {
             return Err(GpuError::Device(format!(
-                "a particle has {largest} neighbour candidates, more than the {} its list holds (twice the most at \
-                 the start, plus 16): the particles have clumped far beyond their initial packing",
-                self.stride
+                "a particle has {short} neighbour candidates, more than the room its list was given: the lists share \
+                 {} entries, twice the room they took at the start plus 16 per particle, and the particles have clumped \
+                 far beyond their initial packing",
+                self.capacity
             )));
         }
         Ok(())
+    }
+
+    pub fn pool(&self, gpu: &Gpu) -> Result<ListPool, GpuError> {
+        let h = self.header(gpu)?;
+        Ok(ListPool { capacity: h[CAPACITY], taken: h[TAKEN], largest: h[LARGEST] })
     }
 
     pub fn stats(&self, gpu: &Gpu) -> Result<crate::schedule::SearchStats, GpuError> {

@@ -248,7 +248,7 @@ impl GpuBackend {
                     support,
                     mirrors,
                     field_base,
-                    stride: list_stride(
+                    capacity: list_capacity(
                         store.column(x).zip(store.column(h)).map(|(xc, hc)| crate::backend::cpu::lists::BuildInput {
                             x: &xc.data,
                             h: &hc.data,
@@ -259,7 +259,7 @@ impl GpuBackend {
                             // The device's lists hold every group.
                             sources: None,
                         }),
-                        search.skin(),
+                        search,
                     ),
                 };
                 Some(GpuLists::new(&gpu, search, &scene, super::cells::wgsl_helpers()).map_err(err)?)
@@ -467,6 +467,12 @@ impl GpuBackend {
     }
 
     /// The cells per cut-off of its cell list ([`cells_per_cutoff`], chosen at the start).
+    /// The pool of the kept neighbour lists (None with the cell search): its capacity, the room
+    /// taken since the last full build and the most candidates a particle had.
+    pub fn list_pool(&self) -> Option<Result<super::lists::ListPool, BackendError>> {
+        self.lists.as_ref().map(|l| l.pool(&self.gpu).map_err(failed("reading the neighbour lists' pool")))
+    }
+
     pub fn cells_per_cutoff(&self) -> u32 {
         self.cells.cells_per_cutoff()
     }
@@ -595,7 +601,7 @@ impl GpuBackend {
         }
         encoder.copy_buffer_to_buffer(&self.globals, 0, &self.globals_staging, 0, CLOCK_BYTES);
         if let Some(l) = &self.lists {
-            l.record_largest_copy(&mut encoder, &self.globals_staging, CLOCK_BYTES);
+            l.record_short_copy(&mut encoder, &self.globals_staging, CLOCK_BYTES);
         }
         encoder
     }
@@ -629,13 +635,13 @@ impl GpuBackend {
             // one: recording and encoding a step took 0.4–0.7 ms of host time on an H200.
             self.next_step = Some(self.record_step().finish());
         }
-        // The clock's words, then (with kept lists) their largest candidate count.
+        // The clock's words, then (with kept lists) the most candidates of a list cut short.
         let words: Vec<u32> = self
             .gpu
             .map_read(&self.globals_staging, CLOCK_WORDS + self.lists.is_some() as usize, started)
             .map_err(failed("running a step"))?;
         if let Some(l) = &self.lists {
-            l.check_largest(words[CLOCK_WORDS]).map_err(failed("checking the neighbour lists"))?;
+            l.check_short(words[CLOCK_WORDS]).map_err(failed("checking the neighbour lists"))?;
         }
         // Time accumulates on the host in f64 from the device's f32 step. The device cuts the
         // last step to the end time in f32, so the sum lands within f32 rounding of the end: that
@@ -971,7 +977,7 @@ pub fn step_traffic(plan: &Plan, n: usize) -> Result<String, String> {
         )
     };
     let readbacks = if plan.search.keeps_lists() {
-        format!("one blocking read-back (the clock, {CLOCK_BYTES} bytes, and the lists' largest candidate count)")
+        format!("one blocking read-back (the clock, {CLOCK_BYTES} bytes, and the most candidates of a neighbour list cut short)")
     } else {
         format!("one blocking read-back (the clock, {CLOCK_BYTES} bytes)")
     };
@@ -986,14 +992,16 @@ pub fn step_traffic(plan: &Plan, n: usize) -> Result<String, String> {
     ))
 }
 
-/// Entries per particle of the device's lists: twice the most candidates any particle has at the
-/// start within the cut-off plus the skin (counted on the host), plus 16.
-fn list_stride(inp: Option<crate::backend::cpu::lists::BuildInput<f32>>, skin: f64) -> u32 {
+/// Entries of the device's pool of lists: twice the room the particles take at the start (their
+/// candidates within the cut-off plus the skin, counted on the host, with the build kernel's
+/// margin, [`super::lists::room`]), plus 16 per particle.
+fn list_capacity(inp: Option<crate::backend::cpu::lists::BuildInput<f32>>, search: &Search) -> u32 {
     let Some(inp) = inp else { return 16 };
     let mut lists = crate::backend::cpu::lists::Lists::default();
-    lists.prepare(&Search::Verlet { skin }, &inp, |_| vec![]);
-    let most = lists.of.iter().map(Vec::len).max().unwrap_or(0);
-    (2 * most + 16) as u32
+    lists.prepare(&Search::Verlet { skin: search.skin() }, &inp, |_| vec![]);
+    let adaptive = matches!(search, Search::Adaptive { .. });
+    let room: u64 = lists.of.iter().map(|l| super::lists::room(l.len() as u64, adaptive)).sum();
+    (2 * room + 16 * lists.of.len() as u64).min(u32::MAX as u64) as u32
 }
 
 /// Particles a cell of half the cut-off must hold on average, weighted by particle, before the

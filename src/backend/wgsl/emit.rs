@@ -1034,8 +1034,7 @@ fn cell_walk(w: &mut Writer, support: &str) -> Vec<(usize, &'static str)> {
 fn list_walk(w: &mut Writer) -> Vec<(usize, &'static str)> {
     use crate::backend::gpu::lists as l;
     w.line("let n_all = u32(info[0]);");
-    w.line(format!("let stride = lists[{}u];", l::STRIDE));
-    w.line(format!("let list_start = {}u + n_all + i * stride;", l::HEADER));
+    w.line(format!("let list_start = {}u + 3u * n_all + lists[{}u + n_all + i];", l::HEADER, l::HEADER));
     w.line(format!("for (var k_list = list_start; k_list < list_start + lists[{}u + i]; k_list++) {{", l::HEADER));
     w.indent += 1;
     w.line("let entry = lists[k_list];");
