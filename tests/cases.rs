@@ -1366,7 +1366,7 @@ fn a_material_no_body_uses_is_a_warning_not_an_unknown_parameter_error() {
 /// `optional` ones: the shaped model binds `--set p_spall=6` (as 6 GPa), the round model leaves
 /// the key out at its default, and `--set p_spall=6` under the round model is error C0007.
 #[test]
-fn the_borvik_cases_optional_p_spall_binds_under_the_shaped_model_and_is_c0007_set_under_the_round_one() {
+fn the_borvik_cases_optional_p_spall_binds_under_the_shaped_model_and_is_c0007_changed_under_the_round_one() {
     let weldox_p_spall = |set: &[(&str, &str)]| {
         let (scene, _) = prepare(&case("borvik_perforation"), &with_set(set)).unwrap_or_else(|e| panic!("{e}"));
         let id = scene.model.param_id("p_spall");
@@ -1385,6 +1385,12 @@ fn the_borvik_cases_optional_p_spall_binds_under_the_shaped_model_and_is_c0007_s
         err.contains("C0007") && err.contains("`p_spall`, which the model `models::ftlr19_perforation` does not take"),
         "{err}"
     );
+    // The default written another way is the default: the key is left out, not an error.
+    for same in ["1e20", "100000000000000000000", "1.0e20"] {
+        let set = with_set(&[("p_spall", same)]);
+        let run = prepare(&case("borvik_perforation"), &set).map(|_| ()).map_err(|e| e.to_string());
+        assert_eq!(run, Ok(()), "--set p_spall={same} under the round model");
+    }
 }
 
 /// A material key that `optional` does not list is checked against the model as any other (C0007

@@ -352,7 +352,7 @@ fn optional_left_out(mat: &str, key: &str, v: &Value, optional: &[String], case:
         return false;
     }
     let default = cx.default_materials.map_or(Some(v), |m| m.get(mat).and_then(|vals| vals.get(key)));
-    if default.is_some_and(|d| d.get_ref() == v.get_ref()) {
+    if default.is_some_and(|d| same_value(d.get_ref(), v.get_ref())) {
         return true;
     }
     let model = case.model.get_ref();
@@ -364,6 +364,22 @@ fn optional_left_out(mat: &str, key: &str, v: &Value, optional: &[String], case:
     ));
     cx.diags.push(d);
     true
+}
+
+/// Whether two values of a key are the same: equal as written, or the same quantity however
+/// written (`1e20 GPa` and `100000000000000000000.0 GPa`, `6 GPa` and `6000 MPa`), to 1 part in
+/// 10¹².
+fn same_value(a: &toml::Value, b: &toml::Value) -> bool {
+    let quantity = |v: &toml::Value| match v {
+        toml::Value::Integer(i) => Some(quantity::Quantity { value: *i as f64, unit: Unit::ONE }),
+        toml::Value::Float(f) => Some(quantity::Quantity { value: *f, unit: Unit::ONE }),
+        toml::Value::String(s) => quantity::parse(s).ok(),
+        _ => None,
+    };
+    a == b
+        || quantity(a).zip(quantity(b)).is_some_and(|(a, b)| {
+            a.unit == b.unit && (a.value - b.value).abs() <= 1e-12 * a.value.abs().max(b.value.abs())
+        })
 }
 
 /// The materials of the case with only its own parameters and the resolution's `set` (see
