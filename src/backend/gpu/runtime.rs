@@ -466,13 +466,13 @@ impl GpuBackend {
         self.check_lists()
     }
 
-    /// The cells per cut-off of its cell list ([`cells_per_cutoff`], chosen at the start).
     /// The pool of the kept neighbour lists (None with the cell search): its capacity, the room
     /// taken since the last full build and the most candidates a particle had.
     pub fn list_pool(&self) -> Option<Result<super::lists::ListPool, BackendError>> {
         self.lists.as_ref().map(|l| l.pool(&self.gpu).map_err(failed("reading the neighbour lists' pool")))
     }
 
+    /// The cells per cut-off of its cell list ([`cells_per_cutoff`], chosen at the start).
     pub fn cells_per_cutoff(&self) -> u32 {
         self.cells.cells_per_cutoff()
     }
