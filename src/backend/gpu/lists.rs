@@ -222,9 +222,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var start = atomicLoad(&lists[16u + n + i]);
     var room = atomicLoad(&lists[16u + 2u * n + i]);
     if (all) {
-        // Room from the pool (`room` on the host): none when the pool has run out.
+        // Room from the pool (`room`, rendered from the host's rule): none when the pool has run out.
         let wanted = walk(i, xi, hi, radius, skin_len, 0u, 0u, false);
-        room = select(wanted + wanted / 8u + 8u, 2u * wanted + 16u, params.mode == 2u);
+        room = select(ROOM_VERLET, ROOM_ADAPTIVE, params.mode == 2u);
         start = atomicAdd(&lists[10], room);
         let capacity = atomicLoad(&lists[0]);
         if (start > capacity || room > capacity - start) { room = 0u; }
@@ -238,18 +238,33 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
 }
 "#;
 
-/// The room a particle with `count` candidates takes from the pool at a full build (the build
-/// kernel's rule, in WGSL there): with Verlet lists, rebuilt only whole, its count and an eighth
-/// more plus 8, since the walk that counts and the walk that stores may round a pair at the
-/// cut-off differently (a compiler may contract one and not the other: lavapipe did, by one
-/// candidate); on the adaptive search, whose particles rebuild their own lists in their room,
-/// twice the count plus 16.
+/// The room a particle with `count` candidates takes from the pool at a full build: with Verlet
+/// lists, rebuilt only whole, its count and an eighth more plus 8, since the walk that counts and
+/// the walk that stores may round a pair at the cut-off differently (a compiler may contract one
+/// and not the other: lavapipe did, by one candidate); on the adaptive search, whose particles
+/// rebuild their own lists in their room, twice the count plus 16. The host sizes the pool by it
+/// and the build kernel takes by it ([`room_wgsl`]): one rule, `(share, extra)` per search, the
+/// room `count · share.0 + count / share.1 + extra`.
+const ROOM: [RoomRule; 2] =
+    [RoomRule { times: 1, over: Some(8), extra: 8 }, RoomRule { times: 2, over: None, extra: 16 }];
+
+/// One search's room: `count · times + count / over + extra` (no `over`: no fraction).
+struct RoomRule {
+    times: u64,
+    over: Option<u64>,
+    extra: u64,
+}
+
 pub fn room(count: u64, adaptive: bool) -> u64 {
-    if adaptive {
-        2 * count + 16
-    } else {
-        count + count / 8 + 8
-    }
+    let RoomRule { times, over, extra } = ROOM[adaptive as usize];
+    count * times + over.map_or(0, |over| count / over) + extra
+}
+
+/// [`room`] as a WGSL expression of the build kernel's `wanted`.
+fn room_wgsl(adaptive: bool) -> String {
+    let RoomRule { times, over, extra } = ROOM[adaptive as usize];
+    let fraction = over.map_or(String::new(), |over| format!(" + wanted / {over}u"));
+    format!("(wanted * {times}u{fraction} + {extra}u)")
 }
 
 /// The pool of entries every list takes its room from: its size, the entries handed out since the
@@ -349,7 +364,10 @@ impl GpuLists {
             "neighbour lists: build",
             &format!(
                 "{PARAMS_WGSL}{cell_helpers}{}",
-                BUILD_WGSL.replace("TRANSFORM_SHIFT", &TRANSFORM_SHIFT.to_string())
+                BUILD_WGSL
+                    .replace("TRANSFORM_SHIFT", &TRANSFORM_SHIFT.to_string())
+                    .replace("ROOM_VERLET", &room_wgsl(false))
+                    .replace("ROOM_ADAPTIVE", &room_wgsl(true))
             ),
             "main",
         )?;
@@ -433,5 +451,37 @@ impl GpuLists {
             full_builds: h[FULL_BUILDS] as u64,
             particle_rebuilds: h[PARTICLE_REBUILDS] as u64,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// What naga's constant evaluation makes of the build kernel's room for `wanted` candidates.
+    fn room_on_the_device(wanted: u32, adaptive: bool) -> u32 {
+        let src = format!("const wanted: u32 = {wanted}u;\nconst room: u32 = {};\n", room_wgsl(adaptive));
+        let module = naga::front::wgsl::parse_str(&src).expect("the room's WGSL parses");
+        let (_, room) =
+            module.constants.iter().find(|(_, c)| c.name.as_deref() == Some("room")).expect("a constant `room`");
+        match module.global_expressions[room.init] {
+            naga::Expression::Literal(naga::Literal::U32(v)) => v,
+            ref e => panic!("the room did not evaluate to a u32: {e:?}"),
+        }
+    }
+
+    #[test]
+    fn the_build_kernels_room_is_the_hosts_for_both_searches() {
+        for adaptive in [false, true] {
+            for wanted in [0u32, 1, 7, 8, 9, 63, 64, 1000, 123_457] {
+                assert_eq!(
+                    room_on_the_device(wanted, adaptive) as u64,
+                    room(wanted as u64, adaptive),
+                    "{wanted}, {adaptive}"
+                );
+            }
+        }
+        assert_eq!(room(1000, false), 1133);
+        assert_eq!(room(1000, true), 2016);
     }
 }
