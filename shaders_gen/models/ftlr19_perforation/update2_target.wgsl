@@ -502,7 +502,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // failed_density_floor
     let rho = rho_i;
     let D_2 = D_i;
-    rho_i = select(rho, max(rho, prm_rho0(i)), (D_2 >= 1.0));
+    let floor = prm_rho0(i);
+    rho_i = select(rho, max(rho, floor), (D_2 >= 1.0));
     // eos
     var p_i: f32 = ld_p(i);
     var c_i: f32 = ld_c(i);

@@ -536,35 +536,35 @@ fn st_p_contact(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 5u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 7u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 10u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 11u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 12u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 18u;
     return params[b];
 }
 fn prm_contact_colour(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 24u;
     return params[b];
 }
 fn prm_contact_stiffness(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 25u;
     return params[b];
 }
 @compute @workgroup_size(64)

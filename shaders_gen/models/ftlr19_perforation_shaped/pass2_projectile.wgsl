@@ -531,23 +531,23 @@ fn st_a_contact(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_delta(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 8u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 9u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 10u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 11u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 12u;
     return params[b];
 }
 @compute @workgroup_size(64)

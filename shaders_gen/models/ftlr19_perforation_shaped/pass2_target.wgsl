@@ -619,31 +619,31 @@ fn st_a_contact(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 1u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 10u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 11u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 12u;
     return params[b];
 }
 fn prm_visc_share(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 14u;
     return params[b];
 }
 fn prm_hourglass_visc(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 15u;
     return params[b];
 }
 fn prm_damage_coupling(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 21u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -197,19 +197,19 @@ fn st_e_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 0u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 9u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 22u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 23u;
     return params[b];
 }
 @compute @workgroup_size(64)

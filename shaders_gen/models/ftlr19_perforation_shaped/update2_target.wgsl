@@ -437,115 +437,119 @@ fn st_eps_nl_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 1u;
     return params[b];
 }
 fn prm_p_spall(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 6u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 9u;
     return params[b];
 }
 fn prm_shape_floor(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 16u;
     return params[b];
 }
 fn prm_shape_aspect(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 17u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 18u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 22u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 23u;
     return params[b];
 }
 fn prm_nonlocal_hardening(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 26u;
     return params[b];
 }
 fn prm_nonlocal_rate(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 27u;
     return params[b];
 }
 fn prm_damage_length(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 28u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 29u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 30u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 31u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 32u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 32u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 33u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 33u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 34u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 34u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 35u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 35u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 36u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 36u;
+    return params[b];
+}
+fn prm_zero_pressure_floor(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 37u;
     return params[b];
 }
 fn prm_D1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 37u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 38u;
     return params[b];
 }
 fn prm_D2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 38u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 39u;
     return params[b];
 }
 fn prm_D3(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 39u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 40u;
     return params[b];
 }
 fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 40u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 41u;
     return params[b];
 }
 fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 41u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 42u;
     return params[b];
 }
 fn prm_failure_band(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 42u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 43u;
     return params[b];
 }
 fn prm_failure_band_spacing(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 43u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 44u;
     return params[b];
 }
 fn prm_nonlocal_weight(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 44u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 45u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -655,9 +659,16 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let failed = select(jc, 1.0, ((((1.0 - ((0.5 * prm_gamma0(i)) * eta)) * p_h) + ((prm_gamma0(i) * rho) * e_4)) <= (-prm_p_spall(i))));
     D_i = failed;
     eps_nl_i = nonlocal;
+    let e_5 = e_i;
+    let p3 = prm_c0(i);
+    let k_2 = ((prm_gamma0(i) * max(e_5, 0.0)) / (p3 * p3));
+    let p4 = (1.0 + k_2);
+    let eta0 = ((-2.0 * k_2) / ((1.0 + k_2) + sqrt(((p4 * p4) + ((2.0 * prm_gamma0(i)) * k_2)))));
+    let floor = select(prm_rho0(i), (prm_rho0(i) * (1.0 + eta0)), (prm_zero_pressure_floor(i) > 0.0));
     let rho_2 = rho_i;
     let D_2 = failed;
-    rho_i = select(rho_2, max(rho_2, prm_rho0(i)), (D_2 >= 1.0));
+    let floor_2 = floor;
+    rho_i = select(rho_2, max(rho_2, floor_2), (D_2 >= 1.0));
     // round_failed_kernels
     kernel_shape_i = sel_m(kernel_shape_i, eye(), (D_i >= 1.0));
     // shape_kernel
@@ -675,9 +686,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let angle = (acos(min(max((determinant(div_m(b, unit)) / 2.0), -1.0), 1.0)) / 3.0);
     let largest = select((q + spread), (q + ((2.0 * spread) * cos(angle))), (3.0 == 3.0));
     let smallest = select((q - spread), (q + ((2.0 * spread) * cos((angle + ((2.0 * 3.1415927) / 3.0))))), (3.0 == 3.0));
-    let p3 = max(prm_shape_aspect(i), 1.0);
-    let bound = select(0.0, (select(smallest, largest, (sign > 0.0)) / (p3 * p3)), (prm_shape_aspect(i) > 0.0));
-    let p4 = prm_shape_floor(i);
+    let p5 = max(prm_shape_aspect(i), 1.0);
+    let bound = select(0.0, (select(smallest, largest, (sign > 0.0)) / (p5 * p5)), (prm_shape_aspect(i) > 0.0));
+    let p6 = prm_shape_floor(i);
     let C_2 = AAt;
     let sign_2 = -1.0;
     let q_2 = (trace(C_2) / 3.0);
@@ -687,7 +698,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let angle_2 = (acos(min(max((determinant(div_m(b_2, unit_2)) / 2.0), -1.0), 1.0)) / 3.0);
     let largest_2 = select((q_2 + spread_2), (q_2 + ((2.0 * spread_2) * cos(angle_2))), (3.0 == 3.0));
     let smallest_2 = select((q_2 - spread_2), (q_2 + ((2.0 * spread_2) * cos((angle_2 + ((2.0 * 3.1415927) / 3.0))))), (3.0 == 3.0));
-    let B = (AAt + (max((max((p4 * p4), bound) - select(smallest_2, largest_2, (sign_2 > 0.0))), 0.0) * eye()));
+    let B = (AAt + (max((max((p6 * p6), bound) - select(smallest_2, largest_2, (sign_2 > 0.0))), 0.0) * eye()));
     kernel_metric_i = sym(inv(B));
     kernel_norm_i = (1.0 / sqrt(determinant(B)));
     let C_3 = B;
@@ -709,21 +720,21 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let angle_4 = (acos(min(max((determinant(div_m(b_4, unit_4)) / 2.0), -1.0), 1.0)) / 3.0);
     let largest_4 = select((q_4 + spread_4), (q_4 + ((2.0 * spread_4) * cos(angle_4))), (3.0 == 3.0));
     let smallest_4 = select((q_4 - spread_4), (q_4 + ((2.0 * spread_4) * cos((angle_4 + ((2.0 * 3.1415927) / 3.0))))), (3.0 == 3.0));
-    let p5 = prm_shape_floor(i);
-    h_short_i = ((prm_h_ratio(i) * ld_dx(i)) * sqrt(max(select(smallest_4, largest_4, (sign_4 > 0.0)), (p5 * p5))));
+    let p7 = prm_shape_floor(i);
+    h_short_i = ((prm_h_ratio(i) * ld_dx(i)) * sqrt(max(select(smallest_4, largest_4, (sign_4 > 0.0)), (p7 * p7))));
     // eos
     var p_i: f32 = ld_p(i);
     var c_i: f32 = ld_c(i);
     let rho_3 = rho_i;
-    let e_5 = e_i;
+    let e_6 = e_i;
     let eta_2 = ((rho_3 / prm_rho0(i)) - 1.0);
-    let p6 = prm_c0(i);
-    let a0_2 = (prm_rho0(i) * (p6 * p6));
+    let p8 = prm_c0(i);
+    let a0_2 = (prm_rho0(i) * (p8 * p8));
     let b0_2 = (a0_2 * (1.0 + (2.0 * (prm_S_s(i) - 1.0))));
-    let p7 = (prm_S_s(i) - 1.0);
-    let c0_h_2 = (a0_2 * ((2.0 * (prm_S_s(i) - 1.0)) + (3.0 * (p7 * p7))));
+    let p9 = (prm_S_s(i) - 1.0);
+    let c0_h_2 = (a0_2 * ((2.0 * (prm_S_s(i) - 1.0)) + (3.0 * (p9 * p9))));
     let p_h_2 = select((a0_2 * eta_2), (((a0_2 * eta_2) + (b0_2 * (eta_2 * eta_2))) + (c0_h_2 * (eta_2 * eta_2 * eta_2))), (eta_2 > 0.0));
-    p_i = (((1.0 - ((0.5 * prm_gamma0(i)) * eta_2)) * p_h_2) + ((prm_gamma0(i) * rho_3) * e_5));
+    p_i = (((1.0 - ((0.5 * prm_gamma0(i)) * eta_2)) * p_h_2) + ((prm_gamma0(i) * rho_3) * e_6));
     c_i = prm_c0(i);
     st_x(i, x_i);
     st_v(i, v_i);
