@@ -14,8 +14,7 @@ import numpy as np
 
 sys.dont_write_bytecode = True
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "borvik_rings"))
-from band import read  # noqa: E402
-from shear_band import outputs  # noqa: E402
+from band import outputs, read  # noqa: E402
 
 
 def spacing_mm(run):

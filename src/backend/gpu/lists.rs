@@ -238,13 +238,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
 }
 "#;
 
-/// The room a particle with `count` candidates takes from the pool at a full build: with Verlet
-/// lists, rebuilt only whole, its count and an eighth more plus 8, since the walk that counts and
-/// the walk that stores may round a pair at the cut-off differently (a compiler may contract one
-/// and not the other: lavapipe did, by one candidate); on the adaptive search, whose particles
-/// rebuild their own lists in their room, twice the count plus 16. The host sizes the pool by it
-/// and the build kernel takes by it ([`room_wgsl`]): one rule, `(share, extra)` per search, the
-/// room `count · share.0 + count / share.1 + extra`.
+/// The room rules, Verlet's then the adaptive search's ([`room`] says why these).
 const ROOM: [RoomRule; 2] =
     [RoomRule { times: 1, over: Some(8), extra: 8 }, RoomRule { times: 2, over: None, extra: 16 }];
 
@@ -255,6 +249,12 @@ struct RoomRule {
     extra: u64,
 }
 
+/// The room a particle with `count` candidates takes from the pool at a full build: with Verlet
+/// lists, rebuilt only whole, its count and an eighth more plus 8, since the walk that counts and
+/// the walk that stores may round a pair at the cut-off differently (a compiler may contract one
+/// and not the other: lavapipe did, by one candidate); on the adaptive search, whose particles
+/// rebuild their own lists in their room, twice the count plus 16. The host sizes the pool by it
+/// and the build kernel takes by it, rendered from the same [`ROOM`] ([`room_wgsl`]).
 pub fn room(count: u64, adaptive: bool) -> u64 {
     let RoomRule { times, over, extra } = ROOM[adaptive as usize];
     count * times + over.map_or(0, |over| count / over) + extra
