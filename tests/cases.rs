@@ -1401,15 +1401,15 @@ fn a_material_key_optional_does_not_list_is_c0007_and_listing_an_unset_key_is_c0
     std::fs::create_dir_all(&dir).expect("dir");
     let path = dir.join("borvik.toml");
     let text = std::fs::read_to_string(case("borvik_perforation")).expect("case");
-    let listed = r#"optional = ["shape_aspect", "hourglass_visc", "p_spall"]"#;
+    let listed = r#"optional = ["shape_aspect", "hourglass_visc", "p_spall", "zero_pressure_floor"]"#;
     assert!(text.contains(listed), "the case's weldox material no longer lists its optional keys");
     let error_of = |replacement: &str| {
         std::fs::write(&path, text.replace(listed, replacement)).expect("write");
         prepare(&path, &Default::default()).err().map(|e| e.to_string()).unwrap_or_default()
     };
-    let err = error_of(r#"optional = ["hourglass_visc", "p_spall"]"#);
+    let err = error_of(r#"optional = ["hourglass_visc", "p_spall", "zero_pressure_floor"]"#);
     assert!(err.contains("C0007") && err.contains("`shape_aspect`, which is not a parameter"), "{err}");
-    let err = error_of(r#"optional = ["shape_aspect", "hourglass_visc", "p_spall", "p_spal"]"#);
+    let err = error_of(r#"optional = ["shape_aspect", "hourglass_visc", "p_spall", "zero_pressure_floor", "p_spal"]"#);
     assert!(err.contains("C0052") && err.contains("lists `p_spal`, which it does not set"), "{err}");
     let err = error_of(r#"optional = "p_spall""#);
     assert!(err.contains("C0052") && err.contains("must be a list"), "{err}");
