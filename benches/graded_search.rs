@@ -1,6 +1,7 @@
 //! The cell search on a graded scene: the Børvik 12 mm plate at 1 mm near the axis, 4 mm beyond
 //! (a quarter: projectile ∅20 × 80 mm and plate r = 256 mm, 1 mm within 24 mm of the axis),
-//! about the 21,800 particles of `docs/results/borvik_12mm_refined_1mm/`.
+//! about the 21,800 particles of `docs/results/borvik_12mm_refined_1mm/` (dropped in stop 104:
+//! `git show e77815e5:docs/results/borvik_12mm_refined_1mm/303.5/report.md`).
 //!
 //! Each variant walks every particle's candidates and keeps the pairs within
 //! `support · (h_i + h_j)/2`, as the CPU backend's cell walk does, and must find the same pairs:

@@ -1209,8 +1209,8 @@ fn total_lagrangian_cantilever_3d_deflection_is_within_its_5_percent_tolerance_a
 
 /// The Taylor bar (steel at 287 m/s on a rigid wall, a quarter model) at 0.8 mm, 4 particles
 /// across its radius: its final length and foot diameter against the Abaqus reference within the
-/// case's bounds, and their pinned figures (docs/results/taylor_bar_convergence/ has the finer
-/// spacings).
+/// case's bounds, and their pinned figures (docs/results/README.md; the round kernels' finer
+/// spacings: git show e77815e5:docs/results/taylor_bar_convergence/report.md).
 #[test]
 fn taylor_bar_final_length_and_foot_diameter_are_within_their_tolerances_at_4_particles_across_the_radius() {
     run_and_check("taylor_bar", Precision::F64);
