@@ -150,6 +150,12 @@ pub struct Param {
     /// Used when a material does not bind the parameter (a constant expression).
     pub default: Option<Expr>,
     pub span: Span,
+    /// Its declaration as written, without `param` and the comment (`p_spall: scalar [Pa] =
+    /// 1e20 [Pa]`), its comment (the one after it on its line, else the first line of the
+    /// comment just above it), and `file:line`: what `pairsum plan` lists.
+    pub declared: String,
+    pub doc: String,
+    pub location: String,
 }
 
 #[derive(Clone, Debug)]

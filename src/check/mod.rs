@@ -86,7 +86,28 @@ fn finish(loader: Loader<'_>) -> Checked {
         let (line, _) = sources.line_col(e.span);
         e.location = format!("{}:{line}", sources.name(e.span.file));
     }
+    for p in &mut model.params {
+        let (line, _) = sources.line_col(p.span);
+        p.location = format!("{}:{line}", sources.name(p.span.file));
+        (p.declared, p.doc) = declaration_and_doc(sources.text(p.span.file), line);
+    }
     Checked { model, diags, is_model }
+}
+
+/// A parameter's declaration on line `line` (1-based) of `text`, without `param` and its
+/// comment, and its comment: the one after it on the line, else the first line of the comment
+/// block just above it.
+fn declaration_and_doc(text: &str, line: usize) -> (String, String) {
+    let lines: Vec<&str> = text.lines().collect();
+    let Some(decl) = line.checked_sub(1).and_then(|k| lines.get(k)) else { return Default::default() };
+    let (code, after) = decl.split_once("//").unwrap_or((decl, ""));
+    let declared = code.trim().trim_start_matches("param").trim().to_string();
+    if !after.trim().is_empty() {
+        return (declared, after.trim().to_string());
+    }
+    let above = lines[..line - 1].iter().rev().take_while(|l| l.trim_start().starts_with("//"));
+    let first = above.last().map(|l| l.trim_start().trim_start_matches('/').trim().to_string());
+    (declared, first.unwrap_or_default())
 }
 
 /// For each module's source file, the files of every module it uses, directly or not.
@@ -576,7 +597,15 @@ impl Checker {
             );
             return;
         }
-        self.model.params.push(ir::Param { name: p.name.name.clone(), ty, default: None, span: p.name.span });
+        self.model.params.push(ir::Param {
+            name: p.name.name.clone(),
+            ty,
+            default: None,
+            span: p.name.span,
+            declared: String::new(),
+            doc: String::new(),
+            location: String::new(),
+        });
     }
 
     /// Field initial values and parameter defaults, once every name is known.

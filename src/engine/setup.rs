@@ -3,7 +3,7 @@
 //! checked against what the plan reads.
 
 use crate::host_eval;
-use crate::ir::{self, Expr, ExprKind, FieldId, GroupId, GroupSet, Model, ParamId, Side};
+use crate::ir::{self, Expr, FieldId, GroupId, GroupSet, Model, ParamId};
 use crate::particles::{Real, Store};
 use crate::schedule::Plan;
 use std::collections::{BTreeMap, BTreeSet};
@@ -89,66 +89,6 @@ impl std::fmt::Display for SetupError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "error[{}]: {}", self.code, self.message)
     }
-}
-
-/// Parameters the plan reads on each group (at i on the group, at j on the sources).
-pub fn params_used(plan: &Plan) -> BTreeMap<ParamId, GroupSet> {
-    let mut used: BTreeMap<ParamId, GroupSet> = BTreeMap::new();
-    let mut note = |p: ParamId, g: GroupSet| {
-        let e = used.entry(p).or_default();
-        *e = e.union(g.intersect(plan.groups));
-    };
-    let walk = |stmts: &[ir::Stmt], i: GroupSet, j: GroupSet, note: &mut dyn FnMut(ParamId, GroupSet)| {
-        ir::walk_stmts(stmts, &mut |e| {
-            if let ExprKind::Param(p, side) = e.kind {
-                note(p, if side == Side::I { i } else { j });
-            }
-        });
-    };
-    for pass in &plan.passes {
-        for v in &pass.variants {
-            let g = GroupSet::default().with(v.group);
-            for e in &v.pair_sums {
-                let eq = plan.equation(*e);
-                for s in crate::schedule::stmts_of(eq) {
-                    walk(s, g, v.sources.intersect(eq.sources()), &mut note);
-                }
-            }
-            for b in plan.tail_blocks(&v.tail) {
-                walk(&b.stmts, g, g, &mut note);
-            }
-        }
-    }
-    for st in &plan.stages {
-        for b in &st.updates {
-            walk(&b.stmts, b.dest, b.dest, &mut note);
-        }
-        for e in st.corrections.iter().chain(&st.derived) {
-            let eq = plan.equation(*e);
-            for s in crate::schedule::stmts_of(eq) {
-                walk(s, eq.dest, eq.dest, &mut note);
-            }
-        }
-    }
-    let all = plan.groups;
-    for f in &plan.initial {
-        if let Some(init) = &plan.model.field(*f).init {
-            ir::walk_expr(init, &mut |e| {
-                if let ExprKind::Param(p, _) = e.kind {
-                    note(p, all);
-                }
-            });
-        }
-    }
-    for t in &plan.timesteps {
-        let ts = &plan.model.timesteps[*t];
-        ir::walk_expr(&ts.value, &mut |e| {
-            if let ExprKind::Param(p, _) = e.kind {
-                note(p, ts.dest.intersect(all));
-            }
-        });
-    }
-    used
 }
 
 /// Every parameter's value for one material: bound, else its default (which may read the
@@ -310,7 +250,7 @@ pub fn build_store<T: Real>(
     }
     // Parameters: every material its values; a parameter the plan reads on a group must be
     // bound (or defaulted) for every material with particles on that group.
-    let used = params_used(plan);
+    let used = plan.params_read();
     for (mi, (m, values)) in materials.iter().zip(&resolved).enumerate() {
         let groups = material_groups(input, mi);
         for (p, v) in values.iter().enumerate() {

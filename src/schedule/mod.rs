@@ -27,6 +27,7 @@ pub use search::{Drift, Rebuild, Search, SearchStats};
 use crate::diag::{Diagnostic, Span};
 use crate::ir::{self, EqId, FieldId, GroupId, GroupSet, Model, ParamId, Storage};
 use crate::units::Unit;
+use std::collections::BTreeMap;
 
 /// A plane `x[axis] = offset` that gives the particles within reach of it an image their
 /// neighbours see: a symmetry plane (`shift` 0) reflects them across it, and the particles live
@@ -382,6 +383,66 @@ impl Plan {
     pub fn describe(&self, real_bytes: usize) -> String {
         print::describe(self, real_bytes)
     }
+
+    /// Parameters the plan reads on each group (at i on the group, at j on the sources).
+    pub fn params_read(&self) -> BTreeMap<ParamId, GroupSet> {
+        let mut used: BTreeMap<ParamId, GroupSet> = BTreeMap::new();
+        let mut note = |p: ParamId, g: GroupSet| {
+            let e = used.entry(p).or_default();
+            *e = e.union(g.intersect(self.groups));
+        };
+        let walk = |stmts: &[ir::Stmt], i: GroupSet, j: GroupSet, note: &mut dyn FnMut(ParamId, GroupSet)| {
+            ir::walk_stmts(stmts, &mut |e| {
+                if let ir::ExprKind::Param(p, side) = e.kind {
+                    note(p, if side == ir::Side::I { i } else { j });
+                }
+            });
+        };
+        for pass in &self.passes {
+            for v in &pass.variants {
+                let g = GroupSet::default().with(v.group);
+                for e in &v.pair_sums {
+                    let eq = self.equation(*e);
+                    for s in stmts_of(eq) {
+                        walk(s, g, v.sources.intersect(eq.sources()), &mut note);
+                    }
+                }
+                for b in self.tail_blocks(&v.tail) {
+                    walk(&b.stmts, g, g, &mut note);
+                }
+            }
+        }
+        for st in &self.stages {
+            for b in &st.updates {
+                walk(&b.stmts, b.dest, b.dest, &mut note);
+            }
+            for e in st.corrections.iter().chain(&st.derived) {
+                let eq = self.equation(*e);
+                for s in stmts_of(eq) {
+                    walk(s, eq.dest, eq.dest, &mut note);
+                }
+            }
+        }
+        let all = self.groups;
+        for f in &self.initial {
+            if let Some(init) = &self.model.field(*f).init {
+                ir::walk_expr(init, &mut |e| {
+                    if let ir::ExprKind::Param(p, _) = e.kind {
+                        note(p, all);
+                    }
+                });
+            }
+        }
+        for t in &self.timesteps {
+            let ts = &self.model.timesteps[*t];
+            ir::walk_expr(&ts.value, &mut |e| {
+                if let ir::ExprKind::Param(p, _) = e.kind {
+                    note(p, ts.dest.intersect(all));
+                }
+            });
+        }
+        used
+    }
 }
 
 /// Components `.z`, `.xz`… must exist in the scene's dimension.
@@ -419,6 +480,9 @@ pub(crate) fn synthetic_param(model: &mut Model, name: &str, shape: ir::Shape, u
         ty: ir::Type::new(shape, unit),
         default: None,
         span: Default::default(),
+        declared: format!("{name}: {}", shape.name()),
+        doc: "set by the scene".into(),
+        location: String::new(),
     });
     ParamId(model.params.len() as u32 - 1)
 }

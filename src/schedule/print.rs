@@ -126,6 +126,7 @@ pub fn describe(plan: &Plan, real: usize) -> String {
             m.group_names(l.groups)
         );
     }
+    describe_params(plan, &mut s);
     for g in plan.groups.iter(m.groups.len()) {
         let _ = writeln!(
             s,
@@ -155,5 +156,26 @@ fn describe_halo(plan: &Plan, real: usize, s: &mut String) {
             field_list(plan, &x.fields),
             bytes(plan, &x.fields, real)
         );
+    }
+}
+
+/// The parameters the step reads (`Plan::params_read`), as declared, with the groups that read
+/// them, their comment and where they are declared: what a case's materials can bind.
+fn describe_params(plan: &Plan, s: &mut String) {
+    let m = &plan.model;
+    let _ = writeln!(s, "parameters (a material binds them; without a value, the default after `=`):");
+    for (p, groups) in plan.params_read() {
+        let param = &m.params[p.index()];
+        let by_scene = plan.scene_params.iter().any(|sp| sp.param == p);
+        let needed = if by_scene {
+            " (set by the scene)"
+        } else if param.default.is_none() {
+            " (required)"
+        } else {
+            ""
+        };
+        let doc = if param.doc.is_empty() || by_scene { String::new() } else { format!(": {}", param.doc) };
+        let at = if param.location.is_empty() { String::new() } else { format!(" ({})", param.location) };
+        let _ = writeln!(s, "  {}{needed}  on {}{doc}{at}", param.declared, m.group_names(groups));
     }
 }
