@@ -98,8 +98,8 @@ enum Command {
     Cases,
     /// Write the generated code of a model or a case
     Emit {
-        /// A model (.sph), a case (.toml) or a bundled case's name; with --all, every stdlib model
-        /// and bundled case
+        /// A model (.sph, or a stdlib model by name: models::elastic_solid), a case (.toml) or a
+        /// bundled case's name; with --all, every stdlib model and bundled case
         path: Option<PathBuf>,
         /// wgsl
         #[arg(long, default_value = "wgsl")]
@@ -142,9 +142,10 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
-    /// Print the plan of a step: passes, fused equations, fields read and written, bytes per particle
+    /// Print the plan of a step: passes, fused equations, fields read and written, bytes per particle, and the parameters a material binds
     Plan {
-        /// A model (.sph), a case (.toml) or a bundled case's name
+        /// A model (.sph, or a stdlib model by name: models::elastic_solid), a case (.toml) or a
+        /// bundled case's name
         path: PathBuf,
         /// Dimension, for a model
         #[arg(long, default_value_t = 3)]
@@ -412,9 +413,20 @@ fn real_bytes(precision: Precision) -> usize {
     }
 }
 
+/// A model file, or a stdlib model by the name a case gives it (`models::elastic_solid`) where
+/// no such file is.
+fn check_model(sources: &mut Sources, path: &Path) -> check::Checked {
+    let name = path.to_string_lossy();
+    if !path.exists() && name.contains("::") {
+        let rel = name.replace("::", "/") + ".sph";
+        return check::check_stdlib_modules(sources, &[rel.as_str()], Stdlib::locate());
+    }
+    check::check_paths(sources, &[path], Stdlib::locate())
+}
+
 /// Checks a model file and prints its diagnostics; the model if it has no errors.
 pub fn load_model(path: &Path, sources: &mut Sources) -> Option<crate::ir::Model> {
-    let checked = check::check_paths(sources, &[path], Stdlib::locate());
+    let checked = check_model(sources, path);
     if !checked.diags.is_empty() {
         eprint!("{}", render(sources, &checked.diags));
     }
@@ -710,7 +722,7 @@ pub fn plan_of(path: &Path, dim: usize) -> Result<crate::schedule::Plan, String>
             .map_err(|e| e.to_string());
     }
     let mut sources = Sources::new();
-    let checked = check::check_paths(&mut sources, &[path], Stdlib::locate());
+    let checked = check_model(&mut sources, path);
     if checked.has_errors() {
         return Err(render(&sources, &checked.diags));
     }

@@ -151,11 +151,13 @@ pub struct Param {
     pub default: Option<Expr>,
     pub span: Span,
     /// Its declaration as written, without `param` and the comment (`p_spall: scalar [Pa] =
-    /// 1e20 [Pa]`), its comment (the one after it on its line, else the first line of the
+    /// 1e20 [Pa]`), its comment (the one after it on its line, else the first sentence of the
     /// comment just above it), and `file:line`: what `pairsum plan` lists.
     pub declared: String,
     pub doc: String,
     pub location: String,
+    /// Where other modules declare it too (the same type).
+    pub also_declared: Vec<Span>,
 }
 
 #[derive(Clone, Debug)]

@@ -1534,6 +1534,48 @@ fn pairsum_plan_estimates_the_steps_a_run_takes() {
     assert!((about - steps).abs() <= 0.02 * steps, "estimated {about} steps, the run took {steps}");
 }
 
+/// `pairsum plan MODEL` lists what a material can bind: each parameter the step reads, as its
+/// module declares it, the groups that read it and its comment. A stdlib model goes by the name
+/// a case gives it; a parameter read only through another's default (`E` in `G = E / (2 (1 +
+/// nu))`) is listed too, and one the elastic projectile never reads (Johnson–Cook's `jc_A`) is
+/// listed on the target alone.
+#[test]
+fn pairsum_plan_lists_the_parameters_a_material_binds_with_their_groups_defaults_and_comments() {
+    let plan = |args: &[&str]| -> String {
+        let o =
+            std::process::Command::new(env!("CARGO_BIN_EXE_pairsum")).arg("plan").args(args).output().expect("runs");
+        assert!(o.status.success(), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8(o.stdout).expect("text")
+    };
+    let listing = |text: &str| -> Vec<String> {
+        let from = text.lines().skip_while(|l| !l.starts_with("parameters the step reads"));
+        from.skip(1).take_while(|l| l.starts_with("  ")).map(str::to_string).collect()
+    };
+    let elastic = listing(&plan(&["models::elastic_solid", "--dim", "2"]));
+    for expected in [
+        "  rho0: scalar [kg/m^3] (no default)  on solid: reference density of the material (",
+        "  E: scalar [Pa] (no default)  on solid",
+        "  G: scalar [Pa] = E / (2 * (1 + nu))  on solid",
+    ] {
+        assert!(elastic.iter().any(|l| l.starts_with(expected)), "no `{expected}` in:\n{}", elastic.join("\n"));
+    }
+    // The declaration and its comment, read here from the module's own line.
+    let module = std::fs::read_to_string("stdlib/damage/johnson_cook_or_spall_now.sph").expect("module");
+    let (k, line) =
+        module.lines().enumerate().find(|(_, l)| l.starts_with("param zero_pressure_floor")).expect("declared");
+    let (code, comment) = line.split_once("//").expect("a comment");
+    let expected = format!(
+        "  {}  on target: {} (stdlib/damage/johnson_cook_or_spall_now.sph:{})",
+        code.trim().trim_start_matches("param ").trim(),
+        comment.trim(),
+        k + 1
+    );
+    let shaped = listing(&plan(&["models::ftlr19_perforation_shaped"]));
+    assert!(shaped.contains(&expected), "no `{expected}` in:\n{}", shaped.join("\n"));
+    assert!(shaped.iter().any(|l| l.starts_with("  jc_A: scalar [Pa] (no default)  on target ")), "{shaped:?}");
+    assert!(shaped.iter().any(|l| l.starts_with("  rho0: scalar [kg/m^3] (no default)  on projectile|target")));
+}
+
 /// Sod's shock tube with the Morris–Monaghan switch (`models::ideal_gas_switch`): the plateaus
 /// within the same tolerances, and the viscosity coefficient in the rarefaction decayed from 1
 /// to near its minimum 0.1 (it stays 1 without the switch).

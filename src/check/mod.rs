@@ -87,16 +87,25 @@ fn finish(loader: Loader<'_>) -> Checked {
         e.location = format!("{}:{line}", sources.name(e.span.file));
     }
     for p in &mut model.params {
-        let (line, _) = sources.line_col(p.span);
-        p.location = format!("{}:{line}", sources.name(p.span.file));
-        (p.declared, p.doc) = declaration_and_doc(sources.text(p.span.file), line);
+        // The comment of the first declaration that has one, and where it is.
+        let described = std::iter::once(p.span).chain(p.also_declared.iter().copied()).map(|span| {
+            let (line, _) = sources.line_col(span);
+            let (declared, doc) = declaration_and_doc(sources.text(span.file), line);
+            (declared, doc, format!("{}:{line}", sources.name(span.file)))
+        });
+        let all: Vec<_> = described.collect();
+        let (_, doc, location) = all.iter().find(|(_, doc, _)| !doc.is_empty()).unwrap_or(&all[0]).clone();
+        // The declaration that gives the default, where one does.
+        let with_default = all.iter().find(|(declared, ..)| declared.contains('='));
+        p.declared = with_default.filter(|_| p.default.is_some()).unwrap_or(&all[0]).0.clone();
+        (p.doc, p.location) = (doc, location);
     }
     Checked { model, diags, is_model }
 }
 
 /// A parameter's declaration on line `line` (1-based) of `text`, without `param` and its
-/// comment, and its comment: the one after it on the line, else the first line of the comment
-/// block just above it.
+/// comment, and its comment: the one after it on the line, else the first sentence of the
+/// comment block just above it.
 fn declaration_and_doc(text: &str, line: usize) -> (String, String) {
     let lines: Vec<&str> = text.lines().collect();
     let Some(decl) = line.checked_sub(1).and_then(|k| lines.get(k)) else { return Default::default() };
@@ -105,9 +114,19 @@ fn declaration_and_doc(text: &str, line: usize) -> (String, String) {
     if !after.trim().is_empty() {
         return (declared, after.trim().to_string());
     }
-    let above = lines[..line - 1].iter().rev().take_while(|l| l.trim_start().starts_with("//"));
-    let first = above.last().map(|l| l.trim_start().trim_start_matches('/').trim().to_string());
-    (declared, first.unwrap_or_default())
+    let above: Vec<&str> =
+        lines[..line - 1].iter().rev().take_while(|l| l.trim_start().starts_with("//")).copied().collect();
+    let block: Vec<&str> = above.iter().rev().map(|l| l.trim_start().trim_start_matches('/').trim()).collect();
+    (declared, first_sentence(&block.join(" ")))
+}
+
+/// Up to the first full stop, at most about 120 characters.
+fn first_sentence(text: &str) -> String {
+    let sentence = text.split_once(". ").map_or(text, |(first, _)| first).trim_end_matches('.');
+    match sentence.char_indices().nth(120) {
+        Some((cut, _)) => format!("{}…", &sentence[..cut]),
+        None => sentence.to_string(),
+    }
 }
 
 /// For each module's source file, the files of every module it uses, directly or not.
@@ -588,6 +607,7 @@ impl Checker {
                         .also(old.span, format!("and here as {}", old.ty)),
                 );
             }
+            self.model.params[id.index()].also_declared.push(p.name.span);
             return;
         }
         if self.model.field_id(&p.name.name).is_some() {
@@ -605,6 +625,7 @@ impl Checker {
             declared: String::new(),
             doc: String::new(),
             location: String::new(),
+            also_declared: vec![],
         });
     }
 

@@ -483,6 +483,7 @@ pub(crate) fn synthetic_param(model: &mut Model, name: &str, shape: ir::Shape, u
         declared: format!("{name}: {}", shape.name()),
         doc: "set by the scene".into(),
         location: String::new(),
+        also_declared: vec![],
     });
     ParamId(model.params.len() as u32 - 1)
 }
