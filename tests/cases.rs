@@ -1538,9 +1538,10 @@ fn pairsum_plan_estimates_the_steps_a_run_takes() {
 /// module declares it, the groups that read it and its comment. A stdlib model goes by the name
 /// a case gives it; a parameter read only through another's default (`E` in `G = E / (2 (1 +
 /// nu))`) is listed too, and one the elastic projectile never reads (Johnson–Cook's `jc_A`) is
-/// listed on the target alone.
+/// listed on the target alone. A material key that is no parameter and near none is C0007 whose
+/// help is the `pairsum plan` command that lists them.
 #[test]
-fn pairsum_plan_lists_the_parameters_a_material_binds_with_their_groups_defaults_and_comments() {
+fn pairsum_plan_lists_each_parameter_a_material_binds_with_groups_default_and_comment_and_c0007_names_that_command() {
     let plan = |args: &[&str]| -> String {
         let o =
             std::process::Command::new(env!("CARGO_BIN_EXE_pairsum")).arg("plan").args(args).output().expect("runs");
@@ -1574,6 +1575,20 @@ fn pairsum_plan_lists_the_parameters_a_material_binds_with_their_groups_defaults
     assert!(shaped.contains(&expected), "no `{expected}` in:\n{}", shaped.join("\n"));
     assert!(shaped.iter().any(|l| l.starts_with("  jc_A: scalar [Pa] (no default)  on target ")), "{shaped:?}");
     assert!(shaped.iter().any(|l| l.starts_with("  rho0: scalar [kg/m^3] (no default)  on projectile|target")));
+
+    // A key no parameter is near is C0007 with the command that lists them, which does.
+    let dir = out_dir("unknown-key");
+    std::fs::create_dir_all(&dir).expect("dir");
+    let text = std::fs::read_to_string(case("cantilever")).expect("case");
+    assert!(text.contains("[materials.beam]\n"), "the cantilever's material is `beam`");
+    let path = dir.join("cantilever.toml");
+    std::fs::write(&path, text.replace("[materials.beam]\n", "[materials.beam]\nfoo = 1\n")).expect("write");
+    let err = prepare(&path, &Default::default()).err().map(|e| e.to_string()).unwrap_or_default();
+    let help = "`pairsum plan models::elastic_solid_corrected` lists the parameters the model reads";
+    assert!(err.contains("C0007") && err.contains(help), "{err}");
+    let corrected = listing(&plan(&["models::elastic_solid_corrected"]));
+    assert!(corrected.iter().any(|l| l.starts_with("  E: scalar [Pa] (no default)  on solid")), "{corrected:?}");
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// Sod's shock tube with the Morris–Monaghan switch (`models::ideal_gas_switch`): the plateaus

@@ -468,6 +468,14 @@ fn load_model(
     (!has_errors).then_some(checked.model)
 }
 
+/// The `pairsum plan` command that lists the parameters of the case's model.
+fn plan_command(case: &CaseFile, dir: &Path, dim: usize) -> String {
+    let m = case.model.get_ref();
+    let model = if m.ends_with(".sph") { dir.join(m).display().to_string() } else { m.clone() };
+    let dim = if dim == 3 { String::new() } else { format!(" --dim {dim}") };
+    format!("pairsum plan {model}{dim}")
+}
+
 fn build(
     case: &CaseFile,
     path: &Path,
@@ -590,9 +598,10 @@ fn build(
                     format!("material `{}` sets `{key}`, which is not a parameter of the model", mi.name),
                 )
                 .at(cx.span(v.span()), "unknown parameter");
-                if let Some(b) = closest(key, names.iter().copied()) {
-                    d = d.help(format!("did you mean `{b}`?"));
-                }
+                d = match closest(key, names.iter().copied()) {
+                    Some(b) => d.help(format!("did you mean `{b}`?")),
+                    None => d.help(format!("`{}` lists the parameters the model reads", plan_command(case, dir, dim))),
+                };
                 cx.diags.push(d);
                 continue;
             };
