@@ -660,6 +660,7 @@ fn run_plan(
             Ok((scene, plan)) => {
                 eprint!("{}", scene.warnings.concat());
                 say(&plan.describe(real));
+                say(&crate::runner::material_values(&scene, &plan));
                 if let Some(parts) = domains {
                     match crate::runner::domains_report(&scene, &plan, real, parts as usize) {
                         Ok(text) => say(&text),

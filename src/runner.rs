@@ -123,6 +123,45 @@ pub fn cost_estimate(scene: &Scene, plan: &Plan, precision: Precision) -> Result
     }
 }
 
+/// Each material's value of every parameter it may bind on its bodies' groups (`pairsum plan
+/// CASE`), in SI units, `(default)` where the material leaves it to the model.
+pub fn material_values(scene: &Scene, plan: &Plan) -> String {
+    let model = &plan.model;
+    let read = plan.params_a_material_binds();
+    let by_scene = |p: &crate::ir::ParamId| plan.scene_params.iter().any(|sp| sp.param == *p);
+    let mut out = String::new();
+    for (k, material) in scene.materials.iter().enumerate() {
+        let mut groups = crate::ir::GroupSet::default();
+        let particles = scene.particles.material.iter().zip(&scene.particles.group);
+        for (_, g) in particles.filter(|(m, _)| **m as usize == k) {
+            groups = groups.with(crate::ir::GroupId(*g));
+        }
+        if groups == crate::ir::GroupSet::default() {
+            continue;
+        }
+        let values = setup::resolve_material(model, plan.dim, material);
+        out += &format!("material {} (on {}):\n", material.name, model.group_names(groups));
+        for (p, _) in read.iter().filter(|(p, on)| !by_scene(p) && on.intersect(groups) != Default::default()) {
+            let param = &model.params[p.index()];
+            let value = values[p.index()].as_ref().map_or("none".into(), |v| number_list(v));
+            let default = if material.values.contains_key(p) { "" } else { " (default)" };
+            let unit = param.ty.unit.label();
+            let unit = if unit.is_empty() { unit } else { format!(" {unit}") };
+            out += &format!("  {} = {value}{unit}{default}\n", param.name);
+        }
+    }
+    out
+}
+
+/// `7850`, `6e9`, `(0, 0, -9.81)`: a parameter's value as `pairsum plan` prints it.
+fn number_list(v: &[f64]) -> String {
+    let one = |x: f64| if x != 0.0 && !(1e-3..1e5).contains(&x.abs()) { format!("{x:e}") } else { format!("{x}") };
+    match v {
+        [x] => one(*x),
+        _ => format!("({})", v.iter().map(|x| one(*x)).collect::<Vec<_>>().join(", ")),
+    }
+}
+
 /// The case split into `parts` domains of equal particle counts as a run splits it (the cut
 /// planes of `grid::decompose::bisect_with_cuts` at the initial positions, a particle on a plane
 /// on its high side): each domain's particles, the particles of the others within reach of it

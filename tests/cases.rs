@@ -1539,9 +1539,10 @@ fn pairsum_plan_estimates_the_steps_a_run_takes() {
 /// a case gives it; a parameter read only through another's default (`E` in `G = E / (2 (1 +
 /// nu))`) is listed too, and one the elastic projectile never reads (Johnson–Cook's `jc_A`) is
 /// listed on the target alone. A material key that is no parameter and near none is C0007 whose
-/// help is the `pairsum plan` command that lists them.
+/// help is the `pairsum plan` command that lists them. Of a case, the plan gives each material's
+/// values, the defaults computed from what it binds.
 #[test]
-fn pairsum_plan_lists_each_parameter_a_material_binds_with_groups_default_and_comment_and_c0007_names_that_command() {
+fn pairsum_plan_lists_each_parameter_a_material_binds_and_a_cases_values_and_c0007_names_that_command() {
     let plan = |args: &[&str]| -> String {
         let o =
             std::process::Command::new(env!("CARGO_BIN_EXE_pairsum")).arg("plan").args(args).output().expect("runs");
@@ -1589,6 +1590,16 @@ fn pairsum_plan_lists_each_parameter_a_material_binds_with_groups_default_and_co
     let corrected = listing(&plan(&["models::elastic_solid_corrected"]));
     assert!(corrected.iter().any(|l| l.starts_with("  E: scalar [Pa] (no default)  on solid")), "{corrected:?}");
     let _ = std::fs::remove_dir_all(&dir);
+
+    // Of a case, each material's values: bound, or the model's default computed from them.
+    let cantilever = plan(&["cantilever"]);
+    let beam: Vec<&str> = cantilever.lines().skip_while(|l| *l != "material beam (on solid):").collect();
+    let case_text = std::fs::read_to_string(case("cantilever")).expect("case");
+    assert!(case_text.contains("E = \"10 MPa\"\nnu = 0.3\n"), "the cantilever's E and nu");
+    let (e, nu) = (1e7_f64, 0.3_f64);
+    for expected in ["  E = 1e7 Pa".to_string(), format!("  G = {:e} Pa (default)", e / (2.0 * (1.0 + nu)))] {
+        assert!(beam.contains(&expected.as_str()), "no `{expected}` in:\n{cantilever}");
+    }
 }
 
 /// Sod's shock tube with the Morris–Monaghan switch (`models::ideal_gas_switch`): the plateaus

@@ -384,6 +384,26 @@ impl Plan {
         print::describe(self, real_bytes)
     }
 
+    /// `params_read`, with the parameters their defaults read (`G = E / (2 (1 + ν))` reads `E`
+    /// and `nu`), on the same groups: what a material may bind.
+    pub fn params_a_material_binds(&self) -> BTreeMap<ParamId, GroupSet> {
+        let mut read = self.params_read();
+        let mut todo: Vec<_> = read.iter().map(|(p, g)| (*p, *g)).collect();
+        while let Some((p, groups)) = todo.pop() {
+            let Some(default) = &self.model.params[p.index()].default else { continue };
+            ir::walk_expr(default, &mut |e| {
+                if let ir::ExprKind::Param(q, _) = e.kind {
+                    let entry = read.entry(q).or_default();
+                    if entry.union(groups) != *entry {
+                        *entry = entry.union(groups);
+                        todo.push((q, *entry));
+                    }
+                }
+            });
+        }
+        read
+    }
+
     /// Parameters the plan reads on each group (at i on the group, at j on the sources).
     pub fn params_read(&self) -> BTreeMap<ParamId, GroupSet> {
         let mut used: BTreeMap<ParamId, GroupSet> = BTreeMap::new();

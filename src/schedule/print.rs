@@ -159,7 +159,7 @@ fn describe_halo(plan: &Plan, real: usize, s: &mut String) {
     }
 }
 
-/// The parameters the step reads (`Plan::params_read`), as declared, with the groups that read
+/// The parameters a material binds (`Plan::params_a_material_binds`), as declared, with the groups that read
 /// them, their comment and where they are declared: what a case's materials can bind.
 fn describe_params(plan: &Plan, s: &mut String) {
     let m = &plan.model;
@@ -167,7 +167,7 @@ fn describe_params(plan: &Plan, s: &mut String) {
         s,
         "parameters the step reads (a case's material binds them by name; those it leaves take the default after `=`):"
     );
-    for (p, groups) in with_their_defaults_inputs(plan) {
+    for (p, groups) in plan.params_a_material_binds() {
         let param = &m.params[p.index()];
         if param.location.is_empty() {
             continue; // the scene's own (a load's value), which no material names
@@ -184,24 +184,4 @@ fn describe_params(plan: &Plan, s: &mut String) {
         let at = if param.location.is_empty() { String::new() } else { format!(" ({})", param.location) };
         let _ = writeln!(s, "  {}{needed}  on {}{doc}{at}", param.declared, m.group_names(groups));
     }
-}
-
-/// `Plan::params_read`, with the parameters their defaults read (`G = E / (2 (1 + ν))` reads
-/// `E` and `nu`), on the same groups.
-fn with_their_defaults_inputs(plan: &Plan) -> std::collections::BTreeMap<crate::ir::ParamId, crate::ir::GroupSet> {
-    let mut read = plan.params_read();
-    let mut todo: Vec<_> = read.iter().map(|(p, g)| (*p, *g)).collect();
-    while let Some((p, groups)) = todo.pop() {
-        let Some(default) = &plan.model.params[p.index()].default else { continue };
-        crate::ir::walk_expr(default, &mut |e| {
-            if let crate::ir::ExprKind::Param(q, _) = e.kind {
-                let entry = read.entry(q).or_default();
-                if entry.union(groups) != *entry {
-                    *entry = entry.union(groups);
-                    todo.push((q, *entry));
-                }
-            }
-        });
-    }
-    read
 }
