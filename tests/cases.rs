@@ -1602,6 +1602,29 @@ fn pairsum_plan_lists_each_parameter_a_material_binds_and_a_cases_values_and_c00
     }
 }
 
+/// A case's stdlib model misspelt is C0005 at the key, suggesting the nearest stdlib model; a
+/// name near none says what a model may be.
+#[test]
+fn a_misspelt_stdlib_model_is_c0005_suggesting_the_nearest_one() {
+    let dir = out_dir("misspelt-model");
+    std::fs::create_dir_all(&dir).expect("dir");
+    let text = std::fs::read_to_string(case("cantilever")).expect("case");
+    let model = "model = \"models::elastic_solid_corrected\"";
+    assert!(text.contains(model), "the cantilever's model");
+    let path = dir.join("cantilever.toml");
+    let error_of = |replacement: &str| {
+        std::fs::write(&path, text.replace(model, replacement)).expect("write");
+        prepare(&path, &Default::default()).err().map(|e| e.to_string()).unwrap_or_default()
+    };
+    let err = error_of("model = \"models::elastic_solid_corected\"");
+    assert!(err.contains("C0005") && err.contains("did you mean `models::elastic_solid_corrected`?"), "{err}");
+    let line = text.lines().position(|l| l.starts_with(model)).expect("the key's line") + 1;
+    assert!(err.contains(&format!("cantilever.toml:{line}:")), "at the key: {err}");
+    let err = error_of("model = \"models::wobbly\"");
+    assert!(err.contains("C0005") && err.contains("a stdlib module such as `models::elastic_solid`"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// Sod's shock tube with the Morris–Monaghan switch (`models::ideal_gas_switch`): the plateaus
 /// within the same tolerances, and the viscosity coefficient in the rarefaction decayed from 1
 /// to near its minimum 0.1 (it stays 1 without the switch).

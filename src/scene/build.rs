@@ -454,10 +454,16 @@ fn load_model(
         loader.load_stdlib_module(&rel, None, true);
         if loader.diags.iter().any(|d| d.code == "E0003") {
             let s = case.model.span();
+            let modules: Vec<String> =
+                Stdlib::locate().modules().iter().map(|r| r.trim_end_matches(".sph").replace('/', "::")).collect();
+            let help = match crate::diag::closest(m, modules.iter().map(String::as_str)) {
+                Some(near) => format!("did you mean `{near}`?"),
+                None => "name a model file next to the case, or a stdlib module such as `models::elastic_solid`".into(),
+            };
             diags.push(
                 Diagnostic::error("C0005", format!("no stdlib model `{m}`"))
                     .at(Span::new(file, s.start, s.end), "not a file (ending in .sph) nor a stdlib module")
-                    .help("name a model file next to the case, or a stdlib module such as `models::elastic_solid`"),
+                    .help(help),
             );
             return None;
         }
