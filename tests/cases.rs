@@ -1500,6 +1500,13 @@ fn sod_shock_tube_shock_arrival_error_halves_from_5_to_2_5_mm() {
     );
 }
 
+/// What `pairsum plan ARGS` prints, asserting that it succeeds.
+fn pairsum_plan(args: &[&str]) -> String {
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_pairsum")).arg("plan").args(args).output().expect("runs");
+    assert!(o.status.success(), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
+    String::from_utf8(o.stdout).expect("text")
+}
+
 /// `pairsum plan CASE` prints what a run will cost (issue 40): the particles of each body, the
 /// first time step, and the steps and wall time measured here. A run short enough to time whole
 /// (Sod's tube at 5 mm, 0.1 s of wall time) gives its exact step count; a longer one (the elastic wave at 0.5 mm,
@@ -1507,23 +1514,17 @@ fn sod_shock_tube_shock_arrival_error_halves_from_5_to_2_5_mm() {
 /// takes.
 #[test]
 fn pairsum_plan_estimates_the_steps_a_run_takes() {
-    let plan = |args: &[&str]| -> String {
-        let o =
-            std::process::Command::new(env!("CARGO_BIN_EXE_pairsum")).arg("plan").args(args).output().expect("runs");
-        assert!(o.status.success(), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
-        String::from_utf8(o.stdout).expect("text")
-    };
     let steps_of = |name: &str, resolution: &str| -> u64 { run_at(name, resolution, &[]).outcome.report.steps };
-    let sod = plan(&[case("sod_shock_tube").to_str().unwrap(), "--resolution", "coarse"]);
+    let sod = pairsum_plan(&[case("sod_shock_tube").to_str().unwrap(), "--resolution", "coarse"]);
     assert!(sod.contains("particles: left 200, right 25 (225 in all)"), "{sod}");
     assert!(sod.contains("first time step: "), "{sod}");
     // A run short enough to end within the plan's one-second trial on a loaded machine (about
     // 100 steps of 50 particles; Sod's 403 steps did not, with two other runs beside the suite).
-    let short = plan(&[case("standing_wave").to_str().unwrap(), "--resolution", "20 mm"]);
+    let short = pairsum_plan(&[case("standing_wave").to_str().unwrap(), "--resolution", "20 mm"]);
     let whole = format!("the whole run, {} steps in ", steps_of("standing_wave", "20 mm"));
     assert!(short.contains(&whole), "expected `{whole}` in:\n{short}");
 
-    let wave = plan(&[case("elastic_wave").to_str().unwrap(), "--resolution", "paper"]);
+    let wave = pairsum_plan(&[case("elastic_wave").to_str().unwrap(), "--resolution", "paper"]);
     let about: f64 = wave
         .split("the run: about ")
         .nth(1)
@@ -1543,17 +1544,11 @@ fn pairsum_plan_estimates_the_steps_a_run_takes() {
 /// values, the defaults computed from what it binds.
 #[test]
 fn pairsum_plan_lists_each_parameter_a_material_binds_and_a_cases_values_and_c0007_names_that_command() {
-    let plan = |args: &[&str]| -> String {
-        let o =
-            std::process::Command::new(env!("CARGO_BIN_EXE_pairsum")).arg("plan").args(args).output().expect("runs");
-        assert!(o.status.success(), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
-        String::from_utf8(o.stdout).expect("text")
-    };
     let listing = |text: &str| -> Vec<String> {
         let from = text.lines().skip_while(|l| !l.starts_with("parameters the step reads"));
         from.skip(1).take_while(|l| l.starts_with("  ")).map(str::to_string).collect()
     };
-    let elastic = listing(&plan(&["models::elastic_solid", "--dim", "2"]));
+    let elastic = listing(&pairsum_plan(&["models::elastic_solid", "--dim", "2"]));
     for expected in [
         "  rho0: scalar [kg/m^3] (no default)  on solid: reference density of the material (",
         "  E: scalar [Pa] (no default)  on solid",
@@ -1572,7 +1567,7 @@ fn pairsum_plan_lists_each_parameter_a_material_binds_and_a_cases_values_and_c00
         comment.trim(),
         k + 1
     );
-    let shaped = listing(&plan(&["models::ftlr19_perforation_shaped"]));
+    let shaped = listing(&pairsum_plan(&["models::ftlr19_perforation_shaped"]));
     assert!(shaped.contains(&expected), "no `{expected}` in:\n{}", shaped.join("\n"));
     assert!(shaped.iter().any(|l| l.starts_with("  jc_A: scalar [Pa] (no default)  on target ")), "{shaped:?}");
     assert!(shaped.iter().any(|l| l.starts_with("  rho0: scalar [kg/m^3] (no default)  on projectile|target")));
@@ -1587,12 +1582,12 @@ fn pairsum_plan_lists_each_parameter_a_material_binds_and_a_cases_values_and_c00
     let err = prepare(&path, &Default::default()).err().map(|e| e.to_string()).unwrap_or_default();
     let help = "`pairsum plan models::elastic_solid_corrected` lists the parameters the model reads";
     assert!(err.contains("C0007") && err.contains(help), "{err}");
-    let corrected = listing(&plan(&["models::elastic_solid_corrected"]));
+    let corrected = listing(&pairsum_plan(&["models::elastic_solid_corrected"]));
     assert!(corrected.iter().any(|l| l.starts_with("  E: scalar [Pa] (no default)  on solid")), "{corrected:?}");
     let _ = std::fs::remove_dir_all(&dir);
 
     // Of a case, each material's values: bound, or the model's default computed from them.
-    let cantilever = plan(&["cantilever"]);
+    let cantilever = pairsum_plan(&["cantilever"]);
     let beam: Vec<&str> = cantilever.lines().skip_while(|l| *l != "material beam (on solid):").collect();
     let case_text = std::fs::read_to_string(case("cantilever")).expect("case");
     assert!(case_text.contains("E = \"10 MPa\"\nnu = 0.3\n"), "the cantilever's E and nu");
