@@ -1569,7 +1569,7 @@ fn pairsum_plan_lists_each_parameter_a_material_binds_and_a_cases_values_and_c00
     );
     let shaped = listing(&pairsum_plan(&["models::ftlr19_perforation_shaped"]));
     assert!(shaped.contains(&expected), "no `{expected}` in:\n{}", shaped.join("\n"));
-    assert!(shaped.iter().any(|l| l.starts_with("  jc_A: scalar [Pa] (no default)  on target ")), "{shaped:?}");
+    assert!(shaped.iter().any(|l| l.starts_with("  jc_A: scalar [Pa] (no default)  on target: ")), "{shaped:?}");
     assert!(shaped.iter().any(|l| l.starts_with("  rho0: scalar [kg/m^3] (no default)  on projectile|target")));
 
     // A key no parameter is near is C0007 with the command that lists them, which does.
