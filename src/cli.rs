@@ -418,7 +418,7 @@ fn real_bytes(precision: Precision) -> usize {
 fn check_model(sources: &mut Sources, path: &Path) -> check::Checked {
     let name = path.to_string_lossy();
     if !path.exists() && name.contains("::") {
-        let rel = name.replace("::", "/") + ".sph";
+        let rel = Stdlib::file_of(&name);
         return check::check_stdlib_modules(sources, &[rel.as_str()], Stdlib::locate());
     }
     check::check_paths(sources, &[path], Stdlib::locate())

@@ -131,11 +131,7 @@ pub fn material_values(scene: &Scene, plan: &Plan) -> String {
     let by_scene = |p: &crate::ir::ParamId| plan.scene_params.iter().any(|sp| sp.param == *p);
     let mut out = String::new();
     for (k, material) in scene.materials.iter().enumerate() {
-        let mut groups = crate::ir::GroupSet::default();
-        let particles = scene.particles.material.iter().zip(&scene.particles.group);
-        for (_, g) in particles.filter(|(m, _)| **m as usize == k) {
-            groups = groups.with(crate::ir::GroupId(*g));
-        }
+        let groups = setup::material_groups(&scene.particles, k);
         if groups == crate::ir::GroupSet::default() {
             continue;
         }

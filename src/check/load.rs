@@ -21,6 +21,17 @@ pub enum Stdlib {
 }
 
 impl Stdlib {
+    /// The file of a stdlib module named as a case or `use` names it: `models::elastic_solid` →
+    /// `models/elastic_solid.sph`.
+    pub fn file_of(name: &str) -> String {
+        name.replace("::", "/") + ".sph"
+    }
+
+    /// Every stdlib module by its name (`models::elastic_solid`).
+    pub fn module_names(&self) -> Vec<String> {
+        self.modules().iter().map(|m| m.trim_end_matches(".sph").replace('/', "::")).collect()
+    }
+
     /// `$PAIRSUM_STDLIB`, else the source tree's `stdlib/` when it exists, else the embedded copy.
     pub fn locate() -> Stdlib {
         if let Some(dir) = &crate::config::env().stdlib {
@@ -269,8 +280,7 @@ impl<'s> Loader<'s> {
             .at(span, "no such module")
             .note(format!("looked for {}", looked.join(" and ")));
         let stem = rel.rsplit('/').next().unwrap_or(&rel).to_string();
-        let mods = self.stdlib.modules();
-        let names: Vec<String> = mods.iter().map(|m| m.trim_end_matches(".sph").replace('/', "::")).collect();
+        let names = self.stdlib.module_names();
         let candidates: Vec<&str> = names.iter().map(String::as_str).collect();
         if let Some(best) = crate::diag::closest(&shown, candidates.iter().copied()) {
             d = d.help(format!("did you mean `use {best}`?"));

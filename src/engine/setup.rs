@@ -278,7 +278,7 @@ pub fn build_store<T: Real>(
 }
 
 /// The groups that material `mi` has particles on.
-fn material_groups(input: &ParticleInput, mi: usize) -> GroupSet {
+pub fn material_groups(input: &ParticleInput, mi: usize) -> GroupSet {
     input
         .material
         .iter()

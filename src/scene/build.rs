@@ -449,13 +449,12 @@ fn load_model(
         }
         check::check_paths(sources, &[p.as_path()], Stdlib::locate())
     } else {
-        let rel = m.replace("::", "/") + ".sph";
+        let rel = Stdlib::file_of(m);
         let mut loader = check::Loader::new(sources, Stdlib::locate());
         loader.load_stdlib_module(&rel, None, true);
         if loader.diags.iter().any(|d| d.code == "E0003") {
             let s = case.model.span();
-            let modules: Vec<String> =
-                Stdlib::locate().modules().iter().map(|r| r.trim_end_matches(".sph").replace('/', "::")).collect();
+            let modules = Stdlib::locate().module_names();
             let help = match crate::diag::closest(m, modules.iter().map(String::as_str)) {
                 Some(near) => format!("did you mean `{near}`?"),
                 None => "name a model file next to the case, or a stdlib module such as `models::elastic_solid`".into(),
