@@ -85,6 +85,7 @@ fn elastic_store<T: crate::particles::Real>(n: usize) -> Result<(Plan, Store<T>)
         damping: None,
         settled: vec![],
         initialised: vec![],
+        axisymmetric: false,
     };
     let plan = Plan::build(&model, &scene, None).map_err(|e| e.to_string())?;
     let mut store: Store<T> = build_store(&plan, &input, &[mat]).map_err(|e| e.to_string())?;

@@ -702,6 +702,7 @@ fn run_plan(
         damping: None,
         settled: vec![],
         initialised: vec![],
+        axisymmetric: false,
     };
     match crate::schedule::Plan::build(&model, &scene, None) {
         Ok(plan) => {
@@ -740,6 +741,7 @@ pub fn plan_of(path: &Path, dim: usize) -> Result<crate::schedule::Plan, String>
         damping: None,
         settled: vec![],
         initialised: vec![],
+        axisymmetric: false,
     };
     crate::schedule::Plan::build(&checked.model, &scene, None).map_err(|e| render(&sources, &[*e.0]))
 }

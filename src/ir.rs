@@ -36,6 +36,8 @@ impl std::fmt::Display for Type {
 /// The prelude's parameter that the case's `gravity` binds for every material (the integrator adds
 /// it to the rate of `v`; models may read it).
 pub const GRAVITY: &str = "gravity";
+/// The prelude's parameter that is 1 in an axisymmetric case, 0 otherwise: set by the scene.
+pub const AXISYMMETRIC: &str = "axisymmetric";
 /// The state fields the scene places with every particle (besides its velocity `v`).
 pub const PLACED: [&str; 5] = ["x", "vol", "dx", "body", "part"];
 

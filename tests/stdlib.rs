@@ -141,6 +141,7 @@ fn every_plasticity_thermal_and_eos_module_compose() {
                 damping: None,
                 settled: vec![],
                 initialised: vec![],
+                axisymmetric: false,
             };
             let plan = pairsum::schedule::Plan::build(&m, &scene, None).unwrap_or_else(|e| panic!("{what}: {e}"));
             let order: Vec<&str> =

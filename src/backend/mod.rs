@@ -124,6 +124,18 @@ impl Partial {
         Partial { value, count: self.count + 1.0, ..self }
     }
 
+    /// This part with `v` of weight `w` taken in (left out if NaN): a sum adds `w v`, a mean
+    /// counts `w` (an axisymmetric case's particle weighs as its ring, 2π r); the extremes ignore
+    /// the weight.
+    pub fn taking_weighted(self, v: f64, w: f64) -> Partial {
+        match self.kind {
+            _ if v.is_nan() => self,
+            Reduction::Sum => Partial { value: self.value + w * v, count: self.count + 1.0, ..self },
+            Reduction::Mean => Partial { value: self.value + w * v, count: self.count + w, ..self },
+            _ => self.taking(v),
+        }
+    }
+
     /// Both parts reduced as one.
     pub fn merge(self, other: Partial) -> Partial {
         if other.count == 0.0 {

@@ -610,6 +610,10 @@ fn build(
                 cx.diags.push(d);
                 continue;
             };
+            if key == crate::ir::AXISYMMETRIC {
+                cx.err(v.span(), "C0007", "axisymmetric is the case's top-level `axisymmetric = true`", "here");
+                continue;
+            }
             if key == crate::ir::GRAVITY {
                 cx.err(
                     v.span(),
@@ -692,6 +696,10 @@ fn build(
             continue;
         }
         mirrors.push(plane);
+    }
+    let axisymmetric = case.axisymmetric.as_ref().is_some_and(|a| *a.get_ref());
+    if axisymmetric {
+        axis_of_symmetry(case, &model, &mut mirrors, cx)?;
     }
     let mut periodic_spans = vec![];
     if let Some(periodic) = &case.periodic {
@@ -1187,7 +1195,10 @@ fn build(
         }
         None => None,
     };
-    let settled = settled_params(&model, dim, &materials, &used);
+    let mut settled = settled_params(&model, dim, &materials, &used);
+    if let Some(p) = model.param_id(ir::AXISYMMETRIC).filter(|p| settled.len() > p.index()) {
+        settled[p.index()] = Some(vec![f64::from(u8::from(axisymmetric))]);
+    }
     let initialised: std::collections::BTreeSet<FieldId> = particles.initial.iter().map(|iv| iv.field).collect();
     let spec = SceneSpec {
         dim,
@@ -1202,6 +1213,7 @@ fn build(
         damping,
         settled,
         initialised: initialised.into_iter().collect(),
+        axisymmetric,
     };
     let mut config =
         RunConfig { end_time, dt_max, reorder_every: case.reorder_every.unwrap_or(25), ..RunConfig::default() };
@@ -2065,6 +2077,42 @@ fn neighbour_search(cx: &mut Ctx, model: &Model, n: Option<&case::Neighbours>, v
             None
         }
     }
+}
+
+/// An axisymmetric case (`axisymmetric = true`): a 2D case whose x is the radius and y the axis,
+/// so the axis is a symmetry plane at x = 0 (added here, unless the case lists it), and a model
+/// that integrates the hoop stress `s_hoop` wherever it integrates `v` (solid/hoop_stress.sph),
+/// since its other equations then carry the hoop terms. Error C0053 otherwise.
+fn axis_of_symmetry(case: &CaseFile, model: &Model, mirrors: &mut Vec<Mirror>, cx: &mut Ctx) -> Option<()> {
+    let span = case.axisymmetric.as_ref().map(|a| a.span()).unwrap_or_default();
+    if cx.dim != 2 {
+        let msg = format!("an axisymmetric case is 2D (x the radius, y the axis), and this one is {}D", cx.dim);
+        cx.err(span, "C0053", msg, "here");
+        return None;
+    }
+    let axis = Mirror::symmetry(0, 0.0);
+    match mirrors.iter().find(|m| m.axis == 0) {
+        None => mirrors.push(axis),
+        Some(m) if m.offset == 0.0 && m.side > 0.0 => {}
+        Some(_) => {
+            cx.err(span, "C0053", "an axisymmetric case's only plane on x is its axis, x = 0 (kept above)", "here");
+            return None;
+        }
+    }
+    let rate_groups = |name: &str| {
+        model.field_id(name).map_or(GroupSet::default(), |f| {
+            model.rates.iter().filter(|r| r.state == f).fold(GroupSet::default(), |g, r| g.union(r.dest))
+        })
+    };
+    let (moving, hoop) = (rate_groups("v"), rate_groups("s_hoop"));
+    if moving.intersect(hoop) != moving {
+        let d = Diagnostic::error("C0053", "the model has no hoop stress: it does not integrate `s_hoop` wherever it integrates `v`")
+            .at(cx.span(span), "axisymmetric")
+            .help("an axisymmetric model uses solid::hoop_stress and integrates `s_hoop' = ds_hoop` beside `s' = ds`; the stdlib's: models::ftlr19_perforation_shaped (docs/CASE_FILES.md, \"Axisymmetric cases\")");
+        cx.diags.push(d);
+        return None;
+    }
+    Some(())
 }
 
 /// By parameter id: the value every material a body uses binds the parameter to (its default

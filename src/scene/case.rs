@@ -42,6 +42,9 @@ pub struct CaseFile {
     pub convergence: Option<Vec<String>>,
     #[serde(default)]
     pub gravity: Option<Value>,
+    /// A 2D case about an axis: x is the radius, y the axis, each particle a ring.
+    #[serde(default)]
+    pub axisymmetric: Option<Spanned<bool>>,
     /// Mass-proportional damping (1/s), to bring a loaded body to rest.
     #[serde(default)]
     pub damping: Option<Value>,

@@ -299,7 +299,9 @@ fn padded(column: &Column) -> Vec<[f64; 3]> {
 pub fn evaluate(p: &ProbeSpec, scene: &Scene, b: &dyn Reader) -> Result<f64, BackendError> {
     match &p.kind {
         ProbeKind::Field { select, value, pick, reduce, locate, .. } => {
-            if let Some(v) = reduced_by_backend(value, *pick, reduce, select.as_deref(), locate.is_some(), b)? {
+            // An axisymmetric case's sums and means weigh each particle as its ring, on the host.
+            let host = scene.spec.axisymmetric || locate.is_some();
+            if let Some(v) = reduced_by_backend(value, *pick, reduce, select.as_deref(), host, b)? {
                 return Ok(v);
             }
             let Some((column, shape)) = probed_values(value, select.as_deref(), scene, b)? else {
@@ -316,6 +318,12 @@ pub fn evaluate(p: &ProbeSpec, scene: &Scene, b: &dyn Reader) -> Result<f64, Bac
                 .filter(|(_, v)| !v.is_nan());
             match locate {
                 Some(axis) => locate_extreme(reduce, &selected.collect::<Vec<_>>(), *axis, b),
+                None if scene.spec.axisymmetric => {
+                    let x = own_positions(b)?.unwrap_or_default();
+                    let rings = selected.map(|(k, v)| (v, x.get(k).map_or(f64::NAN, ring)));
+                    let part = rings.fold(Partial::new(reduce), |p, (v, w)| p.taking_weighted(v, w));
+                    Ok(merged(b, part).value())
+                }
                 None => Ok(merged(b, Partial::of(reduce, selected.map(|p| p.1))).value()),
             }
         }
@@ -324,14 +332,15 @@ pub fn evaluate(p: &ProbeSpec, scene: &Scene, b: &dyn Reader) -> Result<f64, Bac
 }
 
 /// A probe of a field's component or length, reduced where the backend holds the field (the
-/// GPU); None where the backend does not, or for an expression, a von Mises stress or the position
-/// of an extreme, which the host computes from the fields.
+/// GPU); None where the backend does not, or for an expression, a von Mises stress, or `on_host`
+/// (the position of an extreme, an axisymmetric case's rings), which the host computes from the
+/// fields.
 fn reduced_by_backend(
     value: &ProbeValue,
     pick: Pick,
     reduce: &str,
     select: Option<&[bool]>,
-    locate: bool,
+    on_host: bool,
     b: &dyn Reader,
 ) -> Result<Option<f64>, BackendError> {
     let component = match pick {
@@ -340,7 +349,7 @@ fn reduced_by_backend(
         Pick::VonMises => return Ok(None),
     };
     match value {
-        ProbeValue::Field(field) if !locate => {
+        ProbeValue::Field(field) if !on_host => {
             b.reduce_field(&FieldReduction { field: *field, component, reduce, select })
         }
         _ => Ok(None),
@@ -426,6 +435,12 @@ fn locate_extreme(reduce: &str, values: &[(usize, f64)], axis: usize, b: &dyn Re
     Ok(greatest(b, mine, |p, q| p[0].total_cmp(&q[0])).map_or(f64::NAN, |p| p[1]))
 }
 
+/// What a particle of an axisymmetric case stands for in a sum over particles: its ring, 2π r
+/// (over the 1 m a 2D case's particle is thick), r its x.
+fn ring(x: &[f64; 3]) -> f64 {
+    2.0 * std::f64::consts::PI * x[0]
+}
+
 /// Every rank's part of a reduction, merged in rank order.
 fn merged(b: &dyn Reader, mine: Partial) -> Partial {
     mine.merge_all(&b.all_gather(mine.parts().to_vec()))
@@ -471,8 +486,8 @@ fn measure(m: Measure, scene: &Scene, b: &dyn Reader) -> Result<f64, BackendErro
     Ok(match m {
         // Both are among the watchdog's reductions where the backend reduces them itself.
         Measure::KineticEnergy => match b.motion()? {
-            Some(w) => w.kinetic,
-            None => kinetic_energy(b)?,
+            Some(w) if !scene.spec.axisymmetric => w.kinetic,
+            _ => kinetic_energy(scene, b)?,
         },
         Measure::MaxSpeed => match b.motion()? {
             Some(w) => w.max_speed,
@@ -530,12 +545,13 @@ fn plug_velocity(x: &[[f64; 3]], body: &[u32], scene: &Scene, b: &dyn Reader) ->
         return Ok(f64::NAN);
     }
     let beyond = (rear + scene.dx).max(nose);
-    let speeds: Vec<f64> = (0..x.len())
+    let weight = |k: usize| if scene.spec.axisymmetric { ring(&x[k]) } else { 1.0 };
+    let speeds: Vec<(f64, f64)> = (0..x.len())
         .filter(|k| body[*k] == 1 && axis.coords(x[*k]).0 > beyond)
-        .map(|k| (0..c).map(|d| v[k * c + d] * axis.dir[d]).sum::<f64>())
+        .map(|k| ((0..c).map(|d| v[k * c + d] * axis.dir[d]).sum::<f64>(), weight(k)))
         .collect();
     // A NaN speed makes the mean NaN.
-    let plug = summed(b, vec![speeds.iter().sum(), speeds.len() as f64]);
+    let plug = summed(b, vec![speeds.iter().map(|(s, w)| s * w).sum(), speeds.iter().map(|(_, w)| w).sum()]);
     let (sum, count) = (plug[0], plug[1]);
     Ok(if count == 0.0 { 0.0 } else { sum / count })
 }
@@ -619,12 +635,16 @@ fn speeds(b: &dyn Reader) -> Result<Vec<f64>, BackendError> {
     Ok(v.chunks(c).map(|u| u.iter().map(|x| x * x).sum::<f64>().sqrt()).collect())
 }
 
-/// Σ ½ m |v|² over every particle.
-fn kinetic_energy(b: &dyn Reader) -> Result<f64, BackendError> {
+/// Σ ½ m |v|² over every particle (in an axisymmetric case over its ring: m 2π r).
+fn kinetic_energy(scene: &Scene, b: &dyn Reader) -> Result<f64, BackendError> {
     let Some(m) = b.plan().model.field_id("m") else { return Ok(f64::NAN) };
     let Some(column) = b.read(m)? else { return Ok(f64::NAN) };
     let (_, m) = (column.0, &column.1);
-    Ok(speeds(b)?.iter().zip(m).map(|(s, m)| 0.5 * m * s * s).sum())
+    let rings: Vec<f64> = match scene.spec.axisymmetric {
+        true => positions(b)?.unwrap_or_default().iter().map(ring).collect(),
+        false => vec![1.0; m.len()],
+    };
+    Ok(speeds(b)?.iter().zip(m).zip(&rings).map(|((s, m), w)| 0.5 * m * w * s * s).sum())
 }
 
 /// The impact axis: through the first body's centroid at t = 0, along its initial velocity.

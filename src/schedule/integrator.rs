@@ -96,6 +96,10 @@ pub fn scene_params(model: &mut Model, scene: &SceneSpec) -> Vec<SceneParam> {
             out.extend(rotation_params(model, scene.dim, k, r));
         }
     }
+    if scene.axisymmetric {
+        let p = synthetic_param(model, ir::AXISYMMETRIC, Shape::Scalar, Unit::ONE);
+        out.push(SceneParam { param: p, value: vec![1.0], role: SceneRole::Axisymmetric });
+    }
     if let Some(c) = scene.damping {
         let per_second = Unit::ONE.div(&Unit::S).unwrap_or(Unit::ONE);
         let p = synthetic_param(model, "@damping", Shape::Scalar, per_second);

@@ -96,6 +96,9 @@ pub struct SceneSpec {
     /// By parameter id: the value every material with particles binds it to, where they agree
     /// (`settle.rs` takes the branches it decides); empty where no materials are known.
     pub settled: Vec<Option<Vec<f64>>>,
+    /// A 2D case about the y axis, x the radius (`axisymmetric = true`): the prelude's
+    /// `axisymmetric` is 1.
+    pub axisymmetric: bool,
     /// State fields some body's `initial` sets (beyond those the scene places): with `settled`,
     /// what tells a state that nothing writes, which `settle.rs` folds to its initial value.
     pub initialised: Vec<FieldId>,
@@ -249,6 +252,8 @@ pub enum SceneRole {
     Period(usize),
     /// The case's mass-proportional damping (1/s).
     Damping,
+    /// 1 in an axisymmetric case (the prelude's `axisymmetric`).
+    Axisymmetric,
 }
 
 #[derive(Clone, Debug)]

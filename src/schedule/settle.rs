@@ -31,9 +31,102 @@ pub fn settle(model: &mut Model, settled: &[Option<Vec<f64>>], dim: usize) {
     for k in 0..model.equations.len() {
         let mut e = model.equations[k].clone();
         if settle_equation(&mut e, settled, dim) {
+            let kept: Vec<FieldId> = e
+                .writes
+                .iter()
+                .copied()
+                .filter(|f| model.field(*f).storage != Storage::State || sets(&e, *f))
+                .collect();
+            e.writes = kept;
             model.equations[k] = super::live::pruned(&e, model, &Default::default());
         }
     }
+    fold_constant_outputs(model);
+}
+
+/// Whether a statement of `e` still writes `f` (a correction whose settled branch no longer
+/// updates a state leaves it as it was: `s_hoop` in a planar case, plasticity/radial_return_jc.sph).
+fn sets(e: &Equation, f: FieldId) -> bool {
+    fn any(stmts: &[Stmt], f: FieldId) -> bool {
+        stmts.iter().any(|s| match s {
+            Stmt::Set(g, _) | Stmt::Accum(g, _, _) => *g == f,
+            Stmt::If(_, a, b) => any(a, f) || any(b, f),
+            Stmt::Let(..) => false,
+        })
+    }
+    super::live::stmts_of(e).into_iter().any(|stmts| any(stmts, f))
+}
+
+/// A scalar output that the only equation writing it, a particle equation, sets to a constant (a
+/// branch settled to `0`) is that constant wherever it is read, in equations and in rates; a rate
+/// that is then 0 is dropped, so that the state it integrated, written by nothing else, is folded
+/// by [`fold_constant_states`]. A planar case's `ds_hoop` (solid/hoop_stress.sph) goes so, and
+/// `s_hoop` with it.
+fn fold_constant_outputs(model: &mut Model) {
+    let constants: Vec<(FieldId, f64)> = (0..model.fields.len())
+        .map(|k| FieldId(k as u32))
+        .filter(|f| model.field(*f).ty.shape == ir::Shape::Scalar && model.field(*f).storage != Storage::State)
+        .filter_map(|f| {
+            let mut writers = model.equations.iter().filter(|e| e.writes.contains(&f));
+            let (Some(writer), None) = (writers.next(), writers.next()) else { return None };
+            let ir::EquationKind::Particle { body } = &writer.kind else { return None };
+            let mut values = body.iter().filter_map(|s| match s {
+                Stmt::Set(g, e) if *g == f => Some(host_eval::constant(e)),
+                _ => None,
+            });
+            let (Some(Some(value)), None) = (values.next(), values.next()) else { return None };
+            (!sets_nested(body, f)).then_some((f, value))
+        })
+        .collect();
+    if constants.is_empty() {
+        return;
+    }
+    for k in 0..model.equations.len() {
+        if constants.iter().any(|(f, _)| model.equations[k].writes.contains(f)) {
+            continue;
+        }
+        let mut e = model.equations[k].clone();
+        let mut changed = false;
+        for stmts in super::live::stmts_of_mut(&mut e) {
+            for s in stmts.iter_mut() {
+                changed |= fold_in_stmt(s, &constants);
+            }
+        }
+        if changed {
+            model.equations[k] = super::live::pruned(&e, model, &Default::default());
+        }
+    }
+    let mut folded = vec![false; model.rates.len()];
+    for (r, folded) in model.rates.iter_mut().zip(&mut folded) {
+        let changed = folded;
+        ir::walk_expr_mut(&mut r.rate, &mut |x| {
+            if let ExprKind::Field(f, _) = x.kind {
+                if let Some((_, value)) = constants.iter().find(|(c, _)| *c == f) {
+                    *x = Expr::constant(*value, x.ty);
+                    *changed = true;
+                }
+            }
+        });
+        if *changed {
+            r.reads.retain(|f| !constants.iter().any(|(c, _)| c == f));
+        }
+    }
+    let mut k = 0;
+    model.rates.retain(|r| {
+        k += 1;
+        !(folded[k - 1] && host_eval::constant(&r.rate) == Some(0.0))
+    });
+}
+
+/// Whether `f` is written inside an `if` of `stmts` (then its value is no one constant).
+fn sets_nested(stmts: &[Stmt], f: FieldId) -> bool {
+    stmts.iter().any(|s| match s {
+        Stmt::If(_, a, b) => {
+            let both: Vec<Stmt> = a.iter().chain(b.iter()).cloned().collect();
+            both.iter().any(|s| matches!(s, Stmt::Set(g, _) | Stmt::Accum(g, _, _) if *g == f)) || sets_nested(&both, f)
+        }
+        _ => false,
+    })
 }
 
 /// Replaces every read of a state nothing writes by its constant initial value (in a scene whose

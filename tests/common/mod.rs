@@ -106,6 +106,7 @@ pub fn scene(model: &Model, dim: usize, outputs: &[&str], integrator: Integrator
         damping: None,
         settled: vec![],
         initialised: vec![],
+        axisymmetric: false,
     }
 }
 

@@ -191,27 +191,27 @@ fn st_P(i: u32, v: mat2x2<f32>) {
     data[b + 3u] = v[1][1];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 7u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 8u;
     return params[b];
 }
 fn prm_quadratic_correction(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 12u;
     return params[b];
 }
 fn prm_cell_quadrature(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 13u;
     return params[b];
 }
 fn prm_clamp_normal(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 17u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 fn prm_clamp_at(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 19u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -174,35 +174,35 @@ fn st_hourglass_rate2(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 0u;
     return params[b];
 }
 fn prm_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 4u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 5u;
     return params[b];
 }
 fn prm_hourglass_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 9u;
     return params[b];
 }
 fn prm_viscosity_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 11u;
     return params[b];
 }
 fn prm_c_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 14u;
     return params[b];
 }
 fn prm_damping(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 15u;
     return params[b];
 }
 fn prm_clamp_normal(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 17u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 fn prm_clamp_at(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 19u;
     return params[b];
 }
 @compute @workgroup_size(64)

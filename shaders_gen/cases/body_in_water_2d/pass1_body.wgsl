@@ -450,27 +450,27 @@ fn st_a_lsm(i: u32, v: vec2<f32>) {
     data[b + 1u] = v[1];
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 0u;
     return params[b];
 }
 fn prm_gravity(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 2u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 2u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 6u;
     return params[b];
 }
 fn prm_gamma(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 7u;
     return params[b];
 }
 fn prm_lattice_damping(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 12u;
     return params[b];
 }
 fn prm_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 13u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -75,15 +75,15 @@ fn st_mu_max(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 13u;
     return params[b];
 }
 fn prm_cfl_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 14u;
     return params[b];
 }
 fn prm_c_t(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 15u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -81,7 +81,7 @@ fn st_v_0(i: u32, v: vec2<f32>) {
     data[b + 1u] = v[1];
 }
 fn prm_gravity(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 2u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 2u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 @compute @workgroup_size(64)

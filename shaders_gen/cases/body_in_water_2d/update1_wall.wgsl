@@ -71,51 +71,51 @@ fn st_x_ref(i: u32, v: vec2<f32>) {
     data[b + 1u] = v[1];
 }
 fn prm__constraint0(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 16u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 fn prm__center0(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 18u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 fn prm__omega0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 20u;
     return params[b];
 }
 fn prm__cross0(i: u32) -> mat2x2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 21u;
     return mat2x2<f32>(vec2<f32>(params[b], params[b + 2u]), vec2<f32>(params[b + 1u], params[b + 3u]));
 }
 fn prm__constraint1(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 25u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 fn prm__center1(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 27u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 fn prm__omega1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 29u;
     return params[b];
 }
 fn prm__cross1(i: u32) -> mat2x2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 30u;
     return mat2x2<f32>(vec2<f32>(params[b], params[b + 2u]), vec2<f32>(params[b + 1u], params[b + 3u]));
 }
 fn prm__constraint2(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 33u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 34u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 fn prm__center2(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 35u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 36u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 fn prm__omega2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 37u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 38u;
     return params[b];
 }
 fn prm__cross2(i: u32) -> mat2x2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 38u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 39u;
     return mat2x2<f32>(vec2<f32>(params[b], params[b + 2u]), vec2<f32>(params[b + 1u], params[b + 3u]));
 }
 @compute @workgroup_size(64)

@@ -137,19 +137,19 @@ fn st_rho_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 0u;
     return params[b];
 }
 fn prm_gravity(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 2u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 2u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 6u;
     return params[b];
 }
 fn prm_gamma(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 7u;
     return params[b];
 }
 @compute @workgroup_size(64)

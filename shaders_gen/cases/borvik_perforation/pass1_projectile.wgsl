@@ -564,27 +564,27 @@ fn st_a_contact(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 6u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 9u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 12u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 13u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 14u;
     return params[b];
 }
 fn prm_K_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 16u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -610,6 +610,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var de: f32 = 0.0;
     // pairsum contact: accumulators
     var a_contact: vec3<f32> = vec3<f32>(0.0);
+    de = 0.0;
     let G_i = prm_G(i);
     let visc_a_i = prm_visc_a(i);
     let visc_b_i = prm_visc_b(i);
@@ -671,7 +672,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             if (in_groups(1u, ints[j])) {
                 L = L + neg_m(((ldj_m(j, sgn) / ldj_rho(j, sgn)) * outer(gradW_ij, x_ij)));
             }
-            // pairsum density_gradient (stdlib/continuity/delta_sph.sph:17)
+            // pairsum density_gradient (stdlib/continuity/delta_sph.sph:18)
             if (in_groups(1u, ints[j])) {
                 g = g + (-(((ldj_m(j, sgn) / ldj_rho(j, sgn)) * (rho_i - ldj_rho(j, sgn))) * gradW_ij));
             }
@@ -679,7 +680,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             if (in_groups(1u, ints[j])) {
                 grad_v = grad_v + outer((ldj_v(j, sgn) - v_i), ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * gradW_ij));
             }
-            // pairsum energy (stdlib/energy/solid.sph:16)
+            // pairsum energy (stdlib/energy/solid.sph:17)
             if (in_groups(1u, ints[j])) {
                 let sig_i = (s_i - (p_i * eye()));
                 let sig_j = (ldj_s(j, sgn) - (ldj_p(j, sgn) * eye()));
@@ -722,7 +723,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     spin = skew(g_2);
     // then jaumann
     var ds_i: mat3x3<f32> = ld_ds(i);
-    ds_i = (((2.0 * G_i) * dev(edot)) + sym(((s_i * transpose(spin)) + (spin * s_i))));
+    ds_i = (((2.0 * G_i) * (dev(edot) - ((0.0 / 3.0) * eye()))) + sym(((s_i * transpose(spin)) + (spin * s_i))));
     st_L_inv(i, L_inv);
     st_edot(i, edot);
     st_spin(i, spin);

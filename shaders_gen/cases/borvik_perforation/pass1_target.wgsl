@@ -578,31 +578,31 @@ fn st_a_contact(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 6u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 9u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 12u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 13u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 14u;
     return params[b];
 }
 fn prm_damage_coupling(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 15u;
     return params[b];
 }
 fn prm_K_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 16u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -691,7 +691,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             if (in_groups(2u, ints[j])) {
                 L = L + neg_m(((ldj_m(j, sgn) / ldj_rho(j, sgn)) * outer(gradW_ij, x_ij)));
             }
-            // pairsum density_gradient (stdlib/continuity/delta_sph.sph:17)
+            // pairsum density_gradient (stdlib/continuity/delta_sph.sph:18)
             if (in_groups(2u, ints[j])) {
                 g = g + (-(((ldj_m(j, sgn) / ldj_rho(j, sgn)) * (rho_i - ldj_rho(j, sgn))) * gradW_ij));
             }
@@ -752,7 +752,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     spin = skew(g_2);
     // then jaumann
     var ds_i: mat3x3<f32> = ld_ds(i);
-    ds_i = (((2.0 * G_i) * dev(edot)) + sym(((s_i * transpose(spin)) + (spin * s_i))));
+    ds_i = (((2.0 * G_i) * (dev(edot) - ((0.0 / 3.0) * eye()))) + sym(((s_i * transpose(spin)) + (spin * s_i))));
     st_L_inv(i, L_inv);
     st_edot(i, edot);
     st_spin(i, spin);

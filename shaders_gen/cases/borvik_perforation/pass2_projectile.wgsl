@@ -507,23 +507,23 @@ fn st_dv(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_delta(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 7u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 8u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 12u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 13u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 14u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -541,6 +541,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var diffusion: f32 = 0.0;
     // pairsum momentum: accumulators
     var dv: vec3<f32> = vec3<f32>(0.0);
+    dv = vec3<f32>(0.0);
     let delta_i = prm_delta(i);
     let c0_i = prm_c0(i);
     let visc_a_i = prm_visc_a(i);
@@ -599,14 +600,14 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let r_ij = sqrt(r2);
             let W_ij = kernel_w(r_ij, h_ij);
             let gradW_ij = kernel_grad(r_ij, h_ij) * x_ij;
-            // pairsum continuity (stdlib/continuity/delta_sph.sph:25)
+            // pairsum continuity (stdlib/continuity/delta_sph.sph:26)
             let vol_j = (ldj_m(j, sgn) / ldj_rho(j, sgn));
             let L_inv = L_inv_i;
             let g = gradW_ij;
             div_v = div_v + (vol_j * dot((v_i - ldj_v(j, sgn)), (L_inv * g)));
             let phi = ((((2.0 * (rho_i - ldj_rho(j, sgn))) * x_ij) / (r_ij * r_ij)) - (grad_rho_i + ldj_grad_rho(j, sgn)));
             diffusion = diffusion + ((((delta_i * h_i) * c0_i) * vol_j) * dot(phi, gradW_ij));
-            // pairsum momentum (stdlib/momentum/corrected.sph:13)
+            // pairsum momentum (stdlib/momentum/corrected.sph:14)
             if ((body_i == ldj_body(j, sgn))) {
                 let sig_i = (s_i - (p_i * eye()));
                 let sig_j = (ldj_s(j, sgn) - (ldj_p(j, sgn) * eye()));
@@ -628,7 +629,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         }}}
     }
     // then continuity
-    drho = ((rho_i * div_v) + diffusion);
+    drho = ((rho_i * (div_v - 0.0)) + diffusion);
     st_drho(i, drho);
     st_dv(i, dv);
 }

@@ -521,27 +521,27 @@ fn st_dv(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_delta(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 7u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 8u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 12u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 13u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 14u;
     return params[b];
 }
 fn prm_damage_coupling(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 15u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -619,7 +619,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let r_ij = sqrt(r2);
             let W_ij = kernel_w(r_ij, h_ij);
             let gradW_ij = kernel_grad(r_ij, h_ij) * x_ij;
-            // pairsum continuity (stdlib/continuity/delta_sph.sph:25)
+            // pairsum continuity (stdlib/continuity/delta_sph.sph:26)
             let vol_j = (ldj_m(j, sgn) / ldj_rho(j, sgn));
             let L_inv = L_inv_i;
             let g = gradW_ij;
@@ -658,7 +658,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         }}}
     }
     // then continuity
-    drho = ((rho_i * div_v) + diffusion);
+    drho = ((rho_i * (div_v - 0.0)) + diffusion);
     st_drho(i, drho);
     st_dv(i, dv);
 }

@@ -250,79 +250,79 @@ fn st_e_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 0u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 8u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 9u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 10u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 11u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 20u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 21u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 22u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 23u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 24u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 25u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 26u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 27u;
     return params[b];
 }
 fn prm_D1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 28u;
     return params[b];
 }
 fn prm_D2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 29u;
     return params[b];
 }
 fn prm_D3(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 30u;
     return params[b];
 }
 fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 31u;
     return params[b];
 }
 fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 32u;
     return params[b];
 }
 fn prm__constraint0(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 36u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 37u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 @compute @workgroup_size(64)
@@ -354,11 +354,15 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // radial_return
     var eps_p_i: f32 = ld_eps_p(i);
     var deps_p_i: f32 = ld_deps_p(i);
-    let sig_eq = sqrt(((3.0 * 0.5) * ddot(s_i, s_i)));
+    let s_2 = s_i;
+    let s_hoop = 0.0;
+    let sig_eq = sqrt((1.5 * (ddot(s_2, s_2) + (s_hoop * s_hoop))));
     let hardening_strain = eps_p_i;
     let e = ld_edot(i);
-    let d = dev(e);
-    let hardening_rate = sqrt(((2.0 / 3.0) * ddot(d, d)));
+    let e_hoop = 0.0;
+    let d = (dev(e) - ((e_hoop / 3.0) * eye()));
+    let d_hoop = 0.0;
+    let hardening_rate = sqrt(((2.0 / 3.0) * (ddot(d, d) + (d_hoop * d_hoop))));
     let eps_p = hardening_strain;
     let rate_p = hardening_rate;
     let T = ld_T(i);
@@ -378,18 +382,23 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let local = deps_p;
     let deps_p_2 = local;
     let p = ld_p(i);
-    let s_2 = s_i;
+    let s_3 = s_i;
+    let s_hoop_2 = 0.0;
     let edot = ld_edot(i);
     let T_3 = ld_T(i);
     let p_2 = p;
-    let s_3 = s_2;
+    let s_4 = s_3;
+    let s_hoop_3 = s_hoop_2;
     let edot_2 = edot;
     let T_4 = T_3;
     let e_2 = edot_2;
-    let d_3 = dev(e_2);
-    let rate_2 = (sqrt(((2.0 / 3.0) * ddot(d_3, d_3))) / prm_eps_rate0(i));
-    let s_4 = s_3;
-    let triax = ((-p_2) / max(sqrt((1.5 * ddot(s_4, s_4))), 1e-30));
+    let e_hoop_2 = 0.0;
+    let d_3 = (dev(e_2) - ((e_hoop_2 / 3.0) * eye()));
+    let d_hoop_2 = 0.0;
+    let rate_2 = (sqrt(((2.0 / 3.0) * (ddot(d_3, d_3) + (d_hoop_2 * d_hoop_2)))) / prm_eps_rate0(i));
+    let s_5 = s_4;
+    let s_hoop_4 = s_hoop_3;
+    let triax = ((-p_2) / max(sqrt((1.5 * (ddot(s_5, s_5) + (s_hoop_4 * s_hoop_4)))), 1e-30));
     let T_5 = T_4;
     D_i = min((D + (deps_p_2 / max((((prm_D1(i) + (prm_D2(i) * exp((prm_D3(i) * triax)))) * (1.0 + (prm_D4(i) * log(max(rate_2, 1.0))))) * (1.0 + (prm_D5(i) * min(max(((T_5 - prm_T_room(i)) / (prm_T_melt(i) - prm_T_room(i))), 0.0), 1.0)))), 1e-12))), 1.0);
     // failed_density_floor

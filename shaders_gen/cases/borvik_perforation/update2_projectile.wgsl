@@ -205,31 +205,31 @@ fn st_e_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 0u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 8u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 10u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 11u;
     return params[b];
 }
 fn prm__constraint0(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 36u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 37u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm__symmetry0(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 39u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 40u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm__symmetry1(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 42u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 43u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 @compute @workgroup_size(64)

@@ -523,15 +523,15 @@ fn st_a_contact(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 8u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 10u;
     return params[b];
 }
 fn prm_K_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 14u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -633,10 +633,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     spin = skew(g);
     // then continuity_from_strain_rate
     var drho_i: f32 = ld_drho(i);
-    drho_i = ((-rho_i) * trace(edot));
+    drho_i = ((-rho_i) * (trace(edot) + 0.0));
     // then jaumann
     var ds_i: mat3x3<f32> = ld_ds(i);
-    ds_i = (((2.0 * G_i) * dev(edot)) + sym(((ld_s(i) * transpose(spin)) + (spin * ld_s(i)))));
+    ds_i = (((2.0 * G_i) * (dev(edot) - ((0.0 / 3.0) * eye()))) + sym(((ld_s(i) * transpose(spin)) + (spin * ld_s(i)))));
     st_L_inv(i, L_inv);
     st_edot(i, edot);
     st_spin(i, spin);

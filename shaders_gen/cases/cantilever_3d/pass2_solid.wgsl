@@ -240,27 +240,27 @@ fn st_P(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 8u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 9u;
     return params[b];
 }
 fn prm_quadratic_correction(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 13u;
     return params[b];
 }
 fn prm_cell_quadrature(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 14u;
     return params[b];
 }
 fn prm_clamp_normal(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 18u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm_clamp_at(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 21u;
     return params[b];
 }
 @compute @workgroup_size(64)

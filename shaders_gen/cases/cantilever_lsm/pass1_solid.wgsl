@@ -421,11 +421,11 @@ fn st_a_lsm(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_lattice_damping(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 6u;
     return params[b];
 }
 fn prm_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 7u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -92,11 +92,11 @@ fn st_v_0(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm__load0(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 9u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm__constraint0(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 12u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 @compute @workgroup_size(64)

@@ -187,23 +187,23 @@ fn st_a_contact(i: u32, v: vec2<f32>) {
     data[b + 1u] = v[1];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 7u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 10u;
     return params[b];
 }
 fn prm_clamp_normal(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 17u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 fn prm_clamp_at(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 19u;
     return params[b];
 }
 fn prm_K_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 20u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -51,19 +51,19 @@ fn st_hourglass_rate2(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 0u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 7u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 8u;
     return params[b];
 }
 fn prm_cfl_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 16u;
     return params[b];
 }
 @compute @workgroup_size(64)

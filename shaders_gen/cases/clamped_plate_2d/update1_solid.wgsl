@@ -107,7 +107,7 @@ fn st_u_0(i: u32, v: vec2<f32>) {
     data[b + 1u] = v[1];
 }
 fn prm__load0(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 21u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 @compute @workgroup_size(64)

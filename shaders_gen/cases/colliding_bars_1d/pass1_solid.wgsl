@@ -472,15 +472,15 @@ fn st_a_contact(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 6u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 8u;
     return params[b];
 }
 fn prm_K_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 12u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -582,10 +582,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     spin = 0.0;
     // then continuity_from_strain_rate
     var drho_i: f32 = ld_drho(i);
-    drho_i = ((-rho_i) * edot);
+    drho_i = ((-rho_i) * (edot + 0.0));
     // then jaumann
     var ds_i: f32 = ld_ds(i);
-    ds_i = (((2.0 * G_i) * (edot * (2.0 / 3.0))) + ((ld_s(i) * spin) + (spin * ld_s(i))));
+    ds_i = (((2.0 * G_i) * ((edot * (2.0 / 3.0)) - ((0.0 / 3.0) * 1.0))) + ((ld_s(i) * spin) + (spin * ld_s(i))));
     st_L_inv(i, L_inv);
     st_edot(i, edot);
     st_spin(i, spin);

@@ -497,19 +497,19 @@ fn st_dv(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 6u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 10u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 11u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 12u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -532,6 +532,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var de: f32 = 0.0;
     // pairsum momentum: accumulators
     var dv: vec3<f32> = vec3<f32>(0.0);
+    de = 0.0;
     let visc_a_i = prm_visc_a(i);
     let visc_b_i = prm_visc_b(i);
     let eta_ratio_i = prm_eta_ratio(i);
@@ -587,7 +588,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             div_v = div_v + ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * dot((v_i - ldj_v(j, sgn)), gradW_ij));
             // pairsum velocity_gradient (stdlib/solid/strain_rate.sph:6)
             grad_v = grad_v + outer((ldj_v(j, sgn) - v_i), ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * gradW_ij));
-            // pairsum energy (stdlib/energy/solid.sph:16)
+            // pairsum energy (stdlib/energy/solid.sph:17)
             let sig_i = (s_i - (p_i * eye()));
             let sig_j = (ldj_s(j, sgn) - (ldj_p(j, sgn) * eye()));
             let c_i_2 = c_i;
@@ -626,7 +627,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     spin = skew(grad_v);
     // then jaumann
     var ds_i: mat3x3<f32> = ld_ds(i);
-    ds_i = (((2.0 * prm_G(i)) * dev(edot)) + sym(((s_i * transpose(spin)) + (spin * s_i))));
+    ds_i = (((2.0 * prm_G(i)) * (dev(edot) - ((0.0 / 3.0) * eye()))) + sym(((s_i * transpose(spin)) + (spin * s_i))));
     st_edot(i, edot);
     st_spin(i, spin);
     st_drho(i, drho);

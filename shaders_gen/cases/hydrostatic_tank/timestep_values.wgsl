@@ -59,7 +59,7 @@ fn st_mu_max(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_cfl_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 12u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 12u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -510,23 +510,23 @@ fn st_dv(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 6u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 10u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 11u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 12u;
     return params[b];
 }
 fn prm_damage_coupling(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 13u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -665,7 +665,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     spin = skew(grad_v);
     // then jaumann
     var ds_i: mat3x3<f32> = ld_ds(i);
-    ds_i = (((2.0 * prm_G(i)) * dev(edot)) + sym(((s_i * transpose(spin)) + (spin * s_i))));
+    ds_i = (((2.0 * prm_G(i)) * (dev(edot) - ((0.0 / 3.0) * eye()))) + sym(((s_i * transpose(spin)) + (spin * s_i))));
     st_edot(i, edot);
     st_spin(i, spin);
     st_drho(i, drho);

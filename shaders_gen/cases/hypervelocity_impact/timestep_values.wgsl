@@ -51,15 +51,15 @@ fn st_h(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 7u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 8u;
     return params[b];
 }
 fn prm_cfl_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 34u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 35u;
     return params[b];
 }
 @compute @workgroup_size(64)

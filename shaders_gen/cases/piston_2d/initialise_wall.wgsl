@@ -68,15 +68,15 @@ fn st_dv(i: u32, v: vec2<f32>) {
     data[b + 1u] = v[1];
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 0u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 6u;
     return params[b];
 }
 fn prm_gamma(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 7u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -409,23 +409,23 @@ fn st_mu_max(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 0u;
     return params[b];
 }
 fn prm_gravity(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 2u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 2u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 fn prm_delta(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 4u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 5u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 6u;
     return params[b];
 }
 fn prm_gamma(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 7u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -119,19 +119,19 @@ fn st_x_ref(i: u32, v: vec2<f32>) {
     data[b + 1u] = v[1];
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 0u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 6u;
     return params[b];
 }
 fn prm_gamma(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 7u;
     return params[b];
 }
 fn prm__constraint0(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 13u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 @compute @workgroup_size(64)

@@ -444,39 +444,39 @@ fn st_mu_max(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 0u;
     return params[b];
 }
 fn prm_gravity(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 2u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 2u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 fn prm_delta(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 4u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 5u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 6u;
     return params[b];
 }
 fn prm_gamma(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 7u;
     return params[b];
 }
 fn prm_nu0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 8u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 9u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 10u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 11u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -59,15 +59,15 @@ fn st_mu_max(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_nu0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 8u;
     return params[b];
 }
 fn prm_cfl_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 12u;
     return params[b];
 }
 fn prm_cfl_viscous(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 13u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -230,27 +230,27 @@ fn st_v_xsph(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 9u;
     return params[b];
 }
 fn prm_art_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 11u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 13u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 14u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 15u;
     return params[b];
 }
 fn prm_xsph_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 16u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -276,6 +276,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // pairsum xsph: accumulators
     var v_xsph: vec3<f32> = vec3<f32>(0.0);
     var smooth_: vec3<f32> = vec3<f32>(0.0);
+    de = 0.0;
     let art_n_i = prm_art_n(i);
     let visc_a_i = prm_visc_a(i);
     let visc_b_i = prm_visc_b(i);
@@ -340,7 +341,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         let p2 = ldj_rho(j, sgn);
         let bracket = (((div_m(sig_i, (rho_i * rho_i)) + div_m(sig_j, (p2 * p2))) - (pi_ij * eye())) + (pow(f, art_n_i) * (R_art_i + ldj_R_art(j, sgn))));
         dv = dv + ((ldj_m(j, sgn) * bracket) * gradW_ij);
-        // pairsum energy (stdlib/energy/solid.sph:16)
+        // pairsum energy (stdlib/energy/solid.sph:17)
         let sig_i_2 = (s_i - (p_i * eye()));
         let sig_j_2 = (ldj_s(j, sgn) - (ldj_p(j, sgn) * eye()));
         let c_i_3 = c_i;
@@ -365,7 +366,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     spin = skew(grad_v);
     // then jaumann
     var ds_i: mat3x3<f32> = ld_ds(i);
-    ds_i = (((2.0 * prm_G(i)) * dev(edot)) + sym(((s_i * transpose(spin)) + (spin * s_i))));
+    ds_i = (((2.0 * prm_G(i)) * (dev(edot) - ((0.0 / 3.0) * eye()))) + sym(((s_i * transpose(spin)) + (spin * s_i))));
     // then xsph
     v_xsph = (v_i - (prm_xsph_alpha(i) * smooth_));
     st_edot(i, edot);

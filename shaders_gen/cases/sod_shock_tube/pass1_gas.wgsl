@@ -408,7 +408,7 @@ fn st_c(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_gamma_gas(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 8u + 3u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 9u + 4u;
     return params[b];
 }
 @compute @workgroup_size(64)

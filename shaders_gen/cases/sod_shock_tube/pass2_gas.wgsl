@@ -451,11 +451,11 @@ fn st_de(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_cond_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 8u + 4u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 9u + 5u;
     return params[b];
 }
 fn prm_visc_beta(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 8u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 9u + 7u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -232,59 +232,59 @@ fn st_e_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 0u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 6u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 7u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 8u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 9u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 16u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 17u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 18u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 19u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 20u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 21u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 22u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 23u;
     return params[b];
 }
 fn prm_C_v(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 24u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -323,11 +323,15 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     T_i = (prm_T_room(i) + (max(e_i, 0.0) / prm_C_v(i)));
     // radial_return
     var eps_p_i: f32 = ld_eps_p(i);
-    let sig_eq = sqrt(((3.0 * 0.5) * ddot(s_i, s_i)));
+    let s_2 = s_i;
+    let s_hoop = 0.0;
+    let sig_eq = sqrt((1.5 * (ddot(s_2, s_2) + (s_hoop * s_hoop))));
     let hardening_strain = eps_p_i;
     let e = ld_edot(i);
-    let d = dev(e);
-    let hardening_rate = sqrt(((2.0 / 3.0) * ddot(d, d)));
+    let e_hoop = 0.0;
+    let d = (dev(e) - ((e_hoop / 3.0) * eye()));
+    let d_hoop = 0.0;
+    let hardening_rate = sqrt(((2.0 / 3.0) * (ddot(d, d) + (d_hoop * d_hoop))));
     let eps_p = hardening_strain;
     let rate_p = hardening_rate;
     let T = T_i;

@@ -438,15 +438,15 @@ fn st_dv(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 9u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 10u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 11u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -460,6 +460,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let dt = globals[1u];
     // pairsum momentum: accumulators
     var dv: f32 = 0.0;
+    dv = 0.0;
     let visc_a_i = prm_visc_a(i);
     let visc_b_i = prm_visc_b(i);
     let eta_ratio_i = prm_eta_ratio(i);
@@ -513,7 +514,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let r_ij = sqrt(r2);
             let W_ij = kernel_w(r_ij, h_ij);
             let gradW_ij = kernel_grad(r_ij, h_ij) * x_ij;
-            // pairsum momentum (stdlib/momentum/corrected.sph:13)
+            // pairsum momentum (stdlib/momentum/corrected.sph:14)
             if ((body_i == ldj_body(j, sgn))) {
                 let sig_i = (s_i - (p_i * 1.0));
                 let sig_j = (ldj_s(j, sgn) - (ldj_p(j, sgn) * 1.0));

@@ -313,27 +313,27 @@ fn st_ds(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 1u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 6u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 16u;
     return params[b];
 }
 fn prm_hourglass_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 18u;
     return params[b];
 }
 fn prm_hourglass_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 19u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -397,7 +397,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         if (r2 >= rc * rc || r2 == 0.0) { continue; }
         let x_ij = (dxv * sgn);
         let r_ij = sqrt(r2);
-        // pairsum shaped_velocity_gradient (stdlib/solid/shaped_kernel.sph:128)
+        // pairsum shaped_velocity_gradient (stdlib/solid/shaped_kernel.sph:129)
         if ((body_i == ldj_body(j, sgn))) {
             let M = kernel_metric_i;
             let norm = kernel_norm_i;
@@ -440,13 +440,14 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     dkernel_shape = (gv * kernel_shape_i);
     // then continuity_from_strain_rate
     var drho_i: f32 = ld_drho(i);
-    drho_i = ((-ld_rho(i)) * trace(edot));
+    drho_i = ((-ld_rho(i)) * (trace(edot) + 0.0));
     // then jaumann
     var ds_i: mat3x3<f32> = ld_ds(i);
-    ds_i = (((2.0 * prm_G(i)) * dev(edot)) + sym(((ld_s(i) * transpose(spin)) + (spin * ld_s(i)))));
+    ds_i = (((2.0 * prm_G(i)) * (dev(edot) - ((0.0 / 3.0) * eye()))) + sym(((ld_s(i) * transpose(spin)) + (spin * ld_s(i)))));
     // then compressive_share
     var compression_i: f32 = ld_compression(i);
-    compression_i = (abs(trace(edot)) / ((abs(trace(edot)) + frob(dev(edot))) + ((0.01 * ld_c(i)) / ld_h(i))));
+    let volumetric = abs((trace(edot) + 0.0));
+    compression_i = (volumetric / ((volumetric + frob(dev(edot))) + ((0.01 * ld_c(i)) / ld_h(i))));
     st_edot(i, edot);
     st_spin(i, spin);
     st_L_inv(i, L_inv);

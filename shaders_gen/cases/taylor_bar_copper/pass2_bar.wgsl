@@ -262,23 +262,23 @@ fn st_dv(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 1u;
     return params[b];
 }
 fn prm_hourglass_visc(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 8u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 13u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 14u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 15u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -292,6 +292,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let dt = globals[1u];
     // pairsum momentum_shaped: accumulators
     var dv: vec3<f32> = vec3<f32>(0.0);
+    dv = vec3<f32>(0.0);
     let h_ratio_i = prm_h_ratio(i);
     let hourglass_visc_i = prm_hourglass_visc(i);
     let visc_a_i = prm_visc_a(i);

@@ -323,63 +323,63 @@ fn st_u_0(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 1u;
     return params[b];
 }
 fn prm_shape_floor(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 9u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 16u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 17u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 23u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 24u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 25u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 26u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 27u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 28u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 29u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 30u;
     return params[b];
 }
 fn prm_C_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 31u;
     return params[b];
 }
 fn prm_taylor_quinney(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 32u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -454,11 +454,15 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // radial_return
     var eps_p_i: f32 = ld_eps_p(i);
     var deps_p_i: f32 = ld_deps_p(i);
-    let sig_eq = sqrt(((3.0 * 0.5) * ddot(s_i, s_i)));
+    let s_2 = s_i;
+    let s_hoop = 0.0;
+    let sig_eq = sqrt((1.5 * (ddot(s_2, s_2) + (s_hoop * s_hoop))));
     let hardening_strain = eps_p_i;
     let e = ld_edot(i);
-    let d = dev(e);
-    let hardening_rate = sqrt(((2.0 / 3.0) * ddot(d, d)));
+    let e_hoop = 0.0;
+    let d = (dev(e) - ((e_hoop / 3.0) * eye()));
+    let d_hoop = 0.0;
+    let hardening_rate = sqrt(((2.0 / 3.0) * (ddot(d, d) + (d_hoop * d_hoop))));
     let eps_p = hardening_strain;
     let rate_p = hardening_rate;
     let T = ld_T(i);
@@ -475,8 +479,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var T_i: f32 = ld_T(i);
     let eps_p_2 = eps_p_i;
     let e_2 = ld_edot(i);
-    let d_3 = dev(e_2);
-    let rate_p_2 = sqrt(((2.0 / 3.0) * ddot(d_3, d_3)));
+    let e_hoop_2 = 0.0;
+    let d_3 = (dev(e_2) - ((e_hoop_2 / 3.0) * eye()));
+    let d_hoop_2 = 0.0;
+    let rate_p_2 = sqrt(((2.0 / 3.0) * (ddot(d_3, d_3) + (d_hoop_2 * d_hoop_2))));
     let T_3 = T_i;
     let hardening_2 = (prm_jc_A(i) + (prm_jc_B(i) * pow(max(eps_p_2, 0.0), prm_jc_n(i))));
     let rate_2 = (1.0 + (prm_jc_C(i) * log(max((rate_p_2 / prm_eps_rate0(i)), 1.0))));

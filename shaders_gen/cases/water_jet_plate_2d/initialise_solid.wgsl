@@ -79,19 +79,19 @@ fn st_sigma(i: u32, v: mat2x2<f32>) {
     data[b + 2u] = v[1][1];
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 0u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 6u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 7u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 8u;
     return params[b];
 }
 @compute @workgroup_size(64)

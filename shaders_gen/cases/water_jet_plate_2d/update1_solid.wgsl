@@ -210,63 +210,63 @@ fn st_e_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 0u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 4u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 5u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 6u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 7u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 8u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 12u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 13u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 14u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 15u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 16u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 17u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 18u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 19u;
     return params[b];
 }
 fn prm_C_v(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 20u;
     return params[b];
 }
 fn prm__constraint0(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 29u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 @compute @workgroup_size(64)
@@ -300,11 +300,15 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     T_i = (prm_T_room(i) + (max(e_i, 0.0) / prm_C_v(i)));
     // radial_return
     var eps_p_i: f32 = ld_eps_p(i);
-    let sig_eq = sqrt(((3.0 * 0.5) * ddot(s_i, s_i)));
+    let s_2 = s_i;
+    let s_hoop = 0.0;
+    let sig_eq = sqrt((1.5 * (ddot(s_2, s_2) + (s_hoop * s_hoop))));
     let hardening_strain = eps_p_i;
     let e = ld_edot(i);
-    let d = dev(e);
-    let hardening_rate = sqrt(((2.0 / 3.0) * ddot(d, d)));
+    let e_hoop = 0.0;
+    let d = (dev(e) - ((e_hoop / 3.0) * eye()));
+    let d_hoop = 0.0;
+    let hardening_rate = sqrt(((2.0 / 3.0) * (ddot(d, d) + (d_hoop * d_hoop))));
     let eps_p = hardening_strain;
     let rate_p = hardening_rate;
     let T = T_i;

@@ -429,7 +429,7 @@ fn st_ds(i: u32, v: mat2x2<f32>) {
     data[b + 2u] = v[1][1];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 4u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 5u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -500,10 +500,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     spin = skew(grad_v);
     // then jaumann
     var ds_i: mat2x2<f32> = ld_ds(i);
-    ds_i = (((2.0 * prm_G(i)) * dev(edot)) + sym(((ld_s(i) * transpose(spin)) + (spin * ld_s(i)))));
+    ds_i = (((2.0 * prm_G(i)) * (dev(edot) - ((0.0 / 3.0) * eye()))) + sym(((ld_s(i) * transpose(spin)) + (spin * ld_s(i)))));
     // then continuity_from_strain_rate
     var drho_i: f32 = ld_drho(i);
-    drho_i = ((-ld_rho(i)) * trace(edot));
+    drho_i = ((-ld_rho(i)) * (trace(edot) + 0.0));
     st_edot(i, edot);
     st_spin(i, spin);
     st_drho(i, drho_i);

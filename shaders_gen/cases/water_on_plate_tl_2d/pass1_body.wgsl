@@ -459,31 +459,31 @@ fn st_H_linear(i: u32, v: mat2x2<f32>) {
     data[b + 3u] = v[1][1];
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 0u;
     return params[b];
 }
 fn prm_gravity(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 2u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 2u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 6u;
     return params[b];
 }
 fn prm_gamma(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 7u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 17u;
     return params[b];
 }
 fn prm_clamp_normal(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 24u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 fn prm_clamp_at(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 26u;
     return params[b];
 }
 @compute @workgroup_size(64)

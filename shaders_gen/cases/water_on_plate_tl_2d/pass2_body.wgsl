@@ -591,43 +591,43 @@ fn st_P(i: u32, v: mat2x2<f32>) {
     data[b + 3u] = v[1][1];
 }
 fn prm_nu0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 8u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 9u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 10u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 11u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 14u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 15u;
     return params[b];
 }
 fn prm_quadratic_correction(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 19u;
     return params[b];
 }
 fn prm_cell_quadrature(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 20u;
     return params[b];
 }
 fn prm_clamp_normal(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 24u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 fn prm_clamp_at(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 26u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -490,35 +490,35 @@ fn st_hourglass_rate2(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 0u;
     return params[b];
 }
 fn prm_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 12u;
     return params[b];
 }
 fn prm_hourglass_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 16u;
     return params[b];
 }
 fn prm_viscosity_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 18u;
     return params[b];
 }
 fn prm_c_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 21u;
     return params[b];
 }
 fn prm_damping(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 22u;
     return params[b];
 }
 fn prm_clamp_normal(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 24u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 fn prm_clamp_at(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 26u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -76,23 +76,23 @@ fn st_mu_max(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 0u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 14u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 15u;
     return params[b];
 }
 fn prm_cfl_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 23u;
     return params[b];
 }
 fn prm_cfl_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 27u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -99,11 +99,11 @@ fn st_u_0(i: u32, v: vec2<f32>) {
     data[b + 1u] = v[1];
 }
 fn prm_gravity(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 2u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 2u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 fn prm__damping(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 28u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -356,7 +356,7 @@ fn pos3(p: u32) -> vec3<f32> {
     let b = u32(info[5u] + i32(p) * 3);
     return vec3<f32>(data[b + 0u], data[b + 1u], data[b + 2u]);
 }
-fn h_of(p: u32) -> f32 { return data[u32(info[13u] + i32(p))]; }
+fn h_of(p: u32) -> f32 { return data[u32(info[15u] + i32(p))]; }
 fn ld_v(i: u32) -> vec3<f32> {
     let b = u32(info[7 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
@@ -373,61 +373,61 @@ fn ldj_v(j: u32, sgn: vec3<f32>) -> vec3<f32> {
     return (vec3<f32>(data[b], data[b + 1u], data[b + 2u]) * sgn);
 }
 fn ld_m(i: u32) -> f32 {
-    let b = u32(info[9 + G] + i32(i) * 1);
+    let b = u32(info[11 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_m(i: u32, v: f32) {
-    let b = u32(info[9 + G] + i32(i) * 1);
+    let b = u32(info[11 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_m(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[9u];
-    let b = u32(base + i32(j) * 1);
-    return data[b];
-}
-fn ld_rho(i: u32) -> f32 {
-    let b = u32(info[11 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_rho(i: u32, v: f32) {
-    let b = u32(info[11 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ldj_rho(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[11u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
-fn ld_h(i: u32) -> f32 {
+fn ld_rho(i: u32) -> f32 {
     let b = u32(info[13 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_rho(i: u32, v: f32) {
+    let b = u32(info[13 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ldj_rho(j: u32, sgn: vec3<f32>) -> f32 {
+    let base = info[13u];
+    let b = u32(base + i32(j) * 1);
+    return data[b];
+}
+fn ld_h(i: u32) -> f32 {
+    let b = u32(info[15 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_h(i: u32, v: f32) {
-    let b = u32(info[13 + G] + i32(i) * 1);
+    let b = u32(info[15 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_p(i: u32) -> f32 {
-    let b = u32(info[31 + G] + i32(i) * 1);
+    let b = u32(info[35 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p(i: u32, v: f32) {
-    let b = u32(info[31 + G] + i32(i) * 1);
+    let b = u32(info[35 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_c(i: u32) -> f32 {
-    let b = u32(info[33 + G] + i32(i) * 1);
+    let b = u32(info[37 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_c(i: u32, v: f32) {
-    let b = u32(info[33 + G] + i32(i) * 1);
+    let b = u32(info[37 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_tau(i: u32) -> mat3x3<f32> {
-    let b = u32(info[35 + G] + i32(i) * 6);
+    let b = u32(info[39 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_tau(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[35 + G] + i32(i) * 6);
+    let b = u32(info[39 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -436,11 +436,11 @@ fn st_tau(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_sigma(i: u32) -> mat3x3<f32> {
-    let b = u32(info[37 + G] + i32(i) * 6);
+    let b = u32(info[41 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_sigma(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[37 + G] + i32(i) * 6);
+    let b = u32(info[41 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -449,27 +449,27 @@ fn st_sigma(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_drho(i: u32) -> f32 {
-    let b = u32(info[39 + G] + i32(i) * 1);
+    let b = u32(info[43 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho(i: u32, v: f32) {
-    let b = u32(info[39 + G] + i32(i) * 1);
+    let b = u32(info[43 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_kernel_sum(i: u32) -> f32 {
-    let b = u32(info[43 + G] + i32(i) * 1);
+    let b = u32(info[47 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_kernel_sum(i: u32, v: f32) {
-    let b = u32(info[43 + G] + i32(i) * 1);
+    let b = u32(info[47 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_edot_visc(i: u32) -> mat3x3<f32> {
-    let b = u32(info[45 + G] + i32(i) * 6);
+    let b = u32(info[49 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_edot_visc(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[45 + G] + i32(i) * 6);
+    let b = u32(info[49 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -478,31 +478,31 @@ fn st_edot_visc(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_p_interface(i: u32) -> f32 {
-    let b = u32(info[47 + G] + i32(i) * 1);
+    let b = u32(info[51 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p_interface(i: u32, v: f32) {
-    let b = u32(info[47 + G] + i32(i) * 1);
+    let b = u32(info[51 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 0u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 22u;
     return params[b];
 }
 fn prm_p_cav(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 23u;
     return params[b];
 }
 fn prm_surface_threshold(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 24u;
     return params[b];
 }
 fn prm_mu(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 25u;
     return params[b];
 }
 @compute @workgroup_size(64)

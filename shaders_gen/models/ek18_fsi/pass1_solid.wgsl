@@ -356,7 +356,17 @@ fn pos3(p: u32) -> vec3<f32> {
     let b = u32(info[5u] + i32(p) * 3);
     return vec3<f32>(data[b + 0u], data[b + 1u], data[b + 2u]);
 }
-fn h_of(p: u32) -> f32 { return data[u32(info[13u] + i32(p))]; }
+fn h_of(p: u32) -> f32 { return data[u32(info[15u] + i32(p))]; }
+fn ld_x(i: u32) -> vec3<f32> {
+    let b = u32(info[5 + G] + i32(i) * 3);
+    return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
+}
+fn st_x(i: u32, v: vec3<f32>) {
+    let b = u32(info[5 + G] + i32(i) * 3);
+    data[b] = v[0];
+    data[b + 1u] = v[1];
+    data[b + 2u] = v[2];
+}
 fn ld_v(i: u32) -> vec3<f32> {
     let b = u32(info[7 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
@@ -372,30 +382,38 @@ fn ldj_v(j: u32, sgn: vec3<f32>) -> vec3<f32> {
     let b = u32(base + i32(j) * 3);
     return (vec3<f32>(data[b], data[b + 1u], data[b + 2u]) * sgn);
 }
-fn ldj_m(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[9u];
-    let b = u32(base + i32(j) * 1);
+fn ld_dx(i: u32) -> f32 {
+    let b = u32(info[9 + G] + i32(i) * 1);
     return data[b];
 }
-fn ld_rho(i: u32) -> f32 {
-    let b = u32(info[11 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_rho(i: u32, v: f32) {
-    let b = u32(info[11 + G] + i32(i) * 1);
+fn st_dx(i: u32, v: f32) {
+    let b = u32(info[9 + G] + i32(i) * 1);
     data[b] = v;
 }
-fn ldj_rho(j: u32, sgn: vec3<f32>) -> f32 {
+fn ldj_m(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[11u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
+fn ld_rho(i: u32) -> f32 {
+    let b = u32(info[13 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_rho(i: u32, v: f32) {
+    let b = u32(info[13 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ldj_rho(j: u32, sgn: vec3<f32>) -> f32 {
+    let base = info[13u];
+    let b = u32(base + i32(j) * 1);
+    return data[b];
+}
 fn ld_edot(i: u32) -> mat3x3<f32> {
-    let b = u32(info[15 + G] + i32(i) * 6);
+    let b = u32(info[17 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_edot(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[15 + G] + i32(i) * 6);
+    let b = u32(info[17 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -404,11 +422,11 @@ fn st_edot(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_s(i: u32) -> mat3x3<f32> {
-    let b = u32(info[17 + G] + i32(i) * 6);
+    let b = u32(info[21 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[17 + G] + i32(i) * 6);
+    let b = u32(info[21 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -417,29 +435,29 @@ fn st_s(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_spin(i: u32) -> mat3x3<f32> {
-    let b = u32(info[19 + G] + i32(i) * 3);
+    let b = u32(info[23 + G] + i32(i) * 3);
     return mat3x3<f32>(vec3<f32>(0.0, -data[b], -data[b + 1u]), vec3<f32>(data[b], 0.0, -data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 2u], 0.0));
 }
 fn st_spin(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[19 + G] + i32(i) * 3);
+    let b = u32(info[23 + G] + i32(i) * 3);
     data[b] = v[1][0];
     data[b + 1u] = v[2][0];
     data[b + 2u] = v[2][1];
 }
 fn ld_drho(i: u32) -> f32 {
-    let b = u32(info[39 + G] + i32(i) * 1);
+    let b = u32(info[43 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho(i: u32, v: f32) {
-    let b = u32(info[39 + G] + i32(i) * 1);
+    let b = u32(info[43 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_ds(i: u32) -> mat3x3<f32> {
-    let b = u32(info[41 + G] + i32(i) * 6);
+    let b = u32(info[45 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_ds(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[41 + G] + i32(i) * 6);
+    let b = u32(info[45 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -447,8 +465,12 @@ fn st_ds(i: u32, v: mat3x3<f32>) {
     data[b + 4u] = v[2][1];
     data[b + 5u] = v[2][2];
 }
+fn prm_axisymmetric(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 5u;
+    return params[b];
+}
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 6u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -519,10 +541,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     spin = skew(grad_v);
     // then jaumann
     var ds_i: mat3x3<f32> = ld_ds(i);
-    ds_i = (((2.0 * prm_G(i)) * dev(edot)) + sym(((ld_s(i) * transpose(spin)) + (spin * ld_s(i)))));
+    ds_i = (((2.0 * prm_G(i)) * (dev(edot) - ((select(0.0, (v_i[0] / max(ld_x(i)[0], (0.1 * ld_dx(i)))), (prm_axisymmetric(i) > 0.0)) / 3.0) * eye()))) + sym(((ld_s(i) * transpose(spin)) + (spin * ld_s(i)))));
     // then continuity_from_strain_rate
     var drho_i: f32 = ld_drho(i);
-    drho_i = ((-ld_rho(i)) * trace(edot));
+    drho_i = ((-ld_rho(i)) * (trace(edot) + select(0.0, (v_i[0] / max(ld_x(i)[0], (0.1 * ld_dx(i)))), (prm_axisymmetric(i) > 0.0))));
     st_edot(i, edot);
     st_spin(i, spin);
     st_drho(i, drho_i);

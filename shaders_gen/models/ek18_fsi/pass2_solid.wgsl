@@ -356,27 +356,27 @@ fn pos3(p: u32) -> vec3<f32> {
     let b = u32(info[5u] + i32(p) * 3);
     return vec3<f32>(data[b + 0u], data[b + 1u], data[b + 2u]);
 }
-fn h_of(p: u32) -> f32 { return data[u32(info[13u] + i32(p))]; }
+fn h_of(p: u32) -> f32 { return data[u32(info[15u] + i32(p))]; }
 fn ldj_rho(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[11u];
+    let base = info[13u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
 fn ldj_p(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[31u];
+    let base = info[35u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
 fn ld_p_interface(i: u32) -> f32 {
-    let b = u32(info[47 + G] + i32(i) * 1);
+    let b = u32(info[51 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p_interface(i: u32, v: f32) {
-    let b = u32(info[47 + G] + i32(i) * 1);
+    let b = u32(info[51 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_gravity(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 2u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 2u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 @compute @workgroup_size(64)

@@ -356,7 +356,7 @@ fn pos3(p: u32) -> vec3<f32> {
     let b = u32(info[5u] + i32(p) * 3);
     return vec3<f32>(data[b + 0u], data[b + 1u], data[b + 2u]);
 }
-fn h_of(p: u32) -> f32 { return data[u32(info[13u] + i32(p))]; }
+fn h_of(p: u32) -> f32 { return data[u32(info[15u] + i32(p))]; }
 fn ld_v(i: u32) -> vec3<f32> {
     let b = u32(info[7 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
@@ -373,42 +373,42 @@ fn ldj_v(j: u32, sgn: vec3<f32>) -> vec3<f32> {
     return (vec3<f32>(data[b], data[b + 1u], data[b + 2u]) * sgn);
 }
 fn ldj_m(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[9u];
-    let b = u32(base + i32(j) * 1);
-    return data[b];
-}
-fn ld_rho(i: u32) -> f32 {
-    let b = u32(info[11 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_rho(i: u32, v: f32) {
-    let b = u32(info[11 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ldj_rho(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[11u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
+fn ld_rho(i: u32) -> f32 {
+    let b = u32(info[13 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_rho(i: u32, v: f32) {
+    let b = u32(info[13 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ldj_rho(j: u32, sgn: vec3<f32>) -> f32 {
+    let base = info[13u];
+    let b = u32(base + i32(j) * 1);
+    return data[b];
+}
 fn ld_c(i: u32) -> f32 {
-    let b = u32(info[33 + G] + i32(i) * 1);
+    let b = u32(info[37 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_c(i: u32, v: f32) {
-    let b = u32(info[33 + G] + i32(i) * 1);
+    let b = u32(info[37 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_c(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[33u];
+    let base = info[37u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
 fn ld_sigma(i: u32) -> mat3x3<f32> {
-    let b = u32(info[37 + G] + i32(i) * 6);
+    let b = u32(info[41 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_sigma(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[37 + G] + i32(i) * 6);
+    let b = u32(info[41 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -417,43 +417,43 @@ fn st_sigma(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ldj_sigma(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
-    let base = info[37u];
+    let base = info[41u];
     let b = u32(base + i32(j) * 6);
     return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u])), sgn);
 }
 fn ld_p_interface(i: u32) -> f32 {
-    let b = u32(info[47 + G] + i32(i) * 1);
+    let b = u32(info[51 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p_interface(i: u32, v: f32) {
-    let b = u32(info[47 + G] + i32(i) * 1);
+    let b = u32(info[51 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_p_interface(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[47u];
+    let base = info[51u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
 fn ld_dv(i: u32) -> vec3<f32> {
-    let b = u32(info[49 + G] + i32(i) * 3);
+    let b = u32(info[53 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_dv(i: u32, v: vec3<f32>) {
-    let b = u32(info[49 + G] + i32(i) * 3);
+    let b = u32(info[53 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 26u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 27u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 28u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -34,51 +34,51 @@ fn inv(a: mat3x3<f32>) -> mat3x3<f32> {
     return (1.0 / det) * transpose(mat3x3<f32>(r0, r1, r2));
 }
 fn ld_rho(i: u32) -> f32 {
-    let b = u32(info[6 + G] + i32(i) * 1);
+    let b = u32(info[7 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho(i: u32, v: f32) {
-    let b = u32(info[6 + G] + i32(i) * 1);
+    let b = u32(info[7 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_e(i: u32) -> f32 {
-    let b = u32(info[11 + G] + i32(i) * 1);
+    let b = u32(info[13 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_e(i: u32, v: f32) {
-    let b = u32(info[11 + G] + i32(i) * 1);
+    let b = u32(info[13 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_p(i: u32) -> f32 {
-    let b = u32(info[12 + G] + i32(i) * 1);
+    let b = u32(info[14 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p(i: u32, v: f32) {
-    let b = u32(info[12 + G] + i32(i) * 1);
+    let b = u32(info[14 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_c(i: u32) -> f32 {
-    let b = u32(info[13 + G] + i32(i) * 1);
+    let b = u32(info[15 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_c(i: u32, v: f32) {
-    let b = u32(info[13 + G] + i32(i) * 1);
+    let b = u32(info[15 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 0u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 7u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 8u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 9u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -43,23 +43,23 @@ fn st_v(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn ld_h(i: u32) -> f32 {
-    let b = u32(info[7 + ints[i]] + i32(i) * 1);
+    let b = u32(info[8 + ints[i]] + i32(i) * 1);
     return data[b];
 }
 fn st_h(i: u32, v: f32) {
-    let b = u32(info[7 + ints[i]] + i32(i) * 1);
+    let b = u32(info[8 + ints[i]] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 7u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 8u;
     return params[b];
 }
 fn prm_cfl_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 25u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -70,7 +70,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     if (i >= n) { return; }
     let t = globals[0u];
     let dt = globals[1u];
-    let scratch = u32(info[28]);
+    let scratch = u32(info[31]);
     data[scratch + 0u * n + i] = (prm_cfl_alpha(i) * ld_h(i));
     data[scratch + 1u * n + i] = ((prm_S_s(i) * length(ld_v(i))) + prm_c0(i));
 }

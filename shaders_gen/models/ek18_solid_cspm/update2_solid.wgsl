@@ -53,20 +53,28 @@ fn st_v(i: u32, v: vec3<f32>) {
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
+fn ld_dx(i: u32) -> f32 {
+    let b = u32(info[5 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_dx(i: u32, v: f32) {
+    let b = u32(info[5 + G] + i32(i) * 1);
+    data[b] = v;
+}
 fn ld_rho(i: u32) -> f32 {
-    let b = u32(info[6 + G] + i32(i) * 1);
+    let b = u32(info[7 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho(i: u32, v: f32) {
-    let b = u32(info[6 + G] + i32(i) * 1);
+    let b = u32(info[7 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s(i: u32) -> mat3x3<f32> {
-    let b = u32(info[8 + G] + i32(i) * 6);
+    let b = u32(info[9 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[8 + G] + i32(i) * 6);
+    let b = u32(info[9 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -75,11 +83,11 @@ fn st_s(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_edot(i: u32) -> mat3x3<f32> {
-    let b = u32(info[9 + G] + i32(i) * 6);
+    let b = u32(info[10 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_edot(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[9 + G] + i32(i) * 6);
+    let b = u32(info[10 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -87,76 +95,84 @@ fn st_edot(i: u32, v: mat3x3<f32>) {
     data[b + 4u] = v[2][1];
     data[b + 5u] = v[2][2];
 }
+fn ld_s_hoop(i: u32) -> f32 {
+    let b = u32(info[12 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_s_hoop(i: u32, v: f32) {
+    let b = u32(info[12 + G] + i32(i) * 1);
+    data[b] = v;
+}
 fn ld_e(i: u32) -> f32 {
-    let b = u32(info[11 + G] + i32(i) * 1);
+    let b = u32(info[13 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_e(i: u32, v: f32) {
-    let b = u32(info[11 + G] + i32(i) * 1);
+    let b = u32(info[13 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_p(i: u32) -> f32 {
-    let b = u32(info[12 + G] + i32(i) * 1);
+    let b = u32(info[14 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p(i: u32, v: f32) {
-    let b = u32(info[12 + G] + i32(i) * 1);
+    let b = u32(info[14 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_c(i: u32) -> f32 {
-    let b = u32(info[13 + G] + i32(i) * 1);
+    let b = u32(info[15 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_c(i: u32, v: f32) {
-    let b = u32(info[13 + G] + i32(i) * 1);
+    let b = u32(info[15 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_eps_p(i: u32) -> f32 {
-    let b = u32(info[14 + G] + i32(i) * 1);
+    let b = u32(info[16 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_eps_p(i: u32, v: f32) {
-    let b = u32(info[14 + G] + i32(i) * 1);
+    let b = u32(info[16 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_eps_nl(i: u32) -> f32 {
-    let b = u32(info[15 + G] + i32(i) * 1);
+    let b = u32(info[17 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_eps_nl(i: u32, v: f32) {
-    let b = u32(info[15 + G] + i32(i) * 1);
+    let b = u32(info[17 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_rate_nl(i: u32) -> f32 {
-    let b = u32(info[16 + G] + i32(i) * 1);
+    let b = u32(info[18 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rate_nl(i: u32, v: f32) {
-    let b = u32(info[16 + G] + i32(i) * 1);
+    let b = u32(info[18 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_T(i: u32) -> f32 {
-    let b = u32(info[17 + G] + i32(i) * 1);
+    let b = u32(info[19 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_T(i: u32, v: f32) {
-    let b = u32(info[17 + G] + i32(i) * 1);
+    let b = u32(info[19 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_drho(i: u32) -> f32 {
-    let b = u32(info[18 + G] + i32(i) * 1);
+    let b = u32(info[20 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho(i: u32, v: f32) {
-    let b = u32(info[18 + G] + i32(i) * 1);
+    let b = u32(info[20 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_ds(i: u32) -> mat3x3<f32> {
-    let b = u32(info[19 + G] + i32(i) * 6);
+    let b = u32(info[21 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_ds(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[19 + G] + i32(i) * 6);
+    let b = u32(info[21 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -165,57 +181,57 @@ fn st_ds(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_de(i: u32) -> f32 {
-    let b = u32(info[20 + G] + i32(i) * 1);
+    let b = u32(info[22 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_de(i: u32, v: f32) {
-    let b = u32(info[20 + G] + i32(i) * 1);
+    let b = u32(info[22 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_dv(i: u32) -> vec3<f32> {
-    let b = u32(info[21 + G] + i32(i) * 3);
+    let b = u32(info[23 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_dv(i: u32, v: vec3<f32>) {
-    let b = u32(info[21 + G] + i32(i) * 3);
+    let b = u32(info[23 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_x_0(i: u32) -> vec3<f32> {
-    let b = u32(info[22 + G] + i32(i) * 3);
+    let b = u32(info[24 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_x_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[22 + G] + i32(i) * 3);
+    let b = u32(info[24 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_v_0(i: u32) -> vec3<f32> {
-    let b = u32(info[23 + G] + i32(i) * 3);
+    let b = u32(info[25 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_v_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[23 + G] + i32(i) * 3);
+    let b = u32(info[25 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_rho_0(i: u32) -> f32 {
-    let b = u32(info[24 + G] + i32(i) * 1);
+    let b = u32(info[26 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho_0(i: u32, v: f32) {
-    let b = u32(info[24 + G] + i32(i) * 1);
+    let b = u32(info[26 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s_0(i: u32) -> mat3x3<f32> {
-    let b = u32(info[25 + G] + i32(i) * 6);
+    let b = u32(info[27 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s_0(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[25 + G] + i32(i) * 6);
+    let b = u32(info[27 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -223,88 +239,100 @@ fn st_s_0(i: u32, v: mat3x3<f32>) {
     data[b + 4u] = v[2][1];
     data[b + 5u] = v[2][2];
 }
+fn ld_s_hoop_0(i: u32) -> f32 {
+    let b = u32(info[28 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_s_hoop_0(i: u32, v: f32) {
+    let b = u32(info[28 + G] + i32(i) * 1);
+    data[b] = v;
+}
 fn ld_e_0(i: u32) -> f32 {
-    let b = u32(info[26 + G] + i32(i) * 1);
+    let b = u32(info[29 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_e_0(i: u32, v: f32) {
-    let b = u32(info[26 + G] + i32(i) * 1);
+    let b = u32(info[29 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_eps_p_0(i: u32) -> f32 {
-    let b = u32(info[27 + G] + i32(i) * 1);
+    let b = u32(info[30 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_eps_p_0(i: u32, v: f32) {
-    let b = u32(info[27 + G] + i32(i) * 1);
+    let b = u32(info[30 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 0u;
+    return params[b];
+}
+fn prm_axisymmetric(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 5u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 6u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 7u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 8u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 9u;
     return params[b];
 }
 fn prm_nonlocal_hardening(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 13u;
     return params[b];
 }
 fn prm_nonlocal_rate(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 14u;
     return params[b];
 }
 fn prm_damage_length(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 15u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 16u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 17u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 18u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 19u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 20u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 21u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 22u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 23u;
     return params[b];
 }
 fn prm_C_v(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 25u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 24u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -332,6 +360,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     rho_i = (ld_rho_0(i) + (dt * rate_of_rho));
     s_i = (ld_s_0(i) + (dt * rate_of_s));
     e_i = (ld_e_0(i) + (dt * rate_of_e));
+    // restore s_hoop
+    var s_hoop_i: f32 = ld_s_hoop(i);
+    s_hoop_i = ld_s_hoop_0(i);
     // restore eps_p
     var eps_p_i: f32 = ld_eps_p(i);
     eps_p_i = ld_eps_p_0(i);
@@ -339,12 +370,16 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var T_i: f32 = ld_T(i);
     T_i = (prm_T_room(i) + (max(e_i, 0.0) / prm_C_v(i)));
     // radial_return
-    let sig_eq = sqrt(((3.0 * 0.5) * ddot(s_i, s_i)));
+    let s_2 = s_i;
+    let s_hoop = s_hoop_i;
+    let sig_eq = sqrt((1.5 * (ddot(s_2, s_2) + (s_hoop * s_hoop))));
     let blend = ((prm_nonlocal_hardening(i) * ld_eps_nl(i)) + ((1.0 - prm_nonlocal_hardening(i)) * eps_p_i));
     let hardening_strain = select(eps_p_i, max(blend, 0.0), ((prm_nonlocal_hardening(i) != 0.0) && (prm_damage_length(i) > 0.0)));
     let e = ld_edot(i);
-    let d = dev(e);
-    let hardening_rate = select(sqrt(((2.0 / 3.0) * ddot(d, d))), ld_rate_nl(i), ((prm_nonlocal_rate(i) > 0.0) && (prm_damage_length(i) > 0.0)));
+    let e_hoop = select(0.0, (v_i[0] / max(x_i[0], (0.1 * ld_dx(i)))), (prm_axisymmetric(i) > 0.0));
+    let d = (dev(e) - ((e_hoop / 3.0) * eye()));
+    let d_hoop = select(0.0, (e_hoop - ((trace(e) + e_hoop) / 3.0)), (prm_axisymmetric(i) > 0.0));
+    let hardening_rate = select(sqrt(((2.0 / 3.0) * (ddot(d, d) + (d_hoop * d_hoop)))), ld_rate_nl(i), ((prm_nonlocal_rate(i) > 0.0) && (prm_damage_length(i) > 0.0)));
     let eps_p = hardening_strain;
     let rate_p = hardening_rate;
     let T = T_i;
@@ -355,6 +390,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let c_y = min(1.0, (sigma_y / max(sig_eq, 1e-30)));
     let d_2 = (((1.0 - c_y) / (3.0 * prm_G(i))) * sig_eq);
     s_i = (c_y * s_i);
+    if ((prm_axisymmetric(i) > 0.0)) {
+        s_hoop_i = (c_y * s_hoop_i);
+    }
     eps_p_i = (eps_p_i + d_2);
     // eos
     var p_i: f32 = ld_p(i);
@@ -374,6 +412,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     st_v(i, v_i);
     st_rho(i, rho_i);
     st_s(i, s_i);
+    st_s_hoop(i, s_hoop_i);
     st_e(i, e_i);
     st_p(i, p_i);
     st_c(i, c_i);

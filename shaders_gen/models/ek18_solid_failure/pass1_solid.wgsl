@@ -357,6 +357,16 @@ fn pos3(p: u32) -> vec3<f32> {
     return vec3<f32>(data[b + 0u], data[b + 1u], data[b + 2u]);
 }
 fn h_of(p: u32) -> f32 { return data[u32(info[9u] + i32(p))]; }
+fn ld_x(i: u32) -> vec3<f32> {
+    let b = u32(info[3 + G] + i32(i) * 3);
+    return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
+}
+fn st_x(i: u32, v: vec3<f32>) {
+    let b = u32(info[3 + G] + i32(i) * 3);
+    data[b] = v[0];
+    data[b + 1u] = v[1];
+    data[b + 2u] = v[2];
+}
 fn ld_v(i: u32) -> vec3<f32> {
     let b = u32(info[4 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
@@ -371,6 +381,14 @@ fn ldj_v(j: u32, sgn: vec3<f32>) -> vec3<f32> {
     let base = info[4u];
     let b = u32(base + i32(j) * 3);
     return (vec3<f32>(data[b], data[b + 1u], data[b + 2u]) * sgn);
+}
+fn ld_dx(i: u32) -> f32 {
+    let b = u32(info[5 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_dx(i: u32, v: f32) {
+    let b = u32(info[5 + G] + i32(i) * 1);
+    data[b] = v;
 }
 fn ld_body(i: u32) -> f32 {
     let b = u32(info[6 + G] + i32(i) * 1);
@@ -445,68 +463,68 @@ fn st_spin(i: u32, v: mat3x3<f32>) {
     data[b + 2u] = v[2][1];
 }
 fn ld_p(i: u32) -> f32 {
-    let b = u32(info[14 + G] + i32(i) * 1);
+    let b = u32(info[15 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p(i: u32, v: f32) {
-    let b = u32(info[14 + G] + i32(i) * 1);
+    let b = u32(info[15 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_p(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[14u];
-    let b = u32(base + i32(j) * 1);
-    return data[b];
-}
-fn ld_c(i: u32) -> f32 {
-    let b = u32(info[15 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_c(i: u32, v: f32) {
-    let b = u32(info[15 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ldj_c(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[15u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
-fn ld_D(i: u32) -> f32 {
+fn ld_c(i: u32) -> f32 {
     let b = u32(info[16 + G] + i32(i) * 1);
     return data[b];
 }
-fn st_D(i: u32, v: f32) {
+fn st_c(i: u32, v: f32) {
     let b = u32(info[16 + G] + i32(i) * 1);
     data[b] = v;
 }
-fn ldj_D(j: u32, sgn: vec3<f32>) -> f32 {
+fn ldj_c(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[16u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
-fn ldj_eps_nl(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[19u];
+fn ld_D(i: u32) -> f32 {
+    let b = u32(info[17 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_D(i: u32, v: f32) {
+    let b = u32(info[17 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ldj_D(j: u32, sgn: vec3<f32>) -> f32 {
+    let base = info[17u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
-fn ldj_rate_nl(j: u32, sgn: vec3<f32>) -> f32 {
+fn ldj_eps_nl(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[20u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
+fn ldj_rate_nl(j: u32, sgn: vec3<f32>) -> f32 {
+    let base = info[21u];
+    let b = u32(base + i32(j) * 1);
+    return data[b];
+}
 fn ld_drho(i: u32) -> f32 {
-    let b = u32(info[22 + G] + i32(i) * 1);
+    let b = u32(info[23 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho(i: u32, v: f32) {
-    let b = u32(info[22 + G] + i32(i) * 1);
+    let b = u32(info[23 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_ds(i: u32) -> mat3x3<f32> {
-    let b = u32(info[23 + G] + i32(i) * 6);
+    let b = u32(info[24 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_ds(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[23 + G] + i32(i) * 6);
+    let b = u32(info[24 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -515,65 +533,69 @@ fn st_ds(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_de(i: u32) -> f32 {
-    let b = u32(info[24 + G] + i32(i) * 1);
+    let b = u32(info[25 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_de(i: u32, v: f32) {
-    let b = u32(info[24 + G] + i32(i) * 1);
+    let b = u32(info[25 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_dv(i: u32) -> vec3<f32> {
-    let b = u32(info[25 + G] + i32(i) * 3);
+    let b = u32(info[26 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_dv(i: u32, v: vec3<f32>) {
-    let b = u32(info[25 + G] + i32(i) * 3);
+    let b = u32(info[26 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_lap_sum(i: u32) -> f32 {
-    let b = u32(info[26 + G] + i32(i) * 1);
+    let b = u32(info[27 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_lap_sum(i: u32, v: f32) {
-    let b = u32(info[26 + G] + i32(i) * 1);
+    let b = u32(info[27 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_lap_weight(i: u32) -> f32 {
-    let b = u32(info[27 + G] + i32(i) * 1);
+    let b = u32(info[28 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_lap_weight(i: u32, v: f32) {
-    let b = u32(info[27 + G] + i32(i) * 1);
+    let b = u32(info[28 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_rate_lap_sum(i: u32) -> f32 {
-    let b = u32(info[28 + G] + i32(i) * 1);
+    let b = u32(info[29 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rate_lap_sum(i: u32, v: f32) {
-    let b = u32(info[28 + G] + i32(i) * 1);
+    let b = u32(info[29 + G] + i32(i) * 1);
     data[b] = v;
 }
+fn prm_axisymmetric(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 5u;
+    return params[b];
+}
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 6u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 10u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 11u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 12u;
     return params[b];
 }
 fn prm_damage_coupling(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 13u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -748,7 +770,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     spin = skew(grad_v);
     // then jaumann
     var ds_i: mat3x3<f32> = ld_ds(i);
-    ds_i = (((2.0 * prm_G(i)) * dev(edot)) + sym(((s_i * transpose(spin)) + (spin * s_i))));
+    ds_i = (((2.0 * prm_G(i)) * (dev(edot) - ((select(0.0, (v_i[0] / max(ld_x(i)[0], (0.1 * ld_dx(i)))), (prm_axisymmetric(i) > 0.0)) / 3.0) * eye()))) + sym(((s_i * transpose(spin)) + (spin * s_i))));
     // then nonlocal_strain_laplacian
     let exact_for_quadratics = ((2.0 * 3.0) / max(moment, 1e-12));
     lap_sum = (exact_for_quadratics * sum);

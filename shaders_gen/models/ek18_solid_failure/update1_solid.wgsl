@@ -95,92 +95,100 @@ fn st_edot(i: u32, v: mat3x3<f32>) {
     data[b + 4u] = v[2][1];
     data[b + 5u] = v[2][2];
 }
-fn ld_e(i: u32) -> f32 {
+fn ld_s_hoop(i: u32) -> f32 {
     let b = u32(info[13 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_s_hoop(i: u32, v: f32) {
+    let b = u32(info[13 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_e(i: u32) -> f32 {
+    let b = u32(info[14 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_e(i: u32, v: f32) {
-    let b = u32(info[13 + G] + i32(i) * 1);
+    let b = u32(info[14 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_p(i: u32) -> f32 {
-    let b = u32(info[14 + G] + i32(i) * 1);
+    let b = u32(info[15 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p(i: u32, v: f32) {
-    let b = u32(info[14 + G] + i32(i) * 1);
+    let b = u32(info[15 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_c(i: u32) -> f32 {
-    let b = u32(info[15 + G] + i32(i) * 1);
+    let b = u32(info[16 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_c(i: u32, v: f32) {
-    let b = u32(info[15 + G] + i32(i) * 1);
+    let b = u32(info[16 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_D(i: u32) -> f32 {
-    let b = u32(info[16 + G] + i32(i) * 1);
+    let b = u32(info[17 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_D(i: u32, v: f32) {
-    let b = u32(info[16 + G] + i32(i) * 1);
+    let b = u32(info[17 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_eps_p(i: u32) -> f32 {
-    let b = u32(info[17 + G] + i32(i) * 1);
+    let b = u32(info[18 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_eps_p(i: u32, v: f32) {
-    let b = u32(info[17 + G] + i32(i) * 1);
+    let b = u32(info[18 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_deps_p(i: u32) -> f32 {
-    let b = u32(info[18 + G] + i32(i) * 1);
+    let b = u32(info[19 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_deps_p(i: u32, v: f32) {
-    let b = u32(info[18 + G] + i32(i) * 1);
+    let b = u32(info[19 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_eps_nl(i: u32) -> f32 {
-    let b = u32(info[19 + G] + i32(i) * 1);
+    let b = u32(info[20 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_eps_nl(i: u32, v: f32) {
-    let b = u32(info[19 + G] + i32(i) * 1);
+    let b = u32(info[20 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_rate_nl(i: u32) -> f32 {
-    let b = u32(info[20 + G] + i32(i) * 1);
+    let b = u32(info[21 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rate_nl(i: u32, v: f32) {
-    let b = u32(info[20 + G] + i32(i) * 1);
+    let b = u32(info[21 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_T(i: u32) -> f32 {
-    let b = u32(info[21 + G] + i32(i) * 1);
+    let b = u32(info[22 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_T(i: u32, v: f32) {
-    let b = u32(info[21 + G] + i32(i) * 1);
+    let b = u32(info[22 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_drho(i: u32) -> f32 {
-    let b = u32(info[22 + G] + i32(i) * 1);
+    let b = u32(info[23 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho(i: u32, v: f32) {
-    let b = u32(info[22 + G] + i32(i) * 1);
+    let b = u32(info[23 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_ds(i: u32) -> mat3x3<f32> {
-    let b = u32(info[23 + G] + i32(i) * 6);
+    let b = u32(info[24 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_ds(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[23 + G] + i32(i) * 6);
+    let b = u32(info[24 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -189,81 +197,81 @@ fn st_ds(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_de(i: u32) -> f32 {
-    let b = u32(info[24 + G] + i32(i) * 1);
+    let b = u32(info[25 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_de(i: u32, v: f32) {
-    let b = u32(info[24 + G] + i32(i) * 1);
+    let b = u32(info[25 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_dv(i: u32) -> vec3<f32> {
-    let b = u32(info[25 + G] + i32(i) * 3);
+    let b = u32(info[26 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_dv(i: u32, v: vec3<f32>) {
-    let b = u32(info[25 + G] + i32(i) * 3);
+    let b = u32(info[26 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_lap_sum(i: u32) -> f32 {
-    let b = u32(info[26 + G] + i32(i) * 1);
+    let b = u32(info[27 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_lap_sum(i: u32, v: f32) {
-    let b = u32(info[26 + G] + i32(i) * 1);
+    let b = u32(info[27 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_lap_weight(i: u32) -> f32 {
-    let b = u32(info[27 + G] + i32(i) * 1);
+    let b = u32(info[28 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_lap_weight(i: u32, v: f32) {
-    let b = u32(info[27 + G] + i32(i) * 1);
+    let b = u32(info[28 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_rate_lap_sum(i: u32) -> f32 {
-    let b = u32(info[28 + G] + i32(i) * 1);
+    let b = u32(info[29 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rate_lap_sum(i: u32, v: f32) {
-    let b = u32(info[28 + G] + i32(i) * 1);
+    let b = u32(info[29 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_x_0(i: u32) -> vec3<f32> {
-    let b = u32(info[29 + G] + i32(i) * 3);
+    let b = u32(info[30 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_x_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[29 + G] + i32(i) * 3);
+    let b = u32(info[30 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_v_0(i: u32) -> vec3<f32> {
-    let b = u32(info[30 + G] + i32(i) * 3);
+    let b = u32(info[31 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_v_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[30 + G] + i32(i) * 3);
+    let b = u32(info[31 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_rho_0(i: u32) -> f32 {
-    let b = u32(info[31 + G] + i32(i) * 1);
+    let b = u32(info[32 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho_0(i: u32, v: f32) {
-    let b = u32(info[31 + G] + i32(i) * 1);
+    let b = u32(info[32 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s_0(i: u32) -> mat3x3<f32> {
-    let b = u32(info[32 + G] + i32(i) * 6);
+    let b = u32(info[33 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s_0(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[32 + G] + i32(i) * 6);
+    let b = u32(info[33 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -272,115 +280,119 @@ fn st_s_0(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_e_0(i: u32) -> f32 {
-    let b = u32(info[33 + G] + i32(i) * 1);
+    let b = u32(info[35 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_e_0(i: u32, v: f32) {
-    let b = u32(info[33 + G] + i32(i) * 1);
+    let b = u32(info[35 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 0u;
+    return params[b];
+}
+fn prm_axisymmetric(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 5u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 6u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 7u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 8u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 9u;
     return params[b];
 }
 fn prm_nonlocal_hardening(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 14u;
     return params[b];
 }
 fn prm_nonlocal_rate(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 15u;
     return params[b];
 }
 fn prm_damage_length(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 16u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 17u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 18u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 19u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 20u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 21u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 22u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 23u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 24u;
     return params[b];
 }
 fn prm_p_spall(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 25u;
     return params[b];
 }
 fn prm_D1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 26u;
     return params[b];
 }
 fn prm_D2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 27u;
     return params[b];
 }
 fn prm_D3(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 28u;
     return params[b];
 }
 fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 29u;
     return params[b];
 }
 fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 30u;
     return params[b];
 }
 fn prm_failure_band(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 31u;
     return params[b];
 }
 fn prm_failure_band_spacing(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 32u;
     return params[b];
 }
 fn prm_nonlocal_weight(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 32u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 33u;
     return params[b];
 }
 fn prm_C_v(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 33u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 34u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -412,20 +424,27 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var rate_nl_i: f32 = ld_rate_nl(i);
     let l2 = (prm_damage_length(i) * prm_damage_length(i));
     let e = ld_edot(i);
-    let d = dev(e);
-    rate_nl_i = ((sqrt(((2.0 / 3.0) * ddot(d, d))) + (l2 * ld_rate_lap_sum(i))) / (1.0 + (l2 * ld_lap_weight(i))));
+    let e_hoop = select(0.0, (v_i[0] / max(x_i[0], (0.1 * ld_dx(i)))), (prm_axisymmetric(i) > 0.0));
+    let d = (dev(e) - ((e_hoop / 3.0) * eye()));
+    let d_hoop = select(0.0, (e_hoop - ((trace(e) + e_hoop) / 3.0)), (prm_axisymmetric(i) > 0.0));
+    rate_nl_i = ((sqrt(((2.0 / 3.0) * (ddot(d, d) + (d_hoop * d_hoop)))) + (l2 * ld_rate_lap_sum(i))) / (1.0 + (l2 * ld_lap_weight(i))));
     // temperature
     var T_i: f32 = ld_T(i);
     T_i = (prm_T_room(i) + (max(e_i, 0.0) / prm_C_v(i)));
     // radial_return
+    var s_hoop_i: f32 = ld_s_hoop(i);
     var eps_p_i: f32 = ld_eps_p(i);
     var deps_p_i: f32 = ld_deps_p(i);
-    let sig_eq = sqrt(((3.0 * 0.5) * ddot(s_i, s_i)));
+    let s_2 = s_i;
+    let s_hoop = s_hoop_i;
+    let sig_eq = sqrt((1.5 * (ddot(s_2, s_2) + (s_hoop * s_hoop))));
     let blend = ((prm_nonlocal_hardening(i) * ld_eps_nl(i)) + ((1.0 - prm_nonlocal_hardening(i)) * eps_p_i));
     let hardening_strain = select(eps_p_i, max(blend, 0.0), ((prm_nonlocal_hardening(i) != 0.0) && (prm_damage_length(i) > 0.0)));
     let e_2 = ld_edot(i);
-    let d_2 = dev(e_2);
-    let hardening_rate = select(sqrt(((2.0 / 3.0) * ddot(d_2, d_2))), rate_nl_i, ((prm_nonlocal_rate(i) > 0.0) && (prm_damage_length(i) > 0.0)));
+    let e_hoop_2 = select(0.0, (v_i[0] / max(x_i[0], (0.1 * ld_dx(i)))), (prm_axisymmetric(i) > 0.0));
+    let d_2 = (dev(e_2) - ((e_hoop_2 / 3.0) * eye()));
+    let d_hoop_2 = select(0.0, (e_hoop_2 - ((trace(e_2) + e_hoop_2) / 3.0)), (prm_axisymmetric(i) > 0.0));
+    let hardening_rate = select(sqrt(((2.0 / 3.0) * (ddot(d_2, d_2) + (d_hoop_2 * d_hoop_2)))), rate_nl_i, ((prm_nonlocal_rate(i) > 0.0) && (prm_damage_length(i) > 0.0)));
     let eps_p = hardening_strain;
     let rate_p = hardening_rate;
     let T = T_i;
@@ -436,6 +455,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let c_y = min(1.0, (sigma_y / max(sig_eq, 1e-30)));
     let d_3 = (((1.0 - c_y) / (3.0 * prm_G(i))) * sig_eq);
     s_i = (c_y * s_i);
+    if ((prm_axisymmetric(i) > 0.0)) {
+        s_hoop_i = (c_y * s_hoop_i);
+    }
     eps_p_i = (eps_p_i + d_3);
     deps_p_i = d_3;
     // damage
@@ -455,18 +477,23 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let mixed = ((prm_nonlocal_weight(i) * (eps_nl_new - eps_nl)) + ((1.0 - prm_nonlocal_weight(i)) * deps_p));
     let deps_p_2 = select(local, max(mixed, 0.0), (prm_damage_length(i) > 0.0));
     let p = ld_p(i);
-    let s_2 = s_i;
+    let s_3 = s_i;
+    let s_hoop_2 = s_hoop_i;
     let edot = ld_edot(i);
     let T_3 = T_i;
     let p_2 = p;
-    let s_3 = s_2;
+    let s_4 = s_3;
+    let s_hoop_3 = s_hoop_2;
     let edot_2 = edot;
     let T_4 = T_3;
     let e_3 = edot_2;
-    let d_4 = dev(e_3);
-    let rate_2 = (sqrt(((2.0 / 3.0) * ddot(d_4, d_4))) / prm_eps_rate0(i));
-    let s_4 = s_3;
-    let triax = ((-p_2) / max(sqrt((1.5 * ddot(s_4, s_4))), 1e-30));
+    let e_hoop_3 = select(0.0, (v_i[0] / max(x_i[0], (0.1 * ld_dx(i)))), (prm_axisymmetric(i) > 0.0));
+    let d_4 = (dev(e_3) - ((e_hoop_3 / 3.0) * eye()));
+    let d_hoop_3 = select(0.0, (e_hoop_3 - ((trace(e_3) + e_hoop_3) / 3.0)), (prm_axisymmetric(i) > 0.0));
+    let rate_2 = (sqrt(((2.0 / 3.0) * (ddot(d_4, d_4) + (d_hoop_3 * d_hoop_3)))) / prm_eps_rate0(i));
+    let s_5 = s_4;
+    let s_hoop_4 = s_hoop_3;
+    let triax = ((-p_2) / max(sqrt((1.5 * (ddot(s_5, s_5) + (s_hoop_4 * s_hoop_4)))), 1e-30));
     let T_5 = T_4;
     let jc = min((D + (deps_p_2 / max((((prm_D1(i) + (prm_D2(i) * exp((prm_D3(i) * triax)))) * (1.0 + (prm_D4(i) * log(max(rate_2, 1.0))))) * (1.0 + (prm_D5(i) * min(max(((T_5 - prm_T_room(i)) / (prm_T_melt(i) - prm_T_room(i))), 0.0), 1.0)))), 1e-12))), 1.0);
     D_i = select(jc, 1.0, (ld_p(i) <= (-prm_p_spall(i))));
@@ -489,6 +516,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     st_v(i, v_i);
     st_rho(i, rho_i);
     st_s(i, s_i);
+    st_s_hoop(i, s_hoop_i);
     st_e(i, e_i);
     st_p(i, p_i);
     st_c(i, c_i);

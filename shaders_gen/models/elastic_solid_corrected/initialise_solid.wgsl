@@ -42,27 +42,27 @@ fn st_rho(i: u32, v: f32) {
     data[b] = v;
 }
 fn ld_p(i: u32) -> f32 {
-    let b = u32(info[14 + G] + i32(i) * 1);
+    let b = u32(info[15 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p(i: u32, v: f32) {
-    let b = u32(info[14 + G] + i32(i) * 1);
+    let b = u32(info[15 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_c(i: u32) -> f32 {
-    let b = u32(info[15 + G] + i32(i) * 1);
+    let b = u32(info[16 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_c(i: u32, v: f32) {
-    let b = u32(info[15 + G] + i32(i) * 1);
+    let b = u32(info[16 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 0u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 9u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -359,6 +359,16 @@ fn pos3(p: u32) -> vec3<f32> {
     return vec3<f32>(data[b + 0u], data[b + 1u], data[b + 2u]);
 }
 fn h_of(p: u32) -> f32 { return data[u32(info[9u] + i32(p))]; }
+fn ld_x(i: u32) -> vec3<f32> {
+    let b = u32(info[3 + G] + i32(i) * 3);
+    return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
+}
+fn st_x(i: u32, v: vec3<f32>) {
+    let b = u32(info[3 + G] + i32(i) * 3);
+    data[b] = v[0];
+    data[b + 1u] = v[1];
+    data[b + 2u] = v[2];
+}
 fn ld_v(i: u32) -> vec3<f32> {
     let b = u32(info[4 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
@@ -469,11 +479,11 @@ fn st_edot(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_s(i: u32) -> mat3x3<f32> {
-    let b = u32(info[12 + G] + i32(i) * 6);
+    let b = u32(info[13 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[12 + G] + i32(i) * 6);
+    let b = u32(info[13 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -482,29 +492,29 @@ fn st_s(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_spin(i: u32) -> mat3x3<f32> {
-    let b = u32(info[13 + G] + i32(i) * 3);
+    let b = u32(info[14 + G] + i32(i) * 3);
     return mat3x3<f32>(vec3<f32>(0.0, -data[b], -data[b + 1u]), vec3<f32>(data[b], 0.0, -data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 2u], 0.0));
 }
 fn st_spin(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[13 + G] + i32(i) * 3);
+    let b = u32(info[14 + G] + i32(i) * 3);
     data[b] = v[1][0];
     data[b + 1u] = v[2][0];
     data[b + 2u] = v[2][1];
 }
 fn ld_drho(i: u32) -> f32 {
-    let b = u32(info[16 + G] + i32(i) * 1);
+    let b = u32(info[17 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho(i: u32, v: f32) {
-    let b = u32(info[16 + G] + i32(i) * 1);
+    let b = u32(info[17 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_ds(i: u32) -> mat3x3<f32> {
-    let b = u32(info[17 + G] + i32(i) * 6);
+    let b = u32(info[18 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_ds(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[17 + G] + i32(i) * 6);
+    let b = u32(info[18 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -513,25 +523,29 @@ fn st_ds(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_a_contact(i: u32) -> vec3<f32> {
-    let b = u32(info[19 + G] + i32(i) * 3);
+    let b = u32(info[20 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_a_contact(i: u32, v: vec3<f32>) {
-    let b = u32(info[19 + G] + i32(i) * 3);
+    let b = u32(info[20 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
+fn prm_axisymmetric(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 5u;
+    return params[b];
+}
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 8u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 10u;
     return params[b];
 }
 fn prm_K_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 14u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -633,10 +647,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     spin = skew(g);
     // then continuity_from_strain_rate
     var drho_i: f32 = ld_drho(i);
-    drho_i = ((-rho_i) * trace(edot));
+    drho_i = ((-rho_i) * (trace(edot) + select(0.0, (v_i[0] / max(ld_x(i)[0], (0.1 * dx_i))), (prm_axisymmetric(i) > 0.0))));
     // then jaumann
     var ds_i: mat3x3<f32> = ld_ds(i);
-    ds_i = (((2.0 * G_i) * dev(edot)) + sym(((ld_s(i) * transpose(spin)) + (spin * ld_s(i)))));
+    ds_i = (((2.0 * G_i) * (dev(edot) - ((select(0.0, (v_i[0] / max(ld_x(i)[0], (0.1 * dx_i))), (prm_axisymmetric(i) > 0.0)) / 3.0) * eye()))) + sym(((ld_s(i) * transpose(spin)) + (spin * ld_s(i)))));
     st_L_inv(i, L_inv);
     st_edot(i, edot);
     st_spin(i, spin);

@@ -359,6 +359,16 @@ fn pos3(p: u32) -> vec3<f32> {
     return vec3<f32>(data[b + 0u], data[b + 1u], data[b + 2u]);
 }
 fn h_of(p: u32) -> f32 { return data[u32(info[9u] + i32(p))]; }
+fn ld_x(i: u32) -> vec3<f32> {
+    let b = u32(info[3 + G] + i32(i) * 3);
+    return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
+}
+fn st_x(i: u32, v: vec3<f32>) {
+    let b = u32(info[3 + G] + i32(i) * 3);
+    data[b] = v[0];
+    data[b + 1u] = v[1];
+    data[b + 2u] = v[2];
+}
 fn ld_v(i: u32) -> vec3<f32> {
     let b = u32(info[4 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
@@ -373,6 +383,14 @@ fn ldj_v(j: u32, sgn: vec3<f32>) -> vec3<f32> {
     let base = info[4u];
     let b = u32(base + i32(j) * 3);
     return (vec3<f32>(data[b], data[b + 1u], data[b + 2u]) * sgn);
+}
+fn ld_dx(i: u32) -> f32 {
+    let b = u32(info[5 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_dx(i: u32, v: f32) {
+    let b = u32(info[5 + G] + i32(i) * 1);
+    data[b] = v;
 }
 fn ld_body(i: u32) -> f32 {
     let b = u32(info[6 + G] + i32(i) * 1);
@@ -421,12 +439,20 @@ fn st_L_inv(i: u32, v: mat3x3<f32>) {
     data[b + 7u] = v[1][2];
     data[b + 8u] = v[2][2];
 }
+fn ld_s_hoop(i: u32) -> f32 {
+    let b = u32(info[12 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_s_hoop(i: u32, v: f32) {
+    let b = u32(info[12 + G] + i32(i) * 1);
+    data[b] = v;
+}
 fn ld_s(i: u32) -> mat3x3<f32> {
-    let b = u32(info[12 + G] + i32(i) * 6);
+    let b = u32(info[13 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[12 + G] + i32(i) * 6);
+    let b = u32(info[13 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -435,56 +461,60 @@ fn st_s(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ldj_s(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
-    let base = info[12u];
+    let base = info[13u];
     let b = u32(base + i32(j) * 6);
     return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u])), sgn);
 }
 fn ld_p(i: u32) -> f32 {
-    let b = u32(info[14 + G] + i32(i) * 1);
+    let b = u32(info[15 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p(i: u32, v: f32) {
-    let b = u32(info[14 + G] + i32(i) * 1);
+    let b = u32(info[15 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_p(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[14u];
-    let b = u32(base + i32(j) * 1);
-    return data[b];
-}
-fn ld_c(i: u32) -> f32 {
-    let b = u32(info[15 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_c(i: u32, v: f32) {
-    let b = u32(info[15 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ldj_c(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[15u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
+fn ld_c(i: u32) -> f32 {
+    let b = u32(info[16 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_c(i: u32, v: f32) {
+    let b = u32(info[16 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ldj_c(j: u32, sgn: vec3<f32>) -> f32 {
+    let base = info[16u];
+    let b = u32(base + i32(j) * 1);
+    return data[b];
+}
 fn ld_dv(i: u32) -> vec3<f32> {
-    let b = u32(info[18 + G] + i32(i) * 3);
+    let b = u32(info[19 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_dv(i: u32, v: vec3<f32>) {
-    let b = u32(info[18 + G] + i32(i) * 3);
+    let b = u32(info[19 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
+fn prm_axisymmetric(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 5u;
+    return params[b];
+}
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 11u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 12u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 13u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -498,6 +528,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let dt = globals[1u];
     // pairsum momentum: accumulators
     var dv: vec3<f32> = vec3<f32>(0.0);
+    let s_2 = ld_s(i);
+    let s_hoop = ld_s_hoop(i);
+    let w = 1.0;
+    dv = select(vec3<f32>(0.0), ((w * ((s_2 - (s_hoop * eye())) * vec3<f32>(1.0, 0.0, 0.0))) / (ld_rho(i) * max(ld_x(i)[0], (0.1 * ld_dx(i))))), (prm_axisymmetric(i) > 0.0));
     let visc_a_i = prm_visc_a(i);
     let visc_b_i = prm_visc_b(i);
     let eta_ratio_i = prm_eta_ratio(i);
@@ -551,7 +585,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let r_ij = sqrt(r2);
             let W_ij = kernel_w(r_ij, h_ij);
             let gradW_ij = kernel_grad(r_ij, h_ij) * x_ij;
-            // pairsum momentum (stdlib/momentum/corrected.sph:13)
+            // pairsum momentum (stdlib/momentum/corrected.sph:14)
             if ((body_i == ldj_body(j, sgn))) {
                 let sig_i = (s_i - (p_i * eye()));
                 let sig_j = (ldj_s(j, sgn) - (ldj_p(j, sgn) * eye()));

@@ -51,15 +51,15 @@ fn st_h(i: u32, v: f32) {
     data[b] = v;
 }
 fn ld_c(i: u32) -> f32 {
-    let b = u32(info[15 + ints[i]] + i32(i) * 1);
+    let b = u32(info[16 + ints[i]] + i32(i) * 1);
     return data[b];
 }
 fn st_c(i: u32, v: f32) {
-    let b = u32(info[15 + ints[i]] + i32(i) * 1);
+    let b = u32(info[16 + ints[i]] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_cfl_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 15u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -70,7 +70,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     if (i >= n) { return; }
     let t = globals[0u];
     let dt = globals[1u];
-    let scratch = u32(info[24]);
+    let scratch = u32(info[25]);
     data[scratch + 0u * n + i] = (prm_cfl_alpha(i) * ld_h(i));
     data[scratch + 1u * n + i] = (ld_c(i) + length(ld_v(i)));
 }

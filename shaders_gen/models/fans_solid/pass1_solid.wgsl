@@ -359,6 +359,16 @@ fn pos3(p: u32) -> vec3<f32> {
     return vec3<f32>(data[b + 0u], data[b + 1u], data[b + 2u]);
 }
 fn h_of(p: u32) -> f32 { return data[u32(info[8u] + i32(p))]; }
+fn ld_x(i: u32) -> vec3<f32> {
+    let b = u32(info[3 + G] + i32(i) * 3);
+    return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
+}
+fn st_x(i: u32, v: vec3<f32>) {
+    let b = u32(info[3 + G] + i32(i) * 3);
+    data[b] = v[0];
+    data[b + 1u] = v[1];
+    data[b + 2u] = v[2];
+}
 fn ld_v(i: u32) -> vec3<f32> {
     let b = u32(info[4 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
@@ -531,28 +541,32 @@ fn st_v_xsph(i: u32, v: vec3<f32>) {
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
+fn prm_axisymmetric(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 20u + 5u;
+    return params[b];
+}
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 20u + 7u;
     return params[b];
 }
 fn prm_art_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 20u + 10u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 20u + 12u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 20u + 13u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 20u + 14u;
     return params[b];
 }
 fn prm_xsph_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 20u + 18u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -662,7 +676,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     spin = skew(grad_v);
     // then jaumann
     var ds_i: mat3x3<f32> = ld_ds(i);
-    ds_i = (((2.0 * prm_G(i)) * dev(edot)) + sym(((s_i * transpose(spin)) + (spin * s_i))));
+    ds_i = (((2.0 * prm_G(i)) * (dev(edot) - ((select(0.0, (v_i[0] / max(ld_x(i)[0], (0.1 * dx_i))), (prm_axisymmetric(i) > 0.0)) / 3.0) * eye()))) + sym(((s_i * transpose(spin)) + (spin * s_i))));
     // then xsph
     v_xsph = (v_i - (prm_xsph_alpha(i) * smooth_));
     st_edot(i, edot);

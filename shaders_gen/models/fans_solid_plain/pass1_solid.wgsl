@@ -358,7 +358,17 @@ fn pos3(p: u32) -> vec3<f32> {
     let b = u32(info[3u] + i32(p) * 3);
     return vec3<f32>(data[b + 0u], data[b + 1u], data[b + 2u]);
 }
-fn h_of(p: u32) -> f32 { return data[u32(info[7u] + i32(p))]; }
+fn h_of(p: u32) -> f32 { return data[u32(info[8u] + i32(p))]; }
+fn ld_x(i: u32) -> vec3<f32> {
+    let b = u32(info[3 + G] + i32(i) * 3);
+    return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
+}
+fn st_x(i: u32, v: vec3<f32>) {
+    let b = u32(info[3 + G] + i32(i) * 3);
+    data[b] = v[0];
+    data[b + 1u] = v[1];
+    data[b + 2u] = v[2];
+}
 fn ld_v(i: u32) -> vec3<f32> {
     let b = u32(info[4 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
@@ -374,30 +384,38 @@ fn ldj_v(j: u32, sgn: vec3<f32>) -> vec3<f32> {
     let b = u32(base + i32(j) * 3);
     return (vec3<f32>(data[b], data[b + 1u], data[b + 2u]) * sgn);
 }
-fn ldj_m(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[5u];
-    let b = u32(base + i32(j) * 1);
+fn ld_dx(i: u32) -> f32 {
+    let b = u32(info[5 + G] + i32(i) * 1);
     return data[b];
 }
-fn ld_rho(i: u32) -> f32 {
-    let b = u32(info[6 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_rho(i: u32, v: f32) {
-    let b = u32(info[6 + G] + i32(i) * 1);
+fn st_dx(i: u32, v: f32) {
+    let b = u32(info[5 + G] + i32(i) * 1);
     data[b] = v;
 }
-fn ldj_rho(j: u32, sgn: vec3<f32>) -> f32 {
+fn ldj_m(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[6u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
+fn ld_rho(i: u32) -> f32 {
+    let b = u32(info[7 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_rho(i: u32, v: f32) {
+    let b = u32(info[7 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ldj_rho(j: u32, sgn: vec3<f32>) -> f32 {
+    let base = info[7u];
+    let b = u32(base + i32(j) * 1);
+    return data[b];
+}
 fn ld_s(i: u32) -> mat3x3<f32> {
-    let b = u32(info[8 + G] + i32(i) * 6);
+    let b = u32(info[9 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[8 + G] + i32(i) * 6);
+    let b = u32(info[9 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -406,16 +424,16 @@ fn st_s(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ldj_s(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
-    let base = info[8u];
+    let base = info[9u];
     let b = u32(base + i32(j) * 6);
     return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u])), sgn);
 }
 fn ld_edot(i: u32) -> mat3x3<f32> {
-    let b = u32(info[9 + G] + i32(i) * 6);
+    let b = u32(info[10 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_edot(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[9 + G] + i32(i) * 6);
+    let b = u32(info[10 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -424,55 +442,55 @@ fn st_edot(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_spin(i: u32) -> mat3x3<f32> {
-    let b = u32(info[10 + G] + i32(i) * 3);
+    let b = u32(info[11 + G] + i32(i) * 3);
     return mat3x3<f32>(vec3<f32>(0.0, -data[b], -data[b + 1u]), vec3<f32>(data[b], 0.0, -data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 2u], 0.0));
 }
 fn st_spin(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[10 + G] + i32(i) * 3);
+    let b = u32(info[11 + G] + i32(i) * 3);
     data[b] = v[1][0];
     data[b + 1u] = v[2][0];
     data[b + 2u] = v[2][1];
 }
 fn ld_p(i: u32) -> f32 {
-    let b = u32(info[11 + G] + i32(i) * 1);
+    let b = u32(info[12 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p(i: u32, v: f32) {
-    let b = u32(info[11 + G] + i32(i) * 1);
+    let b = u32(info[12 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_p(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[11u];
-    let b = u32(base + i32(j) * 1);
-    return data[b];
-}
-fn ld_c(i: u32) -> f32 {
-    let b = u32(info[12 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_c(i: u32, v: f32) {
-    let b = u32(info[12 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ldj_c(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[12u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
+fn ld_c(i: u32) -> f32 {
+    let b = u32(info[13 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_c(i: u32, v: f32) {
+    let b = u32(info[13 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ldj_c(j: u32, sgn: vec3<f32>) -> f32 {
+    let base = info[13u];
+    let b = u32(base + i32(j) * 1);
+    return data[b];
+}
 fn ld_drho(i: u32) -> f32 {
-    let b = u32(info[14 + G] + i32(i) * 1);
+    let b = u32(info[15 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho(i: u32, v: f32) {
-    let b = u32(info[14 + G] + i32(i) * 1);
+    let b = u32(info[15 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_ds(i: u32) -> mat3x3<f32> {
-    let b = u32(info[15 + G] + i32(i) * 6);
+    let b = u32(info[16 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_ds(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[15 + G] + i32(i) * 6);
+    let b = u32(info[16 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -481,43 +499,47 @@ fn st_ds(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_dv(i: u32) -> vec3<f32> {
-    let b = u32(info[16 + G] + i32(i) * 3);
+    let b = u32(info[17 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_dv(i: u32, v: vec3<f32>) {
-    let b = u32(info[16 + G] + i32(i) * 3);
+    let b = u32(info[17 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_v_xsph(i: u32) -> vec3<f32> {
-    let b = u32(info[17 + G] + i32(i) * 3);
+    let b = u32(info[18 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_v_xsph(i: u32, v: vec3<f32>) {
-    let b = u32(info[17 + G] + i32(i) * 3);
+    let b = u32(info[18 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
+fn prm_axisymmetric(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 5u;
+    return params[b];
+}
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 7u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 9u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 10u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 11u;
     return params[b];
 }
 fn prm_xsph_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 15u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -622,7 +644,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     spin = skew(grad_v);
     // then jaumann
     var ds_i: mat3x3<f32> = ld_ds(i);
-    ds_i = (((2.0 * prm_G(i)) * dev(edot)) + sym(((s_i * transpose(spin)) + (spin * s_i))));
+    ds_i = (((2.0 * prm_G(i)) * (dev(edot) - ((select(0.0, (v_i[0] / max(ld_x(i)[0], (0.1 * ld_dx(i)))), (prm_axisymmetric(i) > 0.0)) / 3.0) * eye()))) + sym(((s_i * transpose(spin)) + (spin * s_i))));
     // then xsph
     v_xsph = (v_i - (prm_xsph_alpha(i) * smooth_));
     st_edot(i, edot);

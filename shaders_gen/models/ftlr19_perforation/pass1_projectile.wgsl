@@ -359,6 +359,16 @@ fn pos3(p: u32) -> vec3<f32> {
     return vec3<f32>(data[b + 0u], data[b + 1u], data[b + 2u]);
 }
 fn h_of(p: u32) -> f32 { return data[u32(info[17u] + i32(p))]; }
+fn ld_x(i: u32) -> vec3<f32> {
+    let b = u32(info[5 + G] + i32(i) * 3);
+    return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
+}
+fn st_x(i: u32, v: vec3<f32>) {
+    let b = u32(info[5 + G] + i32(i) * 3);
+    data[b] = v[0];
+    data[b + 1u] = v[1];
+    data[b + 2u] = v[2];
+}
 fn ld_v(i: u32) -> vec3<f32> {
     let b = u32(info[7 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
@@ -455,12 +465,20 @@ fn st_L_inv(i: u32, v: mat3x3<f32>) {
     data[b + 7u] = v[1][2];
     data[b + 8u] = v[2][2];
 }
+fn ld_s_hoop(i: u32) -> f32 {
+    let b = u32(info[21 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_s_hoop(i: u32, v: f32) {
+    let b = u32(info[21 + G] + i32(i) * 1);
+    data[b] = v;
+}
 fn ld_s(i: u32) -> mat3x3<f32> {
-    let b = u32(info[21 + G] + i32(i) * 6);
+    let b = u32(info[23 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[21 + G] + i32(i) * 6);
+    let b = u32(info[23 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -469,16 +487,16 @@ fn st_s(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ldj_s(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
-    let base = info[21u];
+    let base = info[23u];
     let b = u32(base + i32(j) * 6);
     return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u])), sgn);
 }
 fn ld_edot(i: u32) -> mat3x3<f32> {
-    let b = u32(info[23 + G] + i32(i) * 6);
+    let b = u32(info[25 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_edot(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[23 + G] + i32(i) * 6);
+    let b = u32(info[25 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -487,57 +505,57 @@ fn st_edot(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_spin(i: u32) -> mat3x3<f32> {
-    let b = u32(info[25 + G] + i32(i) * 3);
+    let b = u32(info[27 + G] + i32(i) * 3);
     return mat3x3<f32>(vec3<f32>(0.0, -data[b], -data[b + 1u]), vec3<f32>(data[b], 0.0, -data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 2u], 0.0));
 }
 fn st_spin(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[25 + G] + i32(i) * 3);
+    let b = u32(info[27 + G] + i32(i) * 3);
     data[b] = v[1][0];
     data[b + 1u] = v[2][0];
     data[b + 2u] = v[2][1];
 }
 fn ld_p(i: u32) -> f32 {
-    let b = u32(info[29 + G] + i32(i) * 1);
+    let b = u32(info[31 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p(i: u32, v: f32) {
-    let b = u32(info[29 + G] + i32(i) * 1);
+    let b = u32(info[31 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_p(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[29u];
-    let b = u32(base + i32(j) * 1);
-    return data[b];
-}
-fn ld_c(i: u32) -> f32 {
-    let b = u32(info[31 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_c(i: u32, v: f32) {
-    let b = u32(info[31 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ldj_c(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[31u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
+fn ld_c(i: u32) -> f32 {
+    let b = u32(info[33 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_c(i: u32, v: f32) {
+    let b = u32(info[33 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ldj_c(j: u32, sgn: vec3<f32>) -> f32 {
+    let base = info[33u];
+    let b = u32(base + i32(j) * 1);
+    return data[b];
+}
 fn ld_grad_rho(i: u32) -> vec3<f32> {
-    let b = u32(info[45 + G] + i32(i) * 3);
+    let b = u32(info[47 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_grad_rho(i: u32, v: vec3<f32>) {
-    let b = u32(info[45 + G] + i32(i) * 3);
+    let b = u32(info[47 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_ds(i: u32) -> mat3x3<f32> {
-    let b = u32(info[49 + G] + i32(i) * 6);
+    let b = u32(info[51 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_ds(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[49 + G] + i32(i) * 6);
+    let b = u32(info[51 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -546,45 +564,49 @@ fn st_ds(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_de(i: u32) -> f32 {
-    let b = u32(info[51 + G] + i32(i) * 1);
+    let b = u32(info[53 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_de(i: u32, v: f32) {
-    let b = u32(info[51 + G] + i32(i) * 1);
+    let b = u32(info[53 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_a_contact(i: u32) -> vec3<f32> {
-    let b = u32(info[55 + G] + i32(i) * 3);
+    let b = u32(info[57 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_a_contact(i: u32, v: vec3<f32>) {
-    let b = u32(info[55 + G] + i32(i) * 3);
+    let b = u32(info[57 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
+fn prm_axisymmetric(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 5u;
+    return params[b];
+}
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 6u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 9u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 12u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 13u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 14u;
     return params[b];
 }
 fn prm_K_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 16u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -610,6 +632,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var de: f32 = 0.0;
     // pairsum contact: accumulators
     var a_contact: vec3<f32> = vec3<f32>(0.0);
+    let sigma_hoop = (ld_s_hoop(i) - ld_p(i));
+    de = select(0.0, ((sigma_hoop * select(0.0, (ld_v(i)[0] / max(ld_x(i)[0], (0.1 * ld_dx(i)))), (prm_axisymmetric(i) > 0.0))) / ld_rho(i)), (prm_axisymmetric(i) > 0.0));
     let G_i = prm_G(i);
     let visc_a_i = prm_visc_a(i);
     let visc_b_i = prm_visc_b(i);
@@ -671,7 +695,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             if (in_groups(1u, ints[j])) {
                 L = L + neg_m(((ldj_m(j, sgn) / ldj_rho(j, sgn)) * outer(gradW_ij, x_ij)));
             }
-            // pairsum density_gradient (stdlib/continuity/delta_sph.sph:17)
+            // pairsum density_gradient (stdlib/continuity/delta_sph.sph:18)
             if (in_groups(1u, ints[j])) {
                 g = g + (-(((ldj_m(j, sgn) / ldj_rho(j, sgn)) * (rho_i - ldj_rho(j, sgn))) * gradW_ij));
             }
@@ -679,7 +703,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             if (in_groups(1u, ints[j])) {
                 grad_v = grad_v + outer((ldj_v(j, sgn) - v_i), ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * gradW_ij));
             }
-            // pairsum energy (stdlib/energy/solid.sph:16)
+            // pairsum energy (stdlib/energy/solid.sph:17)
             if (in_groups(1u, ints[j])) {
                 let sig_i = (s_i - (p_i * eye()));
                 let sig_j = (ldj_s(j, sgn) - (ldj_p(j, sgn) * eye()));
@@ -722,7 +746,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     spin = skew(g_2);
     // then jaumann
     var ds_i: mat3x3<f32> = ld_ds(i);
-    ds_i = (((2.0 * G_i) * dev(edot)) + sym(((s_i * transpose(spin)) + (spin * s_i))));
+    ds_i = (((2.0 * G_i) * (dev(edot) - ((select(0.0, (v_i[0] / max(ld_x(i)[0], (0.1 * dx_i))), (prm_axisymmetric(i) > 0.0)) / 3.0) * eye()))) + sym(((s_i * transpose(spin)) + (spin * s_i))));
     st_L_inv(i, L_inv);
     st_edot(i, edot);
     st_spin(i, spin);

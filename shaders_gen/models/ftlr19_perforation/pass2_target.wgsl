@@ -359,6 +359,16 @@ fn pos3(p: u32) -> vec3<f32> {
     return vec3<f32>(data[b + 0u], data[b + 1u], data[b + 2u]);
 }
 fn h_of(p: u32) -> f32 { return data[u32(info[17u] + i32(p))]; }
+fn ld_x(i: u32) -> vec3<f32> {
+    let b = u32(info[5 + G] + i32(i) * 3);
+    return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
+}
+fn st_x(i: u32, v: vec3<f32>) {
+    let b = u32(info[5 + G] + i32(i) * 3);
+    data[b] = v[0];
+    data[b + 1u] = v[1];
+    data[b + 2u] = v[2];
+}
 fn ld_v(i: u32) -> vec3<f32> {
     let b = u32(info[7 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
@@ -373,6 +383,14 @@ fn ldj_v(j: u32, sgn: vec3<f32>) -> vec3<f32> {
     let base = info[7u];
     let b = u32(base + i32(j) * 3);
     return (vec3<f32>(data[b], data[b + 1u], data[b + 2u]) * sgn);
+}
+fn ld_dx(i: u32) -> f32 {
+    let b = u32(info[9 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_dx(i: u32, v: f32) {
+    let b = u32(info[9 + G] + i32(i) * 1);
+    data[b] = v;
 }
 fn ld_body(i: u32) -> f32 {
     let b = u32(info[11 + G] + i32(i) * 1);
@@ -430,11 +448,11 @@ fn st_L_inv(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ld_s(i: u32) -> mat3x3<f32> {
-    let b = u32(info[21 + G] + i32(i) * 6);
+    let b = u32(info[23 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[21 + G] + i32(i) * 6);
+    let b = u32(info[23 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -443,105 +461,109 @@ fn st_s(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ldj_s(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
-    let base = info[21u];
+    let base = info[23u];
     let b = u32(base + i32(j) * 6);
     return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u])), sgn);
 }
 fn ld_p(i: u32) -> f32 {
-    let b = u32(info[29 + G] + i32(i) * 1);
+    let b = u32(info[31 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p(i: u32, v: f32) {
-    let b = u32(info[29 + G] + i32(i) * 1);
+    let b = u32(info[31 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_p(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[29u];
-    let b = u32(base + i32(j) * 1);
-    return data[b];
-}
-fn ld_c(i: u32) -> f32 {
-    let b = u32(info[31 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_c(i: u32, v: f32) {
-    let b = u32(info[31 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ldj_c(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[31u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
-fn ld_D(i: u32) -> f32 {
+fn ld_c(i: u32) -> f32 {
     let b = u32(info[33 + G] + i32(i) * 1);
     return data[b];
 }
-fn st_D(i: u32, v: f32) {
+fn st_c(i: u32, v: f32) {
     let b = u32(info[33 + G] + i32(i) * 1);
     data[b] = v;
 }
+fn ldj_c(j: u32, sgn: vec3<f32>) -> f32 {
+    let base = info[33u];
+    let b = u32(base + i32(j) * 1);
+    return data[b];
+}
+fn ld_D(i: u32) -> f32 {
+    let b = u32(info[35 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_D(i: u32, v: f32) {
+    let b = u32(info[35 + G] + i32(i) * 1);
+    data[b] = v;
+}
 fn ldj_D(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[33u + ints[j]];
+    let base = info[35u + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
 fn ld_grad_rho(i: u32) -> vec3<f32> {
-    let b = u32(info[45 + G] + i32(i) * 3);
+    let b = u32(info[47 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_grad_rho(i: u32, v: vec3<f32>) {
-    let b = u32(info[45 + G] + i32(i) * 3);
+    let b = u32(info[47 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ldj_grad_rho(j: u32, sgn: vec3<f32>) -> vec3<f32> {
-    let base = info[45u];
+    let base = info[47u];
     let b = u32(base + i32(j) * 3);
     return (vec3<f32>(data[b], data[b + 1u], data[b + 2u]) * sgn);
 }
 fn ld_drho(i: u32) -> f32 {
-    let b = u32(info[47 + G] + i32(i) * 1);
+    let b = u32(info[49 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho(i: u32, v: f32) {
-    let b = u32(info[47 + G] + i32(i) * 1);
+    let b = u32(info[49 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_dv(i: u32) -> vec3<f32> {
-    let b = u32(info[53 + G] + i32(i) * 3);
+    let b = u32(info[55 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_dv(i: u32, v: vec3<f32>) {
-    let b = u32(info[53 + G] + i32(i) * 3);
+    let b = u32(info[55 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
+fn prm_axisymmetric(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 5u;
+    return params[b];
+}
 fn prm_delta(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 7u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 8u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 12u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 13u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 14u;
     return params[b];
 }
 fn prm_damage_coupling(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 15u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -619,7 +641,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let r_ij = sqrt(r2);
             let W_ij = kernel_w(r_ij, h_ij);
             let gradW_ij = kernel_grad(r_ij, h_ij) * x_ij;
-            // pairsum continuity (stdlib/continuity/delta_sph.sph:25)
+            // pairsum continuity (stdlib/continuity/delta_sph.sph:26)
             let vol_j = (ldj_m(j, sgn) / ldj_rho(j, sgn));
             let L_inv = L_inv_i;
             let g = gradW_ij;
@@ -658,7 +680,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         }}}
     }
     // then continuity
-    drho = ((rho_i * div_v) + diffusion);
+    drho = ((rho_i * (div_v - select(0.0, (v_i[0] / max(ld_x(i)[0], (0.1 * ld_dx(i)))), (prm_axisymmetric(i) > 0.0)))) + diffusion);
     st_drho(i, drho);
     st_dv(i, dv);
 }

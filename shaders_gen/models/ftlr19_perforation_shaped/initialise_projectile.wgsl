@@ -42,43 +42,43 @@ fn st_rho(i: u32, v: f32) {
     data[b] = v;
 }
 fn ld_p(i: u32) -> f32 {
-    let b = u32(info[21 + G] + i32(i) * 1);
+    let b = u32(info[23 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p(i: u32, v: f32) {
-    let b = u32(info[21 + G] + i32(i) * 1);
+    let b = u32(info[23 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_c(i: u32) -> f32 {
-    let b = u32(info[23 + G] + i32(i) * 1);
+    let b = u32(info[25 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_c(i: u32, v: f32) {
-    let b = u32(info[23 + G] + i32(i) * 1);
+    let b = u32(info[25 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_e(i: u32) -> f32 {
-    let b = u32(info[27 + G] + i32(i) * 1);
+    let b = u32(info[29 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_e(i: u32, v: f32) {
-    let b = u32(info[27 + G] + i32(i) * 1);
+    let b = u32(info[29 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 0u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 10u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 23u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 24u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -363,6 +363,16 @@ fn pos3(p: u32) -> vec3<f32> {
     return vec3<f32>(data[b + 0u], data[b + 1u], data[b + 2u]);
 }
 fn h_of(p: u32) -> f32 { return data[u32(info[17u] + i32(p))]; }
+fn ld_x(i: u32) -> vec3<f32> {
+    let b = u32(info[5 + G] + i32(i) * 3);
+    return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
+}
+fn st_x(i: u32, v: vec3<f32>) {
+    let b = u32(info[5 + G] + i32(i) * 3);
+    data[b] = v[0];
+    data[b + 1u] = v[1];
+    data[b + 2u] = v[2];
+}
 fn ld_v(i: u32) -> vec3<f32> {
     let b = u32(info[7 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
@@ -387,8 +397,7 @@ fn st_dx(i: u32, v: f32) {
     data[b] = v;
 }
 fn ldj_dx(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[9u + ints[j]];
-    if (base == -2147483648) { return 0.0; }
+    let base = info[9u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
@@ -448,19 +457,19 @@ fn st_L_inv(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ld_c(i: u32) -> f32 {
-    let b = u32(info[23 + G] + i32(i) * 1);
+    let b = u32(info[25 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_c(i: u32, v: f32) {
-    let b = u32(info[23 + G] + i32(i) * 1);
+    let b = u32(info[25 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s(i: u32) -> mat3x3<f32> {
-    let b = u32(info[25 + G] + i32(i) * 6);
+    let b = u32(info[27 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[25 + G] + i32(i) * 6);
+    let b = u32(info[27 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -469,11 +478,11 @@ fn st_s(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_edot(i: u32) -> mat3x3<f32> {
-    let b = u32(info[29 + G] + i32(i) * 6);
+    let b = u32(info[31 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_edot(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[29 + G] + i32(i) * 6);
+    let b = u32(info[31 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -482,21 +491,21 @@ fn st_edot(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_spin(i: u32) -> mat3x3<f32> {
-    let b = u32(info[31 + G] + i32(i) * 3);
+    let b = u32(info[33 + G] + i32(i) * 3);
     return mat3x3<f32>(vec3<f32>(0.0, -data[b], -data[b + 1u]), vec3<f32>(data[b], 0.0, -data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 2u], 0.0));
 }
 fn st_spin(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[31 + G] + i32(i) * 3);
+    let b = u32(info[33 + G] + i32(i) * 3);
     data[b] = v[1][0];
     data[b + 1u] = v[2][0];
     data[b + 2u] = v[2][1];
 }
 fn ld_kernel_shape(i: u32) -> mat3x3<f32> {
-    let b = u32(info[33 + G] + i32(i) * 9);
+    let b = u32(info[35 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_kernel_shape(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[33 + G] + i32(i) * 9);
+    let b = u32(info[35 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -508,17 +517,17 @@ fn st_kernel_shape(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ldj_kernel_shape(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
-    let base = info[33u + ints[j]];
+    let base = info[35u + ints[j]];
     if (base == -2147483648) { return mat3x3<f32>(); }
     let b = u32(base + i32(j) * 9);
     return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u])), sgn);
 }
 fn ld_kernel_metric(i: u32) -> mat3x3<f32> {
-    let b = u32(info[35 + G] + i32(i) * 6);
+    let b = u32(info[37 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_kernel_metric(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[35 + G] + i32(i) * 6);
+    let b = u32(info[37 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -527,81 +536,81 @@ fn st_kernel_metric(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ldj_kernel_metric(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
-    let base = info[35u + ints[j]];
+    let base = info[37u + ints[j]];
     if (base == -2147483648) { return mat3x3<f32>(); }
     let b = u32(base + i32(j) * 6);
     return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u])), sgn);
 }
 fn ld_kernel_norm(i: u32) -> f32 {
-    let b = u32(info[37 + G] + i32(i) * 1);
+    let b = u32(info[39 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_kernel_norm(i: u32, v: f32) {
-    let b = u32(info[37 + G] + i32(i) * 1);
+    let b = u32(info[39 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_kernel_norm(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[37u + ints[j]];
+    let base = info[39u + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
 fn ld_u(i: u32) -> vec3<f32> {
-    let b = u32(info[41 + G] + i32(i) * 3);
+    let b = u32(info[43 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_u(i: u32, v: vec3<f32>) {
-    let b = u32(info[41 + G] + i32(i) * 3);
+    let b = u32(info[43 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ldj_u(j: u32, sgn: vec3<f32>) -> vec3<f32> {
-    let base = info[41u + ints[j]];
+    let base = info[43u + ints[j]];
     if (base == -2147483648) { return vec3<f32>(0.0); }
     let b = u32(base + i32(j) * 3);
     return (vec3<f32>(data[b], data[b + 1u], data[b + 2u]) * sgn);
 }
 fn ld_D(i: u32) -> f32 {
-    let b = u32(info[43 + G] + i32(i) * 1);
+    let b = u32(info[45 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_D(i: u32, v: f32) {
-    let b = u32(info[43 + G] + i32(i) * 1);
+    let b = u32(info[45 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_D(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[43u + ints[j]];
+    let base = info[45u + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
 fn ldj_eps_nl(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[49u + ints[j]];
-    if (base == -2147483648) { return 0.0; }
-    let b = u32(base + i32(j) * 1);
-    return data[b];
-}
-fn ldj_rate_nl(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[51u + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
+fn ldj_rate_nl(j: u32, sgn: vec3<f32>) -> f32 {
+    let base = info[53u + ints[j]];
+    if (base == -2147483648) { return 0.0; }
+    let b = u32(base + i32(j) * 1);
+    return data[b];
+}
 fn ld_drho(i: u32) -> f32 {
-    let b = u32(info[57 + G] + i32(i) * 1);
+    let b = u32(info[59 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho(i: u32, v: f32) {
-    let b = u32(info[57 + G] + i32(i) * 1);
+    let b = u32(info[59 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_dkernel_shape(i: u32) -> mat3x3<f32> {
-    let b = u32(info[63 + G] + i32(i) * 9);
+    let b = u32(info[65 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_dkernel_shape(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[63 + G] + i32(i) * 9);
+    let b = u32(info[65 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -613,45 +622,45 @@ fn st_dkernel_shape(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ld_compression(i: u32) -> f32 {
-    let b = u32(info[65 + G] + i32(i) * 1);
+    let b = u32(info[67 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_compression(i: u32, v: f32) {
-    let b = u32(info[65 + G] + i32(i) * 1);
+    let b = u32(info[67 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_dv_hourglass(i: u32) -> vec3<f32> {
-    let b = u32(info[67 + G] + i32(i) * 3);
+    let b = u32(info[69 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_dv_hourglass(i: u32, v: vec3<f32>) {
-    let b = u32(info[67 + G] + i32(i) * 3);
+    let b = u32(info[69 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_hourglass_rate2(i: u32) -> f32 {
-    let b = u32(info[69 + G] + i32(i) * 1);
+    let b = u32(info[71 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_hourglass_rate2(i: u32, v: f32) {
-    let b = u32(info[69 + G] + i32(i) * 1);
+    let b = u32(info[71 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_drho_diffusion(i: u32) -> f32 {
-    let b = u32(info[71 + G] + i32(i) * 1);
+    let b = u32(info[73 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho_diffusion(i: u32, v: f32) {
-    let b = u32(info[71 + G] + i32(i) * 1);
+    let b = u32(info[73 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_ds(i: u32) -> mat3x3<f32> {
-    let b = u32(info[73 + G] + i32(i) * 6);
+    let b = u32(info[75 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_ds(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[73 + G] + i32(i) * 6);
+    let b = u32(info[75 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -659,88 +668,100 @@ fn st_ds(i: u32, v: mat3x3<f32>) {
     data[b + 4u] = v[2][1];
     data[b + 5u] = v[2][2];
 }
+fn ld_ds_hoop(i: u32) -> f32 {
+    let b = u32(info[77 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_ds_hoop(i: u32, v: f32) {
+    let b = u32(info[77 + G] + i32(i) * 1);
+    data[b] = v;
+}
 fn ld_colour_other(i: u32) -> f32 {
-    let b = u32(info[75 + G] + i32(i) * 1);
+    let b = u32(info[79 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_colour_other(i: u32, v: f32) {
-    let b = u32(info[75 + G] + i32(i) * 1);
+    let b = u32(info[79 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_p_contact(i: u32) -> f32 {
-    let b = u32(info[77 + G] + i32(i) * 1);
+    let b = u32(info[81 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p_contact(i: u32, v: f32) {
-    let b = u32(info[77 + G] + i32(i) * 1);
+    let b = u32(info[81 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_lap_sum(i: u32) -> f32 {
-    let b = u32(info[81 + G] + i32(i) * 1);
+    let b = u32(info[85 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_lap_sum(i: u32, v: f32) {
-    let b = u32(info[81 + G] + i32(i) * 1);
+    let b = u32(info[85 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_lap_weight(i: u32) -> f32 {
-    let b = u32(info[83 + G] + i32(i) * 1);
+    let b = u32(info[87 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_lap_weight(i: u32, v: f32) {
-    let b = u32(info[83 + G] + i32(i) * 1);
+    let b = u32(info[87 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_rate_lap_sum(i: u32) -> f32 {
-    let b = u32(info[85 + G] + i32(i) * 1);
+    let b = u32(info[89 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rate_lap_sum(i: u32, v: f32) {
-    let b = u32(info[85 + G] + i32(i) * 1);
+    let b = u32(info[89 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 1u;
+    return params[b];
+}
+fn prm_axisymmetric(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 5u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 6u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 8u;
     return params[b];
 }
 fn prm_delta(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 9u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 10u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 19u;
     return params[b];
 }
 fn prm_hourglass_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 20u;
     return params[b];
 }
 fn prm_hourglass_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 21u;
     return params[b];
 }
 fn prm_contact_colour(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 25u;
     return params[b];
 }
 fn prm_contact_stiffness(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 26u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -834,7 +855,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let r_ij = sqrt(r2);
             let W_ij = kernel_w(r_ij, h_ij);
             let gradW_ij = kernel_grad(r_ij, h_ij) * x_ij;
-            // pairsum shaped_velocity_gradient (stdlib/solid/shaped_kernel.sph:128)
+            // pairsum shaped_velocity_gradient (stdlib/solid/shaped_kernel.sph:129)
             if (in_groups(2u, ints[j])) {
                 if ((body_i == ldj_body(j, sgn))) {
                     let M = kernel_metric_i;
@@ -937,12 +958,15 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     dkernel_shape = (gv * kernel_shape_i);
     // then continuity_from_strain_rate
     var drho_i: f32 = ld_drho(i);
-    drho_i = ((-rho_i) * trace(edot));
+    drho_i = ((-rho_i) * (trace(edot) + select(0.0, (v_i[0] / max(ld_x(i)[0], (0.1 * dx_i))), (prm_axisymmetric(i) > 0.0))));
     // then shaped_density_diffusion
     drho_diffusion = (prm_delta(i) * sum);
     // then jaumann
     var ds_i: mat3x3<f32> = ld_ds(i);
-    ds_i = (((2.0 * prm_G(i)) * dev(edot)) + sym(((ld_s(i) * transpose(spin)) + (spin * ld_s(i)))));
+    ds_i = (((2.0 * prm_G(i)) * (dev(edot) - ((select(0.0, (v_i[0] / max(ld_x(i)[0], (0.1 * dx_i))), (prm_axisymmetric(i) > 0.0)) / 3.0) * eye()))) + sym(((ld_s(i) * transpose(spin)) + (spin * ld_s(i)))));
+    // then jaumann_hoop
+    var ds_hoop_i: f32 = ld_ds_hoop(i);
+    ds_hoop_i = select(0.0, ((2.0 * prm_G(i)) * (select(0.0, (v_i[0] / max(ld_x(i)[0], (0.1 * dx_i))), (prm_axisymmetric(i) > 0.0)) - ((trace(edot) + select(0.0, (v_i[0] / max(ld_x(i)[0], (0.1 * dx_i))), (prm_axisymmetric(i) > 0.0))) / 3.0))), (prm_axisymmetric(i) > 0.0));
     // then contact_pressure
     var p_contact_i: f32 = ld_p_contact(i);
     p_contact_i = ((prm_contact_stiffness(i) * prm_bulk(i)) * max((colour_other - prm_contact_colour(i)), 0.0));
@@ -954,7 +978,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     rate_lap_sum = (((2.0 * 3.0) / max(moment_2, 1e-12)) * sum_3);
     // then compressive_share
     var compression_i: f32 = ld_compression(i);
-    compression_i = (abs(trace(edot)) / ((abs(trace(edot)) + frob(dev(edot))) + ((0.01 * ld_c(i)) / ld_h(i))));
+    let volumetric = abs((trace(edot) + select(0.0, (v_i[0] / max(ld_x(i)[0], (0.1 * dx_i))), (prm_axisymmetric(i) > 0.0))));
+    compression_i = (volumetric / ((volumetric + frob(dev(edot))) + ((0.01 * ld_c(i)) / ld_h(i))));
     st_L_inv(i, L_inv);
     st_edot(i, edot);
     st_spin(i, spin);
@@ -965,6 +990,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     st_hourglass_rate2(i, hourglass_rate2);
     st_drho_diffusion(i, drho_diffusion);
     st_ds(i, ds_i);
+    st_ds_hoop(i, ds_hoop_i);
     st_colour_other(i, colour_other);
     st_p_contact(i, p_contact_i);
     st_lap_sum(i, lap_sum);

@@ -359,6 +359,16 @@ fn pos3(p: u32) -> vec3<f32> {
     return vec3<f32>(data[b + 0u], data[b + 1u], data[b + 2u]);
 }
 fn h_of(p: u32) -> f32 { return data[u32(info[17u] + i32(p))]; }
+fn ld_x(i: u32) -> vec3<f32> {
+    let b = u32(info[5 + G] + i32(i) * 3);
+    return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
+}
+fn st_x(i: u32, v: vec3<f32>) {
+    let b = u32(info[5 + G] + i32(i) * 3);
+    data[b] = v[0];
+    data[b + 1u] = v[1];
+    data[b + 2u] = v[2];
+}
 fn ld_v(i: u32) -> vec3<f32> {
     let b = u32(info[7 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
@@ -373,6 +383,14 @@ fn ldj_v(j: u32, sgn: vec3<f32>) -> vec3<f32> {
     let base = info[7u];
     let b = u32(base + i32(j) * 3);
     return (vec3<f32>(data[b], data[b + 1u], data[b + 2u]) * sgn);
+}
+fn ld_dx(i: u32) -> f32 {
+    let b = u32(info[9 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_dx(i: u32, v: f32) {
+    let b = u32(info[9 + G] + i32(i) * 1);
+    data[b] = v;
 }
 fn ld_body(i: u32) -> f32 {
     let b = u32(info[11 + G] + i32(i) * 1);
@@ -429,38 +447,46 @@ fn st_L_inv(i: u32, v: mat3x3<f32>) {
     data[b + 7u] = v[1][2];
     data[b + 8u] = v[2][2];
 }
-fn ld_p(i: u32) -> f32 {
+fn ld_s_hoop(i: u32) -> f32 {
     let b = u32(info[21 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_s_hoop(i: u32, v: f32) {
+    let b = u32(info[21 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_p(i: u32) -> f32 {
+    let b = u32(info[23 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p(i: u32, v: f32) {
-    let b = u32(info[21 + G] + i32(i) * 1);
+    let b = u32(info[23 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_p(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[21u];
-    let b = u32(base + i32(j) * 1);
-    return data[b];
-}
-fn ld_c(i: u32) -> f32 {
-    let b = u32(info[23 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_c(i: u32, v: f32) {
-    let b = u32(info[23 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ldj_c(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[23u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
+fn ld_c(i: u32) -> f32 {
+    let b = u32(info[25 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_c(i: u32, v: f32) {
+    let b = u32(info[25 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ldj_c(j: u32, sgn: vec3<f32>) -> f32 {
+    let base = info[25u];
+    let b = u32(base + i32(j) * 1);
+    return data[b];
+}
 fn ld_s(i: u32) -> mat3x3<f32> {
-    let b = u32(info[25 + G] + i32(i) * 6);
+    let b = u32(info[27 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[25 + G] + i32(i) * 6);
+    let b = u32(info[27 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -469,85 +495,89 @@ fn st_s(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ldj_s(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
-    let base = info[25u];
+    let base = info[27u];
     let b = u32(base + i32(j) * 6);
     return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u])), sgn);
 }
 fn ld_grad_rho(i: u32) -> vec3<f32> {
-    let b = u32(info[55 + G] + i32(i) * 3);
+    let b = u32(info[57 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_grad_rho(i: u32, v: vec3<f32>) {
-    let b = u32(info[55 + G] + i32(i) * 3);
+    let b = u32(info[57 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ldj_grad_rho(j: u32, sgn: vec3<f32>) -> vec3<f32> {
-    let base = info[55u + ints[j]];
+    let base = info[57u + ints[j]];
     if (base == -2147483648) { return vec3<f32>(0.0); }
     let b = u32(base + i32(j) * 3);
     return (vec3<f32>(data[b], data[b + 1u], data[b + 2u]) * sgn);
 }
 fn ld_drho(i: u32) -> f32 {
-    let b = u32(info[57 + G] + i32(i) * 1);
+    let b = u32(info[59 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho(i: u32, v: f32) {
-    let b = u32(info[57 + G] + i32(i) * 1);
+    let b = u32(info[59 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_dv(i: u32) -> vec3<f32> {
-    let b = u32(info[61 + G] + i32(i) * 3);
+    let b = u32(info[63 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_dv(i: u32, v: vec3<f32>) {
-    let b = u32(info[61 + G] + i32(i) * 3);
+    let b = u32(info[63 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_p_contact(i: u32) -> f32 {
-    let b = u32(info[77 + G] + i32(i) * 1);
+    let b = u32(info[81 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p_contact(i: u32, v: f32) {
-    let b = u32(info[77 + G] + i32(i) * 1);
+    let b = u32(info[81 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_p_contact(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[77u];
+    let base = info[81u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
 fn ld_a_contact(i: u32) -> vec3<f32> {
-    let b = u32(info[79 + G] + i32(i) * 3);
+    let b = u32(info[83 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_a_contact(i: u32, v: vec3<f32>) {
-    let b = u32(info[79 + G] + i32(i) * 3);
+    let b = u32(info[83 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
+fn prm_axisymmetric(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 5u;
+    return params[b];
+}
 fn prm_delta(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 9u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 10u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 11u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 12u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 13u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -567,6 +597,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var a_contact: vec3<f32> = vec3<f32>(0.0);
     // pairsum momentum: accumulators
     var dv: vec3<f32> = vec3<f32>(0.0);
+    let s_2 = ld_s(i);
+    let s_hoop = ld_s_hoop(i);
+    let w = 1.0;
+    dv = select(vec3<f32>(0.0), ((w * ((s_2 - (s_hoop * eye())) * vec3<f32>(1.0, 0.0, 0.0))) / (ld_rho(i) * max(ld_x(i)[0], (0.1 * ld_dx(i))))), (prm_axisymmetric(i) > 0.0));
     let delta_i = prm_delta(i);
     let c0_i = prm_c0(i);
     let visc_a_i = prm_visc_a(i);
@@ -625,7 +659,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let r_ij = sqrt(r2);
             let W_ij = kernel_w(r_ij, h_ij);
             let gradW_ij = kernel_grad(r_ij, h_ij) * x_ij;
-            // pairsum continuity (stdlib/continuity/delta_sph.sph:25)
+            // pairsum continuity (stdlib/continuity/delta_sph.sph:26)
             if (in_groups(1u, ints[j])) {
                 let vol_j = (ldj_m(j, sgn) / ldj_rho(j, sgn));
                 let L_inv = L_inv_i;
@@ -638,7 +672,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             if ((body_i != ldj_body(j, sgn))) {
                 a_contact = a_contact + ((((-ldj_m(j, sgn)) * (p_contact_i + ldj_p_contact(j, sgn))) / (rho_i * ldj_rho(j, sgn))) * gradW_ij);
             }
-            // pairsum momentum (stdlib/momentum/corrected.sph:13)
+            // pairsum momentum (stdlib/momentum/corrected.sph:14)
             if (in_groups(1u, ints[j])) {
                 if ((body_i == ldj_body(j, sgn))) {
                     let sig_i = (s_i - (p_i * eye()));
@@ -662,7 +696,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         }}}
     }
     // then continuity
-    drho = ((rho_i * div_v) + diffusion);
+    drho = ((rho_i * (div_v - select(0.0, (v_i[0] / max(ld_x(i)[0], (0.1 * ld_dx(i)))), (prm_axisymmetric(i) > 0.0)))) + diffusion);
     st_drho(i, drho);
     st_dv(i, dv);
     st_a_contact(i, a_contact);

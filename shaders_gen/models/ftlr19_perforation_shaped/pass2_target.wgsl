@@ -363,6 +363,16 @@ fn pos3(p: u32) -> vec3<f32> {
     return vec3<f32>(data[b + 0u], data[b + 1u], data[b + 2u]);
 }
 fn h_of(p: u32) -> f32 { return data[u32(info[17u] + i32(p))]; }
+fn ld_x(i: u32) -> vec3<f32> {
+    let b = u32(info[5 + G] + i32(i) * 3);
+    return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
+}
+fn st_x(i: u32, v: vec3<f32>) {
+    let b = u32(info[5 + G] + i32(i) * 3);
+    data[b] = v[0];
+    data[b + 1u] = v[1];
+    data[b + 2u] = v[2];
+}
 fn ld_v(i: u32) -> vec3<f32> {
     let b = u32(info[7 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
@@ -387,8 +397,7 @@ fn st_dx(i: u32, v: f32) {
     data[b] = v;
 }
 fn ldj_dx(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[9u + ints[j]];
-    if (base == -2147483648) { return 0.0; }
+    let base = info[9u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
@@ -439,38 +448,46 @@ fn st_L_inv(i: u32, v: mat3x3<f32>) {
     data[b + 7u] = v[1][2];
     data[b + 8u] = v[2][2];
 }
-fn ld_p(i: u32) -> f32 {
+fn ld_s_hoop(i: u32) -> f32 {
     let b = u32(info[21 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_s_hoop(i: u32, v: f32) {
+    let b = u32(info[21 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_p(i: u32) -> f32 {
+    let b = u32(info[23 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p(i: u32, v: f32) {
-    let b = u32(info[21 + G] + i32(i) * 1);
+    let b = u32(info[23 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_p(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[21u];
-    let b = u32(base + i32(j) * 1);
-    return data[b];
-}
-fn ld_c(i: u32) -> f32 {
-    let b = u32(info[23 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_c(i: u32, v: f32) {
-    let b = u32(info[23 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ldj_c(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[23u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
+fn ld_c(i: u32) -> f32 {
+    let b = u32(info[25 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_c(i: u32, v: f32) {
+    let b = u32(info[25 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ldj_c(j: u32, sgn: vec3<f32>) -> f32 {
+    let base = info[25u];
+    let b = u32(base + i32(j) * 1);
+    return data[b];
+}
 fn ld_s(i: u32) -> mat3x3<f32> {
-    let b = u32(info[25 + G] + i32(i) * 6);
+    let b = u32(info[27 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[25 + G] + i32(i) * 6);
+    let b = u32(info[27 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -479,16 +496,16 @@ fn st_s(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ldj_s(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
-    let base = info[25u];
+    let base = info[27u];
     let b = u32(base + i32(j) * 6);
     return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u])), sgn);
 }
 fn ld_edot(i: u32) -> mat3x3<f32> {
-    let b = u32(info[29 + G] + i32(i) * 6);
+    let b = u32(info[31 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_edot(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[29 + G] + i32(i) * 6);
+    let b = u32(info[31 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -497,31 +514,31 @@ fn st_edot(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ldj_edot(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
-    let base = info[29u];
+    let base = info[31u];
     let b = u32(base + i32(j) * 6);
     return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u])), sgn);
 }
 fn ld_spin(i: u32) -> mat3x3<f32> {
-    let b = u32(info[31 + G] + i32(i) * 3);
+    let b = u32(info[33 + G] + i32(i) * 3);
     return mat3x3<f32>(vec3<f32>(0.0, -data[b], -data[b + 1u]), vec3<f32>(data[b], 0.0, -data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 2u], 0.0));
 }
 fn st_spin(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[31 + G] + i32(i) * 3);
+    let b = u32(info[33 + G] + i32(i) * 3);
     data[b] = v[1][0];
     data[b + 1u] = v[2][0];
     data[b + 2u] = v[2][1];
 }
 fn ldj_spin(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
-    let base = info[31u];
+    let base = info[33u];
     let b = u32(base + i32(j) * 3);
     return flip_m(mat3x3<f32>(vec3<f32>(0.0, -data[b], -data[b + 1u]), vec3<f32>(data[b], 0.0, -data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 2u], 0.0)), sgn);
 }
 fn ld_kernel_metric(i: u32) -> mat3x3<f32> {
-    let b = u32(info[35 + G] + i32(i) * 6);
+    let b = u32(info[37 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_kernel_metric(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[35 + G] + i32(i) * 6);
+    let b = u32(info[37 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -530,120 +547,124 @@ fn st_kernel_metric(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ldj_kernel_metric(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
-    let base = info[35u + ints[j]];
+    let base = info[37u + ints[j]];
     if (base == -2147483648) { return mat3x3<f32>(); }
     let b = u32(base + i32(j) * 6);
     return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u])), sgn);
 }
 fn ld_kernel_norm(i: u32) -> f32 {
-    let b = u32(info[37 + G] + i32(i) * 1);
+    let b = u32(info[39 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_kernel_norm(i: u32, v: f32) {
-    let b = u32(info[37 + G] + i32(i) * 1);
+    let b = u32(info[39 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_kernel_norm(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[37u + ints[j]];
+    let base = info[39u + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
 fn ld_D(i: u32) -> f32 {
-    let b = u32(info[43 + G] + i32(i) * 1);
+    let b = u32(info[45 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_D(i: u32, v: f32) {
-    let b = u32(info[43 + G] + i32(i) * 1);
+    let b = u32(info[45 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_D(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[43u + ints[j]];
+    let base = info[45u + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
 fn ld_de(i: u32) -> f32 {
-    let b = u32(info[59 + G] + i32(i) * 1);
+    let b = u32(info[61 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_de(i: u32, v: f32) {
-    let b = u32(info[59 + G] + i32(i) * 1);
+    let b = u32(info[61 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_dv(i: u32) -> vec3<f32> {
-    let b = u32(info[61 + G] + i32(i) * 3);
+    let b = u32(info[63 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_dv(i: u32, v: vec3<f32>) {
-    let b = u32(info[61 + G] + i32(i) * 3);
+    let b = u32(info[63 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_compression(i: u32) -> f32 {
-    let b = u32(info[65 + G] + i32(i) * 1);
+    let b = u32(info[67 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_compression(i: u32, v: f32) {
-    let b = u32(info[65 + G] + i32(i) * 1);
+    let b = u32(info[67 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_compression(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[65u + ints[j]];
+    let base = info[67u + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
 fn ld_p_contact(i: u32) -> f32 {
-    let b = u32(info[77 + G] + i32(i) * 1);
+    let b = u32(info[81 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p_contact(i: u32, v: f32) {
-    let b = u32(info[77 + G] + i32(i) * 1);
+    let b = u32(info[81 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ldj_p_contact(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[77u];
+    let base = info[81u];
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
 fn ld_a_contact(i: u32) -> vec3<f32> {
-    let b = u32(info[79 + G] + i32(i) * 3);
+    let b = u32(info[83 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_a_contact(i: u32, v: vec3<f32>) {
-    let b = u32(info[79 + G] + i32(i) * 3);
+    let b = u32(info[83 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 1u;
+    return params[b];
+}
+fn prm_axisymmetric(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 5u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 11u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 12u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 13u;
     return params[b];
 }
 fn prm_visc_share(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 15u;
     return params[b];
 }
 fn prm_hourglass_visc(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 16u;
     return params[b];
 }
 fn prm_damage_coupling(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 22u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -660,6 +681,13 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // pairsum shaped_failing_momentum: accumulators
     var dv: vec3<f32> = vec3<f32>(0.0);
     var de: f32 = 0.0;
+    let w = (1.0 - select((prm_damage_coupling(i) * ld_D(i)), 1.0, (ld_D(i) >= 1.0)));
+    let s_2 = ld_s(i);
+    let s_hoop = ld_s_hoop(i);
+    let w_2 = w;
+    dv = select(vec3<f32>(0.0), ((w_2 * ((s_2 - (s_hoop * eye())) * vec3<f32>(1.0, 0.0, 0.0))) / (ld_rho(i) * max(ld_x(i)[0], (0.1 * ld_dx(i))))), (prm_axisymmetric(i) > 0.0));
+    let sigma_hoop = ((w * (ld_s_hoop(i) - min(ld_p(i), 0.0))) - max(ld_p(i), 0.0));
+    de = select(0.0, ((sigma_hoop * select(0.0, (ld_v(i)[0] / max(ld_x(i)[0], (0.1 * ld_dx(i)))), (prm_axisymmetric(i) > 0.0))) / ld_rho(i)), (prm_axisymmetric(i) > 0.0));
     let h_ratio_i = prm_h_ratio(i);
     let visc_a_i = prm_visc_a(i);
     let visc_b_i = prm_visc_b(i);
@@ -732,18 +760,18 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             // pairsum shaped_failing_momentum (stdlib/momentum/shaped_failing.sph:15)
             if (in_groups(2u, ints[j])) {
                 if ((body_i == ldj_body(j, sgn))) {
-                    let s_2 = s_i;
+                    let s_3 = s_i;
                     let p = p_i;
                     let D = D_i;
                     let coupling = damage_coupling_i;
-                    let w = select((coupling * D), 1.0, (D >= 1.0));
-                    let sig_i = (((1.0 - w) * (s_2 - (min(p, 0.0) * eye()))) - (max(p, 0.0) * eye()));
-                    let s_3 = ldj_s(j, sgn);
+                    let w_3 = select((coupling * D), 1.0, (D >= 1.0));
+                    let sig_i = (((1.0 - w_3) * (s_3 - (min(p, 0.0) * eye()))) - (max(p, 0.0) * eye()));
+                    let s_4 = ldj_s(j, sgn);
                     let p_2 = ldj_p(j, sgn);
                     let D_2 = ldj_D(j, sgn);
                     let coupling_2 = prm_damage_coupling(j);
-                    let w_2 = select((coupling_2 * D_2), 1.0, (D_2 >= 1.0));
-                    let sig_j = (((1.0 - w_2) * (s_3 - (min(p_2, 0.0) * eye()))) - (max(p_2, 0.0) * eye()));
+                    let w_4 = select((coupling_2 * D_2), 1.0, (D_2 >= 1.0));
+                    let sig_j = (((1.0 - w_4) * (s_4 - (min(p_2, 0.0) * eye()))) - (max(p_2, 0.0) * eye()));
                     let p1 = ldj_rho(j, sgn);
                     let M = kernel_metric_i;
                     let x_2 = x_ij;

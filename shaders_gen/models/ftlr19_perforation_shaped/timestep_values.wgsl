@@ -51,27 +51,27 @@ fn st_h(i: u32, v: f32) {
     data[b] = v;
 }
 fn ld_h_short(i: u32) -> f32 {
-    let b = u32(info[39 + ints[i]] + i32(i) * 1);
+    let b = u32(info[41 + ints[i]] + i32(i) * 1);
     return data[b];
 }
 fn st_h_short(i: u32, v: f32) {
-    let b = u32(info[39 + ints[i]] + i32(i) * 1);
+    let b = u32(info[41 + ints[i]] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_hourglass_rate2(i: u32) -> f32 {
-    let b = u32(info[69 + ints[i]] + i32(i) * 1);
+    let b = u32(info[71 + ints[i]] + i32(i) * 1);
     return data[b];
 }
 fn st_hourglass_rate2(i: u32, v: f32) {
-    let b = u32(info[69 + ints[i]] + i32(i) * 1);
+    let b = u32(info[71 + ints[i]] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 10u;
     return params[b];
 }
 fn prm_C_cfl(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 14u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -82,7 +82,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     if (i >= n) { return; }
     let t = globals[0u];
     let dt = globals[1u];
-    let scratch = u32(info[107]);
+    let scratch = u32(info[113]);
     data[scratch + 0u * n + i] = select(pinf(), (prm_C_cfl(i) * ld_h(i)), in_groups(1u, ints[i]));
     data[scratch + 1u * n + i] = select((-pinf()), (prm_c0(i) + length(ld_v(i))), in_groups(1u, ints[i]));
     data[scratch + 2u * n + i] = select(pinf(), (prm_C_cfl(i) * ld_h_short(i)), in_groups(2u, ints[i]));

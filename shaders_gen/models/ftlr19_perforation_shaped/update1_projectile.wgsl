@@ -61,28 +61,36 @@ fn st_rho(i: u32, v: f32) {
     let b = u32(info[15 + G] + i32(i) * 1);
     data[b] = v;
 }
-fn ld_p(i: u32) -> f32 {
+fn ld_s_hoop(i: u32) -> f32 {
     let b = u32(info[21 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_s_hoop(i: u32, v: f32) {
+    let b = u32(info[21 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_p(i: u32) -> f32 {
+    let b = u32(info[23 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p(i: u32, v: f32) {
-    let b = u32(info[21 + G] + i32(i) * 1);
+    let b = u32(info[23 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_c(i: u32) -> f32 {
-    let b = u32(info[23 + G] + i32(i) * 1);
+    let b = u32(info[25 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_c(i: u32, v: f32) {
-    let b = u32(info[23 + G] + i32(i) * 1);
+    let b = u32(info[25 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s(i: u32) -> mat3x3<f32> {
-    let b = u32(info[25 + G] + i32(i) * 6);
+    let b = u32(info[27 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[25 + G] + i32(i) * 6);
+    let b = u32(info[27 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -91,45 +99,45 @@ fn st_s(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_e(i: u32) -> f32 {
-    let b = u32(info[27 + G] + i32(i) * 1);
+    let b = u32(info[29 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_e(i: u32, v: f32) {
-    let b = u32(info[27 + G] + i32(i) * 1);
+    let b = u32(info[29 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_drho(i: u32) -> f32 {
-    let b = u32(info[57 + G] + i32(i) * 1);
+    let b = u32(info[59 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho(i: u32, v: f32) {
-    let b = u32(info[57 + G] + i32(i) * 1);
+    let b = u32(info[59 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_de(i: u32) -> f32 {
-    let b = u32(info[59 + G] + i32(i) * 1);
+    let b = u32(info[61 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_de(i: u32, v: f32) {
-    let b = u32(info[59 + G] + i32(i) * 1);
+    let b = u32(info[61 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_dv(i: u32) -> vec3<f32> {
-    let b = u32(info[61 + G] + i32(i) * 3);
+    let b = u32(info[63 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_dv(i: u32, v: vec3<f32>) {
-    let b = u32(info[61 + G] + i32(i) * 3);
+    let b = u32(info[63 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_ds(i: u32) -> mat3x3<f32> {
-    let b = u32(info[73 + G] + i32(i) * 6);
+    let b = u32(info[75 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_ds(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[73 + G] + i32(i) * 6);
+    let b = u32(info[75 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -137,50 +145,66 @@ fn st_ds(i: u32, v: mat3x3<f32>) {
     data[b + 4u] = v[2][1];
     data[b + 5u] = v[2][2];
 }
+fn ld_ds_hoop(i: u32) -> f32 {
+    let b = u32(info[77 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_ds_hoop(i: u32, v: f32) {
+    let b = u32(info[77 + G] + i32(i) * 1);
+    data[b] = v;
+}
 fn ld_a_contact(i: u32) -> vec3<f32> {
-    let b = u32(info[79 + G] + i32(i) * 3);
+    let b = u32(info[83 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_a_contact(i: u32, v: vec3<f32>) {
-    let b = u32(info[79 + G] + i32(i) * 3);
+    let b = u32(info[83 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_x_0(i: u32) -> vec3<f32> {
-    let b = u32(info[87 + G] + i32(i) * 3);
+    let b = u32(info[91 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_x_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[87 + G] + i32(i) * 3);
+    let b = u32(info[91 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_v_0(i: u32) -> vec3<f32> {
-    let b = u32(info[89 + G] + i32(i) * 3);
+    let b = u32(info[93 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_v_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[89 + G] + i32(i) * 3);
+    let b = u32(info[93 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_rho_0(i: u32) -> f32 {
-    let b = u32(info[91 + G] + i32(i) * 1);
+    let b = u32(info[95 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho_0(i: u32, v: f32) {
-    let b = u32(info[91 + G] + i32(i) * 1);
+    let b = u32(info[95 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_s_hoop_0(i: u32) -> f32 {
+    let b = u32(info[97 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_s_hoop_0(i: u32, v: f32) {
+    let b = u32(info[97 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s_0(i: u32) -> mat3x3<f32> {
-    let b = u32(info[93 + G] + i32(i) * 6);
+    let b = u32(info[99 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s_0(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[93 + G] + i32(i) * 6);
+    let b = u32(info[99 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -189,27 +213,27 @@ fn st_s_0(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_e_0(i: u32) -> f32 {
-    let b = u32(info[95 + G] + i32(i) * 1);
+    let b = u32(info[101 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_e_0(i: u32, v: f32) {
-    let b = u32(info[95 + G] + i32(i) * 1);
+    let b = u32(info[101 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 0u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 10u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 23u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 24u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -225,17 +249,20 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var x_i: vec3<f32> = ld_x(i);
     var v_i: vec3<f32> = ld_v(i);
     var rho_i: f32 = ld_rho(i);
+    var s_hoop_i: f32 = ld_s_hoop(i);
     var s_i: mat3x3<f32> = ld_s(i);
     var e_i: f32 = ld_e(i);
     let rate_of_x = v_i;
     let rate_of_v = (ld_dv(i) + ld_a_contact(i));
     let rate_of_rho = ld_drho(i);
     let rate_of_s = ld_ds(i);
+    let rate_of_s_hoop = ld_ds_hoop(i);
     let rate_of_e = ld_de(i);
     v_i = (ld_v_0(i) + (0.5 * (dt * rate_of_v)));
     x_i = (ld_x_0(i) + (0.5 * (dt * rate_of_x)));
     rho_i = (ld_rho_0(i) + (0.5 * (dt * rate_of_rho)));
     s_i = (ld_s_0(i) + (0.5 * (dt * rate_of_s)));
+    s_hoop_i = (ld_s_hoop_0(i) + (0.5 * (dt * rate_of_s_hoop)));
     e_i = (ld_e_0(i) + (0.5 * (dt * rate_of_e)));
     // eos
     var p_i: f32 = ld_p(i);
@@ -254,6 +281,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     st_x(i, x_i);
     st_v(i, v_i);
     st_rho(i, rho_i);
+    st_s_hoop(i, s_hoop_i);
     st_p(i, p_i);
     st_c(i, c_i);
     st_s(i, s_i);

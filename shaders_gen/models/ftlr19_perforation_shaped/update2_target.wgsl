@@ -77,28 +77,36 @@ fn st_h(i: u32, v: f32) {
     let b = u32(info[17 + G] + i32(i) * 1);
     data[b] = v;
 }
-fn ld_p(i: u32) -> f32 {
+fn ld_s_hoop(i: u32) -> f32 {
     let b = u32(info[21 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_s_hoop(i: u32, v: f32) {
+    let b = u32(info[21 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_p(i: u32) -> f32 {
+    let b = u32(info[23 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p(i: u32, v: f32) {
-    let b = u32(info[21 + G] + i32(i) * 1);
+    let b = u32(info[23 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_c(i: u32) -> f32 {
-    let b = u32(info[23 + G] + i32(i) * 1);
+    let b = u32(info[25 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_c(i: u32, v: f32) {
-    let b = u32(info[23 + G] + i32(i) * 1);
+    let b = u32(info[25 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s(i: u32) -> mat3x3<f32> {
-    let b = u32(info[25 + G] + i32(i) * 6);
+    let b = u32(info[27 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[25 + G] + i32(i) * 6);
+    let b = u32(info[27 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -107,19 +115,19 @@ fn st_s(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_e(i: u32) -> f32 {
-    let b = u32(info[27 + G] + i32(i) * 1);
+    let b = u32(info[29 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_e(i: u32, v: f32) {
-    let b = u32(info[27 + G] + i32(i) * 1);
+    let b = u32(info[29 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_edot(i: u32) -> mat3x3<f32> {
-    let b = u32(info[29 + G] + i32(i) * 6);
+    let b = u32(info[31 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_edot(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[29 + G] + i32(i) * 6);
+    let b = u32(info[31 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -128,11 +136,11 @@ fn st_edot(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_kernel_shape(i: u32) -> mat3x3<f32> {
-    let b = u32(info[33 + G] + i32(i) * 9);
+    let b = u32(info[35 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_kernel_shape(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[33 + G] + i32(i) * 9);
+    let b = u32(info[35 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -144,11 +152,11 @@ fn st_kernel_shape(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ld_kernel_metric(i: u32) -> mat3x3<f32> {
-    let b = u32(info[35 + G] + i32(i) * 6);
+    let b = u32(info[37 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_kernel_metric(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[35 + G] + i32(i) * 6);
+    let b = u32(info[37 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -157,111 +165,111 @@ fn st_kernel_metric(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_kernel_norm(i: u32) -> f32 {
-    let b = u32(info[37 + G] + i32(i) * 1);
+    let b = u32(info[39 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_kernel_norm(i: u32, v: f32) {
-    let b = u32(info[37 + G] + i32(i) * 1);
+    let b = u32(info[39 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_h_short(i: u32) -> f32 {
-    let b = u32(info[39 + G] + i32(i) * 1);
+    let b = u32(info[41 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_h_short(i: u32, v: f32) {
-    let b = u32(info[39 + G] + i32(i) * 1);
+    let b = u32(info[41 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_u(i: u32) -> vec3<f32> {
-    let b = u32(info[41 + G] + i32(i) * 3);
+    let b = u32(info[43 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_u(i: u32, v: vec3<f32>) {
-    let b = u32(info[41 + G] + i32(i) * 3);
+    let b = u32(info[43 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_D(i: u32) -> f32 {
-    let b = u32(info[43 + G] + i32(i) * 1);
+    let b = u32(info[45 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_D(i: u32, v: f32) {
-    let b = u32(info[43 + G] + i32(i) * 1);
+    let b = u32(info[45 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_eps_p(i: u32) -> f32 {
-    let b = u32(info[45 + G] + i32(i) * 1);
+    let b = u32(info[47 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_eps_p(i: u32, v: f32) {
-    let b = u32(info[45 + G] + i32(i) * 1);
+    let b = u32(info[47 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_deps_p(i: u32) -> f32 {
-    let b = u32(info[47 + G] + i32(i) * 1);
+    let b = u32(info[49 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_deps_p(i: u32, v: f32) {
-    let b = u32(info[47 + G] + i32(i) * 1);
+    let b = u32(info[49 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_eps_nl(i: u32) -> f32 {
-    let b = u32(info[49 + G] + i32(i) * 1);
+    let b = u32(info[51 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_eps_nl(i: u32, v: f32) {
-    let b = u32(info[49 + G] + i32(i) * 1);
+    let b = u32(info[51 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_rate_nl(i: u32) -> f32 {
-    let b = u32(info[51 + G] + i32(i) * 1);
+    let b = u32(info[53 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rate_nl(i: u32, v: f32) {
-    let b = u32(info[51 + G] + i32(i) * 1);
+    let b = u32(info[53 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_T(i: u32) -> f32 {
-    let b = u32(info[53 + G] + i32(i) * 1);
+    let b = u32(info[55 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_T(i: u32, v: f32) {
-    let b = u32(info[53 + G] + i32(i) * 1);
+    let b = u32(info[55 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_drho(i: u32) -> f32 {
-    let b = u32(info[57 + G] + i32(i) * 1);
+    let b = u32(info[59 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho(i: u32, v: f32) {
-    let b = u32(info[57 + G] + i32(i) * 1);
+    let b = u32(info[59 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_de(i: u32) -> f32 {
-    let b = u32(info[59 + G] + i32(i) * 1);
+    let b = u32(info[61 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_de(i: u32, v: f32) {
-    let b = u32(info[59 + G] + i32(i) * 1);
+    let b = u32(info[61 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_dv(i: u32) -> vec3<f32> {
-    let b = u32(info[61 + G] + i32(i) * 3);
+    let b = u32(info[63 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_dv(i: u32, v: vec3<f32>) {
-    let b = u32(info[61 + G] + i32(i) * 3);
+    let b = u32(info[63 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_dkernel_shape(i: u32) -> mat3x3<f32> {
-    let b = u32(info[63 + G] + i32(i) * 9);
+    let b = u32(info[65 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_dkernel_shape(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[63 + G] + i32(i) * 9);
+    let b = u32(info[65 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -273,29 +281,29 @@ fn st_dkernel_shape(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ld_dv_hourglass(i: u32) -> vec3<f32> {
-    let b = u32(info[67 + G] + i32(i) * 3);
+    let b = u32(info[69 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_dv_hourglass(i: u32, v: vec3<f32>) {
-    let b = u32(info[67 + G] + i32(i) * 3);
+    let b = u32(info[69 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_drho_diffusion(i: u32) -> f32 {
-    let b = u32(info[71 + G] + i32(i) * 1);
+    let b = u32(info[73 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_drho_diffusion(i: u32, v: f32) {
-    let b = u32(info[71 + G] + i32(i) * 1);
+    let b = u32(info[73 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_ds(i: u32) -> mat3x3<f32> {
-    let b = u32(info[73 + G] + i32(i) * 6);
+    let b = u32(info[75 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_ds(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[73 + G] + i32(i) * 6);
+    let b = u32(info[75 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -303,74 +311,90 @@ fn st_ds(i: u32, v: mat3x3<f32>) {
     data[b + 4u] = v[2][1];
     data[b + 5u] = v[2][2];
 }
+fn ld_ds_hoop(i: u32) -> f32 {
+    let b = u32(info[77 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_ds_hoop(i: u32, v: f32) {
+    let b = u32(info[77 + G] + i32(i) * 1);
+    data[b] = v;
+}
 fn ld_a_contact(i: u32) -> vec3<f32> {
-    let b = u32(info[79 + G] + i32(i) * 3);
+    let b = u32(info[83 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_a_contact(i: u32, v: vec3<f32>) {
-    let b = u32(info[79 + G] + i32(i) * 3);
+    let b = u32(info[83 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_lap_sum(i: u32) -> f32 {
-    let b = u32(info[81 + G] + i32(i) * 1);
+    let b = u32(info[85 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_lap_sum(i: u32, v: f32) {
-    let b = u32(info[81 + G] + i32(i) * 1);
+    let b = u32(info[85 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_lap_weight(i: u32) -> f32 {
-    let b = u32(info[83 + G] + i32(i) * 1);
+    let b = u32(info[87 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_lap_weight(i: u32, v: f32) {
-    let b = u32(info[83 + G] + i32(i) * 1);
+    let b = u32(info[87 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_rate_lap_sum(i: u32) -> f32 {
-    let b = u32(info[85 + G] + i32(i) * 1);
+    let b = u32(info[89 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rate_lap_sum(i: u32, v: f32) {
-    let b = u32(info[85 + G] + i32(i) * 1);
+    let b = u32(info[89 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_x_0(i: u32) -> vec3<f32> {
-    let b = u32(info[87 + G] + i32(i) * 3);
+    let b = u32(info[91 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_x_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[87 + G] + i32(i) * 3);
+    let b = u32(info[91 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_v_0(i: u32) -> vec3<f32> {
-    let b = u32(info[89 + G] + i32(i) * 3);
+    let b = u32(info[93 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_v_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[89 + G] + i32(i) * 3);
+    let b = u32(info[93 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_rho_0(i: u32) -> f32 {
-    let b = u32(info[91 + G] + i32(i) * 1);
+    let b = u32(info[95 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho_0(i: u32, v: f32) {
-    let b = u32(info[91 + G] + i32(i) * 1);
+    let b = u32(info[95 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_s_hoop_0(i: u32) -> f32 {
+    let b = u32(info[97 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_s_hoop_0(i: u32, v: f32) {
+    let b = u32(info[97 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s_0(i: u32) -> mat3x3<f32> {
-    let b = u32(info[93 + G] + i32(i) * 6);
+    let b = u32(info[99 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s_0(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[93 + G] + i32(i) * 6);
+    let b = u32(info[99 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -379,19 +403,19 @@ fn st_s_0(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_e_0(i: u32) -> f32 {
-    let b = u32(info[95 + G] + i32(i) * 1);
+    let b = u32(info[101 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_e_0(i: u32, v: f32) {
-    let b = u32(info[95 + G] + i32(i) * 1);
+    let b = u32(info[101 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_kernel_shape_0(i: u32) -> mat3x3<f32> {
-    let b = u32(info[97 + G] + i32(i) * 9);
+    let b = u32(info[103 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_kernel_shape_0(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[97 + G] + i32(i) * 9);
+    let b = u32(info[103 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -403,153 +427,157 @@ fn st_kernel_shape_0(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ld_u_0(i: u32) -> vec3<f32> {
-    let b = u32(info[99 + G] + i32(i) * 3);
+    let b = u32(info[105 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_u_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[99 + G] + i32(i) * 3);
+    let b = u32(info[105 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_D_0(i: u32) -> f32 {
-    let b = u32(info[101 + G] + i32(i) * 1);
+    let b = u32(info[107 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_D_0(i: u32, v: f32) {
-    let b = u32(info[101 + G] + i32(i) * 1);
+    let b = u32(info[107 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_eps_p_0(i: u32) -> f32 {
-    let b = u32(info[103 + G] + i32(i) * 1);
+    let b = u32(info[109 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_eps_p_0(i: u32, v: f32) {
-    let b = u32(info[103 + G] + i32(i) * 1);
+    let b = u32(info[109 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_eps_nl_0(i: u32) -> f32 {
-    let b = u32(info[105 + G] + i32(i) * 1);
+    let b = u32(info[111 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_eps_nl_0(i: u32, v: f32) {
-    let b = u32(info[105 + G] + i32(i) * 1);
+    let b = u32(info[111 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 1u;
+    return params[b];
+}
+fn prm_axisymmetric(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 5u;
     return params[b];
 }
 fn prm_p_spall(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 7u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 10u;
     return params[b];
 }
 fn prm_shape_floor(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 17u;
     return params[b];
 }
 fn prm_shape_aspect(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 18u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 19u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 23u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 24u;
     return params[b];
 }
 fn prm_nonlocal_hardening(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 27u;
     return params[b];
 }
 fn prm_nonlocal_rate(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 28u;
     return params[b];
 }
 fn prm_damage_length(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 29u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 30u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 31u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 32u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 32u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 33u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 33u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 34u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 34u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 35u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 35u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 36u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 36u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 37u;
     return params[b];
 }
 fn prm_zero_pressure_floor(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 37u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 38u;
     return params[b];
 }
 fn prm_D1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 38u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 39u;
     return params[b];
 }
 fn prm_D2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 39u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 40u;
     return params[b];
 }
 fn prm_D3(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 40u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 41u;
     return params[b];
 }
 fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 41u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 42u;
     return params[b];
 }
 fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 42u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 43u;
     return params[b];
 }
 fn prm_failure_band(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 43u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 44u;
     return params[b];
 }
 fn prm_failure_band_spacing(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 44u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 45u;
     return params[b];
 }
 fn prm_nonlocal_weight(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 45u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 46u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -565,6 +593,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var x_i: vec3<f32> = ld_x(i);
     var v_i: vec3<f32> = ld_v(i);
     var rho_i: f32 = ld_rho(i);
+    var s_hoop_i: f32 = ld_s_hoop(i);
     var s_i: mat3x3<f32> = ld_s(i);
     var e_i: f32 = ld_e(i);
     var kernel_shape_i: mat3x3<f32> = ld_kernel_shape(i);
@@ -574,6 +603,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let rate_of_v = ((ld_dv(i) + ld_a_contact(i)) + ld_dv_hourglass(i));
     let rate_of_rho = (ld_drho(i) + ld_drho_diffusion(i));
     let rate_of_s = ld_ds(i);
+    let rate_of_s_hoop = ld_ds_hoop(i);
     let rate_of_e = ld_de(i);
     let rate_of_kernel_shape = ld_dkernel_shape(i);
     v_i = (ld_v_0(i) + (dt * rate_of_v));
@@ -581,6 +611,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     u_i = (ld_u_0(i) + (dt * rate_of_u));
     rho_i = (ld_rho_0(i) + (dt * rate_of_rho));
     s_i = (ld_s_0(i) + (dt * rate_of_s));
+    s_hoop_i = (ld_s_hoop_0(i) + (dt * rate_of_s_hoop));
     e_i = (ld_e_0(i) + (dt * rate_of_e));
     kernel_shape_i = (ld_kernel_shape_0(i) + (dt * rate_of_kernel_shape));
     // restore D
@@ -596,16 +627,22 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var rate_nl_i: f32 = ld_rate_nl(i);
     let l2 = (prm_damage_length(i) * prm_damage_length(i));
     let e = ld_edot(i);
-    let d = dev(e);
-    rate_nl_i = ((sqrt(((2.0 / 3.0) * ddot(d, d))) + (l2 * ld_rate_lap_sum(i))) / (1.0 + (l2 * ld_lap_weight(i))));
+    let e_hoop = select(0.0, (v_i[0] / max(x_i[0], (0.1 * ld_dx(i)))), (prm_axisymmetric(i) > 0.0));
+    let d = (dev(e) - ((e_hoop / 3.0) * eye()));
+    let d_hoop = select(0.0, (e_hoop - ((trace(e) + e_hoop) / 3.0)), (prm_axisymmetric(i) > 0.0));
+    rate_nl_i = ((sqrt(((2.0 / 3.0) * (ddot(d, d) + (d_hoop * d_hoop)))) + (l2 * ld_rate_lap_sum(i))) / (1.0 + (l2 * ld_lap_weight(i))));
     // radial_return
     var deps_p_i: f32 = ld_deps_p(i);
-    let sig_eq = sqrt(((3.0 * 0.5) * ddot(s_i, s_i)));
+    let s_2 = s_i;
+    let s_hoop = s_hoop_i;
+    let sig_eq = sqrt((1.5 * (ddot(s_2, s_2) + (s_hoop * s_hoop))));
     let blend = ((prm_nonlocal_hardening(i) * eps_nl_i) + ((1.0 - prm_nonlocal_hardening(i)) * eps_p_i));
     let hardening_strain = select(eps_p_i, max(blend, 0.0), ((prm_nonlocal_hardening(i) != 0.0) && (prm_damage_length(i) > 0.0)));
     let e_2 = ld_edot(i);
-    let d_2 = dev(e_2);
-    let hardening_rate = select(sqrt(((2.0 / 3.0) * ddot(d_2, d_2))), rate_nl_i, ((prm_nonlocal_rate(i) > 0.0) && (prm_damage_length(i) > 0.0)));
+    let e_hoop_2 = select(0.0, (v_i[0] / max(x_i[0], (0.1 * ld_dx(i)))), (prm_axisymmetric(i) > 0.0));
+    let d_2 = (dev(e_2) - ((e_hoop_2 / 3.0) * eye()));
+    let d_hoop_2 = select(0.0, (e_hoop_2 - ((trace(e_2) + e_hoop_2) / 3.0)), (prm_axisymmetric(i) > 0.0));
+    let hardening_rate = select(sqrt(((2.0 / 3.0) * (ddot(d_2, d_2) + (d_hoop_2 * d_hoop_2)))), rate_nl_i, ((prm_nonlocal_rate(i) > 0.0) && (prm_damage_length(i) > 0.0)));
     let eps_p = hardening_strain;
     let rate_p = hardening_rate;
     let T = ld_T(i);
@@ -616,6 +653,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let c_y = min(1.0, (sigma_y / max(sig_eq, 1e-30)));
     let d_3 = (((1.0 - c_y) / (3.0 * prm_G(i))) * sig_eq);
     s_i = (c_y * s_i);
+    if ((prm_axisymmetric(i) > 0.0)) {
+        s_hoop_i = (c_y * s_hoop_i);
+    }
     eps_p_i = (eps_p_i + d_3);
     deps_p_i = d_3;
     // damage
@@ -633,18 +673,23 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let mixed = ((prm_nonlocal_weight(i) * (eps_nl_new - eps_nl)) + ((1.0 - prm_nonlocal_weight(i)) * deps_p));
     let deps_p_2 = select(local, max(mixed, 0.0), (prm_damage_length(i) > 0.0));
     let p = ld_p(i);
-    let s_2 = s_i;
+    let s_3 = s_i;
+    let s_hoop_2 = s_hoop_i;
     let edot = ld_edot(i);
     let T_3 = ld_T(i);
     let p_2 = p;
-    let s_3 = s_2;
+    let s_4 = s_3;
+    let s_hoop_3 = s_hoop_2;
     let edot_2 = edot;
     let T_4 = T_3;
     let e_3 = edot_2;
-    let d_4 = dev(e_3);
-    let rate_2 = (sqrt(((2.0 / 3.0) * ddot(d_4, d_4))) / prm_eps_rate0(i));
-    let s_4 = s_3;
-    let triax = ((-p_2) / max(sqrt((1.5 * ddot(s_4, s_4))), 1e-30));
+    let e_hoop_3 = select(0.0, (v_i[0] / max(x_i[0], (0.1 * ld_dx(i)))), (prm_axisymmetric(i) > 0.0));
+    let d_4 = (dev(e_3) - ((e_hoop_3 / 3.0) * eye()));
+    let d_hoop_3 = select(0.0, (e_hoop_3 - ((trace(e_3) + e_hoop_3) / 3.0)), (prm_axisymmetric(i) > 0.0));
+    let rate_2 = (sqrt(((2.0 / 3.0) * (ddot(d_4, d_4) + (d_hoop_3 * d_hoop_3)))) / prm_eps_rate0(i));
+    let s_5 = s_4;
+    let s_hoop_4 = s_hoop_3;
+    let triax = ((-p_2) / max(sqrt((1.5 * (ddot(s_5, s_5) + (s_hoop_4 * s_hoop_4)))), 1e-30));
     let T_5 = T_4;
     let jc = min((D + (deps_p_2 / max((((prm_D1(i) + (prm_D2(i) * exp((prm_D3(i) * triax)))) * (1.0 + (prm_D4(i) * log(max(rate_2, 1.0))))) * (1.0 + (prm_D5(i) * min(max(((T_5 - prm_T_room(i)) / (prm_T_melt(i) - prm_T_room(i))), 0.0), 1.0)))), 1e-12))), 1.0);
     let rho = rho_i;
@@ -740,6 +785,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     st_v(i, v_i);
     st_rho(i, rho_i);
     st_h(i, h_i);
+    st_s_hoop(i, s_hoop_i);
     st_p(i, p_i);
     st_c(i, c_i);
     st_s(i, s_i);

@@ -429,7 +429,7 @@ fn st_c(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_gamma_gas(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 10u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 11u + 6u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -148,7 +148,7 @@ fn st_e_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 10u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 11u + 1u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -468,19 +468,19 @@ fn st_dalpha(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_gamma_gas(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 6u;
     return params[b];
 }
 fn prm_visc_alpha_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 10u;
     return params[b];
 }
 fn prm_visc_alpha_max(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 11u;
     return params[b];
 }
 fn prm_visc_decay(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 12u;
     return params[b];
 }
 @compute @workgroup_size(64)

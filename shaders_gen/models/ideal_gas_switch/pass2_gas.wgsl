@@ -476,11 +476,11 @@ fn st_de(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_cond_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 7u;
     return params[b];
 }
 fn prm_visc_beta(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 9u;
     return params[b];
 }
 @compute @workgroup_size(64)

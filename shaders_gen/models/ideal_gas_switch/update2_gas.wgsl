@@ -172,7 +172,7 @@ fn st_alpha_visc_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 1u;
     return params[b];
 }
 @compute @workgroup_size(64)

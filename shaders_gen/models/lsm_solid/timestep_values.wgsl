@@ -49,11 +49,11 @@ fn st_m(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 8u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 9u + 7u;
     return params[b];
 }
 fn prm_c_t(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 8u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 9u + 8u;
     return params[b];
 }
 @compute @workgroup_size(64)

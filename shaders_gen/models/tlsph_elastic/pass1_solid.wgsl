@@ -516,23 +516,23 @@ fn st_a_contact(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 8u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 11u;
     return params[b];
 }
 fn prm_clamp_normal(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 18u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm_clamp_at(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 21u;
     return params[b];
 }
 fn prm_K_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 22u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -59,19 +59,19 @@ fn st_hourglass_rate2(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 0u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 8u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 9u;
     return params[b];
 }
 fn prm_cfl_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 17u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -429,19 +429,19 @@ fn st_dv(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_nu0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 9u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 10u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 11u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 12u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -132,15 +132,15 @@ fn st_rho_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 0u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 7u;
     return params[b];
 }
 fn prm_gamma(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 8u;
     return params[b];
 }
 @compute @workgroup_size(64)

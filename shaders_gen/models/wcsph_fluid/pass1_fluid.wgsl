@@ -445,19 +445,19 @@ fn st_mu_max(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_nu0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 12u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 8u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 12u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 9u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 12u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 10u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 12u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 13u + 11u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -417,23 +417,23 @@ fn st_mu_max(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 0u;
     return params[b];
 }
 fn prm_gravity(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 2u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 2u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm_delta(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 6u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 7u;
     return params[b];
 }
 fn prm_gamma(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 8u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -83,15 +83,15 @@ fn st_mu_max(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 14u;
     return params[b];
 }
 fn prm_cfl_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 15u;
     return params[b];
 }
 fn prm_c_t(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 16u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -485,31 +485,31 @@ fn st_H_linear(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 0u;
     return params[b];
 }
 fn prm_gravity(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 2u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 2u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 7u;
     return params[b];
 }
 fn prm_gamma(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 8u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 18u;
     return params[b];
 }
 fn prm_clamp_normal(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 25u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm_clamp_at(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 28u;
     return params[b];
 }
 @compute @workgroup_size(64)

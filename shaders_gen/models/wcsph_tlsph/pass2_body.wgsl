@@ -638,43 +638,43 @@ fn st_P(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn prm_nu0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 9u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 10u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 11u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 12u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 15u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 16u;
     return params[b];
 }
 fn prm_quadratic_correction(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 20u;
     return params[b];
 }
 fn prm_cell_quadrature(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 21u;
     return params[b];
 }
 fn prm_clamp_normal(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 25u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm_clamp_at(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 28u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -510,15 +510,15 @@ fn st_Q(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn prm_quadratic_correction(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 20u;
     return params[b];
 }
 fn prm_clamp_normal(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 25u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm_clamp_at(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 28u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -514,35 +514,35 @@ fn st_hourglass_rate2(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 0u;
     return params[b];
 }
 fn prm_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 13u;
     return params[b];
 }
 fn prm_hourglass_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 17u;
     return params[b];
 }
 fn prm_viscosity_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 19u;
     return params[b];
 }
 fn prm_c_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 22u;
     return params[b];
 }
 fn prm_damping(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 23u;
     return params[b];
 }
 fn prm_clamp_normal(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 25u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm_clamp_at(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 28u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -85,23 +85,23 @@ fn st_mu_max(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 0u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 15u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 16u;
     return params[b];
 }
 fn prm_cfl_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 24u;
     return params[b];
 }
 fn prm_cfl_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 29u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 30u + 29u;
     return params[b];
 }
 @compute @workgroup_size(64)

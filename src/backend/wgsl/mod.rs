@@ -235,6 +235,7 @@ mod tests {
                     damping: None,
                     settled: vec![],
                     initialised: vec![],
+                    axisymmetric: false,
                 };
                 let plan = Plan::build(&checked.model, &scene, None).expect("plan");
                 let kernels = generate(&plan, cells).unwrap_or_else(|e| panic!("{m} {dim}D: {e}"));

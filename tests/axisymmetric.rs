@@ -1,0 +1,124 @@
+//! Axisymmetric cases (`axisymmetric = true`, solid/hoop.sph): the hoop terms of the rates against
+//! the cylindrical equations' closed forms, the scene's rules, and a planar case that pays nothing
+//! for them.
+
+mod common;
+use pairsum::backend::cpu::CpuBackend;
+use pairsum::engine::{setup, Engine};
+use pairsum::runner::prepare;
+use std::path::PathBuf;
+
+fn case(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("cases").join(format!("{name}.toml"))
+}
+
+fn scratch(tag: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("pairsum-axisymmetric-{tag}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("scratch folder");
+    dir
+}
+
+/// The axisymmetric Børvik case with the projectile expanding radially, v = (a r, 0), and holding
+/// a uniform hoop stress s_θθ, initialised (every pass evaluated once at t = 0) on the CPU in f64.
+fn expanding_projectile(a: f64, s_hoop: f64) -> Engine<CpuBackend<f64>> {
+    let text = std::fs::read_to_string(case("borvik_axisymmetric")).expect("case");
+    let moving = r#"velocity = [0, "-${v_impact} m/s"]"#;
+    assert!(text.contains(moving), "the case's projectile velocity line");
+    let initial = format!(r#"initial = {{ v = "vec({a} [1/s] * x.x, 0 [m/s])", s_hoop = "{s_hoop} [Pa]" }}"#);
+    let dir = scratch("expanding");
+    let path = dir.join("case.toml");
+    std::fs::write(&path, text.replace(moving, &initial)).expect("case.toml");
+    let (scene, plan) = prepare(&path, &Default::default()).unwrap_or_else(|e| panic!("{e}"));
+    let store = setup::build_store::<f64>(&plan, &scene.particles, &scene.materials).expect("store");
+    let b = CpuBackend::new(plan, store, scene.mirrors.clone()).expect("backend");
+    let mut e = Engine::new(b, scene.config.clone());
+    e.initialise().expect("initialise");
+    let _ = std::fs::remove_dir_all(&dir);
+    e
+}
+
+/// In a radially expanding cylinder, v = (a r, 0), the strain rates are ε̇_rr = ε̇_θθ = a and
+/// ε̇_zz = 0, so ρ̇ = −2 a ρ, ṡ_rr = ṡ_θθ = ⅔ G a and ṡ_zz = −(4/3) G a; a uniform hoop stress
+/// s_θθ with no in-plane stress pulls each ring in, v̇_r = −s_θθ / (ρ r), and works at
+/// ė = s_θθ ε̇_θθ / ρ. The corrected gradients are exact in a linear field, so the projectile's
+/// particles a kernel away from its surface (the axis is a mirror, not a surface) get these to
+/// rounding.
+#[test]
+fn a_radially_expanding_cylinder_gets_the_hoop_terms_of_continuity_jaumann_momentum_and_energy() {
+    let (a, s_hoop) = (1000.0, 1e8);
+    let e = expanding_projectile(a, s_hoop);
+    let b = &e.backend;
+    let (rho0, g) = (7850.0, 77.07e9);
+    let x = common::field_by_id(b, "x").1;
+    let body = common::field_by_id(b, "body").1;
+    let field = |name: &str| common::field_by_id(b, name);
+    let (ds, ds_hoop, drho, dv, de) = (field("ds"), field("ds_hoop"), field("drho"), field("dv"), field("de"));
+    // The projectile: r ≤ 10 mm, z from 1.5 to 81.5 mm; its kernels reach 2 × 1.3 × 1 mm.
+    let inner: Vec<usize> = (0..body.len())
+        .filter(|k| body[*k] == 0.0 && x[2 * k] < 7e-3 && x[2 * k + 1] > 5e-3 && x[2 * k + 1] < 78e-3)
+        .collect();
+    assert!(inner.len() > 300, "{} inner particles", inner.len());
+    let mut worst = 0.0f64;
+    for &k in &inner {
+        let r = x[2 * k];
+        // symtensor components in 2D: xx, xy, yy.
+        let checks = [
+            (drho.1[k], -2.0 * a * rho0, "drho"),
+            (ds.1[3 * k], 2.0 / 3.0 * g * a, "ds_rr"),
+            (ds.1[3 * k + 1], 0.0, "ds_rz"),
+            (ds.1[3 * k + 2], -4.0 / 3.0 * g * a, "ds_zz"),
+            (ds_hoop.1[k], 2.0 / 3.0 * g * a, "ds_hoop"),
+            (dv.1[2 * k], -s_hoop / (rho0 * r), "dv_r"),
+            (dv.1[2 * k + 1], 0.0, "dv_z"),
+            (de.1[k], s_hoop * a / rho0, "de"),
+        ];
+        for (got, want, what) in checks {
+            let scale = match what {
+                "ds_rz" => g * a,
+                "dv_z" => s_hoop / (rho0 * 10e-3),
+                _ => want.abs(),
+            };
+            let error = (got - want).abs() / scale;
+            assert!(error.is_finite() && error < 1e-6, "{what} at r = {r}: {got} against {want}");
+            worst = worst.max(error);
+        }
+    }
+    println!("{} particles, worst relative error {worst:.2e}", inner.len());
+}
+
+/// `axisymmetric = true` needs a 2D case and a model that carries the hoop stress wherever it
+/// moves particles (C0053), and a material may not set it (C0007).
+#[test]
+fn axisymmetric_is_c0053_in_3d_or_with_a_model_without_hoop_stress_and_c0007_on_a_material() {
+    let text = std::fs::read_to_string(case("borvik_axisymmetric")).expect("case");
+    let dir = scratch("errors");
+    for (from, to, code) in [
+        ("dim = 2", "dim = 3", "C0053"),
+        (r#"model = "models::ftlr19_perforation_shaped""#, r#"model = "models::ftlr19_perforation""#, "C0053"),
+        ("[materials.weldox]\n", "[materials.weldox]\naxisymmetric = 1\n", "C0007"),
+    ] {
+        assert!(text.contains(from), "{from}");
+        let path = dir.join("bad.toml");
+        std::fs::write(&path, text.replacen(from, to, 1)).expect("bad.toml");
+        let err = prepare(&path, &Default::default()).err().map(|e| e.to_string()).expect("an error");
+        assert!(err.contains(code), "{to}: {err}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A planar case of the same model neither stores nor computes the hoop stress: its terms settle
+/// to 0, the rate of s_hoop is dropped and s_hoop is folded (schedule/settle.rs).
+#[test]
+fn a_planar_case_of_a_model_with_hoop_terms_stores_no_hoop_stress() {
+    let set = pairsum::scene::Options {
+        set: vec![("model".into(), "models::ftlr19_perforation_shaped".into())],
+        ..Default::default()
+    };
+    let (_, plan) = prepare(&case("borvik_perforation"), &set).unwrap_or_else(|e| panic!("{e}"));
+    let stored: Vec<&str> = plan.layout.iter().map(|l| plan.model.field(l.field).name.as_str()).collect();
+    assert!(stored.contains(&"s") && stored.contains(&"eps_p"), "{stored:?}");
+    assert!(!stored.contains(&"s_hoop") && !stored.contains(&"ds_hoop"), "{stored:?}");
+    let (_, plan) = prepare(&case("borvik_axisymmetric"), &Default::default()).unwrap_or_else(|e| panic!("{e}"));
+    let stored: Vec<&str> = plan.layout.iter().map(|l| plan.model.field(l.field).name.as_str()).collect();
+    assert!(stored.contains(&"s_hoop") && stored.contains(&"ds_hoop"), "{stored:?}");
+}
