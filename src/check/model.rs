@@ -281,8 +281,9 @@ impl Checker {
             }
         }
         for (k, p) in self.model.params.iter().enumerate() {
-            // The prelude's `gravity` is the scene's: the integrator reads it whether or not a model does.
-            if !params.contains(&ir::ParamId(k as u32)) && p.name != ir::GRAVITY {
+            // The prelude's `gravity` and `axisymmetric` are the scene's: the integrator reads
+            // gravity whether or not a model does, and a planar model need not read either.
+            if !params.contains(&ir::ParamId(k as u32)) && p.name != ir::GRAVITY && p.name != ir::AXISYMMETRIC {
                 warnings.push(
                     Diagnostic::warning("W0502", format!("parameter `{}` is declared but never used", p.name))
                         .at(p.span, "unused"),

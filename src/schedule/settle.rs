@@ -81,33 +81,11 @@ fn fold_constant_outputs(model: &mut Model) {
     if constants.is_empty() {
         return;
     }
-    for k in 0..model.equations.len() {
-        if constants.iter().any(|(f, _)| model.equations[k].writes.contains(f)) {
-            continue;
-        }
-        let mut e = model.equations[k].clone();
-        let mut changed = false;
-        for stmts in super::live::stmts_of_mut(&mut e) {
-            for s in stmts.iter_mut() {
-                changed |= fold_in_stmt(s, &constants);
-            }
-        }
-        if changed {
-            model.equations[k] = super::live::pruned(&e, model, &Default::default());
-        }
-    }
+    fold_into_equations(model, &constants);
     let mut folded = vec![false; model.rates.len()];
     for (r, folded) in model.rates.iter_mut().zip(&mut folded) {
-        let changed = folded;
-        ir::walk_expr_mut(&mut r.rate, &mut |x| {
-            if let ExprKind::Field(f, _) = x.kind {
-                if let Some((_, value)) = constants.iter().find(|(c, _)| *c == f) {
-                    *x = Expr::constant(*value, x.ty);
-                    *changed = true;
-                }
-            }
-        });
-        if *changed {
+        *folded = fold_fields(&mut r.rate, &constants);
+        if *folded {
             r.reads.retain(|f| !constants.iter().any(|(c, _)| c == f));
         }
     }
@@ -143,21 +121,44 @@ pub fn fold_constant_states(model: &mut Model, scene: &SceneSpec) {
             Some((f, value))
         })
         .collect();
+    fold_into_equations(model, &constants);
+}
+
+/// Every read of these fields in the equations that do not write them becomes its constant; an
+/// equation that changes has its reads recomputed, as `settle` does.
+fn fold_into_equations(model: &mut Model, constants: &[(FieldId, f64)]) {
     if constants.is_empty() {
         return;
     }
     for k in 0..model.equations.len() {
+        if constants.iter().any(|(f, _)| model.equations[k].writes.contains(f)) {
+            continue;
+        }
         let mut e = model.equations[k].clone();
         let mut changed = false;
         for stmts in super::live::stmts_of_mut(&mut e) {
             for s in stmts.iter_mut() {
-                changed |= fold_in_stmt(s, &constants);
+                changed |= fold_in_stmt(s, constants);
             }
         }
         if changed {
             model.equations[k] = super::live::pruned(&e, model, &Default::default());
         }
     }
+}
+
+/// Every read of these fields in `e` becomes its constant; whether there was one.
+fn fold_fields(e: &mut Expr, constants: &[(FieldId, f64)]) -> bool {
+    let mut changed = false;
+    ir::walk_expr_mut(e, &mut |x| {
+        if let ExprKind::Field(f, _) = x.kind {
+            if let Some((_, value)) = constants.iter().find(|(c, _)| *c == f) {
+                *x = Expr::constant(*value, x.ty);
+                changed = true;
+            }
+        }
+    });
+    changed
 }
 
 /// The scalar states that no equation or rate writes and the scene does not set.
@@ -183,27 +184,16 @@ fn unwritten_states(model: &Model, scene: &SceneSpec) -> Vec<FieldId> {
 }
 
 fn fold_in_stmt(s: &mut Stmt, constants: &[(FieldId, f64)]) -> bool {
-    let mut changed = false;
-    let mut fold = |e: &mut Expr| {
-        ir::walk_expr_mut(e, &mut |x| {
-            if let ExprKind::Field(f, _) = x.kind {
-                if let Some((_, value)) = constants.iter().find(|(c, _)| *c == f) {
-                    *x = Expr::constant(*value, x.ty);
-                    changed = true;
-                }
-            }
-        })
-    };
     match s {
-        Stmt::Let(_, e) | Stmt::Set(_, e) | Stmt::Accum(_, _, e) => fold(e),
+        Stmt::Let(_, e) | Stmt::Set(_, e) | Stmt::Accum(_, _, e) => fold_fields(e, constants),
         Stmt::If(c, a, b) => {
-            fold(c);
+            let mut changed = fold_fields(c, constants);
             for s in a.iter_mut().chain(b.iter_mut()) {
                 changed |= fold_in_stmt(s, constants);
             }
+            changed
         }
     }
-    changed
 }
 
 fn settle_equation(e: &mut Equation, settled: &[Option<Vec<f64>>], dim: usize) -> bool {
