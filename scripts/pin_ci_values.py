@@ -60,6 +60,8 @@ RUNS = [
     ("cube_on_cube_cspm", {}),
     ("sphere_plate_graded_study", {}),
     ("fans_bullet_study", {}),
+    ("taylor_bar_axisymmetric", {}),
+    ("borvik_axisymmetric", {}),
 ]
 
 

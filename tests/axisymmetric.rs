@@ -86,6 +86,27 @@ fn a_radially_expanding_cylinder_gets_the_hoop_terms_of_continuity_jaumann_momen
     println!("{} particles, worst relative error {worst:.2e}", inner.len());
 }
 
+/// A ring's mass 2π r m is what is conserved, so the particle's mass per metre of the slab falls as
+/// the ring moves out: ṁ = −m v_r / r, over one step of the expanding cylinder m (1 − a Δt).
+#[test]
+fn an_expanding_rings_particle_mass_falls_as_its_radius_grows() {
+    let a = 1000.0;
+    let mut e = expanding_projectile(a, 0.0);
+    let m0 = common::field_by_id(&e.backend, "m").1;
+    e.step().expect("a step");
+    let dt = e.time;
+    let m1 = common::field_by_id(&e.backend, "m").1;
+    let x = common::field_by_id(&e.backend, "x").1;
+    let body = common::field_by_id(&e.backend, "body").1;
+    let mut n = 0;
+    for k in (0..body.len()).filter(|k| body[*k] == 0.0 && x[2 * k + 1] > 5e-3 && x[2 * k + 1] < 78e-3) {
+        let rate = (m1[k] / m0[k] - 1.0) / (-a * dt);
+        assert!((rate - 1.0).abs() < 1e-3, "particle {k} at r = {}: m fell by {rate} a Δt", x[2 * k]);
+        n += 1;
+    }
+    assert!(n > 500, "{n} particles");
+}
+
 /// `axisymmetric = true` needs a 2D case and a model that carries the hoop stress wherever it
 /// moves particles (C0053), and a material may not set it (C0007).
 #[test]

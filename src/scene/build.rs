@@ -2104,11 +2104,14 @@ fn axis_of_symmetry(case: &CaseFile, model: &Model, mirrors: &mut Vec<Mirror>, c
             model.rates.iter().filter(|r| r.state == f).fold(GroupSet::default(), |g, r| g.union(r.dest))
         })
     };
-    let (moving, hoop) = (rate_groups("v"), rate_groups("s_hoop"));
-    if moving.intersect(hoop) != moving {
-        let d = Diagnostic::error("C0053", "the model has no hoop stress: it does not integrate `s_hoop` wherever it integrates `v`")
-            .at(cx.span(span), "axisymmetric")
-            .help("an axisymmetric model uses solid::hoop_stress and integrates `s_hoop' = ds_hoop` beside `s' = ds`; the stdlib's: models::ftlr19_perforation_shaped (docs/CASE_FILES.md, \"Axisymmetric cases\")");
+    let moving = rate_groups("v");
+    if moving.intersect(rate_groups("s_hoop")).intersect(rate_groups("m")) != moving {
+        let d = Diagnostic::error(
+            "C0053",
+            "the model is not axisymmetric: it does not integrate `s_hoop` and `m` wherever it integrates `v`",
+        )
+        .at(cx.span(span), "axisymmetric")
+        .help("an axisymmetric model uses solid::hoop_stress and integrates `s_hoop' = ds_hoop  m' = hoop_mass_rate()` beside `s' = ds`; the stdlib's: models::ftlr19_perforation_shaped (docs/CASE_FILES.md, \"Axisymmetric cases\")");
         cx.diags.push(d);
         return None;
     }

@@ -41,7 +41,30 @@ pub fn settle(model: &mut Model, settled: &[Option<Vec<f64>>], dim: usize) {
             model.equations[k] = super::live::pruned(&e, model, &Default::default());
         }
     }
+    // A rate settled to 0 (an axisymmetric model's `m' = hoop_mass_rate()` in a planar case) is
+    // dropped: the state keeps its value, and one that nothing else writes is folded.
+    let settled_rates: Vec<bool> = model.rates.iter_mut().map(|r| settle_expr(&mut r.rate, settled, dim)).collect();
+    drop_zero_rates(model, &settled_rates);
     fold_constant_outputs(model);
+}
+
+/// Drops each rate that `changed` marks and that is now the constant 0, and recomputes the reads
+/// of the others it marks.
+fn drop_zero_rates(model: &mut Model, changed: &[bool]) {
+    let mut k = 0;
+    model.rates.retain_mut(|r| {
+        k += 1;
+        if !changed[k - 1] {
+            return true;
+        }
+        r.reads.clear();
+        ir::walk_expr(&r.rate, &mut |x| {
+            if let ExprKind::Field(f, _) = x.kind {
+                r.reads.insert(f);
+            }
+        });
+        host_eval::constant(&r.rate) != Some(0.0)
+    });
 }
 
 /// Whether a statement of `e` still writes `f` (a correction whose settled branch no longer
@@ -82,18 +105,8 @@ fn fold_constant_outputs(model: &mut Model) {
         return;
     }
     fold_into_equations(model, &constants);
-    let mut folded = vec![false; model.rates.len()];
-    for (r, folded) in model.rates.iter_mut().zip(&mut folded) {
-        *folded = fold_fields(&mut r.rate, &constants);
-        if *folded {
-            r.reads.retain(|f| !constants.iter().any(|(c, _)| c == f));
-        }
-    }
-    let mut k = 0;
-    model.rates.retain(|r| {
-        k += 1;
-        !(folded[k - 1] && host_eval::constant(&r.rate) == Some(0.0))
-    });
+    let folded: Vec<bool> = model.rates.iter_mut().map(|r| fold_fields(&mut r.rate, &constants)).collect();
+    drop_zero_rates(model, &folded);
 }
 
 /// Whether `f` is written inside an `if` of `stmts` (then its value is no one constant).

@@ -134,30 +134,30 @@ fn st_L_inv(i: u32, v: mat2x2<f32>) {
     data[b + 2u] = v[0][1];
     data[b + 3u] = v[1][1];
 }
-fn ld_c(i: u32) -> f32 {
-    let b = u32(info[27 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_c(i: u32, v: f32) {
-    let b = u32(info[27 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ld_s(i: u32) -> mat2x2<f32> {
-    let b = u32(info[29 + G] + i32(i) * 3);
+fn ld_edot(i: u32) -> mat2x2<f32> {
+    let b = u32(info[23 + G] + i32(i) * 3);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 1u]), vec2<f32>(data[b + 1u], data[b + 2u]));
 }
-fn st_s(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[29 + G] + i32(i) * 3);
+fn st_edot(i: u32, v: mat2x2<f32>) {
+    let b = u32(info[23 + G] + i32(i) * 3);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[1][1];
 }
-fn ld_edot(i: u32) -> mat2x2<f32> {
-    let b = u32(info[33 + G] + i32(i) * 3);
+fn ld_c(i: u32) -> f32 {
+    let b = u32(info[29 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_c(i: u32, v: f32) {
+    let b = u32(info[29 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_s(i: u32) -> mat2x2<f32> {
+    let b = u32(info[31 + G] + i32(i) * 3);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 1u]), vec2<f32>(data[b + 1u], data[b + 2u]));
 }
-fn st_edot(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[33 + G] + i32(i) * 3);
+fn st_s(i: u32, v: mat2x2<f32>) {
+    let b = u32(info[31 + G] + i32(i) * 3);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[1][1];
@@ -564,15 +564,19 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     dkernel_shape = (gv * kernel_shape_i);
     // then continuity_from_strain_rate
     var drho_i: f32 = ld_drho(i);
-    drho_i = ((-rho_i) * (trace(edot) + (v_i[0] / max(ld_x(i)[0], (0.1 * dx_i)))));
+    let w = min((ld_x(i)[0] / (2.0 * dx_i)), 1.0);
+    drho_i = ((-rho_i) * (trace(edot) + (((w * v_i[0]) / max(ld_x(i)[0], (0.1 * dx_i))) + ((1.0 - w) * edot[0][0]))));
     // then shaped_density_diffusion
     drho_diffusion = (prm_delta(i) * sum);
     // then jaumann
     var ds_i: mat2x2<f32> = ld_ds(i);
-    ds_i = (((2.0 * prm_G(i)) * (dev(edot) - (((v_i[0] / max(ld_x(i)[0], (0.1 * dx_i))) / 3.0) * eye()))) + sym(((ld_s(i) * transpose(spin)) + (spin * ld_s(i)))));
+    let w_2 = min((ld_x(i)[0] / (2.0 * dx_i)), 1.0);
+    ds_i = (((2.0 * prm_G(i)) * (dev(edot) - (((((w_2 * v_i[0]) / max(ld_x(i)[0], (0.1 * dx_i))) + ((1.0 - w_2) * edot[0][0])) / 3.0) * eye()))) + sym(((ld_s(i) * transpose(spin)) + (spin * ld_s(i)))));
     // then jaumann_hoop
     var ds_hoop_i: f32 = ld_ds_hoop(i);
-    ds_hoop_i = ((2.0 * prm_G(i)) * ((v_i[0] / max(ld_x(i)[0], (0.1 * dx_i))) - ((trace(edot) + (v_i[0] / max(ld_x(i)[0], (0.1 * dx_i)))) / 3.0)));
+    let w_3 = min((ld_x(i)[0] / (2.0 * dx_i)), 1.0);
+    let w_4 = min((ld_x(i)[0] / (2.0 * dx_i)), 1.0);
+    ds_hoop_i = ((2.0 * prm_G(i)) * ((((w_3 * v_i[0]) / max(ld_x(i)[0], (0.1 * dx_i))) + ((1.0 - w_3) * edot[0][0])) - ((trace(edot) + (((w_4 * v_i[0]) / max(ld_x(i)[0], (0.1 * dx_i))) + ((1.0 - w_4) * edot[0][0]))) / 3.0)));
     // then contact_pressure
     var p_contact_i: f32 = ld_p_contact(i);
     p_contact_i = ((prm_contact_stiffness(i) * prm_bulk(i)) * max((colour_other - prm_contact_colour(i)), 0.0));
@@ -582,7 +586,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     lap_weight = (exact_for_quadratics * weight);
     // then compressive_share
     var compression_i: f32 = ld_compression(i);
-    let volumetric = abs((trace(edot) + (v_i[0] / max(ld_x(i)[0], (0.1 * dx_i)))));
+    let w_5 = min((ld_x(i)[0] / (2.0 * dx_i)), 1.0);
+    let volumetric = abs((trace(edot) + (((w_5 * v_i[0]) / max(ld_x(i)[0], (0.1 * dx_i))) + ((1.0 - w_5) * edot[0][0]))));
     compression_i = (volumetric / ((volumetric + frob(dev(edot))) + ((0.01 * ld_c(i)) / ld_h(i))));
     st_L_inv(i, L_inv);
     st_edot(i, edot);

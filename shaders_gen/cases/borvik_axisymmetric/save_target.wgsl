@@ -44,6 +44,14 @@ fn st_v(i: u32, v: vec2<f32>) {
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
+fn ld_m(i: u32) -> f32 {
+    let b = u32(info[15 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_m(i: u32, v: f32) {
+    let b = u32(info[15 + G] + i32(i) * 1);
+    data[b] = v;
+}
 fn ld_rho(i: u32) -> f32 {
     let b = u32(info[17 + G] + i32(i) * 1);
     return data[b];
@@ -53,29 +61,29 @@ fn st_rho(i: u32, v: f32) {
     data[b] = v;
 }
 fn ld_s_hoop(i: u32) -> f32 {
-    let b = u32(info[23 + G] + i32(i) * 1);
+    let b = u32(info[25 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_s_hoop(i: u32, v: f32) {
-    let b = u32(info[23 + G] + i32(i) * 1);
+    let b = u32(info[25 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s(i: u32) -> mat2x2<f32> {
-    let b = u32(info[29 + G] + i32(i) * 3);
+    let b = u32(info[31 + G] + i32(i) * 3);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 1u]), vec2<f32>(data[b + 1u], data[b + 2u]));
 }
 fn st_s(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[29 + G] + i32(i) * 3);
+    let b = u32(info[31 + G] + i32(i) * 3);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[1][1];
 }
 fn ld_e(i: u32) -> f32 {
-    let b = u32(info[31 + G] + i32(i) * 1);
+    let b = u32(info[33 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_e(i: u32, v: f32) {
-    let b = u32(info[31 + G] + i32(i) * 1);
+    let b = u32(info[33 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_kernel_shape(i: u32) -> mat2x2<f32> {
@@ -140,82 +148,90 @@ fn st_v_0(i: u32, v: vec2<f32>) {
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
-fn ld_rho_0(i: u32) -> f32 {
+fn ld_m_0(i: u32) -> f32 {
     let b = u32(info[93 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_m_0(i: u32, v: f32) {
+    let b = u32(info[93 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_rho_0(i: u32) -> f32 {
+    let b = u32(info[95 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho_0(i: u32, v: f32) {
-    let b = u32(info[93 + G] + i32(i) * 1);
+    let b = u32(info[95 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s_hoop_0(i: u32) -> f32 {
-    let b = u32(info[95 + G] + i32(i) * 1);
+    let b = u32(info[97 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_s_hoop_0(i: u32, v: f32) {
-    let b = u32(info[95 + G] + i32(i) * 1);
+    let b = u32(info[97 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s_0(i: u32) -> mat2x2<f32> {
-    let b = u32(info[97 + G] + i32(i) * 3);
+    let b = u32(info[99 + G] + i32(i) * 3);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 1u]), vec2<f32>(data[b + 1u], data[b + 2u]));
 }
 fn st_s_0(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[97 + G] + i32(i) * 3);
+    let b = u32(info[99 + G] + i32(i) * 3);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[1][1];
 }
 fn ld_e_0(i: u32) -> f32 {
-    let b = u32(info[99 + G] + i32(i) * 1);
+    let b = u32(info[101 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_e_0(i: u32, v: f32) {
-    let b = u32(info[99 + G] + i32(i) * 1);
+    let b = u32(info[101 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_kernel_shape_0(i: u32) -> mat2x2<f32> {
-    let b = u32(info[101 + G] + i32(i) * 4);
+    let b = u32(info[103 + G] + i32(i) * 4);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u]));
 }
 fn st_kernel_shape_0(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[101 + G] + i32(i) * 4);
+    let b = u32(info[103 + G] + i32(i) * 4);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[0][1];
     data[b + 3u] = v[1][1];
 }
 fn ld_u_0(i: u32) -> vec2<f32> {
-    let b = u32(info[103 + G] + i32(i) * 2);
+    let b = u32(info[105 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_u_0(i: u32, v: vec2<f32>) {
-    let b = u32(info[103 + G] + i32(i) * 2);
+    let b = u32(info[105 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
 fn ld_D_0(i: u32) -> f32 {
-    let b = u32(info[105 + G] + i32(i) * 1);
+    let b = u32(info[107 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_D_0(i: u32, v: f32) {
-    let b = u32(info[105 + G] + i32(i) * 1);
+    let b = u32(info[107 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_eps_p_0(i: u32) -> f32 {
-    let b = u32(info[107 + G] + i32(i) * 1);
+    let b = u32(info[109 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_eps_p_0(i: u32, v: f32) {
-    let b = u32(info[107 + G] + i32(i) * 1);
+    let b = u32(info[109 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_eps_nl_0(i: u32) -> f32 {
-    let b = u32(info[109 + G] + i32(i) * 1);
+    let b = u32(info[111 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_eps_nl_0(i: u32, v: f32) {
-    let b = u32(info[109 + G] + i32(i) * 1);
+    let b = u32(info[111 + G] + i32(i) * 1);
     data[b] = v;
 }
 @compute @workgroup_size(64)
@@ -230,6 +246,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // save the state at the start of the step
     var x_0_i: vec2<f32> = ld_x_0(i);
     var v_0_i: vec2<f32> = ld_v_0(i);
+    var m_0_i: f32 = ld_m_0(i);
     var rho_0_i: f32 = ld_rho_0(i);
     var s_hoop_0_i: f32 = ld_s_hoop_0(i);
     var s_0_i: mat2x2<f32> = ld_s_0(i);
@@ -241,6 +258,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var eps_nl_0_i: f32 = ld_eps_nl_0(i);
     x_0_i = ld_x(i);
     v_0_i = ld_v(i);
+    m_0_i = ld_m(i);
     rho_0_i = ld_rho(i);
     s_hoop_0_i = ld_s_hoop(i);
     s_0_i = ld_s(i);
@@ -252,6 +270,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     eps_nl_0_i = ld_eps_nl(i);
     st_x_0(i, x_0_i);
     st_v_0(i, v_0_i);
+    st_m_0(i, m_0_i);
     st_rho_0(i, rho_0_i);
     st_s_hoop_0(i, s_hoop_0_i);
     st_s_0(i, s_0_i);

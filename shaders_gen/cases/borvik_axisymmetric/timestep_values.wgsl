@@ -74,7 +74,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     if (i >= n) { return; }
     let t = globals[0u];
     let dt = globals[1u];
-    let scratch = u32(info[111]);
+    let scratch = u32(info[113]);
     data[scratch + 0u * n + i] = select(pinf(), (prm_C_cfl(i) * ld_h(i)), in_groups(1u, ints[i]));
     data[scratch + 1u * n + i] = select((-pinf()), (prm_c0(i) + length(ld_v(i))), in_groups(1u, ints[i]));
     data[scratch + 2u * n + i] = select(pinf(), (prm_C_cfl(i) * ld_h_short(i)), in_groups(2u, ints[i]));

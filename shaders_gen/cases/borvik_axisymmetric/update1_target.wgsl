@@ -60,6 +60,14 @@ fn st_part(i: u32, v: f32) {
     let b = u32(info[13 + G] + i32(i) * 1);
     data[b] = v;
 }
+fn ld_m(i: u32) -> f32 {
+    let b = u32(info[15 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_m(i: u32, v: f32) {
+    let b = u32(info[15 + G] + i32(i) * 1);
+    data[b] = v;
+}
 fn ld_rho(i: u32) -> f32 {
     let b = u32(info[17 + G] + i32(i) * 1);
     return data[b];
@@ -76,57 +84,57 @@ fn st_h(i: u32, v: f32) {
     let b = u32(info[19 + G] + i32(i) * 1);
     data[b] = v;
 }
+fn ld_edot(i: u32) -> mat2x2<f32> {
+    let b = u32(info[23 + G] + i32(i) * 3);
+    return mat2x2<f32>(vec2<f32>(data[b], data[b + 1u]), vec2<f32>(data[b + 1u], data[b + 2u]));
+}
+fn st_edot(i: u32, v: mat2x2<f32>) {
+    let b = u32(info[23 + G] + i32(i) * 3);
+    data[b] = v[0][0];
+    data[b + 1u] = v[1][0];
+    data[b + 2u] = v[1][1];
+}
 fn ld_s_hoop(i: u32) -> f32 {
-    let b = u32(info[23 + G] + i32(i) * 1);
+    let b = u32(info[25 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_s_hoop(i: u32, v: f32) {
-    let b = u32(info[23 + G] + i32(i) * 1);
+    let b = u32(info[25 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_p(i: u32) -> f32 {
-    let b = u32(info[25 + G] + i32(i) * 1);
+    let b = u32(info[27 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p(i: u32, v: f32) {
-    let b = u32(info[25 + G] + i32(i) * 1);
+    let b = u32(info[27 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_c(i: u32) -> f32 {
-    let b = u32(info[27 + G] + i32(i) * 1);
+    let b = u32(info[29 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_c(i: u32, v: f32) {
-    let b = u32(info[27 + G] + i32(i) * 1);
+    let b = u32(info[29 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s(i: u32) -> mat2x2<f32> {
-    let b = u32(info[29 + G] + i32(i) * 3);
+    let b = u32(info[31 + G] + i32(i) * 3);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 1u]), vec2<f32>(data[b + 1u], data[b + 2u]));
 }
 fn st_s(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[29 + G] + i32(i) * 3);
+    let b = u32(info[31 + G] + i32(i) * 3);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[1][1];
 }
 fn ld_e(i: u32) -> f32 {
-    let b = u32(info[31 + G] + i32(i) * 1);
+    let b = u32(info[33 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_e(i: u32, v: f32) {
-    let b = u32(info[31 + G] + i32(i) * 1);
+    let b = u32(info[33 + G] + i32(i) * 1);
     data[b] = v;
-}
-fn ld_edot(i: u32) -> mat2x2<f32> {
-    let b = u32(info[33 + G] + i32(i) * 3);
-    return mat2x2<f32>(vec2<f32>(data[b], data[b + 1u]), vec2<f32>(data[b + 1u], data[b + 2u]));
-}
-fn st_edot(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[33 + G] + i32(i) * 3);
-    data[b] = v[0][0];
-    data[b + 1u] = v[1][0];
-    data[b + 2u] = v[1][1];
 }
 fn ld_kernel_shape(i: u32) -> mat2x2<f32> {
     let b = u32(info[37 + G] + i32(i) * 4);
@@ -328,57 +336,65 @@ fn st_v_0(i: u32, v: vec2<f32>) {
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
-fn ld_rho_0(i: u32) -> f32 {
+fn ld_m_0(i: u32) -> f32 {
     let b = u32(info[93 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_m_0(i: u32, v: f32) {
+    let b = u32(info[93 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_rho_0(i: u32) -> f32 {
+    let b = u32(info[95 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho_0(i: u32, v: f32) {
-    let b = u32(info[93 + G] + i32(i) * 1);
+    let b = u32(info[95 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s_hoop_0(i: u32) -> f32 {
-    let b = u32(info[95 + G] + i32(i) * 1);
+    let b = u32(info[97 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_s_hoop_0(i: u32, v: f32) {
-    let b = u32(info[95 + G] + i32(i) * 1);
+    let b = u32(info[97 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s_0(i: u32) -> mat2x2<f32> {
-    let b = u32(info[97 + G] + i32(i) * 3);
+    let b = u32(info[99 + G] + i32(i) * 3);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 1u]), vec2<f32>(data[b + 1u], data[b + 2u]));
 }
 fn st_s_0(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[97 + G] + i32(i) * 3);
+    let b = u32(info[99 + G] + i32(i) * 3);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[1][1];
 }
 fn ld_e_0(i: u32) -> f32 {
-    let b = u32(info[99 + G] + i32(i) * 1);
+    let b = u32(info[101 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_e_0(i: u32, v: f32) {
-    let b = u32(info[99 + G] + i32(i) * 1);
+    let b = u32(info[101 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_kernel_shape_0(i: u32) -> mat2x2<f32> {
-    let b = u32(info[101 + G] + i32(i) * 4);
+    let b = u32(info[103 + G] + i32(i) * 4);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u]));
 }
 fn st_kernel_shape_0(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[101 + G] + i32(i) * 4);
+    let b = u32(info[103 + G] + i32(i) * 4);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[0][1];
     data[b + 3u] = v[1][1];
 }
 fn ld_u_0(i: u32) -> vec2<f32> {
-    let b = u32(info[103 + G] + i32(i) * 2);
+    let b = u32(info[105 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
 }
 fn st_u_0(i: u32, v: vec2<f32>) {
-    let b = u32(info[103 + G] + i32(i) * 2);
+    let b = u32(info[105 + G] + i32(i) * 2);
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
@@ -498,6 +514,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // integrate (target)
     var x_i: vec2<f32> = ld_x(i);
     var v_i: vec2<f32> = ld_v(i);
+    var m_i: f32 = ld_m(i);
     var rho_i: f32 = ld_rho(i);
     var s_hoop_i: f32 = ld_s_hoop(i);
     var s_i: mat2x2<f32> = ld_s(i);
@@ -510,6 +527,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let rate_of_rho = (ld_drho(i) + ld_drho_diffusion(i));
     let rate_of_s = ld_ds(i);
     let rate_of_s_hoop = ld_ds_hoop(i);
+    let rate_of_m = (((-m_i) * v_i[0]) / max(x_i[0], (0.1 * ld_dx(i))));
     let rate_of_e = ld_de(i);
     let rate_of_kernel_shape = ld_dkernel_shape(i);
     v_i = (ld_v_0(i) + (0.5 * (dt * rate_of_v)));
@@ -519,6 +537,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     rho_i = (ld_rho_0(i) + (0.5 * (dt * rate_of_rho)));
     s_i = (ld_s_0(i) + (0.5 * (dt * rate_of_s)));
     s_hoop_i = (ld_s_hoop_0(i) + (0.5 * (dt * rate_of_s_hoop)));
+    m_i = (ld_m_0(i) + (0.5 * (dt * rate_of_m)));
     e_i = (ld_e_0(i) + (0.5 * (dt * rate_of_e)));
     kernel_shape_i = (ld_kernel_shape_0(i) + (0.5 * (dt * rate_of_kernel_shape)));
     // radial_return
@@ -530,7 +549,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let blend = ((prm_nonlocal_hardening(i) * ld_eps_nl(i)) + ((1.0 - prm_nonlocal_hardening(i)) * eps_p_i));
     let hardening_strain = select(eps_p_i, max(blend, 0.0), ((prm_nonlocal_hardening(i) != 0.0) && (prm_damage_length(i) > 0.0)));
     let e = ld_edot(i);
-    let e_hoop = (v_i[0] / max(x_i[0], (0.1 * ld_dx(i))));
+    let w = min((x_i[0] / (2.0 * ld_dx(i))), 1.0);
+    let e_hoop = (((w * v_i[0]) / max(x_i[0], (0.1 * ld_dx(i)))) + ((1.0 - w) * ld_edot(i)[0][0]));
     let d = (dev(e) - ((e_hoop / 3.0) * eye()));
     let d_hoop = (e_hoop - ((trace(e) + e_hoop) / 3.0));
     let hardening_rate = sqrt(((2.0 / 3.0) * (ddot(d, d) + (d_hoop * d_hoop))));
@@ -573,7 +593,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let edot_2 = edot;
     let T_4 = T_3;
     let e_2 = edot_2;
-    let e_hoop_2 = (v_i[0] / max(x_i[0], (0.1 * ld_dx(i))));
+    let w_2 = min((x_i[0] / (2.0 * ld_dx(i))), 1.0);
+    let e_hoop_2 = (((w_2 * v_i[0]) / max(x_i[0], (0.1 * ld_dx(i)))) + ((1.0 - w_2) * ld_edot(i)[0][0]));
     let d_3 = (dev(e_2) - ((e_hoop_2 / 3.0) * eye()));
     let d_hoop_2 = (e_hoop_2 - ((trace(e_2) + e_hoop_2) / 3.0));
     let rate_2 = (sqrt(((2.0 / 3.0) * (ddot(d_3, d_3) + (d_hoop_2 * d_hoop_2)))) / prm_eps_rate0(i));
@@ -660,6 +681,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     c_i = prm_c0(i);
     st_x(i, x_i);
     st_v(i, v_i);
+    st_m(i, m_i);
     st_rho(i, rho_i);
     st_h(i, h_i);
     st_s_hoop(i, s_hoop_i);

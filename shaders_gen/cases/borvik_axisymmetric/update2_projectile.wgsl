@@ -44,12 +44,28 @@ fn st_v(i: u32, v: vec2<f32>) {
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
+fn ld_dx(i: u32) -> f32 {
+    let b = u32(info[9 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_dx(i: u32, v: f32) {
+    let b = u32(info[9 + G] + i32(i) * 1);
+    data[b] = v;
+}
 fn ld_part(i: u32) -> f32 {
     let b = u32(info[13 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_part(i: u32, v: f32) {
     let b = u32(info[13 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_m(i: u32) -> f32 {
+    let b = u32(info[15 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_m(i: u32, v: f32) {
+    let b = u32(info[15 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_rho(i: u32) -> f32 {
@@ -61,45 +77,45 @@ fn st_rho(i: u32, v: f32) {
     data[b] = v;
 }
 fn ld_s_hoop(i: u32) -> f32 {
-    let b = u32(info[23 + G] + i32(i) * 1);
+    let b = u32(info[25 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_s_hoop(i: u32, v: f32) {
-    let b = u32(info[23 + G] + i32(i) * 1);
+    let b = u32(info[25 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_p(i: u32) -> f32 {
-    let b = u32(info[25 + G] + i32(i) * 1);
+    let b = u32(info[27 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_p(i: u32, v: f32) {
-    let b = u32(info[25 + G] + i32(i) * 1);
+    let b = u32(info[27 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_c(i: u32) -> f32 {
-    let b = u32(info[27 + G] + i32(i) * 1);
+    let b = u32(info[29 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_c(i: u32, v: f32) {
-    let b = u32(info[27 + G] + i32(i) * 1);
+    let b = u32(info[29 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s(i: u32) -> mat2x2<f32> {
-    let b = u32(info[29 + G] + i32(i) * 3);
+    let b = u32(info[31 + G] + i32(i) * 3);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 1u]), vec2<f32>(data[b + 1u], data[b + 2u]));
 }
 fn st_s(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[29 + G] + i32(i) * 3);
+    let b = u32(info[31 + G] + i32(i) * 3);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[1][1];
 }
 fn ld_e(i: u32) -> f32 {
-    let b = u32(info[31 + G] + i32(i) * 1);
+    let b = u32(info[33 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_e(i: u32, v: f32) {
-    let b = u32(info[31 + G] + i32(i) * 1);
+    let b = u32(info[33 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_drho(i: u32) -> f32 {
@@ -172,38 +188,46 @@ fn st_v_0(i: u32, v: vec2<f32>) {
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
-fn ld_rho_0(i: u32) -> f32 {
+fn ld_m_0(i: u32) -> f32 {
     let b = u32(info[93 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_m_0(i: u32, v: f32) {
+    let b = u32(info[93 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_rho_0(i: u32) -> f32 {
+    let b = u32(info[95 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho_0(i: u32, v: f32) {
-    let b = u32(info[93 + G] + i32(i) * 1);
+    let b = u32(info[95 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s_hoop_0(i: u32) -> f32 {
-    let b = u32(info[95 + G] + i32(i) * 1);
+    let b = u32(info[97 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_s_hoop_0(i: u32, v: f32) {
-    let b = u32(info[95 + G] + i32(i) * 1);
+    let b = u32(info[97 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s_0(i: u32) -> mat2x2<f32> {
-    let b = u32(info[97 + G] + i32(i) * 3);
+    let b = u32(info[99 + G] + i32(i) * 3);
     return mat2x2<f32>(vec2<f32>(data[b], data[b + 1u]), vec2<f32>(data[b + 1u], data[b + 2u]));
 }
 fn st_s_0(i: u32, v: mat2x2<f32>) {
-    let b = u32(info[97 + G] + i32(i) * 3);
+    let b = u32(info[99 + G] + i32(i) * 3);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[1][1];
 }
 fn ld_e_0(i: u32) -> f32 {
-    let b = u32(info[99 + G] + i32(i) * 1);
+    let b = u32(info[101 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_e_0(i: u32, v: f32) {
-    let b = u32(info[99 + G] + i32(i) * 1);
+    let b = u32(info[101 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
@@ -242,6 +266,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // integrate (projectile)
     var x_i: vec2<f32> = ld_x(i);
     var v_i: vec2<f32> = ld_v(i);
+    var m_i: f32 = ld_m(i);
     var rho_i: f32 = ld_rho(i);
     var s_hoop_i: f32 = ld_s_hoop(i);
     var s_i: mat2x2<f32> = ld_s(i);
@@ -251,6 +276,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let rate_of_rho = ld_drho(i);
     let rate_of_s = ld_ds(i);
     let rate_of_s_hoop = ld_ds_hoop(i);
+    let rate_of_m = (((-m_i) * v_i[0]) / max(x_i[0], (0.1 * ld_dx(i))));
     let rate_of_e = ld_de(i);
     v_i = (ld_v_0(i) + (dt * rate_of_v));
     v_i = select(v_i, (1.0 * prm__constraint0(i)), (ld_part(i) == 0.0));
@@ -258,6 +284,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     rho_i = (ld_rho_0(i) + (dt * rate_of_rho));
     s_i = (ld_s_0(i) + (dt * rate_of_s));
     s_hoop_i = (ld_s_hoop_0(i) + (dt * rate_of_s_hoop));
+    m_i = (ld_m_0(i) + (dt * rate_of_m));
     e_i = (ld_e_0(i) + (dt * rate_of_e));
     v_i = select(v_i, (v_i - ((2.0 * v_i[0]) * prm__symmetry0(i))), ((0.0 - x_i[0]) > 0.0));
     x_i = select(x_i, (x_i + ((2.0 * (0.0 - x_i[0])) * prm__symmetry0(i))), ((0.0 - x_i[0]) > 0.0));
@@ -277,6 +304,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     c_i = prm_c0(i);
     st_x(i, x_i);
     st_v(i, v_i);
+    st_m(i, m_i);
     st_rho(i, rho_i);
     st_s_hoop(i, s_hoop_i);
     st_p(i, p_i);

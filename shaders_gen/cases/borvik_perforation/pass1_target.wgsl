@@ -455,12 +455,25 @@ fn st_L_inv(i: u32, v: mat3x3<f32>) {
     data[b + 7u] = v[1][2];
     data[b + 8u] = v[2][2];
 }
-fn ld_s(i: u32) -> mat3x3<f32> {
+fn ld_edot(i: u32) -> mat3x3<f32> {
     let b = u32(info[23 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
-fn st_s(i: u32, v: mat3x3<f32>) {
+fn st_edot(i: u32, v: mat3x3<f32>) {
     let b = u32(info[23 + G] + i32(i) * 6);
+    data[b] = v[0][0];
+    data[b + 1u] = v[1][0];
+    data[b + 2u] = v[2][0];
+    data[b + 3u] = v[1][1];
+    data[b + 4u] = v[2][1];
+    data[b + 5u] = v[2][2];
+}
+fn ld_s(i: u32) -> mat3x3<f32> {
+    let b = u32(info[25 + G] + i32(i) * 6);
+    return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
+}
+fn st_s(i: u32, v: mat3x3<f32>) {
+    let b = u32(info[25 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -469,22 +482,9 @@ fn st_s(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ldj_s(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
-    let base = info[23u];
+    let base = info[25u];
     let b = u32(base + i32(j) * 6);
     return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u])), sgn);
-}
-fn ld_edot(i: u32) -> mat3x3<f32> {
-    let b = u32(info[25 + G] + i32(i) * 6);
-    return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
-}
-fn st_edot(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[25 + G] + i32(i) * 6);
-    data[b] = v[0][0];
-    data[b + 1u] = v[1][0];
-    data[b + 2u] = v[2][0];
-    data[b + 3u] = v[1][1];
-    data[b + 4u] = v[2][1];
-    data[b + 5u] = v[2][2];
 }
 fn ld_spin(i: u32) -> mat3x3<f32> {
     let b = u32(info[27 + G] + i32(i) * 3);

@@ -69,11 +69,11 @@ fn st_rho(i: u32, v: f32) {
     let b = u32(info[17 + G] + i32(i) * 1);
     data[b] = v;
 }
-fn ld_s(i: u32) -> mat3x3<f32> {
+fn ld_edot(i: u32) -> mat3x3<f32> {
     let b = u32(info[23 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
-fn st_s(i: u32, v: mat3x3<f32>) {
+fn st_edot(i: u32, v: mat3x3<f32>) {
     let b = u32(info[23 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
@@ -82,11 +82,11 @@ fn st_s(i: u32, v: mat3x3<f32>) {
     data[b + 4u] = v[2][1];
     data[b + 5u] = v[2][2];
 }
-fn ld_edot(i: u32) -> mat3x3<f32> {
+fn ld_s(i: u32) -> mat3x3<f32> {
     let b = u32(info[25 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
-fn st_edot(i: u32, v: mat3x3<f32>) {
+fn st_s(i: u32, v: mat3x3<f32>) {
     let b = u32(info[25 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];

@@ -541,10 +541,12 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     spin = skew(grad_v);
     // then jaumann
     var ds_i: mat3x3<f32> = ld_ds(i);
-    ds_i = (((2.0 * prm_G(i)) * (dev(edot) - ((select(0.0, (v_i[0] / max(ld_x(i)[0], (0.1 * ld_dx(i)))), (prm_axisymmetric(i) > 0.0)) / 3.0) * eye()))) + sym(((ld_s(i) * transpose(spin)) + (spin * ld_s(i)))));
+    let w = min((ld_x(i)[0] / (2.0 * ld_dx(i))), 1.0);
+    ds_i = (((2.0 * prm_G(i)) * (dev(edot) - ((select(0.0, (((w * v_i[0]) / max(ld_x(i)[0], (0.1 * ld_dx(i)))) + ((1.0 - w) * edot[0][0])), (prm_axisymmetric(i) > 0.0)) / 3.0) * eye()))) + sym(((ld_s(i) * transpose(spin)) + (spin * ld_s(i)))));
     // then continuity_from_strain_rate
     var drho_i: f32 = ld_drho(i);
-    drho_i = ((-ld_rho(i)) * (trace(edot) + select(0.0, (v_i[0] / max(ld_x(i)[0], (0.1 * ld_dx(i)))), (prm_axisymmetric(i) > 0.0))));
+    let w_2 = min((ld_x(i)[0] / (2.0 * ld_dx(i))), 1.0);
+    drho_i = ((-ld_rho(i)) * (trace(edot) + select(0.0, (((w_2 * v_i[0]) / max(ld_x(i)[0], (0.1 * ld_dx(i)))) + ((1.0 - w_2) * edot[0][0])), (prm_axisymmetric(i) > 0.0))));
     st_edot(i, edot);
     st_spin(i, spin);
     st_drho(i, drho_i);

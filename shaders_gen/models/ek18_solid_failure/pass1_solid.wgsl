@@ -770,7 +770,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     spin = skew(grad_v);
     // then jaumann
     var ds_i: mat3x3<f32> = ld_ds(i);
-    ds_i = (((2.0 * prm_G(i)) * (dev(edot) - ((select(0.0, (v_i[0] / max(ld_x(i)[0], (0.1 * ld_dx(i)))), (prm_axisymmetric(i) > 0.0)) / 3.0) * eye()))) + sym(((s_i * transpose(spin)) + (spin * s_i))));
+    let w_5 = min((ld_x(i)[0] / (2.0 * ld_dx(i))), 1.0);
+    ds_i = (((2.0 * prm_G(i)) * (dev(edot) - ((select(0.0, (((w_5 * v_i[0]) / max(ld_x(i)[0], (0.1 * ld_dx(i)))) + ((1.0 - w_5) * edot[0][0])), (prm_axisymmetric(i) > 0.0)) / 3.0) * eye()))) + sym(((s_i * transpose(spin)) + (spin * s_i))));
     // then nonlocal_strain_laplacian
     let exact_for_quadratics = ((2.0 * 3.0) / max(moment, 1e-12));
     lap_sum = (exact_for_quadratics * sum);

@@ -468,7 +468,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var rate_nl_i: f32 = ld_rate_nl(i);
     let l2 = (prm_damage_length(i) * prm_damage_length(i));
     let e = ld_edot(i);
-    let e_hoop = select(0.0, (v_i[0] / max(x_i[0], (0.1 * ld_dx(i)))), (prm_axisymmetric(i) > 0.0));
+    let w = min((x_i[0] / (2.0 * ld_dx(i))), 1.0);
+    let e_hoop = select(0.0, (((w * v_i[0]) / max(x_i[0], (0.1 * ld_dx(i)))) + ((1.0 - w) * ld_edot(i)[0][0])), (prm_axisymmetric(i) > 0.0));
     let d = (dev(e) - ((e_hoop / 3.0) * eye()));
     let d_hoop = select(0.0, (e_hoop - ((trace(e) + e_hoop) / 3.0)), (prm_axisymmetric(i) > 0.0));
     rate_nl_i = ((sqrt(((2.0 / 3.0) * (ddot(d, d) + (d_hoop * d_hoop)))) + (l2 * ld_rate_lap_sum(i))) / (1.0 + (l2 * ld_lap_weight(i))));
@@ -483,7 +484,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let blend = ((prm_nonlocal_hardening(i) * eps_nl_i) + ((1.0 - prm_nonlocal_hardening(i)) * eps_p_i));
     let hardening_strain = select(eps_p_i, max(blend, 0.0), ((prm_nonlocal_hardening(i) != 0.0) && (prm_damage_length(i) > 0.0)));
     let e_2 = ld_edot(i);
-    let e_hoop_2 = select(0.0, (v_i[0] / max(x_i[0], (0.1 * ld_dx(i)))), (prm_axisymmetric(i) > 0.0));
+    let w_2 = min((x_i[0] / (2.0 * ld_dx(i))), 1.0);
+    let e_hoop_2 = select(0.0, (((w_2 * v_i[0]) / max(x_i[0], (0.1 * ld_dx(i)))) + ((1.0 - w_2) * ld_edot(i)[0][0])), (prm_axisymmetric(i) > 0.0));
     let d_2 = (dev(e_2) - ((e_hoop_2 / 3.0) * eye()));
     let d_hoop_2 = select(0.0, (e_hoop_2 - ((trace(e_2) + e_hoop_2) / 3.0)), (prm_axisymmetric(i) > 0.0));
     let hardening_rate = select(sqrt(((2.0 / 3.0) * (ddot(d_2, d_2) + (d_hoop_2 * d_hoop_2)))), rate_nl_i, ((prm_nonlocal_rate(i) > 0.0) && (prm_damage_length(i) > 0.0)));
@@ -527,7 +529,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let edot_2 = edot;
     let T_4 = T_3;
     let e_3 = edot_2;
-    let e_hoop_3 = select(0.0, (v_i[0] / max(x_i[0], (0.1 * ld_dx(i)))), (prm_axisymmetric(i) > 0.0));
+    let w_3 = min((x_i[0] / (2.0 * ld_dx(i))), 1.0);
+    let e_hoop_3 = select(0.0, (((w_3 * v_i[0]) / max(x_i[0], (0.1 * ld_dx(i)))) + ((1.0 - w_3) * ld_edot(i)[0][0])), (prm_axisymmetric(i) > 0.0));
     let d_4 = (dev(e_3) - ((e_hoop_3 / 3.0) * eye()));
     let d_hoop_3 = select(0.0, (e_hoop_3 - ((trace(e_3) + e_hoop_3) / 3.0)), (prm_axisymmetric(i) > 0.0));
     let rate_2 = (sqrt(((2.0 / 3.0) * (ddot(d_4, d_4) + (d_hoop_3 * d_hoop_3)))) / prm_eps_rate0(i));

@@ -398,7 +398,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let blend = ((prm_nonlocal_hardening(i) * ld_eps_nl(i)) + ((1.0 - prm_nonlocal_hardening(i)) * eps_p_i));
     let hardening_strain = select(eps_p_i, max(blend, 0.0), ((prm_nonlocal_hardening(i) != 0.0) && (prm_damage_length(i) > 0.0)));
     let e = ld_edot(i);
-    let e_hoop = select(0.0, (v_i[0] / max(x_i[0], (0.1 * ld_dx(i)))), (prm_axisymmetric(i) > 0.0));
+    let w = min((x_i[0] / (2.0 * ld_dx(i))), 1.0);
+    let e_hoop = select(0.0, (((w * v_i[0]) / max(x_i[0], (0.1 * ld_dx(i)))) + ((1.0 - w) * ld_edot(i)[0][0])), (prm_axisymmetric(i) > 0.0));
     let d = (dev(e) - ((e_hoop / 3.0) * eye()));
     let d_hoop = select(0.0, (e_hoop - ((trace(e) + e_hoop) / 3.0)), (prm_axisymmetric(i) > 0.0));
     let hardening_rate = select(sqrt(((2.0 / 3.0) * (ddot(d, d) + (d_hoop * d_hoop)))), ld_rate_nl(i), ((prm_nonlocal_rate(i) > 0.0) && (prm_damage_length(i) > 0.0)));

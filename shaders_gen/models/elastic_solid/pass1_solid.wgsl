@@ -705,7 +705,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     spin = skew(grad_v);
     // then jaumann
     var ds_i: mat3x3<f32> = ld_ds(i);
-    ds_i = (((2.0 * G_i) * (dev(edot) - ((select(0.0, (v_i[0] / max(ld_x(i)[0], (0.1 * dx_i))), (prm_axisymmetric(i) > 0.0)) / 3.0) * eye()))) + sym(((s_i * transpose(spin)) + (spin * s_i))));
+    let w = min((ld_x(i)[0] / (2.0 * dx_i)), 1.0);
+    ds_i = (((2.0 * G_i) * (dev(edot) - ((select(0.0, (((w * v_i[0]) / max(ld_x(i)[0], (0.1 * dx_i))) + ((1.0 - w) * edot[0][0])), (prm_axisymmetric(i) > 0.0)) / 3.0) * eye()))) + sym(((s_i * transpose(spin)) + (spin * s_i))));
     st_edot(i, edot);
     st_spin(i, spin);
     st_drho(i, drho);

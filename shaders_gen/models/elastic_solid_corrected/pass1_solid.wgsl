@@ -647,10 +647,12 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     spin = skew(g);
     // then continuity_from_strain_rate
     var drho_i: f32 = ld_drho(i);
-    drho_i = ((-rho_i) * (trace(edot) + select(0.0, (v_i[0] / max(ld_x(i)[0], (0.1 * dx_i))), (prm_axisymmetric(i) > 0.0))));
+    let w = min((ld_x(i)[0] / (2.0 * dx_i)), 1.0);
+    drho_i = ((-rho_i) * (trace(edot) + select(0.0, (((w * v_i[0]) / max(ld_x(i)[0], (0.1 * dx_i))) + ((1.0 - w) * edot[0][0])), (prm_axisymmetric(i) > 0.0))));
     // then jaumann
     var ds_i: mat3x3<f32> = ld_ds(i);
-    ds_i = (((2.0 * G_i) * (dev(edot) - ((select(0.0, (v_i[0] / max(ld_x(i)[0], (0.1 * dx_i))), (prm_axisymmetric(i) > 0.0)) / 3.0) * eye()))) + sym(((ld_s(i) * transpose(spin)) + (spin * ld_s(i)))));
+    let w_2 = min((ld_x(i)[0] / (2.0 * dx_i)), 1.0);
+    ds_i = (((2.0 * G_i) * (dev(edot) - ((select(0.0, (((w_2 * v_i[0]) / max(ld_x(i)[0], (0.1 * dx_i))) + ((1.0 - w_2) * edot[0][0])), (prm_axisymmetric(i) > 0.0)) / 3.0) * eye()))) + sym(((ld_s(i) * transpose(spin)) + (spin * ld_s(i)))));
     st_L_inv(i, L_inv);
     st_edot(i, edot);
     st_spin(i, spin);

@@ -456,20 +456,12 @@ fn st_L_inv(i: u32, v: mat3x3<f32>) {
     data[b + 7u] = v[1][2];
     data[b + 8u] = v[2][2];
 }
-fn ld_c(i: u32) -> f32 {
-    let b = u32(info[25 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_c(i: u32, v: f32) {
-    let b = u32(info[25 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ld_s(i: u32) -> mat3x3<f32> {
-    let b = u32(info[27 + G] + i32(i) * 6);
+fn ld_edot(i: u32) -> mat3x3<f32> {
+    let b = u32(info[21 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
-fn st_s(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[27 + G] + i32(i) * 6);
+fn st_edot(i: u32, v: mat3x3<f32>) {
+    let b = u32(info[21 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -477,12 +469,20 @@ fn st_s(i: u32, v: mat3x3<f32>) {
     data[b + 4u] = v[2][1];
     data[b + 5u] = v[2][2];
 }
-fn ld_edot(i: u32) -> mat3x3<f32> {
-    let b = u32(info[31 + G] + i32(i) * 6);
+fn ld_c(i: u32) -> f32 {
+    let b = u32(info[27 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_c(i: u32, v: f32) {
+    let b = u32(info[27 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_s(i: u32) -> mat3x3<f32> {
+    let b = u32(info[29 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
-fn st_edot(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[31 + G] + i32(i) * 6);
+fn st_s(i: u32, v: mat3x3<f32>) {
+    let b = u32(info[29 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -958,15 +958,19 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     dkernel_shape = (gv * kernel_shape_i);
     // then continuity_from_strain_rate
     var drho_i: f32 = ld_drho(i);
-    drho_i = ((-rho_i) * (trace(edot) + select(0.0, (v_i[0] / max(ld_x(i)[0], (0.1 * dx_i))), (prm_axisymmetric(i) > 0.0))));
+    let w = min((ld_x(i)[0] / (2.0 * dx_i)), 1.0);
+    drho_i = ((-rho_i) * (trace(edot) + select(0.0, (((w * v_i[0]) / max(ld_x(i)[0], (0.1 * dx_i))) + ((1.0 - w) * edot[0][0])), (prm_axisymmetric(i) > 0.0))));
     // then shaped_density_diffusion
     drho_diffusion = (prm_delta(i) * sum);
     // then jaumann
     var ds_i: mat3x3<f32> = ld_ds(i);
-    ds_i = (((2.0 * prm_G(i)) * (dev(edot) - ((select(0.0, (v_i[0] / max(ld_x(i)[0], (0.1 * dx_i))), (prm_axisymmetric(i) > 0.0)) / 3.0) * eye()))) + sym(((ld_s(i) * transpose(spin)) + (spin * ld_s(i)))));
+    let w_2 = min((ld_x(i)[0] / (2.0 * dx_i)), 1.0);
+    ds_i = (((2.0 * prm_G(i)) * (dev(edot) - ((select(0.0, (((w_2 * v_i[0]) / max(ld_x(i)[0], (0.1 * dx_i))) + ((1.0 - w_2) * edot[0][0])), (prm_axisymmetric(i) > 0.0)) / 3.0) * eye()))) + sym(((ld_s(i) * transpose(spin)) + (spin * ld_s(i)))));
     // then jaumann_hoop
     var ds_hoop_i: f32 = ld_ds_hoop(i);
-    ds_hoop_i = select(0.0, ((2.0 * prm_G(i)) * (select(0.0, (v_i[0] / max(ld_x(i)[0], (0.1 * dx_i))), (prm_axisymmetric(i) > 0.0)) - ((trace(edot) + select(0.0, (v_i[0] / max(ld_x(i)[0], (0.1 * dx_i))), (prm_axisymmetric(i) > 0.0))) / 3.0))), (prm_axisymmetric(i) > 0.0));
+    let w_3 = min((ld_x(i)[0] / (2.0 * dx_i)), 1.0);
+    let w_4 = min((ld_x(i)[0] / (2.0 * dx_i)), 1.0);
+    ds_hoop_i = select(0.0, ((2.0 * prm_G(i)) * (select(0.0, (((w_3 * v_i[0]) / max(ld_x(i)[0], (0.1 * dx_i))) + ((1.0 - w_3) * edot[0][0])), (prm_axisymmetric(i) > 0.0)) - ((trace(edot) + select(0.0, (((w_4 * v_i[0]) / max(ld_x(i)[0], (0.1 * dx_i))) + ((1.0 - w_4) * edot[0][0])), (prm_axisymmetric(i) > 0.0))) / 3.0))), (prm_axisymmetric(i) > 0.0));
     // then contact_pressure
     var p_contact_i: f32 = ld_p_contact(i);
     p_contact_i = ((prm_contact_stiffness(i) * prm_bulk(i)) * max((colour_other - prm_contact_colour(i)), 0.0));
@@ -978,7 +982,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     rate_lap_sum = (((2.0 * 3.0) / max(moment_2, 1e-12)) * sum_3);
     // then compressive_share
     var compression_i: f32 = ld_compression(i);
-    let volumetric = abs((trace(edot) + select(0.0, (v_i[0] / max(ld_x(i)[0], (0.1 * dx_i))), (prm_axisymmetric(i) > 0.0))));
+    let w_5 = min((ld_x(i)[0] / (2.0 * dx_i)), 1.0);
+    let volumetric = abs((trace(edot) + select(0.0, (((w_5 * v_i[0]) / max(ld_x(i)[0], (0.1 * dx_i))) + ((1.0 - w_5) * edot[0][0])), (prm_axisymmetric(i) > 0.0))));
     compression_i = (volumetric / ((volumetric + frob(dev(edot))) + ((0.01 * ld_c(i)) / ld_h(i))));
     st_L_inv(i, L_inv);
     st_edot(i, edot);

@@ -448,64 +448,12 @@ fn st_L_inv(i: u32, v: mat3x3<f32>) {
     data[b + 7u] = v[1][2];
     data[b + 8u] = v[2][2];
 }
-fn ld_s_hoop(i: u32) -> f32 {
-    let b = u32(info[21 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_s_hoop(i: u32, v: f32) {
-    let b = u32(info[21 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ld_p(i: u32) -> f32 {
-    let b = u32(info[23 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_p(i: u32, v: f32) {
-    let b = u32(info[23 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ldj_p(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[23u];
-    let b = u32(base + i32(j) * 1);
-    return data[b];
-}
-fn ld_c(i: u32) -> f32 {
-    let b = u32(info[25 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_c(i: u32, v: f32) {
-    let b = u32(info[25 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ldj_c(j: u32, sgn: vec3<f32>) -> f32 {
-    let base = info[25u];
-    let b = u32(base + i32(j) * 1);
-    return data[b];
-}
-fn ld_s(i: u32) -> mat3x3<f32> {
-    let b = u32(info[27 + G] + i32(i) * 6);
-    return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
-}
-fn st_s(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[27 + G] + i32(i) * 6);
-    data[b] = v[0][0];
-    data[b + 1u] = v[1][0];
-    data[b + 2u] = v[2][0];
-    data[b + 3u] = v[1][1];
-    data[b + 4u] = v[2][1];
-    data[b + 5u] = v[2][2];
-}
-fn ldj_s(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
-    let base = info[27u];
-    let b = u32(base + i32(j) * 6);
-    return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u])), sgn);
-}
 fn ld_edot(i: u32) -> mat3x3<f32> {
-    let b = u32(info[31 + G] + i32(i) * 6);
+    let b = u32(info[21 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_edot(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[31 + G] + i32(i) * 6);
+    let b = u32(info[21 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -514,7 +462,59 @@ fn st_edot(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ldj_edot(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
-    let base = info[31u];
+    let base = info[21u];
+    let b = u32(base + i32(j) * 6);
+    return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u])), sgn);
+}
+fn ld_s_hoop(i: u32) -> f32 {
+    let b = u32(info[23 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_s_hoop(i: u32, v: f32) {
+    let b = u32(info[23 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_p(i: u32) -> f32 {
+    let b = u32(info[25 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_p(i: u32, v: f32) {
+    let b = u32(info[25 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ldj_p(j: u32, sgn: vec3<f32>) -> f32 {
+    let base = info[25u];
+    let b = u32(base + i32(j) * 1);
+    return data[b];
+}
+fn ld_c(i: u32) -> f32 {
+    let b = u32(info[27 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_c(i: u32, v: f32) {
+    let b = u32(info[27 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ldj_c(j: u32, sgn: vec3<f32>) -> f32 {
+    let base = info[27u];
+    let b = u32(base + i32(j) * 1);
+    return data[b];
+}
+fn ld_s(i: u32) -> mat3x3<f32> {
+    let b = u32(info[29 + G] + i32(i) * 6);
+    return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
+}
+fn st_s(i: u32, v: mat3x3<f32>) {
+    let b = u32(info[29 + G] + i32(i) * 6);
+    data[b] = v[0][0];
+    data[b + 1u] = v[1][0];
+    data[b + 2u] = v[2][0];
+    data[b + 3u] = v[1][1];
+    data[b + 4u] = v[2][1];
+    data[b + 5u] = v[2][2];
+}
+fn ldj_s(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
+    let base = info[29u];
     let b = u32(base + i32(j) * 6);
     return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u])), sgn);
 }
@@ -687,7 +687,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let w_2 = w;
     dv = select(vec3<f32>(0.0), ((w_2 * ((s_2 - (s_hoop * eye())) * vec3<f32>(1.0, 0.0, 0.0))) / (ld_rho(i) * max(ld_x(i)[0], (0.1 * ld_dx(i))))), (prm_axisymmetric(i) > 0.0));
     let sigma_hoop = ((w * (ld_s_hoop(i) - min(ld_p(i), 0.0))) - max(ld_p(i), 0.0));
-    de = select(0.0, ((sigma_hoop * select(0.0, (ld_v(i)[0] / max(ld_x(i)[0], (0.1 * ld_dx(i)))), (prm_axisymmetric(i) > 0.0))) / ld_rho(i)), (prm_axisymmetric(i) > 0.0));
+    let w_3 = min((ld_x(i)[0] / (2.0 * ld_dx(i))), 1.0);
+    de = select(0.0, ((sigma_hoop * select(0.0, (((w_3 * ld_v(i)[0]) / max(ld_x(i)[0], (0.1 * ld_dx(i)))) + ((1.0 - w_3) * ld_edot(i)[0][0])), (prm_axisymmetric(i) > 0.0))) / ld_rho(i)), (prm_axisymmetric(i) > 0.0));
     let h_ratio_i = prm_h_ratio(i);
     let visc_a_i = prm_visc_a(i);
     let visc_b_i = prm_visc_b(i);
@@ -700,10 +701,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let body_i = ld_body(i);
     let rho_i = ld_rho(i);
     let L_inv_i = ld_L_inv(i);
+    let edot_i = ld_edot(i);
     let p_i = ld_p(i);
     let c_i = ld_c(i);
     let s_i = ld_s(i);
-    let edot_i = ld_edot(i);
     let spin_i = ld_spin(i);
     let kernel_metric_i = ld_kernel_metric(i);
     let kernel_norm_i = ld_kernel_norm(i);
@@ -764,14 +765,14 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                     let p = p_i;
                     let D = D_i;
                     let coupling = damage_coupling_i;
-                    let w_3 = select((coupling * D), 1.0, (D >= 1.0));
-                    let sig_i = (((1.0 - w_3) * (s_3 - (min(p, 0.0) * eye()))) - (max(p, 0.0) * eye()));
+                    let w_4 = select((coupling * D), 1.0, (D >= 1.0));
+                    let sig_i = (((1.0 - w_4) * (s_3 - (min(p, 0.0) * eye()))) - (max(p, 0.0) * eye()));
                     let s_4 = ldj_s(j, sgn);
                     let p_2 = ldj_p(j, sgn);
                     let D_2 = ldj_D(j, sgn);
                     let coupling_2 = prm_damage_coupling(j);
-                    let w_4 = select((coupling_2 * D_2), 1.0, (D_2 >= 1.0));
-                    let sig_j = (((1.0 - w_4) * (s_4 - (min(p_2, 0.0) * eye()))) - (max(p_2, 0.0) * eye()));
+                    let w_5 = select((coupling_2 * D_2), 1.0, (D_2 >= 1.0));
+                    let sig_j = (((1.0 - w_5) * (s_4 - (min(p_2, 0.0) * eye()))) - (max(p_2, 0.0) * eye()));
                     let p1 = ldj_rho(j, sgn);
                     let M = kernel_metric_i;
                     let x_2 = x_ij;

@@ -53,6 +53,14 @@ fn st_v(i: u32, v: vec3<f32>) {
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
+fn ld_m(i: u32) -> f32 {
+    let b = u32(info[13 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_m(i: u32, v: f32) {
+    let b = u32(info[13 + G] + i32(i) * 1);
+    data[b] = v;
+}
 fn ld_rho(i: u32) -> f32 {
     let b = u32(info[15 + G] + i32(i) * 1);
     return data[b];
@@ -62,19 +70,19 @@ fn st_rho(i: u32, v: f32) {
     data[b] = v;
 }
 fn ld_s_hoop(i: u32) -> f32 {
-    let b = u32(info[21 + G] + i32(i) * 1);
+    let b = u32(info[23 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_s_hoop(i: u32, v: f32) {
-    let b = u32(info[21 + G] + i32(i) * 1);
+    let b = u32(info[23 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s(i: u32) -> mat3x3<f32> {
-    let b = u32(info[27 + G] + i32(i) * 6);
+    let b = u32(info[29 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[27 + G] + i32(i) * 6);
+    let b = u32(info[29 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -83,11 +91,11 @@ fn st_s(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_e(i: u32) -> f32 {
-    let b = u32(info[29 + G] + i32(i) * 1);
+    let b = u32(info[31 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_e(i: u32, v: f32) {
-    let b = u32(info[29 + G] + i32(i) * 1);
+    let b = u32(info[31 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_kernel_shape(i: u32) -> mat3x3<f32> {
@@ -160,28 +168,36 @@ fn st_v_0(i: u32, v: vec3<f32>) {
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
-fn ld_rho_0(i: u32) -> f32 {
+fn ld_m_0(i: u32) -> f32 {
     let b = u32(info[95 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_m_0(i: u32, v: f32) {
+    let b = u32(info[95 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_rho_0(i: u32) -> f32 {
+    let b = u32(info[97 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho_0(i: u32, v: f32) {
-    let b = u32(info[95 + G] + i32(i) * 1);
+    let b = u32(info[97 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s_hoop_0(i: u32) -> f32 {
-    let b = u32(info[97 + G] + i32(i) * 1);
+    let b = u32(info[99 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_s_hoop_0(i: u32, v: f32) {
-    let b = u32(info[97 + G] + i32(i) * 1);
+    let b = u32(info[99 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s_0(i: u32) -> mat3x3<f32> {
-    let b = u32(info[99 + G] + i32(i) * 6);
+    let b = u32(info[101 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s_0(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[99 + G] + i32(i) * 6);
+    let b = u32(info[101 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -190,19 +206,19 @@ fn st_s_0(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_e_0(i: u32) -> f32 {
-    let b = u32(info[101 + G] + i32(i) * 1);
+    let b = u32(info[103 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_e_0(i: u32, v: f32) {
-    let b = u32(info[101 + G] + i32(i) * 1);
+    let b = u32(info[103 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_kernel_shape_0(i: u32) -> mat3x3<f32> {
-    let b = u32(info[103 + G] + i32(i) * 9);
+    let b = u32(info[105 + G] + i32(i) * 9);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u]));
 }
 fn st_kernel_shape_0(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[103 + G] + i32(i) * 9);
+    let b = u32(info[105 + G] + i32(i) * 9);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -214,37 +230,37 @@ fn st_kernel_shape_0(i: u32, v: mat3x3<f32>) {
     data[b + 8u] = v[2][2];
 }
 fn ld_u_0(i: u32) -> vec3<f32> {
-    let b = u32(info[105 + G] + i32(i) * 3);
+    let b = u32(info[107 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_u_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[105 + G] + i32(i) * 3);
+    let b = u32(info[107 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_D_0(i: u32) -> f32 {
-    let b = u32(info[107 + G] + i32(i) * 1);
+    let b = u32(info[109 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_D_0(i: u32, v: f32) {
-    let b = u32(info[107 + G] + i32(i) * 1);
+    let b = u32(info[109 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_eps_p_0(i: u32) -> f32 {
-    let b = u32(info[109 + G] + i32(i) * 1);
+    let b = u32(info[111 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_eps_p_0(i: u32, v: f32) {
-    let b = u32(info[109 + G] + i32(i) * 1);
+    let b = u32(info[111 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_eps_nl_0(i: u32) -> f32 {
-    let b = u32(info[111 + G] + i32(i) * 1);
+    let b = u32(info[113 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_eps_nl_0(i: u32, v: f32) {
-    let b = u32(info[111 + G] + i32(i) * 1);
+    let b = u32(info[113 + G] + i32(i) * 1);
     data[b] = v;
 }
 @compute @workgroup_size(64)
@@ -259,6 +275,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // save the state at the start of the step
     var x_0_i: vec3<f32> = ld_x_0(i);
     var v_0_i: vec3<f32> = ld_v_0(i);
+    var m_0_i: f32 = ld_m_0(i);
     var rho_0_i: f32 = ld_rho_0(i);
     var s_hoop_0_i: f32 = ld_s_hoop_0(i);
     var s_0_i: mat3x3<f32> = ld_s_0(i);
@@ -270,6 +287,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var eps_nl_0_i: f32 = ld_eps_nl_0(i);
     x_0_i = ld_x(i);
     v_0_i = ld_v(i);
+    m_0_i = ld_m(i);
     rho_0_i = ld_rho(i);
     s_hoop_0_i = ld_s_hoop(i);
     s_0_i = ld_s(i);
@@ -281,6 +299,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     eps_nl_0_i = ld_eps_nl(i);
     st_x_0(i, x_0_i);
     st_v_0(i, v_0_i);
+    st_m_0(i, m_0_i);
     st_rho_0(i, rho_0_i);
     st_s_hoop_0(i, s_hoop_0_i);
     st_s_0(i, s_0_i);

@@ -59,11 +59,11 @@ fn st_m(i: u32, v: f32) {
     data[b] = v;
 }
 fn ld_e(i: u32) -> f32 {
-    let b = u32(info[29 + ints[i]] + i32(i) * 1);
+    let b = u32(info[31 + ints[i]] + i32(i) * 1);
     return data[b];
 }
 fn st_e(i: u32, v: f32) {
-    let b = u32(info[29 + ints[i]] + i32(i) * 1);
+    let b = u32(info[31 + ints[i]] + i32(i) * 1);
     data[b] = v;
 }
 @compute @workgroup_size(64)
@@ -72,7 +72,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let n = u32(info[0]);
     let i = k;
     if (i >= n) { return; }
-    let scratch = u32(info[113]) + 5u * n;
+    let scratch = u32(info[115]) + 5u * n;
     var speed2 = 0.0;
     var energy = 0.0;
     var kinetic = 0.0;

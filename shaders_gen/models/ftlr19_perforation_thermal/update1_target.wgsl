@@ -69,20 +69,12 @@ fn st_rho(i: u32, v: f32) {
     let b = u32(info[15 + G] + i32(i) * 1);
     data[b] = v;
 }
-fn ld_s_hoop(i: u32) -> f32 {
-    let b = u32(info[21 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_s_hoop(i: u32, v: f32) {
-    let b = u32(info[21 + G] + i32(i) * 1);
-    data[b] = v;
-}
-fn ld_s(i: u32) -> mat3x3<f32> {
-    let b = u32(info[23 + G] + i32(i) * 6);
+fn ld_edot(i: u32) -> mat3x3<f32> {
+    let b = u32(info[21 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
-fn st_s(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[23 + G] + i32(i) * 6);
+fn st_edot(i: u32, v: mat3x3<f32>) {
+    let b = u32(info[21 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -90,11 +82,19 @@ fn st_s(i: u32, v: mat3x3<f32>) {
     data[b + 4u] = v[2][1];
     data[b + 5u] = v[2][2];
 }
-fn ld_edot(i: u32) -> mat3x3<f32> {
+fn ld_s_hoop(i: u32) -> f32 {
+    let b = u32(info[23 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_s_hoop(i: u32, v: f32) {
+    let b = u32(info[23 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_s(i: u32) -> mat3x3<f32> {
     let b = u32(info[25 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
-fn st_edot(i: u32, v: mat3x3<f32>) {
+fn st_s(i: u32, v: mat3x3<f32>) {
     let b = u32(info[25 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
@@ -434,7 +434,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var rate_nl_i: f32 = ld_rate_nl(i);
     let l2 = (prm_damage_length(i) * prm_damage_length(i));
     let e = ld_edot(i);
-    let e_hoop = select(0.0, (v_i[0] / max(x_i[0], (0.1 * ld_dx(i)))), (prm_axisymmetric(i) > 0.0));
+    let w = min((x_i[0] / (2.0 * ld_dx(i))), 1.0);
+    let e_hoop = select(0.0, (((w * v_i[0]) / max(x_i[0], (0.1 * ld_dx(i)))) + ((1.0 - w) * ld_edot(i)[0][0])), (prm_axisymmetric(i) > 0.0));
     let d = (dev(e) - ((e_hoop / 3.0) * eye()));
     let d_hoop = select(0.0, (e_hoop - ((trace(e) + e_hoop) / 3.0)), (prm_axisymmetric(i) > 0.0));
     rate_nl_i = ((sqrt(((2.0 / 3.0) * (ddot(d, d) + (d_hoop * d_hoop)))) + (l2 * ld_rate_lap_sum(i))) / (1.0 + (l2 * ld_lap_weight(i))));
@@ -448,7 +449,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let blend = ((prm_nonlocal_hardening(i) * ld_eps_nl(i)) + ((1.0 - prm_nonlocal_hardening(i)) * eps_p_i));
     let hardening_strain = select(eps_p_i, max(blend, 0.0), ((prm_nonlocal_hardening(i) != 0.0) && (prm_damage_length(i) > 0.0)));
     let e_2 = ld_edot(i);
-    let e_hoop_2 = select(0.0, (v_i[0] / max(x_i[0], (0.1 * ld_dx(i)))), (prm_axisymmetric(i) > 0.0));
+    let w_2 = min((x_i[0] / (2.0 * ld_dx(i))), 1.0);
+    let e_hoop_2 = select(0.0, (((w_2 * v_i[0]) / max(x_i[0], (0.1 * ld_dx(i)))) + ((1.0 - w_2) * ld_edot(i)[0][0])), (prm_axisymmetric(i) > 0.0));
     let d_2 = (dev(e_2) - ((e_hoop_2 / 3.0) * eye()));
     let d_hoop_2 = select(0.0, (e_hoop_2 - ((trace(e_2) + e_hoop_2) / 3.0)), (prm_axisymmetric(i) > 0.0));
     let hardening_rate = select(sqrt(((2.0 / 3.0) * (ddot(d_2, d_2) + (d_hoop_2 * d_hoop_2)))), rate_nl_i, ((prm_nonlocal_rate(i) > 0.0) && (prm_damage_length(i) > 0.0)));
@@ -471,7 +473,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var T_i: f32 = ld_T(i);
     let eps_p_2 = eps_p_i;
     let e_3 = ld_edot(i);
-    let e_hoop_3 = select(0.0, (v_i[0] / max(x_i[0], (0.1 * ld_dx(i)))), (prm_axisymmetric(i) > 0.0));
+    let w_3 = min((x_i[0] / (2.0 * ld_dx(i))), 1.0);
+    let e_hoop_3 = select(0.0, (((w_3 * v_i[0]) / max(x_i[0], (0.1 * ld_dx(i)))) + ((1.0 - w_3) * ld_edot(i)[0][0])), (prm_axisymmetric(i) > 0.0));
     let d_4 = (dev(e_3) - ((e_hoop_3 / 3.0) * eye()));
     let d_hoop_3 = select(0.0, (e_hoop_3 - ((trace(e_3) + e_hoop_3) / 3.0)), (prm_axisymmetric(i) > 0.0));
     let rate_p_2 = sqrt(((2.0 / 3.0) * (ddot(d_4, d_4) + (d_hoop_3 * d_hoop_3))));
@@ -508,7 +511,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let edot_2 = edot;
     let T_6 = T_5;
     let e_4 = edot_2;
-    let e_hoop_4 = select(0.0, (v_i[0] / max(x_i[0], (0.1 * ld_dx(i)))), (prm_axisymmetric(i) > 0.0));
+    let w_4 = min((x_i[0] / (2.0 * ld_dx(i))), 1.0);
+    let e_hoop_4 = select(0.0, (((w_4 * v_i[0]) / max(x_i[0], (0.1 * ld_dx(i)))) + ((1.0 - w_4) * ld_edot(i)[0][0])), (prm_axisymmetric(i) > 0.0));
     let d_5 = (dev(e_4) - ((e_hoop_4 / 3.0) * eye()));
     let d_hoop_4 = select(0.0, (e_hoop_4 - ((trace(e_4) + e_hoop_4) / 3.0)), (prm_axisymmetric(i) > 0.0));
     let rate_3 = (sqrt(((2.0 / 3.0) * (ddot(d_5, d_5) + (d_hoop_4 * d_hoop_4)))) / prm_eps_rate0(i));
