@@ -6,6 +6,9 @@ use pairsum::diag::{render, Sources};
 use std::path::Path;
 use std::process::Command;
 
+mod common;
+use common::field_by_id;
+
 fn stdlib_dir() -> std::path::PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("stdlib")
 }
@@ -179,4 +182,103 @@ fn modules_whose_equations_share_names_combine_across_groups() {
         let on: Vec<(bool, bool)> = eqs.iter().map(|e| (e.dest.contains(fluid), e.dest.contains(solid))).collect();
         assert!(on.contains(&(true, false)) && on.contains(&(false, true)), "`{name}` runs on {on:?}");
     }
+}
+
+/// Mie–Grüneisen (eos/mie_gruneisen.sph) on the CPU backend over a block whose density rises
+/// from ρ0 to 4 ρ0 across it (e = 0), steel's constants (S = 1.5, Γ = 2): up to the papers' peak
+/// η* the pressure is the papers' (1 − ½ Γ η) P_H to 1e-12, computed here in Rust; `eos_eta_peak`
+/// is that peak, found by the test on a grid of 1e-6 in η; and the pressure rises with the
+/// density at every particle, where the papers' form falls past η* and is tension past η = 1.
+#[test]
+fn mie_gruneisen_is_the_papers_up_to_its_peak_and_rises_with_the_density_beyond() {
+    use pairsum::backend::cpu::CpuBackend;
+    use pairsum::engine::setup::build_store;
+    let dir = std::env::temp_dir().join(format!("pairsum-mie-gruneisen-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let model = "use kernels\nuse eos::mie_gruneisen\ngroup metal\nkernel = wendland_c2\n\
+                 integrate { x' = v  v' = 0 }\n";
+    let case = r#"name = "eos"
+model = "model.sph"
+dim = 2
+end_time = "1 us"
+
+[materials.metal]
+rho0 = "7850 kg/m^3"
+c0 = "5110.25 m/s"
+S_s = 1.5
+gamma0 = 2.0
+
+[[bodies]]
+name = "block"
+group = "metal"
+material = "metal"
+shape = { box = { min = [0, 0], max = ["300 mm", "10 mm"] } }
+initial = { rho = "7850 [kg/m^3] * (1 + x.x / 0.1 [m])" }
+
+[resolutions]
+ci = "1 mm"
+
+[output]
+interval = "1 us"
+fields = ["p"]
+"#;
+    std::fs::write(dir.join("model.sph"), model).unwrap();
+    std::fs::write(dir.join("case.toml"), case).unwrap();
+    let (scene, plan) =
+        pairsum::runner::prepare(&dir.join("case.toml"), &Default::default()).unwrap_or_else(|e| panic!("{e}"));
+    let values = pairsum::runner::material_values(&scene, &plan);
+    let store = build_store::<f64>(&plan, &scene.particles, &scene.materials).unwrap_or_else(|e| panic!("{e}"));
+    let mut b = CpuBackend::new(plan, store, vec![]).expect("backend");
+    pairsum::backend::Backend::initialise(&mut b).expect("initialise");
+    let (_, x) = field_by_id(&b, "x");
+    let (_, p) = field_by_id(&b, "p");
+    let (a0, s, gamma) = (7850.0 * 5110.25f64.powi(2), 1.5, 2.0);
+    let papers = |eta: f64| {
+        let (b0, c0) = (a0 * (1.0 + 2.0 * (s - 1.0)), a0 * (2.0 * (s - 1.0) + 3.0 * (s - 1.0f64).powi(2)));
+        let p_h = if eta > 0.0 { a0 * eta + b0 * eta * eta + c0 * eta.powi(3) } else { a0 * eta };
+        (1.0 - 0.5 * gamma * eta) * p_h
+    };
+    let peak = (0..1_000_000).map(|k| k as f64 * 1e-6).fold((0.0, f64::NEG_INFINITY), |best, eta| {
+        let v = papers(eta);
+        assert!(v.is_finite(), "the papers' pressure at η = {eta} is {v}");
+        if v > best.1 {
+            (eta, v)
+        } else {
+            best
+        }
+    });
+    let held: f64 = values
+        .lines()
+        .find_map(|l| l.trim().strip_prefix("eos_eta_peak = "))
+        .and_then(|v| v.split_whitespace().next()?.parse().ok())
+        .unwrap_or_else(|| panic!("no eos_eta_peak among the material's values:\n{values}"));
+    assert!((held - peak.0).abs() < 2e-6, "eos_eta_peak {held}, the papers' peak at η = {}", peak.0);
+    // One row of particles, one density each.
+    let mut by_density: Vec<(f64, f64)> =
+        (0..p.len()).filter(|&k| x[2 * k + 1] < 1e-3).map(|k| (x[2 * k] / 0.1, p[k])).collect();
+    by_density.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let (mut same, mut beyond) = (0, 0);
+    for (eta, p) in &by_density {
+        if *eta <= peak.0 - 1e-5 {
+            let expected = papers(*eta);
+            assert!((p - expected).abs() <= 1e-12 * expected.abs(), "η = {eta}: p = {p} Pa, the papers' {expected} Pa");
+            same += 1;
+        } else {
+            beyond += 1;
+        }
+    }
+    for w in by_density.windows(2) {
+        assert!(
+            w[1].1 > w[0].1,
+            "the pressure falls from {} Pa at η = {} to {} Pa at η = {}",
+            w[0].1,
+            w[0].0,
+            w[1].1,
+            w[1].0
+        );
+    }
+    assert!(papers(2.5) < 0.0, "the papers' form is tension at η = 2.5: {}", papers(2.5));
+    assert!(same >= 60 && beyond >= 200 && same + beyond == 300, "{same} particles below the peak, {beyond} beyond");
+    let _ = std::fs::remove_dir_all(&dir);
 }

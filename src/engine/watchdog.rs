@@ -15,7 +15,8 @@
 //!   energy stored in strain or compression is not counted, and that only ever takes energy out
 //!   of `E`. The run stops when `E − E₀` passes `energy_factor` times the energy in play at the
 //!   start, `Σ ½ m |v₀|² + Σ m |e₀| + Σ m |g| (z − z_lowest)` (each particle's fall to the scene's
-//!   lowest point), or, for a scene at rest without gravity, `½ M (10⁻⁴ × speed scale)²`.
+//!   lowest point), or, for a scene at rest without gravity, `½ M (10⁻⁴ × speed scale)²`. In an
+//!   axisymmetric case each mass is its ring's (`m 2π r`), whose energy is the one conserved.
 
 use crate::backend::{Backend, BackendError, WatchValues};
 use crate::ir::FieldId;
@@ -52,7 +53,12 @@ impl Motion {
         let (Some((cv, v)), Some((cx, x))) = (column(id("v"))?, column(id("x"))?) else {
             return Ok(None);
         };
-        let m = column(id("m"))?.map(|(_, m)| m);
+        let mut m = column(id("m"))?.map(|(_, m)| m);
+        if plan.axisymmetric() {
+            // A particle's energy is its ring's: the planar mass alone grows as a ring moves inward.
+            let dim = cx.max(1);
+            m.iter_mut().flatten().enumerate().for_each(|(i, m)| *m *= crate::schedule::ring(x[i * dim]));
+        }
         let speed = v.chunks(cv.max(1)).map(|u| u.iter().map(|a| a * a).sum::<f64>().sqrt()).collect();
         let e = column(id("e").filter(|f| model.field(*f).ty.shape == crate::ir::Shape::Scalar))?.map(|(_, e)| e);
         Ok(Some(Motion { m, speed, x, e, dim: cx.max(1) }))

@@ -435,10 +435,10 @@ fn locate_extreme(reduce: &str, values: &[(usize, f64)], axis: usize, b: &dyn Re
     Ok(greatest(b, mine, |p, q| p[0].total_cmp(&q[0])).map_or(f64::NAN, |p| p[1]))
 }
 
-/// What a particle of an axisymmetric case stands for in a sum over particles: its ring, 2π r
-/// (over the 1 m a 2D case's particle is thick), r its x.
+/// What a particle of an axisymmetric case stands for in a sum over particles: its ring
+/// (`schedule::ring`).
 fn ring(x: &[f64; 3]) -> f64 {
-    2.0 * std::f64::consts::PI * x[0]
+    crate::schedule::ring(x[0])
 }
 
 /// Every rank's part of a reduction, merged in rank order.

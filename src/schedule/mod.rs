@@ -304,7 +304,18 @@ impl std::fmt::Display for PlanError {
     }
 }
 
+/// What a particle of an axisymmetric case stands for in a sum over particles (masses, energies):
+/// its ring, 2π r over the 1 m a 2D case's particle is thick, r its x.
+pub fn ring(radius: f64) -> f64 {
+    2.0 * std::f64::consts::PI * radius
+}
+
 impl Plan {
+    /// Whether the case is axisymmetric (x the radius, each particle its ring).
+    pub fn axisymmetric(&self) -> bool {
+        self.scene_params.iter().any(|p| p.role == SceneRole::Axisymmetric)
+    }
+
     pub fn build(model: &Model, scene: &SceneSpec, kernel: Option<&str>) -> Result<Plan, PlanError> {
         let kernel = match kernel {
             Some(name) => model.kernel_id(name).ok_or_else(|| {

@@ -189,23 +189,23 @@ fn st_p_contact(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 5u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 7u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 18u;
     return params[b];
 }
 fn prm_contact_colour(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 25u;
     return params[b];
 }
 fn prm_contact_stiffness(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 26u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -355,47 +355,47 @@ fn st_lap_weight(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 1u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 5u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 7u;
     return params[b];
 }
 fn prm_delta(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 8u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 9u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 18u;
     return params[b];
 }
 fn prm_hourglass_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 19u;
     return params[b];
 }
 fn prm_hourglass_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 20u;
     return params[b];
 }
 fn prm_contact_colour(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 25u;
     return params[b];
 }
 fn prm_contact_stiffness(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 26u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -399,107 +399,111 @@ fn st_u_0(i: u32, v: vec2<f32>) {
     data[b + 1u] = v[1];
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 1u;
     return params[b];
 }
 fn prm_p_spall(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 6u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 9u;
     return params[b];
 }
 fn prm_shape_floor(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 16u;
     return params[b];
 }
 fn prm_shape_aspect(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 17u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 18u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 22u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 23u;
+    return params[b];
+}
+fn prm_eos_eta_peak(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 24u;
     return params[b];
 }
 fn prm_nonlocal_hardening(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 27u;
     return params[b];
 }
 fn prm_damage_length(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 29u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 30u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 31u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 32u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 32u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 33u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 33u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 34u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 34u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 35u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 35u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 36u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 36u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 37u;
     return params[b];
 }
 fn prm_D1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 38u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 39u;
     return params[b];
 }
 fn prm_D2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 39u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 40u;
     return params[b];
 }
 fn prm_D3(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 40u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 41u;
     return params[b];
 }
 fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 41u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 42u;
     return params[b];
 }
 fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 42u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 43u;
     return params[b];
 }
 fn prm_nonlocal_weight(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 45u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 46u;
     return params[b];
 }
 fn prm__constraint0(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 46u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 47u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 @compute @workgroup_size(64)
@@ -612,7 +616,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let p2 = (prm_S_s(i) - 1.0);
     let c0_h = (a0 * ((2.0 * (prm_S_s(i) - 1.0)) + (3.0 * (p2 * p2))));
     let p_h = select((a0 * eta), (((a0 * eta) + (b0 * (eta * eta))) + (c0_h * (eta * eta * eta))), (eta > 0.0));
-    let failed = select(jc, 1.0, ((((1.0 - ((0.5 * prm_gamma0(i)) * eta)) * p_h) + ((prm_gamma0(i) * rho) * e_3)) <= (-prm_p_spall(i))));
+    let failed = select(jc, 1.0, ((((1.0 - ((0.5 * prm_gamma0(i)) * min(eta, prm_eos_eta_peak(i)))) * p_h) + ((prm_gamma0(i) * rho) * e_3)) <= (-prm_p_spall(i))));
     D_i = failed;
     eps_nl_i = nonlocal;
     let floor = prm_rho0(i);
@@ -677,7 +681,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let p7 = (prm_S_s(i) - 1.0);
     let c0_h_2 = (a0_2 * ((2.0 * (prm_S_s(i) - 1.0)) + (3.0 * (p7 * p7))));
     let p_h_2 = select((a0_2 * eta_2), (((a0_2 * eta_2) + (b0_2 * (eta_2 * eta_2))) + (c0_h_2 * (eta_2 * eta_2 * eta_2))), (eta_2 > 0.0));
-    p_i = (((1.0 - ((0.5 * prm_gamma0(i)) * eta_2)) * p_h_2) + ((prm_gamma0(i) * rho_3) * e_4));
+    p_i = (((1.0 - ((0.5 * prm_gamma0(i)) * min(eta_2, prm_eos_eta_peak(i)))) * p_h_2) + ((prm_gamma0(i) * rho_3) * e_4));
     c_i = prm_c0(i);
     st_x(i, x_i);
     st_v(i, v_i);

@@ -71,9 +71,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         let v = ld_v(i);
         speed2 = dot(v, v);
         if (in_groups(3u, ints[i])) {
-            kinetic = 0.5 * ld_m(i) * speed2;
-            energy = ld_m(i) * (0.5 * speed2 - dot(vec2<f32>(0.0, 0.0), ld_x(i)));
-            if (in_groups(3u, ints[i])) { energy = energy + ld_m(i) * ld_e(i); }
+            kinetic = 0.5 * (ld_m(i) * 6.2831855 * ld_x(i).x) * speed2;
+            energy = (ld_m(i) * 6.2831855 * ld_x(i).x) * (0.5 * speed2 - dot(vec2<f32>(0.0, 0.0), ld_x(i)));
+            if (in_groups(3u, ints[i])) { energy = energy + (ld_m(i) * 6.2831855 * ld_x(i).x) * ld_e(i); }
         }
     }
     data[scratch + i] = speed2;

@@ -266,87 +266,91 @@ fn st_eps_p_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 0u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 8u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 9u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 10u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 11u;
+    return params[b];
+}
+fn prm_eos_eta_peak(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 12u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 21u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 22u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 23u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 24u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 25u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 26u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 27u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 28u;
     return params[b];
 }
 fn prm_D1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 29u;
     return params[b];
 }
 fn prm_D2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 30u;
     return params[b];
 }
 fn prm_D3(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 31u;
     return params[b];
 }
 fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 32u;
     return params[b];
 }
 fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 32u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 33u;
     return params[b];
 }
 fn prm__constraint0(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 37u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 38u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm__symmetry0(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 40u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 41u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm__symmetry1(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 46u + 43u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 44u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 @compute @workgroup_size(64)
@@ -450,7 +454,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let p2 = (prm_S_s(i) - 1.0);
     let c0_h = (a0 * ((2.0 * (prm_S_s(i) - 1.0)) + (3.0 * (p2 * p2))));
     let p_h = select((a0 * eta), (((a0 * eta) + (b0 * (eta * eta))) + (c0_h * (eta * eta * eta))), (eta > 0.0));
-    p_i = (((1.0 - ((0.5 * prm_gamma0(i)) * eta)) * p_h) + ((prm_gamma0(i) * rho_2) * e_3));
+    p_i = (((1.0 - ((0.5 * prm_gamma0(i)) * min(eta, prm_eos_eta_peak(i)))) * p_h) + ((prm_gamma0(i) * rho_2) * e_3));
     c_i = prm_c0(i);
     st_x(i, x_i);
     st_v(i, v_i);

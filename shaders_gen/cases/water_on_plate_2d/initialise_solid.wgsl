@@ -79,19 +79,23 @@ fn st_sigma(i: u32, v: mat2x2<f32>) {
     data[b + 2u] = v[1][1];
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 0u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 6u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 7u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 8u;
+    return params[b];
+}
+fn prm_eos_eta_peak(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 9u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -115,7 +119,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let p2 = (prm_S_s(i) - 1.0);
     let c0_h = (a0 * ((2.0 * (prm_S_s(i) - 1.0)) + (3.0 * (p2 * p2))));
     let p_h = select((a0 * eta), (((a0 * eta) + (b0 * (eta * eta))) + (c0_h * (eta * eta * eta))), (eta > 0.0));
-    p_i = (((1.0 - ((0.5 * prm_gamma0(i)) * eta)) * p_h) + ((prm_gamma0(i) * rho) * e));
+    p_i = (((1.0 - ((0.5 * prm_gamma0(i)) * min(eta, prm_eos_eta_peak(i)))) * p_h) + ((prm_gamma0(i) * rho) * e));
     c_i = prm_c0(i);
     // solid_stress
     var sigma_i: mat2x2<f32> = ld_sigma(i);

@@ -218,71 +218,75 @@ fn st_eps_p_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 0u;
     return params[b];
 }
 fn prm_gravity(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 2u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 2u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 5u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 6u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 7u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 8u;
+    return params[b];
+}
+fn prm_eos_eta_peak(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 9u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 13u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 14u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 15u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 16u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 17u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 18u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 19u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 20u;
     return params[b];
 }
 fn prm_C_v(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 21u;
     return params[b];
 }
 fn prm__constraint0(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 30u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 fn prm__symmetry0(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 32u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 @compute @workgroup_size(64)
@@ -352,7 +356,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let p2 = (prm_S_s(i) - 1.0);
     let c0_h = (a0 * ((2.0 * (prm_S_s(i) - 1.0)) + (3.0 * (p2 * p2))));
     let p_h = select((a0 * eta), (((a0 * eta) + (b0 * (eta * eta))) + (c0_h * (eta * eta * eta))), (eta > 0.0));
-    p_i = (((1.0 - ((0.5 * prm_gamma0(i)) * eta)) * p_h) + ((prm_gamma0(i) * rho) * e_2));
+    p_i = (((1.0 - ((0.5 * prm_gamma0(i)) * min(eta, prm_eos_eta_peak(i)))) * p_h) + ((prm_gamma0(i) * rho) * e_2));
     c_i = prm_c0(i);
     // solid_stress
     var sigma_i: mat2x2<f32> = ld_sigma(i);

@@ -248,75 +248,79 @@ fn st_e_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 0u;
     return params[b];
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 5u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 6u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 7u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 8u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 9u;
+    return params[b];
+}
+fn prm_eos_eta_peak(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 10u;
     return params[b];
 }
 fn prm_nonlocal_hardening(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 14u;
     return params[b];
 }
 fn prm_nonlocal_rate(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 15u;
     return params[b];
 }
 fn prm_damage_length(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 16u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 17u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 18u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 19u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 20u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 21u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 22u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 23u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 24u;
     return params[b];
 }
 fn prm_C_v(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 25u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -387,7 +391,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let p2 = (prm_S_s(i) - 1.0);
     let c0_h = (a0 * ((2.0 * (prm_S_s(i) - 1.0)) + (3.0 * (p2 * p2))));
     let p_h = select((a0 * eta), (((a0 * eta) + (b0 * (eta * eta))) + (c0_h * (eta * eta * eta))), (eta > 0.0));
-    p_i = (((1.0 - ((0.5 * prm_gamma0(i)) * eta)) * p_h) + ((prm_gamma0(i) * rho) * e_2));
+    p_i = (((1.0 - ((0.5 * prm_gamma0(i)) * min(eta, prm_eos_eta_peak(i)))) * p_h) + ((prm_gamma0(i) * rho) * e_2));
     c_i = prm_c0(i);
     st_x(i, x_i);
     st_v(i, v_i);

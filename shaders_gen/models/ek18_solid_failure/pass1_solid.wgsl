@@ -575,27 +575,27 @@ fn st_rate_lap_sum(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 5u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 6u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 11u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 12u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 13u;
     return params[b];
 }
 fn prm_damage_coupling(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 14u;
     return params[b];
 }
 @compute @workgroup_size(64)

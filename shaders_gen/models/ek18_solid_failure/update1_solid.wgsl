@@ -288,111 +288,115 @@ fn st_e_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 0u;
     return params[b];
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 5u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 6u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 7u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 8u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 9u;
+    return params[b];
+}
+fn prm_eos_eta_peak(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 10u;
     return params[b];
 }
 fn prm_nonlocal_hardening(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 15u;
     return params[b];
 }
 fn prm_nonlocal_rate(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 16u;
     return params[b];
 }
 fn prm_damage_length(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 17u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 18u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 19u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 20u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 21u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 22u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 23u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 24u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 25u;
     return params[b];
 }
 fn prm_p_spall(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 26u;
     return params[b];
 }
 fn prm_D1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 27u;
     return params[b];
 }
 fn prm_D2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 28u;
     return params[b];
 }
 fn prm_D3(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 29u;
     return params[b];
 }
 fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 30u;
     return params[b];
 }
 fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 31u;
     return params[b];
 }
 fn prm_failure_band(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 32u;
     return params[b];
 }
 fn prm_failure_band_spacing(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 32u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 33u;
     return params[b];
 }
 fn prm_nonlocal_weight(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 33u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 34u;
     return params[b];
 }
 fn prm_C_v(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 34u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 35u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -513,7 +517,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let p2 = (prm_S_s(i) - 1.0);
     let c0_h = (a0 * ((2.0 * (prm_S_s(i) - 1.0)) + (3.0 * (p2 * p2))));
     let p_h = select((a0 * eta), (((a0 * eta) + (b0 * (eta * eta))) + (c0_h * (eta * eta * eta))), (eta > 0.0));
-    p_i = (((1.0 - ((0.5 * prm_gamma0(i)) * eta)) * p_h) + ((prm_gamma0(i) * rho) * e_4));
+    p_i = (((1.0 - ((0.5 * prm_gamma0(i)) * min(eta, prm_eos_eta_peak(i)))) * p_h) + ((prm_gamma0(i) * rho) * e_4));
     c_i = prm_c0(i);
     st_x(i, x_i);
     st_v(i, v_i);

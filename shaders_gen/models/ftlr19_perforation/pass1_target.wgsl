@@ -624,35 +624,35 @@ fn st_rate_lap_sum(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 5u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 6u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 9u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 13u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 14u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 15u;
     return params[b];
 }
 fn prm_damage_coupling(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 16u;
     return params[b];
 }
 fn prm_K_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 17u;
     return params[b];
 }
 @compute @workgroup_size(64)

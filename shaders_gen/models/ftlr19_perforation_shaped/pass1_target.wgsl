@@ -717,51 +717,51 @@ fn st_rate_lap_sum(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 1u;
     return params[b];
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 5u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 6u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 8u;
     return params[b];
 }
 fn prm_delta(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 9u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 10u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 19u;
     return params[b];
 }
 fn prm_hourglass_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 20u;
     return params[b];
 }
 fn prm_hourglass_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 21u;
     return params[b];
 }
 fn prm_contact_colour(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 26u;
     return params[b];
 }
 fn prm_contact_stiffness(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 27u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -453,123 +453,127 @@ fn st_u_0(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 1u;
     return params[b];
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 5u;
     return params[b];
 }
 fn prm_p_spall(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 7u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 10u;
     return params[b];
 }
 fn prm_shape_floor(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 17u;
     return params[b];
 }
 fn prm_shape_aspect(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 18u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 19u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 23u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 24u;
+    return params[b];
+}
+fn prm_eos_eta_peak(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 25u;
     return params[b];
 }
 fn prm_nonlocal_hardening(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 28u;
     return params[b];
 }
 fn prm_nonlocal_rate(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 29u;
     return params[b];
 }
 fn prm_damage_length(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 30u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 31u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 32u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 32u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 33u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 33u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 34u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 34u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 35u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 35u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 36u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 36u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 37u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 37u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 38u;
     return params[b];
 }
 fn prm_zero_pressure_floor(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 38u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 39u;
     return params[b];
 }
 fn prm_D1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 39u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 40u;
     return params[b];
 }
 fn prm_D2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 40u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 41u;
     return params[b];
 }
 fn prm_D3(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 41u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 42u;
     return params[b];
 }
 fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 42u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 43u;
     return params[b];
 }
 fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 43u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 44u;
     return params[b];
 }
 fn prm_failure_band(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 44u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 45u;
     return params[b];
 }
 fn prm_failure_band_spacing(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 45u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 46u;
     return params[b];
 }
 fn prm_nonlocal_weight(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 46u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 47u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -693,7 +697,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let p2 = (prm_S_s(i) - 1.0);
     let c0_h = (a0 * ((2.0 * (prm_S_s(i) - 1.0)) + (3.0 * (p2 * p2))));
     let p_h = select((a0 * eta), (((a0 * eta) + (b0 * (eta * eta))) + (c0_h * (eta * eta * eta))), (eta > 0.0));
-    let failed = select(jc, 1.0, ((((1.0 - ((0.5 * prm_gamma0(i)) * eta)) * p_h) + ((prm_gamma0(i) * rho) * e_4)) <= (-prm_p_spall(i))));
+    let failed = select(jc, 1.0, ((((1.0 - ((0.5 * prm_gamma0(i)) * min(eta, prm_eos_eta_peak(i)))) * p_h) + ((prm_gamma0(i) * rho) * e_4)) <= (-prm_p_spall(i))));
     D_i = failed;
     eps_nl_i = nonlocal;
     let e_5 = e_i;
@@ -771,7 +775,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let p9 = (prm_S_s(i) - 1.0);
     let c0_h_2 = (a0_2 * ((2.0 * (prm_S_s(i) - 1.0)) + (3.0 * (p9 * p9))));
     let p_h_2 = select((a0_2 * eta_2), (((a0_2 * eta_2) + (b0_2 * (eta_2 * eta_2))) + (c0_h_2 * (eta_2 * eta_2 * eta_2))), (eta_2 > 0.0));
-    p_i = (((1.0 - ((0.5 * prm_gamma0(i)) * eta_2)) * p_h_2) + ((prm_gamma0(i) * rho_3) * e_6));
+    p_i = (((1.0 - ((0.5 * prm_gamma0(i)) * min(eta_2, prm_eos_eta_peak(i)))) * p_h_2) + ((prm_gamma0(i) * rho_3) * e_6));
     c_i = prm_c0(i);
     st_x(i, x_i);
     st_v(i, v_i);

@@ -624,35 +624,35 @@ fn st_rate_lap_sum(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 5u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 6u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 9u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 13u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 14u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 15u;
     return params[b];
 }
 fn prm_damage_coupling(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 16u;
     return params[b];
 }
 fn prm_K_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 17u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -1200,6 +1200,9 @@ fn watch_kernel(plan: &Plan, lay: &Layout) -> Option<Kernel> {
     w.line(format!("    speed2 = {};", dot("v", "v")));
     if let Some(m) = &m {
         let ms = w.expr(m);
+        // In an axisymmetric case each mass is its ring's (watchdog.rs).
+        let ms =
+            if plan.axisymmetric() { format!("({ms} * {} * {xs}.x)", lit(2.0 * std::f64::consts::PI)) } else { ms };
         w.line(format!("    if (in_groups({weighed}u, ints[i])) {{"));
         w.line(format!("        kinetic = 0.5 * {ms} * speed2;"));
         w.line(format!("        energy = {ms} * (0.5 * speed2 - {});", dot(&g, &xs)));
