@@ -53,15 +53,15 @@ impl Motion {
         let (Some((cv, v)), Some((cx, x))) = (column(id("v"))?, column(id("x"))?) else {
             return Ok(None);
         };
+        let dim = cx.max(1);
         let mut m = column(id("m"))?.map(|(_, m)| m);
         if plan.axisymmetric() {
             // A particle's energy is its ring's: the planar mass alone grows as a ring moves inward.
-            let dim = cx.max(1);
             m.iter_mut().flatten().enumerate().for_each(|(i, m)| *m *= crate::schedule::ring(x[i * dim]));
         }
         let speed = v.chunks(cv.max(1)).map(|u| u.iter().map(|a| a * a).sum::<f64>().sqrt()).collect();
         let e = column(id("e").filter(|f| model.field(*f).ty.shape == crate::ir::Shape::Scalar))?.map(|(_, e)| e);
-        Ok(Some(Motion { m, speed, x, e, dim: cx.max(1) }))
+        Ok(Some(Motion { m, speed, x, e, dim }))
     }
 
     /// The watchdog's reductions over these particles, as a backend that reduces them itself

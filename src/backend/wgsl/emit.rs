@@ -1202,7 +1202,7 @@ fn watch_kernel(plan: &Plan, lay: &Layout) -> Option<Kernel> {
         let ms = w.expr(m);
         // In an axisymmetric case each mass is its ring's (watchdog.rs).
         let ms =
-            if plan.axisymmetric() { format!("({ms} * {} * {xs}.x)", lit(2.0 * std::f64::consts::PI)) } else { ms };
+            if plan.axisymmetric() { format!("({ms} * {} * {xs}.x)", lit(crate::schedule::ring(1.0))) } else { ms };
         w.line(format!("    if (in_groups({weighed}u, ints[i])) {{"));
         w.line(format!("        kinetic = 0.5 * {ms} * speed2;"));
         w.line(format!("        energy = {ms} * (0.5 * speed2 - {});", dot(&g, &xs)));
