@@ -513,14 +513,14 @@ fn measure(m: Measure, scene: &Scene, b: &dyn Reader) -> Result<f64, BackendErro
             Some(v) => v,
             None => placed(&|x, _| Ok(spacing_extremes(x, b)?.1))?,
         },
-        Measure::CraterDiameter => own(&|x, which| Ok(crater_diameter(x, which, scene, None, b)))?,
+        Measure::CraterDiameter => own(&|x, which| Ok(crater_diameter(x, which, &counted(scene, b)?, scene, None, b)))?,
         Measure::IntactCraterDiameter => {
-            own(&|x, which| Ok(crater_diameter(x, which, scene, damage(b)?.as_deref(), b)))?
+            own(&|x, which| Ok(crater_diameter(x, which, &counted(scene, b)?, scene, damage(b)?.as_deref(), b)))?
         }
-        Measure::DebrisLength => own(&|x, _| Ok(debris(x, scene, b).0))?,
-        Measure::DebrisWidth => own(&|x, _| Ok(debris(x, scene, b).1))?,
+        Measure::DebrisLength => own(&|x, _| Ok(debris(x, &counted(scene, b)?, scene, b).0))?,
+        Measure::DebrisWidth => own(&|x, _| Ok(debris(x, &counted(scene, b)?, scene, b).1))?,
         Measure::DebrisLengthToWidth => own(&|x, _| {
-            let (l, w) = debris(x, scene, b);
+            let (l, w) = debris(x, &counted(scene, b)?, scene, b);
             Ok(l / w)
         })?,
         Measure::PlugVelocity => own(&|x, which| plug_velocity(x, which, scene, b))?,
@@ -687,19 +687,49 @@ impl Axis {
 /// lipped material still counts, and ejected material does not). The crater's radius is where the
 /// ring's share of its initial count first reaches one half, interpolated between rings.
 /// Given the damage `D` of every particle, only the intact ones (`D < 1`) count: a failed particle
-/// carries no tension, so it is loose fragments that a recovered plate would not hold. `x`, `body`
-/// and the damage are this rank's own particles; the rings' counts are summed over the ranks.
-fn crater_diameter(x: &[[f64; 3]], body: &[u32], scene: &Scene, damage: Option<&[f64]>, b: &dyn Reader) -> f64 {
+/// carries no tension, so it is loose fragments that a recovered plate would not hold. `x`, `body`,
+/// `weight` ([`counted`]) and the damage are this rank's own particles; the rings' counts are
+/// summed over the ranks.
+fn crater_diameter(
+    x: &[[f64; 3]],
+    body: &[u32],
+    weight: &[f64],
+    scene: &Scene,
+    damage: Option<&[f64]>,
+    b: &dyn Reader,
+) -> f64 {
     let (Some(axis), Some(plate)) = (Axis::of(scene), scene.bodies.get(1)) else { return f64::NAN };
-    let initial: Vec<[f64; 3]> = plate.particles.clone().map(|k| scene.particles.x[k]).collect();
-    let Some(rings) = Rings::new(&axis, &initial, scene.dx) else { return f64::NAN };
-    rings.diameter(&summed(b, rings.count(plate_now(x, body, damage))))
+    let initial = plate.particles.clone().map(|k| (scene.particles.x[k], counted_weight(scene, k)));
+    let Some(rings) = Rings::new(&axis, &initial.collect::<Vec<_>>(), scene.dx) else { return f64::NAN };
+    rings.diameter(&summed(b, rings.count(plate_now(x, body, weight, damage))))
 }
 
-/// Where the second body's particles are now, only the intact ones (`D < 1`) given the damage.
-fn plate_now<'a>(x: &'a [[f64; 3]], body: &'a [u32], damage: Option<&'a [f64]>) -> impl Iterator<Item = [f64; 3]> + 'a {
+/// Where the second body's particles are now, with their weights, only the intact ones (`D < 1`)
+/// given the damage.
+fn plate_now<'a>(
+    x: &'a [[f64; 3]],
+    body: &'a [u32],
+    weight: &'a [f64],
+    damage: Option<&'a [f64]>,
+) -> impl Iterator<Item = ([f64; 3], f64)> + 'a {
     let intact = move |k: usize| damage.is_none_or(|d| d[k] < 1.0);
-    (0..x.len()).filter(move |k| body[*k] == 1 && intact(*k)).map(|k| x[k])
+    (0..x.len()).filter(move |k| body[*k] == 1 && intact(*k)).map(|k| (x[k], weight[k]))
+}
+
+/// What each of this rank's own particles weighs in the crater's and the debris cloud's counts.
+fn counted(scene: &Scene, b: &dyn Reader) -> Result<Vec<f64>, BackendError> {
+    Ok(b.ids_own()?.iter().map(|id| counted_weight(scene, *id as usize)).collect())
+}
+
+/// What the particle with id `k` weighs in the crater's and the debris cloud's counts: in a
+/// planar case 1, a particle; in an axisymmetric one its ring's volume at t = 0, V 2π r, the
+/// material it stands for, which its ring keeps as it moves in or out (m 2π r is constant, ṁ =
+/// −m v_r / r): a particle pushed out from near the axis is a small ring among larger ones.
+fn counted_weight(scene: &Scene, k: usize) -> f64 {
+    match scene.spec.axisymmetric {
+        true => scene.particles.vol[k] * ring(&scene.particles.x[k]),
+        false => 1.0,
+    }
 }
 
 /// The damage `D` of this rank's own particles, or none where the model has no damage (nothing
@@ -721,10 +751,11 @@ struct Rings<'a> {
 }
 
 impl<'a> Rings<'a> {
-    /// The rings of width `width` of a plate whose particles were at `initial`; `None` where the
-    /// plate has no particles.
-    fn new(axis: &'a Axis, initial: &[[f64; 3]], width: f64) -> Option<Rings<'a>> {
-        let initial: Vec<(f64, f64)> = initial.iter().map(|p| axis.coords(*p)).collect();
+    /// The rings of width `width` of a plate whose particles were at `initial`, each with its
+    /// weight; `None` where the plate has no particles.
+    fn new(axis: &'a Axis, initial: &[([f64; 3], f64)], width: f64) -> Option<Rings<'a>> {
+        let weights: Vec<f64> = initial.iter().map(|p| p.1).collect();
+        let initial: Vec<(f64, f64)> = initial.iter().map(|p| axis.coords(p.0)).collect();
         let (lo, hi) = initial.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, p| (a.0.min(p.0), a.1.max(p.0)));
         let r_max = max_keeping_nan(0.0, initial.iter().map(|p| p.1));
         if r_max.is_nan() {
@@ -732,21 +763,21 @@ impl<'a> Rings<'a> {
         }
         let n = (r_max / width).ceil() as usize + 1;
         let mut before = vec![0.0; n];
-        for p in &initial {
-            before[((p.1 / width) as usize).min(n - 1)] += 1.0;
+        for (p, w) in initial.iter().zip(weights) {
+            before[((p.1 / width) as usize).min(n - 1)] += w;
         }
         let t = hi - lo;
         Some(Rings { axis, width, slab: (lo - t, hi + t), r_max, before })
     }
 
-    /// How many of the points `now` lie in each ring, within the slab.
-    fn count(&self, now: impl Iterator<Item = [f64; 3]>) -> Vec<f64> {
+    /// How much of the weighted points `now` lies in each ring, within the slab.
+    fn count(&self, now: impl Iterator<Item = ([f64; 3], f64)>) -> Vec<f64> {
         let n = self.before.len();
         let mut after = vec![0.0; n];
-        for p in now {
+        for (p, w) in now {
             let (s, r) = self.axis.coords(p);
             if s >= self.slab.0 && s <= self.slab.1 && r < self.r_max {
-                after[((r / self.width) as usize).min(n - 1)] += 1.0;
+                after[((r / self.width) as usize).min(n - 1)] += w;
             }
         }
         after
@@ -770,25 +801,52 @@ impl<'a> Rings<'a> {
 /// [`crater_diameter`] of a plate whose particles were at `initial` and are now at `now`, in a
 /// run in one piece.
 #[cfg(test)]
-fn hole_diameter(axis: &Axis, initial: &[[f64; 3]], now: impl Iterator<Item = [f64; 3]>, ring: f64) -> f64 {
-    Rings::new(axis, initial, ring).map_or(f64::NAN, |r| r.diameter(&r.count(now)))
+fn hole_diameter(axis: &Axis, initial: &[[f64; 3]], now: impl Iterator<Item = ([f64; 3], f64)>, ring: f64) -> f64 {
+    let initial: Vec<([f64; 3], f64)> = initial.iter().map(|p| (*p, 1.0)).collect();
+    Rings::new(axis, &initial, ring).map_or(f64::NAN, |r| r.diameter(&r.count(now)))
 }
 
 /// The debris cloud behind the plate: every particle more than Δx beyond the second body's
 /// initial rear face (along the impact axis). Its length is how far beyond the rear face it
 /// reaches, its width twice its reach from the axis, both as the 99th percentile over its
-/// particles so that a few stray particles do not set them. `x` is this rank's own particles;
+/// particles so that a few stray particles do not set them; in an axisymmetric case over its
+/// rings, each with its `weight` ([`counted`]). `x` and `weight` are this rank's own particles;
 /// the ranks' debris particles are gathered (the cloud's, not the whole scene's).
-fn debris(x: &[[f64; 3]], scene: &Scene, b: &dyn Reader) -> (f64, f64) {
+fn debris(x: &[[f64; 3]], weight: &[f64], scene: &Scene, b: &dyn Reader) -> (f64, f64) {
     let (Some(axis), Some(plate)) = (Axis::of(scene), scene.bodies.get(1)) else { return (f64::NAN, f64::NAN) };
     let rear = max_keeping_nan(f64::NEG_INFINITY, plate.particles.clone().map(|k| axis.coords(scene.particles.x[k]).0));
-    let mine = x.iter().map(|p| axis.coords(*p)).filter(|(s, _)| *s > rear + scene.dx).flat_map(|(s, r)| [s - rear, r]);
+    let behind = |k: &usize| axis.coords(x[*k]).0 > rear + scene.dx;
+    let mine = (0..x.len()).filter(behind).flat_map(|k| {
+        let (s, r) = axis.coords(x[k]);
+        [s - rear, r, weight[k]]
+    });
     let cloud: Vec<f64> = b.all_gather(mine.collect()).concat();
-    let (mut along, mut across): (Vec<f64>, Vec<f64>) = cloud.chunks(2).map(|p| (p[0], p[1])).unzip();
-    if along.len() < 10 {
+    if cloud.len() < 3 * 10 {
         return (f64::NAN, f64::NAN);
     }
-    (percentile(&mut along, 0.99), 2.0 * percentile(&mut across, 0.99))
+    // (value, weight) pairs: along the axis, and from it.
+    let mut along: Vec<(f64, f64)> = cloud.chunks(3).map(|p| (p[0], p[2])).collect();
+    let mut across: Vec<(f64, f64)> = cloud.chunks(3).map(|p| (p[1], p[2])).collect();
+    let quantile = |v: &mut [(f64, f64)]| match scene.spec.axisymmetric {
+        true => weighted_percentile(v, 0.99),
+        false => percentile(&mut v.iter().map(|p| p.0).collect::<Vec<_>>(), 0.99),
+    };
+    (quantile(&mut along), 2.0 * quantile(&mut across))
+}
+
+/// The `q` quantile of values each with its weight `(value, weight)`: the least value at which
+/// the weights summed in order of value reach q of their total.
+fn weighted_percentile(v: &mut [(f64, f64)], q: f64) -> f64 {
+    v.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let total: f64 = v.iter().map(|p| p.1).sum();
+    let mut sum = 0.0;
+    for (value, w) in v.iter() {
+        sum += w;
+        if sum >= q * total {
+            return *value;
+        }
+    }
+    v.last().map_or(f64::NAN, |p| p.0)
 }
 
 fn percentile(v: &mut [f64], q: f64) -> f64 {
@@ -1145,18 +1203,18 @@ mod tests {
         let initial = plate();
         for radius in [3e-3, 5.5e-3, 10e-3] {
             let r = |p: &[f64; 3]| (p[0] * p[0] + p[1] * p[1]).sqrt();
-            let punched = initial.iter().filter(|p| r(p) >= radius).copied();
+            let punched = initial.iter().filter(|p| r(p) >= radius).map(|p| (*p, 1.0));
             let d = hole_diameter(&axis, &initial, punched, 1e-3);
             // Rings of one spacing: the edge is found within half a spacing on the radius.
             assert!((d - 2.0 * radius).abs() <= 1e-3, "hole of radius {radius}: crater {d}");
             // Material pushed out of the hole and gone (beyond the slab widened by its thickness)
             // does not count; material bent into a lip within it does.
-            let ejected = initial.iter().map(|p| if r(p) < radius { [p[0], p[1], p[2] - 0.1] } else { *p });
+            let ejected = initial.iter().map(|p| (if r(p) < radius { [p[0], p[1], p[2] - 0.1] } else { *p }, 1.0));
             assert!((hole_diameter(&axis, &initial, ejected, 1e-3) - d).abs() < 1e-12);
-            let lip = initial.iter().map(|p| if r(p) < radius { [p[0], p[1], p[2] - 2e-3] } else { *p });
+            let lip = initial.iter().map(|p| (if r(p) < radius { [p[0], p[1], p[2] - 2e-3] } else { *p }, 1.0));
             assert_eq!(hole_diameter(&axis, &initial, lip, 1e-3), 0.0);
         }
-        assert_eq!(hole_diameter(&axis, &initial, initial.iter().copied(), 1e-3), 0.0, "no hole");
+        assert_eq!(hole_diameter(&axis, &initial, initial.iter().map(|p| (*p, 1.0)), 1e-3), 0.0, "no hole");
     }
 
     #[test]
@@ -1167,14 +1225,53 @@ mod tests {
         // A hole of radius 5 mm, its rim failed out to 8 mm.
         let x: Vec<[f64; 3]> = initial.iter().filter(|p| r(p) >= 5e-3).copied().collect();
         let body = vec![1; x.len()];
+        let one = vec![1.0; x.len()];
         let damage: Vec<f64> = x.iter().map(|p| if r(p) < 8e-3 { 1.0 } else { 0.3 }).collect();
-        let all = hole_diameter(&axis, &initial, plate_now(&x, &body, None), 1e-3);
-        let intact = hole_diameter(&axis, &initial, plate_now(&x, &body, Some(&damage)), 1e-3);
+        let all = hole_diameter(&axis, &initial, plate_now(&x, &body, &one, None), 1e-3);
+        let intact = hole_diameter(&axis, &initial, plate_now(&x, &body, &one, Some(&damage)), 1e-3);
         assert!((all - 10e-3).abs() <= 1e-3, "crater {all}");
         assert!((intact - 16e-3).abs() <= 1e-3, "intact crater {intact}");
         // Another body's particles never count.
         let other: Vec<u32> = x.iter().map(|p| u32::from(r(p) >= 8e-3)).collect();
-        assert_eq!(hole_diameter(&axis, &initial, plate_now(&x, &other, None), 1e-3), intact);
+        assert_eq!(hole_diameter(&axis, &initial, plate_now(&x, &other, &one, None), 1e-3), intact);
+    }
+
+    /// An axisymmetric plate's rings, each particle weighed by its ring (its radius at t = 0, the
+    /// spacing 1 mm): the hole from the axis to 6 mm, with the four particles of the ring nearest
+    /// the axis (r0 = 0.5 mm) pushed out into the ring at 5–6 mm. By the rings' material that
+    /// ring holds 4 × 0.5 / (4 × 5.5) = 1/11 of its own, and the edge lies between it and the
+    /// next, whole ring: 2 (5.5 + (½ − 1/11) / (1 − 1/11)) = 11.9 mm. By count it is whole again
+    /// (four particles), and the hole would be 10 mm across.
+    #[test]
+    fn an_axisymmetric_crater_weighs_a_particle_pushed_outward_as_its_ring() {
+        let axis = Axis { origin: [0.0; 3], dir: [0.0, -1.0, 0.0] };
+        let initial: Vec<([f64; 3], f64)> = (0..40 * 4)
+            .map(|n| [(n / 4) as f64 + 0.5, -((n % 4) as f64 + 0.5), 0.0])
+            .map(|p| (p.map(|c| c * 1e-3), p[0]))
+            .collect();
+        let rings = Rings::new(&axis, &initial, 1e-3).expect("a plate");
+        let now = || {
+            initial.iter().filter_map(|(p, w)| match p[0] {
+                r if r < 1e-3 => Some(([5.5e-3, p[1], 0.0], *w)),
+                r if r < 6e-3 => None,
+                _ => Some((*p, *w)),
+            })
+        };
+        let by_ring = rings.diameter(&rings.count(now()));
+        assert!((by_ring - 11.9e-3).abs() < 1e-12, "weighed by ring: {by_ring}");
+        let counted =
+            Rings::new(&axis, &initial.iter().map(|(p, _)| (*p, 1.0)).collect::<Vec<_>>(), 1e-3).expect("a plate");
+        let by_count = counted.diameter(&counted.count(now().map(|(p, _)| (p, 1.0))));
+        assert!((by_count - 10e-3).abs() < 1e-12, "counted: {by_count}");
+    }
+
+    #[test]
+    fn a_weighted_percentile_is_where_the_weights_reach_the_share() {
+        let mut v = [(3.0, 1.0), (1.0, 1.0), (2.0, 1.0), (4.0, 7.0)];
+        assert_eq!(weighted_percentile(&mut v, 0.35), 4.0);
+        assert_eq!(weighted_percentile(&mut v, 0.25), 3.0);
+        assert_eq!(weighted_percentile(&mut v, 0.15), 2.0);
+        assert_eq!(weighted_percentile(&mut v, 0.05), 1.0);
     }
 
     #[test]

@@ -197,6 +197,23 @@ impl Primitive {
     pub fn bbox(&self, dim: usize) -> Result<([f64; 3], [f64; 3]), GeometryError> {
         Shape::resolve(self, dim).map(|s| s.bbox())
     }
+
+    /// The exact volume of the solid the 2D shape's part at x ≥ 0 sweeps about the y axis, where
+    /// it is known: a disc or an annulus centred on the axis (a ball or a shell) or wholly off it
+    /// (a torus, by Pappus: 2π × its centre's radius × its area). `None` for the others: a box's
+    /// lattice sweeps its exact volume where its extents are whole spacings, and the rest keep
+    /// their area's scale.
+    pub fn revolved_volume(&self) -> Option<f64> {
+        let Region::Shell { center, r_in, r_out } = Shape::resolve(self, 2).ok()?.region else { return None };
+        let pi = std::f64::consts::PI;
+        if center[0] == 0.0 {
+            Some(4.0 / 3.0 * pi * (r_out.powi(3) - r_in.powi(3)))
+        } else if center[0] >= r_out {
+            Some(2.0 * pi * center[0] * pi * (r_out * r_out - r_in * r_in))
+        } else {
+            None
+        }
+    }
 }
 
 impl Shape {
