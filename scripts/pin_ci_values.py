@@ -62,6 +62,7 @@ RUNS = [
     ("fans_bullet_study", {}),
     ("taylor_bar_axisymmetric", {}),
     ("borvik_axisymmetric", {}),
+    ("hypervelocity_impact_axisymmetric", {}),
 ]
 
 

@@ -189,23 +189,23 @@ fn st_p_contact(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 6u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 9u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 20u;
     return params[b];
 }
 fn prm_contact_colour(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 27u;
     return params[b];
 }
 fn prm_contact_stiffness(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 28u;
     return params[b];
 }
 @compute @workgroup_size(64)

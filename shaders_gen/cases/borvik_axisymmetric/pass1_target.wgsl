@@ -355,47 +355,47 @@ fn st_lap_weight(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 1u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 6u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 9u;
     return params[b];
 }
 fn prm_delta(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 10u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 11u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 20u;
     return params[b];
 }
 fn prm_hourglass_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 21u;
     return params[b];
 }
 fn prm_hourglass_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 22u;
     return params[b];
 }
 fn prm_contact_colour(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 27u;
     return params[b];
 }
 fn prm_contact_stiffness(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 28u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -542,7 +542,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         if ((body_i != ldj_body(j, sgn))) {
             colour_other = colour_other + ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * W_ij);
         }
-        // pairsum nonlocal_strain_laplacian (stdlib/damage/nonlocal_strain.sph:94)
+        // pairsum nonlocal_strain_laplacian (stdlib/damage/nonlocal_strain.sph:111)
         if (in_groups(2u, ints[j])) {
             let m_j = ldj_m(j, sgn);
             let rho_j = ldj_rho(j, sgn);
@@ -551,9 +551,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let r_ij_2 = r_ij;
             let h_ij_2 = h_ij;
             let k_3 = max(((((-2.0 * m_j) / rho_j) * dot(x_ij_2, gradW_ij_2)) / ((r_ij_2 * r_ij_2) + (0.01 * (h_ij_2 * h_ij_2)))), 0.0);
-            sum_2 = sum_2 + (k_3 * ldj_eps_nl(j, sgn));
-            weight = weight + k_3;
-            moment = moment + (k_3 * (r_ij * r_ij));
+            let k_4 = k_3;
+            sum_2 = sum_2 + (k_4 * ldj_eps_nl(j, sgn));
+            weight = weight + k_4;
+            moment = moment + (k_4 * (r_ij * r_ij));
         }
     }
     // then shaped_velocity_gradient

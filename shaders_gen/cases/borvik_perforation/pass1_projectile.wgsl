@@ -564,27 +564,27 @@ fn st_a_contact(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 7u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 10u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 14u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 15u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 16u;
     return params[b];
 }
 fn prm_K_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 18u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -578,31 +578,31 @@ fn st_a_contact(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 7u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 10u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 14u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 15u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 16u;
     return params[b];
 }
 fn prm_damage_coupling(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 17u;
     return params[b];
 }
 fn prm_K_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 47u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 18u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -628,6 +628,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var de: f32 = 0.0;
     // pairsum contact: accumulators
     var a_contact: vec3<f32> = vec3<f32>(0.0);
+    de = 0.0;
     let G_i = prm_G(i);
     let visc_a_i = prm_visc_a(i);
     let visc_b_i = prm_visc_b(i);
@@ -699,7 +700,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             if (in_groups(2u, ints[j])) {
                 grad_v = grad_v + outer((ldj_v(j, sgn) - v_i), ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * gradW_ij));
             }
-            // pairsum failing_energy (stdlib/energy/solid_failing.sph:20)
+            // pairsum failing_energy (stdlib/energy/solid_failing.sph:22)
             if (in_groups(2u, ints[j])) {
                 let s_2 = s_i;
                 let p = p_i;

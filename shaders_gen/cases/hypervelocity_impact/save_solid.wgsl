@@ -62,11 +62,11 @@ fn st_rho(i: u32, v: f32) {
     data[b] = v;
 }
 fn ld_s(i: u32) -> mat3x3<f32> {
-    let b = u32(info[8 + G] + i32(i) * 6);
+    let b = u32(info[9 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[8 + G] + i32(i) * 6);
+    let b = u32(info[9 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];

@@ -53,6 +53,14 @@ fn st_v(i: u32, v: vec3<f32>) {
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
+fn ld_m(i: u32) -> f32 {
+    let b = u32(info[7 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_m(i: u32, v: f32) {
+    let b = u32(info[7 + G] + i32(i) * 1);
+    data[b] = v;
+}
 fn ld_rho(i: u32) -> f32 {
     let b = u32(info[8 + G] + i32(i) * 1);
     return data[b];
@@ -61,26 +69,26 @@ fn st_rho(i: u32, v: f32) {
     let b = u32(info[8 + G] + i32(i) * 1);
     data[b] = v;
 }
+fn ld_s_hoop(i: u32) -> f32 {
+    let b = u32(info[11 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_s_hoop(i: u32, v: f32) {
+    let b = u32(info[11 + G] + i32(i) * 1);
+    data[b] = v;
+}
 fn ld_s(i: u32) -> mat3x3<f32> {
-    let b = u32(info[10 + G] + i32(i) * 6);
+    let b = u32(info[12 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[10 + G] + i32(i) * 6);
+    let b = u32(info[12 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
     data[b + 3u] = v[1][1];
     data[b + 4u] = v[2][1];
     data[b + 5u] = v[2][2];
-}
-fn ld_s_hoop(i: u32) -> f32 {
-    let b = u32(info[13 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_s_hoop(i: u32, v: f32) {
-    let b = u32(info[13 + G] + i32(i) * 1);
-    data[b] = v;
 }
 fn ld_e(i: u32) -> f32 {
     let b = u32(info[14 + G] + i32(i) * 1);
@@ -115,39 +123,55 @@ fn st_eps_nl(i: u32, v: f32) {
     data[b] = v;
 }
 fn ld_x_0(i: u32) -> vec3<f32> {
-    let b = u32(info[30 + G] + i32(i) * 3);
+    let b = u32(info[31 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_x_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[30 + G] + i32(i) * 3);
+    let b = u32(info[31 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_v_0(i: u32) -> vec3<f32> {
-    let b = u32(info[31 + G] + i32(i) * 3);
+    let b = u32(info[32 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_v_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[31 + G] + i32(i) * 3);
+    let b = u32(info[32 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
+fn ld_m_0(i: u32) -> f32 {
+    let b = u32(info[33 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_m_0(i: u32, v: f32) {
+    let b = u32(info[33 + G] + i32(i) * 1);
+    data[b] = v;
+}
 fn ld_rho_0(i: u32) -> f32 {
-    let b = u32(info[32 + G] + i32(i) * 1);
+    let b = u32(info[34 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho_0(i: u32, v: f32) {
-    let b = u32(info[32 + G] + i32(i) * 1);
+    let b = u32(info[34 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_s_hoop_0(i: u32) -> f32 {
+    let b = u32(info[35 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_s_hoop_0(i: u32, v: f32) {
+    let b = u32(info[35 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s_0(i: u32) -> mat3x3<f32> {
-    let b = u32(info[33 + G] + i32(i) * 6);
+    let b = u32(info[36 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s_0(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[33 + G] + i32(i) * 6);
+    let b = u32(info[36 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -155,44 +179,36 @@ fn st_s_0(i: u32, v: mat3x3<f32>) {
     data[b + 4u] = v[2][1];
     data[b + 5u] = v[2][2];
 }
-fn ld_s_hoop_0(i: u32) -> f32 {
-    let b = u32(info[34 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_s_hoop_0(i: u32, v: f32) {
-    let b = u32(info[34 + G] + i32(i) * 1);
-    data[b] = v;
-}
 fn ld_e_0(i: u32) -> f32 {
-    let b = u32(info[35 + G] + i32(i) * 1);
+    let b = u32(info[37 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_e_0(i: u32, v: f32) {
-    let b = u32(info[35 + G] + i32(i) * 1);
+    let b = u32(info[37 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_D_0(i: u32) -> f32 {
-    let b = u32(info[36 + G] + i32(i) * 1);
+    let b = u32(info[38 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_D_0(i: u32, v: f32) {
-    let b = u32(info[36 + G] + i32(i) * 1);
+    let b = u32(info[38 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_eps_p_0(i: u32) -> f32 {
-    let b = u32(info[37 + G] + i32(i) * 1);
+    let b = u32(info[39 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_eps_p_0(i: u32, v: f32) {
-    let b = u32(info[37 + G] + i32(i) * 1);
+    let b = u32(info[39 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_eps_nl_0(i: u32) -> f32 {
-    let b = u32(info[38 + G] + i32(i) * 1);
+    let b = u32(info[40 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_eps_nl_0(i: u32, v: f32) {
-    let b = u32(info[38 + G] + i32(i) * 1);
+    let b = u32(info[40 + G] + i32(i) * 1);
     data[b] = v;
 }
 @compute @workgroup_size(64)
@@ -207,27 +223,30 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // save the state at the start of the step
     var x_0_i: vec3<f32> = ld_x_0(i);
     var v_0_i: vec3<f32> = ld_v_0(i);
+    var m_0_i: f32 = ld_m_0(i);
     var rho_0_i: f32 = ld_rho_0(i);
-    var s_0_i: mat3x3<f32> = ld_s_0(i);
     var s_hoop_0_i: f32 = ld_s_hoop_0(i);
+    var s_0_i: mat3x3<f32> = ld_s_0(i);
     var e_0_i: f32 = ld_e_0(i);
     var D_0_i: f32 = ld_D_0(i);
     var eps_p_0_i: f32 = ld_eps_p_0(i);
     var eps_nl_0_i: f32 = ld_eps_nl_0(i);
     x_0_i = ld_x(i);
     v_0_i = ld_v(i);
+    m_0_i = ld_m(i);
     rho_0_i = ld_rho(i);
-    s_0_i = ld_s(i);
     s_hoop_0_i = ld_s_hoop(i);
+    s_0_i = ld_s(i);
     e_0_i = ld_e(i);
     D_0_i = ld_D(i);
     eps_p_0_i = ld_eps_p(i);
     eps_nl_0_i = ld_eps_nl(i);
     st_x_0(i, x_0_i);
     st_v_0(i, v_0_i);
+    st_m_0(i, m_0_i);
     st_rho_0(i, rho_0_i);
-    st_s_0(i, s_0_i);
     st_s_hoop_0(i, s_hoop_0_i);
+    st_s_0(i, s_0_i);
     st_e_0(i, e_0_i);
     st_D_0(i, D_0_i);
     st_eps_p_0(i, eps_p_0_i);

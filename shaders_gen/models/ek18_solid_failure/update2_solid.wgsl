@@ -61,6 +61,14 @@ fn st_dx(i: u32, v: f32) {
     let b = u32(info[5 + G] + i32(i) * 1);
     data[b] = v;
 }
+fn ld_m(i: u32) -> f32 {
+    let b = u32(info[7 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_m(i: u32, v: f32) {
+    let b = u32(info[7 + G] + i32(i) * 1);
+    data[b] = v;
+}
 fn ld_rho(i: u32) -> f32 {
     let b = u32(info[8 + G] + i32(i) * 1);
     return data[b];
@@ -69,25 +77,12 @@ fn st_rho(i: u32, v: f32) {
     let b = u32(info[8 + G] + i32(i) * 1);
     data[b] = v;
 }
-fn ld_s(i: u32) -> mat3x3<f32> {
-    let b = u32(info[10 + G] + i32(i) * 6);
-    return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
-}
-fn st_s(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[10 + G] + i32(i) * 6);
-    data[b] = v[0][0];
-    data[b + 1u] = v[1][0];
-    data[b + 2u] = v[2][0];
-    data[b + 3u] = v[1][1];
-    data[b + 4u] = v[2][1];
-    data[b + 5u] = v[2][2];
-}
 fn ld_edot(i: u32) -> mat3x3<f32> {
-    let b = u32(info[11 + G] + i32(i) * 6);
+    let b = u32(info[10 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_edot(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[11 + G] + i32(i) * 6);
+    let b = u32(info[10 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -96,12 +91,25 @@ fn st_edot(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_s_hoop(i: u32) -> f32 {
-    let b = u32(info[13 + G] + i32(i) * 1);
+    let b = u32(info[11 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_s_hoop(i: u32, v: f32) {
-    let b = u32(info[13 + G] + i32(i) * 1);
+    let b = u32(info[11 + G] + i32(i) * 1);
     data[b] = v;
+}
+fn ld_s(i: u32) -> mat3x3<f32> {
+    let b = u32(info[12 + G] + i32(i) * 6);
+    return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
+}
+fn st_s(i: u32, v: mat3x3<f32>) {
+    let b = u32(info[12 + G] + i32(i) * 6);
+    data[b] = v[0][0];
+    data[b + 1u] = v[1][0];
+    data[b + 2u] = v[2][0];
+    data[b + 3u] = v[1][1];
+    data[b + 4u] = v[2][1];
+    data[b + 5u] = v[2][2];
 }
 fn ld_e(i: u32) -> f32 {
     let b = u32(info[14 + G] + i32(i) * 1);
@@ -196,82 +204,106 @@ fn st_ds(i: u32, v: mat3x3<f32>) {
     data[b + 4u] = v[2][1];
     data[b + 5u] = v[2][2];
 }
-fn ld_de(i: u32) -> f32 {
+fn ld_ds_hoop(i: u32) -> f32 {
     let b = u32(info[25 + G] + i32(i) * 1);
     return data[b];
 }
-fn st_de(i: u32, v: f32) {
+fn st_ds_hoop(i: u32, v: f32) {
     let b = u32(info[25 + G] + i32(i) * 1);
     data[b] = v;
 }
+fn ld_de(i: u32) -> f32 {
+    let b = u32(info[26 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_de(i: u32, v: f32) {
+    let b = u32(info[26 + G] + i32(i) * 1);
+    data[b] = v;
+}
 fn ld_dv(i: u32) -> vec3<f32> {
-    let b = u32(info[26 + G] + i32(i) * 3);
+    let b = u32(info[27 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_dv(i: u32, v: vec3<f32>) {
-    let b = u32(info[26 + G] + i32(i) * 3);
+    let b = u32(info[27 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_lap_sum(i: u32) -> f32 {
-    let b = u32(info[27 + G] + i32(i) * 1);
+    let b = u32(info[28 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_lap_sum(i: u32, v: f32) {
-    let b = u32(info[27 + G] + i32(i) * 1);
+    let b = u32(info[28 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_lap_weight(i: u32) -> f32 {
-    let b = u32(info[28 + G] + i32(i) * 1);
+    let b = u32(info[29 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_lap_weight(i: u32, v: f32) {
-    let b = u32(info[28 + G] + i32(i) * 1);
+    let b = u32(info[29 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_rate_lap_sum(i: u32) -> f32 {
-    let b = u32(info[29 + G] + i32(i) * 1);
+    let b = u32(info[30 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rate_lap_sum(i: u32, v: f32) {
-    let b = u32(info[29 + G] + i32(i) * 1);
+    let b = u32(info[30 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_x_0(i: u32) -> vec3<f32> {
-    let b = u32(info[30 + G] + i32(i) * 3);
+    let b = u32(info[31 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_x_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[30 + G] + i32(i) * 3);
+    let b = u32(info[31 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_v_0(i: u32) -> vec3<f32> {
-    let b = u32(info[31 + G] + i32(i) * 3);
+    let b = u32(info[32 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_v_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[31 + G] + i32(i) * 3);
+    let b = u32(info[32 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
+fn ld_m_0(i: u32) -> f32 {
+    let b = u32(info[33 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_m_0(i: u32, v: f32) {
+    let b = u32(info[33 + G] + i32(i) * 1);
+    data[b] = v;
+}
 fn ld_rho_0(i: u32) -> f32 {
-    let b = u32(info[32 + G] + i32(i) * 1);
+    let b = u32(info[34 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho_0(i: u32, v: f32) {
-    let b = u32(info[32 + G] + i32(i) * 1);
+    let b = u32(info[34 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_s_hoop_0(i: u32) -> f32 {
+    let b = u32(info[35 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_s_hoop_0(i: u32, v: f32) {
+    let b = u32(info[35 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s_0(i: u32) -> mat3x3<f32> {
-    let b = u32(info[33 + G] + i32(i) * 6);
+    let b = u32(info[36 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s_0(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[33 + G] + i32(i) * 6);
+    let b = u32(info[36 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -279,156 +311,152 @@ fn st_s_0(i: u32, v: mat3x3<f32>) {
     data[b + 4u] = v[2][1];
     data[b + 5u] = v[2][2];
 }
-fn ld_s_hoop_0(i: u32) -> f32 {
-    let b = u32(info[34 + G] + i32(i) * 1);
-    return data[b];
-}
-fn st_s_hoop_0(i: u32, v: f32) {
-    let b = u32(info[34 + G] + i32(i) * 1);
-    data[b] = v;
-}
 fn ld_e_0(i: u32) -> f32 {
-    let b = u32(info[35 + G] + i32(i) * 1);
+    let b = u32(info[37 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_e_0(i: u32, v: f32) {
-    let b = u32(info[35 + G] + i32(i) * 1);
+    let b = u32(info[37 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_D_0(i: u32) -> f32 {
-    let b = u32(info[36 + G] + i32(i) * 1);
+    let b = u32(info[38 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_D_0(i: u32, v: f32) {
-    let b = u32(info[36 + G] + i32(i) * 1);
+    let b = u32(info[38 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_eps_p_0(i: u32) -> f32 {
-    let b = u32(info[37 + G] + i32(i) * 1);
+    let b = u32(info[39 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_eps_p_0(i: u32, v: f32) {
-    let b = u32(info[37 + G] + i32(i) * 1);
+    let b = u32(info[39 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_eps_nl_0(i: u32) -> f32 {
-    let b = u32(info[38 + G] + i32(i) * 1);
+    let b = u32(info[40 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_eps_nl_0(i: u32, v: f32) {
-    let b = u32(info[38 + G] + i32(i) * 1);
+    let b = u32(info[40 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 0u;
     return params[b];
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 5u;
+    return params[b];
+}
+fn prm_zero_pressure_floor(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 6u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 8u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 9u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 10u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 11u;
     return params[b];
 }
 fn prm_eos_eta_peak(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 12u;
     return params[b];
 }
 fn prm_nonlocal_hardening(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 17u;
     return params[b];
 }
 fn prm_nonlocal_rate(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 18u;
     return params[b];
 }
 fn prm_damage_length(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 19u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 20u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 21u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 22u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 23u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 24u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 25u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 26u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 27u;
     return params[b];
 }
 fn prm_p_spall(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 28u;
     return params[b];
 }
 fn prm_D1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 29u;
     return params[b];
 }
 fn prm_D2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 30u;
     return params[b];
 }
 fn prm_D3(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 31u;
     return params[b];
 }
 fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 32u;
     return params[b];
 }
 fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 33u;
     return params[b];
 }
 fn prm_failure_band(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 32u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 34u;
     return params[b];
 }
 fn prm_failure_band_spacing(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 33u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 35u;
     return params[b];
 }
 fn prm_nonlocal_weight(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 34u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 36u;
     return params[b];
 }
 fn prm_C_v(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 35u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 37u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -443,22 +471,25 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // integrate (solid)
     var x_i: vec3<f32> = ld_x(i);
     var v_i: vec3<f32> = ld_v(i);
+    var m_i: f32 = ld_m(i);
     var rho_i: f32 = ld_rho(i);
+    var s_hoop_i: f32 = ld_s_hoop(i);
     var s_i: mat3x3<f32> = ld_s(i);
     var e_i: f32 = ld_e(i);
     let rate_of_x = v_i;
     let rate_of_v = ld_dv(i);
     let rate_of_rho = ld_drho(i);
     let rate_of_s = ld_ds(i);
+    let rate_of_s_hoop = ld_ds_hoop(i);
+    let rate_of_m = select(0.0, (((-m_i) * v_i[0]) / max(x_i[0], (0.1 * ld_dx(i)))), (prm_axisymmetric(i) > 0.0));
     let rate_of_e = ld_de(i);
     v_i = (ld_v_0(i) + (dt * rate_of_v));
     x_i = (ld_x_0(i) + (dt * rate_of_x));
     rho_i = (ld_rho_0(i) + (dt * rate_of_rho));
     s_i = (ld_s_0(i) + (dt * rate_of_s));
+    s_hoop_i = (ld_s_hoop_0(i) + (dt * rate_of_s_hoop));
+    m_i = (ld_m_0(i) + (dt * rate_of_m));
     e_i = (ld_e_0(i) + (dt * rate_of_e));
-    // restore s_hoop
-    var s_hoop_i: f32 = ld_s_hoop(i);
-    s_hoop_i = ld_s_hoop_0(i);
     // restore D
     var D_i: f32 = ld_D(i);
     D_i = ld_D_0(i);
@@ -543,11 +574,6 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let triax = ((-p_2) / max(sqrt((1.5 * (ddot(s_5, s_5) + (s_hoop_4 * s_hoop_4)))), 1e-30));
     let T_5 = T_4;
     let jc = min((D + (deps_p_2 / max((((prm_D1(i) + (prm_D2(i) * exp((prm_D3(i) * triax)))) * (1.0 + (prm_D4(i) * log(max(rate_2, 1.0))))) * (1.0 + (prm_D5(i) * min(max(((T_5 - prm_T_room(i)) / (prm_T_melt(i) - prm_T_room(i))), 0.0), 1.0)))), 1e-12))), 1.0);
-    D_i = select(jc, 1.0, (ld_p(i) <= (-prm_p_spall(i))));
-    eps_nl_i = nonlocal;
-    // eos
-    var p_i: f32 = ld_p(i);
-    var c_i: f32 = ld_c(i);
     let rho = rho_i;
     let e_4 = e_i;
     let eta = ((rho / prm_rho0(i)) - 1.0);
@@ -557,13 +583,39 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let p2 = (prm_S_s(i) - 1.0);
     let c0_h = (a0 * ((2.0 * (prm_S_s(i) - 1.0)) + (3.0 * (p2 * p2))));
     let p_h = select((a0 * eta), (((a0 * eta) + (b0 * (eta * eta))) + (c0_h * (eta * eta * eta))), (eta > 0.0));
-    p_i = (((1.0 - ((0.5 * prm_gamma0(i)) * min(eta, prm_eos_eta_peak(i)))) * p_h) + ((prm_gamma0(i) * rho) * e_4));
+    let failed = select(jc, 1.0, ((((1.0 - ((0.5 * prm_gamma0(i)) * min(eta, prm_eos_eta_peak(i)))) * p_h) + ((prm_gamma0(i) * rho) * e_4)) <= (-prm_p_spall(i))));
+    D_i = failed;
+    eps_nl_i = nonlocal;
+    let e_5 = e_i;
+    let p3 = prm_c0(i);
+    let k_2 = ((prm_gamma0(i) * max(e_5, 0.0)) / (p3 * p3));
+    let p4 = (1.0 + k_2);
+    let eta0 = ((-2.0 * k_2) / ((1.0 + k_2) + sqrt(((p4 * p4) + ((2.0 * prm_gamma0(i)) * k_2)))));
+    let floor = select(prm_rho0(i), (prm_rho0(i) * (1.0 + eta0)), (prm_zero_pressure_floor(i) > 0.0));
+    let rho_2 = rho_i;
+    let D_2 = failed;
+    let floor_2 = floor;
+    rho_i = select(rho_2, max(rho_2, floor_2), (D_2 >= 1.0));
+    // eos
+    var p_i: f32 = ld_p(i);
+    var c_i: f32 = ld_c(i);
+    let rho_3 = rho_i;
+    let e_6 = e_i;
+    let eta_2 = ((rho_3 / prm_rho0(i)) - 1.0);
+    let p5 = prm_c0(i);
+    let a0_2 = (prm_rho0(i) * (p5 * p5));
+    let b0_2 = (a0_2 * (1.0 + (2.0 * (prm_S_s(i) - 1.0))));
+    let p6 = (prm_S_s(i) - 1.0);
+    let c0_h_2 = (a0_2 * ((2.0 * (prm_S_s(i) - 1.0)) + (3.0 * (p6 * p6))));
+    let p_h_2 = select((a0_2 * eta_2), (((a0_2 * eta_2) + (b0_2 * (eta_2 * eta_2))) + (c0_h_2 * (eta_2 * eta_2 * eta_2))), (eta_2 > 0.0));
+    p_i = (((1.0 - ((0.5 * prm_gamma0(i)) * min(eta_2, prm_eos_eta_peak(i)))) * p_h_2) + ((prm_gamma0(i) * rho_3) * e_6));
     c_i = prm_c0(i);
     st_x(i, x_i);
     st_v(i, v_i);
+    st_m(i, m_i);
     st_rho(i, rho_i);
-    st_s(i, s_i);
     st_s_hoop(i, s_hoop_i);
+    st_s(i, s_i);
     st_e(i, e_i);
     st_p(i, p_i);
     st_c(i, c_i);

@@ -523,27 +523,27 @@ fn st_p_contact(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 5u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 7u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 10u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 21u;
     return params[b];
 }
 fn prm_contact_colour(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 28u;
     return params[b];
 }
 fn prm_contact_stiffness(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 29u;
     return params[b];
 }
 @compute @workgroup_size(64)

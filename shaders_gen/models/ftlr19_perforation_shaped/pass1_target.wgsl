@@ -717,51 +717,55 @@ fn st_rate_lap_sum(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 1u;
     return params[b];
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 5u;
+    return params[b];
+}
+fn prm_nonlocal_skips_failed(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 6u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 7u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 10u;
     return params[b];
 }
 fn prm_delta(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 11u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 12u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 21u;
     return params[b];
 }
 fn prm_hourglass_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 22u;
     return params[b];
 }
 fn prm_hourglass_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 23u;
     return params[b];
 }
 fn prm_contact_colour(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 28u;
     return params[b];
 }
 fn prm_contact_stiffness(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 29u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -800,6 +804,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var moment_2: f32 = 0.0;
     let rho0_i = prm_rho0(i);
     let h_ratio_i = prm_h_ratio(i);
+    let nonlocal_skips_failed_i = prm_nonlocal_skips_failed(i);
     let c0_i = prm_c0(i);
     let hourglass_alpha_i = prm_hourglass_alpha(i);
     let hourglass_E_i = prm_hourglass_E(i);
@@ -922,30 +927,34 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             if ((body_i != ldj_body(j, sgn))) {
                 colour_other = colour_other + ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * W_ij);
             }
-            // pairsum nonlocal_strain_laplacian (stdlib/damage/nonlocal_strain.sph:94)
+            // pairsum nonlocal_strain_laplacian (stdlib/damage/nonlocal_strain.sph:111)
             if (in_groups(2u, ints[j])) {
                 let m_j = ldj_m(j, sgn);
                 let rho_j = ldj_rho(j, sgn);
+                let D_j = ldj_D(j, sgn);
                 let x_ij_2 = x_ij;
                 let gradW_ij_2 = gradW_ij;
                 let r_ij_2 = r_ij;
                 let h_ij_2 = h_ij;
                 let k_3 = max(((((-2.0 * m_j) / rho_j) * dot(x_ij_2, gradW_ij_2)) / ((r_ij_2 * r_ij_2) + (0.01 * (h_ij_2 * h_ij_2)))), 0.0);
-                sum_2 = sum_2 + (k_3 * ldj_eps_nl(j, sgn));
-                weight = weight + k_3;
-                moment = moment + (k_3 * (r_ij * r_ij));
+                let k_4 = select(k_3, 0.0, ((nonlocal_skips_failed_i > 0.0) && (D_j >= 1.0)));
+                sum_2 = sum_2 + (k_4 * ldj_eps_nl(j, sgn));
+                weight = weight + k_4;
+                moment = moment + (k_4 * (r_ij * r_ij));
             }
-            // pairsum nonlocal_rate_laplacian (stdlib/damage/nonlocal_strain.sph:120)
+            // pairsum nonlocal_rate_laplacian (stdlib/damage/nonlocal_strain.sph:137)
             if (in_groups(2u, ints[j])) {
                 let m_j_2 = ldj_m(j, sgn);
                 let rho_j_2 = ldj_rho(j, sgn);
+                let D_j_2 = ldj_D(j, sgn);
                 let x_ij_3 = x_ij;
                 let gradW_ij_3 = gradW_ij;
                 let r_ij_3 = r_ij;
                 let h_ij_3 = h_ij;
-                let k_4 = max(((((-2.0 * m_j_2) / rho_j_2) * dot(x_ij_3, gradW_ij_3)) / ((r_ij_3 * r_ij_3) + (0.01 * (h_ij_3 * h_ij_3)))), 0.0);
-                sum_3 = sum_3 + (k_4 * ldj_rate_nl(j, sgn));
-                moment_2 = moment_2 + (k_4 * (r_ij * r_ij));
+                let k_5 = max(((((-2.0 * m_j_2) / rho_j_2) * dot(x_ij_3, gradW_ij_3)) / ((r_ij_3 * r_ij_3) + (0.01 * (h_ij_3 * h_ij_3)))), 0.0);
+                let k_6 = select(k_5, 0.0, ((nonlocal_skips_failed_i > 0.0) && (D_j_2 >= 1.0)));
+                sum_3 = sum_3 + (k_6 * ldj_rate_nl(j, sgn));
+                moment_2 = moment_2 + (k_6 * (r_ij * r_ij));
             }
         }
         }}}

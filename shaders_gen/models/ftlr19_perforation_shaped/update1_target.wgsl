@@ -453,127 +453,127 @@ fn st_u_0(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 1u;
     return params[b];
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 5u;
     return params[b];
 }
 fn prm_p_spall(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 7u;
-    return params[b];
-}
-fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 10u;
-    return params[b];
-}
-fn prm_shape_floor(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 17u;
-    return params[b];
-}
-fn prm_shape_aspect(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 18u;
-    return params[b];
-}
-fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 19u;
-    return params[b];
-}
-fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 23u;
-    return params[b];
-}
-fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 24u;
-    return params[b];
-}
-fn prm_eos_eta_peak(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 25u;
-    return params[b];
-}
-fn prm_nonlocal_hardening(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 28u;
-    return params[b];
-}
-fn prm_nonlocal_rate(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 29u;
-    return params[b];
-}
-fn prm_damage_length(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 30u;
-    return params[b];
-}
-fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 31u;
-    return params[b];
-}
-fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 32u;
-    return params[b];
-}
-fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 33u;
-    return params[b];
-}
-fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 34u;
-    return params[b];
-}
-fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 35u;
-    return params[b];
-}
-fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 36u;
-    return params[b];
-}
-fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 37u;
-    return params[b];
-}
-fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 38u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 8u;
     return params[b];
 }
 fn prm_zero_pressure_floor(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 39u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 9u;
+    return params[b];
+}
+fn prm_c0(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 12u;
+    return params[b];
+}
+fn prm_shape_floor(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 19u;
+    return params[b];
+}
+fn prm_shape_aspect(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 20u;
+    return params[b];
+}
+fn prm_G(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 21u;
+    return params[b];
+}
+fn prm_S_s(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 25u;
+    return params[b];
+}
+fn prm_gamma0(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 26u;
+    return params[b];
+}
+fn prm_eos_eta_peak(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 27u;
+    return params[b];
+}
+fn prm_nonlocal_hardening(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 30u;
+    return params[b];
+}
+fn prm_nonlocal_rate(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 31u;
+    return params[b];
+}
+fn prm_damage_length(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 32u;
+    return params[b];
+}
+fn prm_jc_A(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 33u;
+    return params[b];
+}
+fn prm_jc_B(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 34u;
+    return params[b];
+}
+fn prm_jc_C(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 35u;
+    return params[b];
+}
+fn prm_jc_n(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 36u;
+    return params[b];
+}
+fn prm_jc_m(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 37u;
+    return params[b];
+}
+fn prm_eps_rate0(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 38u;
+    return params[b];
+}
+fn prm_T_melt(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 39u;
+    return params[b];
+}
+fn prm_T_room(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 40u;
     return params[b];
 }
 fn prm_D1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 40u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 41u;
     return params[b];
 }
 fn prm_D2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 41u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 42u;
     return params[b];
 }
 fn prm_D3(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 42u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 43u;
     return params[b];
 }
 fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 43u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 44u;
     return params[b];
 }
 fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 44u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 45u;
     return params[b];
 }
 fn prm_failure_band(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 45u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 46u;
     return params[b];
 }
 fn prm_failure_band_spacing(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 46u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 47u;
     return params[b];
 }
 fn prm_nonlocal_weight(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 47u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 48u;
     return params[b];
 }
 @compute @workgroup_size(64)
