@@ -1556,13 +1556,14 @@ fn pairsum_plan_lists_each_parameter_a_material_binds_and_a_cases_values_and_c00
     ] {
         assert!(elastic.iter().any(|l| l.starts_with(expected)), "no `{expected}` in:\n{}", elastic.join("\n"));
     }
-    // The declaration and its comment, read here from the module's own line.
-    let module = std::fs::read_to_string("stdlib/damage/johnson_cook_or_spall_now.sph").expect("module");
+    // The declaration with its default and its comment, read here from the model's own line (the
+    // module declares it without a default, which each model gives).
+    let module = std::fs::read_to_string("stdlib/models/ftlr19_perforation_shaped.sph").expect("model");
     let (k, line) =
         module.lines().enumerate().find(|(_, l)| l.starts_with("param zero_pressure_floor")).expect("declared");
     let (code, comment) = line.split_once("//").expect("a comment");
     let expected = format!(
-        "  {}  on target: {} (stdlib/damage/johnson_cook_or_spall_now.sph:{})",
+        "  {}  on target: {} (stdlib/models/ftlr19_perforation_shaped.sph:{})",
         code.trim().trim_start_matches("param ").trim(),
         comment.trim(),
         k + 1
