@@ -248,95 +248,95 @@ fn st_eps_p_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 0u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 7u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 8u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 9u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 10u;
     return params[b];
 }
 fn prm_eos_eta_peak(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 11u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 19u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 20u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 21u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 22u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 23u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 24u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 25u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 26u;
     return params[b];
 }
 fn prm_p_spall(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 27u;
     return params[b];
 }
 fn prm_D1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 28u;
     return params[b];
 }
 fn prm_D2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 29u;
     return params[b];
 }
 fn prm_D3(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 30u;
     return params[b];
 }
 fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 32u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 31u;
     return params[b];
 }
 fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 33u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 32u;
     return params[b];
 }
 fn prm_C_v(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 37u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 36u;
     return params[b];
 }
 fn prm__symmetry0(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 39u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 38u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm__symmetry1(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 42u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 41u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 @compute @workgroup_size(64)
@@ -425,6 +425,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let triax = ((-p_2) / max(sqrt((1.5 * (ddot(s_5, s_5) + (s_hoop_4 * s_hoop_4)))), 1e-30));
     let T_5 = T_4;
     let jc = min((D + (deps_p_2 / max((((prm_D1(i) + (prm_D2(i) * exp((prm_D3(i) * triax)))) * (1.0 + (prm_D4(i) * log(max(rate_2, 1.0))))) * (1.0 + (prm_D5(i) * min(max(((T_5 - prm_T_room(i)) / (prm_T_melt(i) - prm_T_room(i))), 0.0), 1.0)))), 1e-12))), 1.0);
+    D_i = select(jc, 1.0, (ld_p(i) <= (-prm_p_spall(i))));
+    // eos
+    var p_i: f32 = ld_p(i);
+    var c_i: f32 = ld_c(i);
     let rho = rho_i;
     let e_3 = e_i;
     let eta = ((rho / prm_rho0(i)) - 1.0);
@@ -434,31 +438,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let p2 = (prm_S_s(i) - 1.0);
     let c0_h = (a0 * ((2.0 * (prm_S_s(i) - 1.0)) + (3.0 * (p2 * p2))));
     let p_h = select((a0 * eta), (((a0 * eta) + (b0 * (eta * eta))) + (c0_h * (eta * eta * eta))), (eta > 0.0));
-    let failed = select(jc, 1.0, ((((1.0 - ((0.5 * prm_gamma0(i)) * min(eta, prm_eos_eta_peak(i)))) * p_h) + ((prm_gamma0(i) * rho) * e_3)) <= (-prm_p_spall(i))));
-    D_i = failed;
-    let e_4 = e_i;
-    let p3 = prm_c0(i);
-    let k_2 = ((prm_gamma0(i) * max(e_4, 0.0)) / (p3 * p3));
-    let p4 = (1.0 + k_2);
-    let eta0 = ((-2.0 * k_2) / ((1.0 + k_2) + sqrt(((p4 * p4) + ((2.0 * prm_gamma0(i)) * k_2)))));
-    let floor = (prm_rho0(i) * (1.0 + eta0));
-    let rho_2 = rho_i;
-    let D_2 = failed;
-    let floor_2 = floor;
-    rho_i = select(rho_2, max(rho_2, floor_2), (D_2 >= 1.0));
-    // eos
-    var p_i: f32 = ld_p(i);
-    var c_i: f32 = ld_c(i);
-    let rho_3 = rho_i;
-    let e_5 = e_i;
-    let eta_2 = ((rho_3 / prm_rho0(i)) - 1.0);
-    let p5 = prm_c0(i);
-    let a0_2 = (prm_rho0(i) * (p5 * p5));
-    let b0_2 = (a0_2 * (1.0 + (2.0 * (prm_S_s(i) - 1.0))));
-    let p6 = (prm_S_s(i) - 1.0);
-    let c0_h_2 = (a0_2 * ((2.0 * (prm_S_s(i) - 1.0)) + (3.0 * (p6 * p6))));
-    let p_h_2 = select((a0_2 * eta_2), (((a0_2 * eta_2) + (b0_2 * (eta_2 * eta_2))) + (c0_h_2 * (eta_2 * eta_2 * eta_2))), (eta_2 > 0.0));
-    p_i = (((1.0 - ((0.5 * prm_gamma0(i)) * min(eta_2, prm_eos_eta_peak(i)))) * p_h_2) + ((prm_gamma0(i) * rho_3) * e_5));
+    p_i = (((1.0 - ((0.5 * prm_gamma0(i)) * min(eta, prm_eos_eta_peak(i)))) * p_h) + ((prm_gamma0(i) * rho) * e_3));
     c_i = prm_c0(i);
     st_x(i, x_i);
     st_v(i, v_i);

@@ -344,119 +344,115 @@ fn st_eps_nl_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 0u;
     return params[b];
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 5u;
-    return params[b];
-}
-fn prm_zero_pressure_floor(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 5u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 7u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 8u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 9u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 10u;
     return params[b];
 }
 fn prm_eos_eta_peak(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 11u;
     return params[b];
 }
 fn prm_nonlocal_hardening(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 16u;
     return params[b];
 }
 fn prm_nonlocal_rate(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 17u;
     return params[b];
 }
 fn prm_damage_length(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 18u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 19u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 20u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 21u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 22u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 23u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 24u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 25u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 26u;
     return params[b];
 }
 fn prm_p_spall(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 27u;
     return params[b];
 }
 fn prm_D1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 28u;
     return params[b];
 }
 fn prm_D2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 29u;
     return params[b];
 }
 fn prm_D3(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 30u;
     return params[b];
 }
 fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 32u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 31u;
     return params[b];
 }
 fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 33u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 32u;
     return params[b];
 }
 fn prm_failure_band(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 34u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 33u;
     return params[b];
 }
 fn prm_failure_band_spacing(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 35u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 34u;
     return params[b];
 }
 fn prm_nonlocal_weight(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 36u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 35u;
     return params[b];
 }
 fn prm_C_v(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 37u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 36u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -574,6 +570,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let triax = ((-p_2) / max(sqrt((1.5 * (ddot(s_5, s_5) + (s_hoop_4 * s_hoop_4)))), 1e-30));
     let T_5 = T_4;
     let jc = min((D + (deps_p_2 / max((((prm_D1(i) + (prm_D2(i) * exp((prm_D3(i) * triax)))) * (1.0 + (prm_D4(i) * log(max(rate_2, 1.0))))) * (1.0 + (prm_D5(i) * min(max(((T_5 - prm_T_room(i)) / (prm_T_melt(i) - prm_T_room(i))), 0.0), 1.0)))), 1e-12))), 1.0);
+    D_i = select(jc, 1.0, (ld_p(i) <= (-prm_p_spall(i))));
+    eps_nl_i = nonlocal;
+    // eos
+    var p_i: f32 = ld_p(i);
+    var c_i: f32 = ld_c(i);
     let rho = rho_i;
     let e_4 = e_i;
     let eta = ((rho / prm_rho0(i)) - 1.0);
@@ -583,32 +584,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let p2 = (prm_S_s(i) - 1.0);
     let c0_h = (a0 * ((2.0 * (prm_S_s(i) - 1.0)) + (3.0 * (p2 * p2))));
     let p_h = select((a0 * eta), (((a0 * eta) + (b0 * (eta * eta))) + (c0_h * (eta * eta * eta))), (eta > 0.0));
-    let failed = select(jc, 1.0, ((((1.0 - ((0.5 * prm_gamma0(i)) * min(eta, prm_eos_eta_peak(i)))) * p_h) + ((prm_gamma0(i) * rho) * e_4)) <= (-prm_p_spall(i))));
-    D_i = failed;
-    eps_nl_i = nonlocal;
-    let e_5 = e_i;
-    let p3 = prm_c0(i);
-    let k_2 = ((prm_gamma0(i) * max(e_5, 0.0)) / (p3 * p3));
-    let p4 = (1.0 + k_2);
-    let eta0 = ((-2.0 * k_2) / ((1.0 + k_2) + sqrt(((p4 * p4) + ((2.0 * prm_gamma0(i)) * k_2)))));
-    let floor = select(prm_rho0(i), (prm_rho0(i) * (1.0 + eta0)), (prm_zero_pressure_floor(i) > 0.0));
-    let rho_2 = rho_i;
-    let D_2 = failed;
-    let floor_2 = floor;
-    rho_i = select(rho_2, max(rho_2, floor_2), (D_2 >= 1.0));
-    // eos
-    var p_i: f32 = ld_p(i);
-    var c_i: f32 = ld_c(i);
-    let rho_3 = rho_i;
-    let e_6 = e_i;
-    let eta_2 = ((rho_3 / prm_rho0(i)) - 1.0);
-    let p5 = prm_c0(i);
-    let a0_2 = (prm_rho0(i) * (p5 * p5));
-    let b0_2 = (a0_2 * (1.0 + (2.0 * (prm_S_s(i) - 1.0))));
-    let p6 = (prm_S_s(i) - 1.0);
-    let c0_h_2 = (a0_2 * ((2.0 * (prm_S_s(i) - 1.0)) + (3.0 * (p6 * p6))));
-    let p_h_2 = select((a0_2 * eta_2), (((a0_2 * eta_2) + (b0_2 * (eta_2 * eta_2))) + (c0_h_2 * (eta_2 * eta_2 * eta_2))), (eta_2 > 0.0));
-    p_i = (((1.0 - ((0.5 * prm_gamma0(i)) * min(eta_2, prm_eos_eta_peak(i)))) * p_h_2) + ((prm_gamma0(i) * rho_3) * e_6));
+    p_i = (((1.0 - ((0.5 * prm_gamma0(i)) * min(eta, prm_eos_eta_peak(i)))) * p_h) + ((prm_gamma0(i) * rho) * e_4));
     c_i = prm_c0(i);
     st_x(i, x_i);
     st_v(i, v_i);
