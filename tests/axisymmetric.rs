@@ -193,6 +193,8 @@ fn a_disc_about_the_axis_sweeps_the_exact_volume_of_its_ball_or_torus() {
         let dir = scratch(tag);
         let path = dir.join("case.toml");
         std::fs::write(&path, &text).expect("case.toml");
+        let model = "hypervelocity_impact_axisymmetric.sph";
+        std::fs::copy(case("hypervelocity_impact_axisymmetric").with_file_name(model), dir.join(model)).expect("model");
         let (scene, _) = prepare(&path, &Default::default()).unwrap_or_else(|e| panic!("{e}"));
         let _ = std::fs::remove_dir_all(&dir);
         let p = &scene.particles;
