@@ -595,7 +595,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var moment: f32 = 0.0;
     let s_2 = ld_s(i);
     let s_hoop = ld_s_hoop(i);
-    let w = (1.0 - select((prm_damage_coupling(i) * ld_D(i)), 1.0, (ld_D(i) >= 1.0)));
+    let D = ld_D(i);
+    let coupling = prm_damage_coupling(i);
+    let w = (1.0 - select((coupling * D), 1.0, (D >= 1.0)));
     dv = ((w * ((s_2 - (s_hoop * eye())) * vec2<f32>(1.0, 0.0))) / (ld_rho(i) * max(ld_x(i)[0], (0.1 * ld_dx(i)))));
     let nonlocal_skips_failed_i = prm_nonlocal_skips_failed(i);
     let visc_a_i = prm_visc_a(i);
@@ -657,16 +659,18 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             // pairsum failing_momentum (stdlib/momentum/total_stress_failing.sph:19)
             let s_3 = s_i;
             let p = p_i;
-            let D = D_i;
-            let coupling = damage_coupling_i;
-            let w_2 = select((coupling * D), 1.0, (D >= 1.0));
-            let sig_i = (((1.0 - w_2) * (s_3 - (min(p, 0.0) * eye()))) - (max(p, 0.0) * eye()));
+            let D_2 = D_i;
+            let coupling_2 = damage_coupling_i;
+            let D_3 = D_2;
+            let coupling_3 = coupling_2;
+            let sig_i = (((1.0 - select((coupling_3 * D_3), 1.0, (D_3 >= 1.0))) * (s_3 - (min(p, 0.0) * eye()))) - (max(p, 0.0) * eye()));
             let s_4 = ldj_s(j, sgn);
             let p_2 = ldj_p(j, sgn);
-            let D_2 = ldj_D(j, sgn);
-            let coupling_2 = prm_damage_coupling(j);
-            let w_3 = select((coupling_2 * D_2), 1.0, (D_2 >= 1.0));
-            let sig_j = (((1.0 - w_3) * (s_4 - (min(p_2, 0.0) * eye()))) - (max(p_2, 0.0) * eye()));
+            let D_4 = ldj_D(j, sgn);
+            let coupling_4 = prm_damage_coupling(j);
+            let D_5 = D_4;
+            let coupling_5 = coupling_4;
+            let sig_j = (((1.0 - select((coupling_5 * D_5), 1.0, (D_5 >= 1.0))) * (s_4 - (min(p_2, 0.0) * eye()))) - (max(p_2, 0.0) * eye()));
             let c_i_2 = c_i;
             let c_j = ldj_c(j, sgn);
             let vr = dot((v_i - ldj_v(j, sgn)), x_ij);
@@ -701,21 +705,21 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     spin = skew(grad_v);
     // then jaumann
     var ds_i: mat2x2<f32> = ld_ds(i);
-    let w_4 = min((ld_x(i)[0] / (2.0 * ld_dx(i))), 1.0);
-    ds_i = (((2.0 * prm_G(i)) * (dev(edot) - (((((w_4 * v_i[0]) / max(ld_x(i)[0], (0.1 * ld_dx(i)))) + ((1.0 - w_4) * edot[0][0])) / 3.0) * eye()))) + sym(((s_i * transpose(spin)) + (spin * s_i))));
+    let w_2 = min((ld_x(i)[0] / (2.0 * ld_dx(i))), 1.0);
+    ds_i = (((2.0 * prm_G(i)) * (dev(edot) - (((((w_2 * v_i[0]) / max(ld_x(i)[0], (0.1 * ld_dx(i)))) + ((1.0 - w_2) * edot[0][0])) / 3.0) * eye()))) + sym(((s_i * transpose(spin)) + (spin * s_i))));
     // then jaumann_hoop
     var ds_hoop_i: f32 = ld_ds_hoop(i);
-    let w_5 = min((ld_x(i)[0] / (2.0 * ld_dx(i))), 1.0);
-    let w_6 = min((ld_x(i)[0] / (2.0 * ld_dx(i))), 1.0);
-    ds_hoop_i = ((2.0 * prm_G(i)) * ((((w_5 * v_i[0]) / max(ld_x(i)[0], (0.1 * ld_dx(i)))) + ((1.0 - w_5) * edot[0][0])) - ((trace(edot) + (((w_6 * v_i[0]) / max(ld_x(i)[0], (0.1 * ld_dx(i)))) + ((1.0 - w_6) * edot[0][0]))) / 3.0)));
+    let w_3 = min((ld_x(i)[0] / (2.0 * ld_dx(i))), 1.0);
+    let w_4 = min((ld_x(i)[0] / (2.0 * ld_dx(i))), 1.0);
+    ds_hoop_i = ((2.0 * prm_G(i)) * ((((w_3 * v_i[0]) / max(ld_x(i)[0], (0.1 * ld_dx(i)))) + ((1.0 - w_3) * edot[0][0])) - ((trace(edot) + (((w_4 * v_i[0]) / max(ld_x(i)[0], (0.1 * ld_dx(i)))) + ((1.0 - w_4) * edot[0][0]))) / 3.0)));
     // then nonlocal_strain_laplacian
     let exact_for_quadratics = ((2.0 * 2.0) / max(moment, 1e-12));
     lap_sum = (exact_for_quadratics * sum);
     lap_weight = (exact_for_quadratics * weight);
     // then continuity_from_strain_rate
     var drho_i: f32 = ld_drho(i);
-    let w_7 = min((ld_x(i)[0] / (2.0 * ld_dx(i))), 1.0);
-    drho_i = ((-rho_i) * (trace(edot) + (((w_7 * v_i[0]) / max(ld_x(i)[0], (0.1 * ld_dx(i)))) + ((1.0 - w_7) * edot[0][0]))));
+    let w_5 = min((ld_x(i)[0] / (2.0 * ld_dx(i))), 1.0);
+    drho_i = ((-rho_i) * (trace(edot) + (((w_5 * v_i[0]) / max(ld_x(i)[0], (0.1 * ld_dx(i)))) + ((1.0 - w_5) * edot[0][0]))));
     st_edot(i, edot);
     st_spin(i, spin);
     st_drho(i, drho_i);

@@ -612,7 +612,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var drho: f32 = 0.0;
     var div_v: f32 = 0.0;
     var diffusion: f32 = 0.0;
-    let w = (1.0 - select((prm_damage_coupling(i) * ld_D(i)), 1.0, (ld_D(i) >= 1.0)));
+    let D = ld_D(i);
+    let coupling = prm_damage_coupling(i);
+    let w = (1.0 - select((coupling * D), 1.0, (D >= 1.0)));
     let sigma_hoop = ((w * (ld_s_hoop(i) - min(ld_p(i), 0.0))) - max(ld_p(i), 0.0));
     let w_2 = min((ld_x(i)[0] / (2.0 * ld_dx(i))), 1.0);
     de = select(0.0, ((sigma_hoop * select(0.0, (((w_2 * ld_v(i)[0]) / max(ld_x(i)[0], (0.1 * ld_dx(i)))) + ((1.0 - w_2) * ld_edot(i)[0][0])), (prm_axisymmetric(i) > 0.0))) / ld_rho(i)), (prm_axisymmetric(i) > 0.0));
@@ -679,16 +681,18 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             // pairsum failing_energy (stdlib/energy/solid_failing.sph:22)
             let s_2 = s_i;
             let p = p_i;
-            let D = D_i;
-            let coupling = damage_coupling_i;
-            let w_3 = select((coupling * D), 1.0, (D >= 1.0));
-            let sig_i = (((1.0 - w_3) * (s_2 - (min(p, 0.0) * eye()))) - (max(p, 0.0) * eye()));
+            let D_2 = D_i;
+            let coupling_2 = damage_coupling_i;
+            let D_3 = D_2;
+            let coupling_3 = coupling_2;
+            let sig_i = (((1.0 - select((coupling_3 * D_3), 1.0, (D_3 >= 1.0))) * (s_2 - (min(p, 0.0) * eye()))) - (max(p, 0.0) * eye()));
             let s_3 = ldj_s(j, sgn);
             let p_2 = ldj_p(j, sgn);
-            let D_2 = ldj_D(j, sgn);
-            let coupling_2 = prm_damage_coupling(j);
-            let w_4 = select((coupling_2 * D_2), 1.0, (D_2 >= 1.0));
-            let sig_j = (((1.0 - w_4) * (s_3 - (min(p_2, 0.0) * eye()))) - (max(p_2, 0.0) * eye()));
+            let D_4 = ldj_D(j, sgn);
+            let coupling_4 = prm_damage_coupling(j);
+            let D_5 = D_4;
+            let coupling_5 = coupling_4;
+            let sig_j = (((1.0 - select((coupling_5 * D_5), 1.0, (D_5 >= 1.0))) * (s_3 - (min(p_2, 0.0) * eye()))) - (max(p_2, 0.0) * eye()));
             let c_i_2 = c_i;
             let c_j = ldj_c(j, sgn);
             let vr = dot((v_i - ldj_v(j, sgn)), x_ij);
@@ -705,16 +709,18 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             if ((body_i == ldj_body(j, sgn))) {
                 let s_4 = s_i;
                 let p_3 = p_i;
-                let D_3 = D_i;
-                let coupling_3 = damage_coupling_i;
-                let w_5 = select((coupling_3 * D_3), 1.0, (D_3 >= 1.0));
-                let sig_i_2 = (((1.0 - w_5) * (s_4 - (min(p_3, 0.0) * eye()))) - (max(p_3, 0.0) * eye()));
+                let D_6 = D_i;
+                let coupling_6 = damage_coupling_i;
+                let D_7 = D_6;
+                let coupling_7 = coupling_6;
+                let sig_i_2 = (((1.0 - select((coupling_7 * D_7), 1.0, (D_7 >= 1.0))) * (s_4 - (min(p_3, 0.0) * eye()))) - (max(p_3, 0.0) * eye()));
                 let s_5 = ldj_s(j, sgn);
                 let p_4 = ldj_p(j, sgn);
-                let D_4 = ldj_D(j, sgn);
-                let coupling_4 = prm_damage_coupling(j);
-                let w_6 = select((coupling_4 * D_4), 1.0, (D_4 >= 1.0));
-                let sig_j_2 = (((1.0 - w_6) * (s_5 - (min(p_4, 0.0) * eye()))) - (max(p_4, 0.0) * eye()));
+                let D_8 = ldj_D(j, sgn);
+                let coupling_8 = prm_damage_coupling(j);
+                let D_9 = D_8;
+                let coupling_9 = coupling_8;
+                let sig_j_2 = (((1.0 - select((coupling_9 * D_9), 1.0, (D_9 >= 1.0))) * (s_5 - (min(p_4, 0.0) * eye()))) - (max(p_4, 0.0) * eye()));
                 let c_i_3 = c_i;
                 let c_j_2 = ldj_c(j, sgn);
                 let vr_2 = dot((v_i - ldj_v(j, sgn)), x_ij);
@@ -740,8 +746,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         }}}
     }
     // then continuity
-    let w_7 = min((ld_x(i)[0] / (2.0 * ld_dx(i))), 1.0);
-    drho = ((rho_i * (div_v - select(0.0, (((w_7 * v_i[0]) / max(ld_x(i)[0], (0.1 * ld_dx(i)))) + ((1.0 - w_7) * ld_edot(i)[0][0])), (prm_axisymmetric(i) > 0.0)))) + diffusion);
+    let w_3 = min((ld_x(i)[0] / (2.0 * ld_dx(i))), 1.0);
+    drho = ((rho_i * (div_v - select(0.0, (((w_3 * v_i[0]) / max(ld_x(i)[0], (0.1 * ld_dx(i)))) + ((1.0 - w_3) * ld_edot(i)[0][0])), (prm_axisymmetric(i) > 0.0)))) + diffusion);
     st_drho(i, drho);
     st_de(i, de);
     st_dv(i, dv);

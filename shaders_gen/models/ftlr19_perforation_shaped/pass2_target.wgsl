@@ -681,7 +681,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // pairsum shaped_failing_momentum: accumulators
     var dv: vec3<f32> = vec3<f32>(0.0);
     var de: f32 = 0.0;
-    let w = (1.0 - select((prm_damage_coupling(i) * ld_D(i)), 1.0, (ld_D(i) >= 1.0)));
+    let D = ld_D(i);
+    let coupling = prm_damage_coupling(i);
+    let w = (1.0 - select((coupling * D), 1.0, (D >= 1.0)));
     let s_2 = ld_s(i);
     let s_hoop = ld_s_hoop(i);
     let w_2 = w;
@@ -763,16 +765,18 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 if ((body_i == ldj_body(j, sgn))) {
                     let s_3 = s_i;
                     let p = p_i;
-                    let D = D_i;
-                    let coupling = damage_coupling_i;
-                    let w_4 = select((coupling * D), 1.0, (D >= 1.0));
-                    let sig_i = (((1.0 - w_4) * (s_3 - (min(p, 0.0) * eye()))) - (max(p, 0.0) * eye()));
+                    let D_2 = D_i;
+                    let coupling_2 = damage_coupling_i;
+                    let D_3 = D_2;
+                    let coupling_3 = coupling_2;
+                    let sig_i = (((1.0 - select((coupling_3 * D_3), 1.0, (D_3 >= 1.0))) * (s_3 - (min(p, 0.0) * eye()))) - (max(p, 0.0) * eye()));
                     let s_4 = ldj_s(j, sgn);
                     let p_2 = ldj_p(j, sgn);
-                    let D_2 = ldj_D(j, sgn);
-                    let coupling_2 = prm_damage_coupling(j);
-                    let w_5 = select((coupling_2 * D_2), 1.0, (D_2 >= 1.0));
-                    let sig_j = (((1.0 - w_5) * (s_4 - (min(p_2, 0.0) * eye()))) - (max(p_2, 0.0) * eye()));
+                    let D_4 = ldj_D(j, sgn);
+                    let coupling_4 = prm_damage_coupling(j);
+                    let D_5 = D_4;
+                    let coupling_5 = coupling_4;
+                    let sig_j = (((1.0 - select((coupling_5 * D_5), 1.0, (D_5 >= 1.0))) * (s_4 - (min(p_2, 0.0) * eye()))) - (max(p_2, 0.0) * eye()));
                     let p1 = ldj_rho(j, sgn);
                     let M = kernel_metric_i;
                     let x_2 = x_ij;
