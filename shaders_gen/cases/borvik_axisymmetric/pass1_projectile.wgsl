@@ -189,23 +189,23 @@ fn st_p_contact(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 6u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 10u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 21u;
     return params[b];
 }
 fn prm_contact_colour(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 28u;
     return params[b];
 }
 fn prm_contact_stiffness(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 29u;
     return params[b];
 }
 @compute @workgroup_size(64)

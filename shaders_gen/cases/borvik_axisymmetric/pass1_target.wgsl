@@ -355,47 +355,47 @@ fn st_lap_weight(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 1u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 6u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 10u;
     return params[b];
 }
 fn prm_delta(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 11u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 12u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 21u;
     return params[b];
 }
 fn prm_hourglass_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 22u;
     return params[b];
 }
 fn prm_hourglass_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 23u;
     return params[b];
 }
 fn prm_contact_colour(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 28u;
     return params[b];
 }
 fn prm_contact_stiffness(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 29u;
     return params[b];
 }
 @compute @workgroup_size(64)

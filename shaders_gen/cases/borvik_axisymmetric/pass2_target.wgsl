@@ -301,27 +301,27 @@ fn st_a_contact(i: u32, v: vec2<f32>) {
     data[b + 1u] = v[1];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 1u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 13u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 14u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 15u;
     return params[b];
 }
 fn prm_hourglass_visc(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 18u;
     return params[b];
 }
 fn prm_damage_coupling(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 24u;
     return params[b];
 }
 @compute @workgroup_size(64)

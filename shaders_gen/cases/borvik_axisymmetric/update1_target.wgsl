@@ -399,111 +399,119 @@ fn st_u_0(i: u32, v: vec2<f32>) {
     data[b + 1u] = v[1];
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 1u;
     return params[b];
 }
 fn prm_p_spall(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 7u;
+    return params[b];
+}
+fn prm_zero_pressure_floor(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 8u;
+    return params[b];
+}
+fn prm_round_failed(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 9u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 12u;
     return params[b];
 }
 fn prm_shape_floor(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 19u;
     return params[b];
 }
 fn prm_shape_aspect(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 20u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 21u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 25u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 26u;
     return params[b];
 }
 fn prm_eos_eta_peak(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 27u;
     return params[b];
 }
 fn prm_nonlocal_hardening(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 30u;
     return params[b];
 }
 fn prm_damage_length(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 32u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 32u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 33u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 33u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 34u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 34u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 35u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 35u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 36u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 36u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 37u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 37u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 38u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 38u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 39u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 39u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 40u;
     return params[b];
 }
 fn prm_D1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 40u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 41u;
     return params[b];
 }
 fn prm_D2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 41u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 42u;
     return params[b];
 }
 fn prm_D3(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 42u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 43u;
     return params[b];
 }
 fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 43u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 44u;
     return params[b];
 }
 fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 44u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 45u;
     return params[b];
 }
 fn prm_nonlocal_weight(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 47u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 48u;
     return params[b];
 }
 fn prm__constraint0(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 48u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 49u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 @compute @workgroup_size(64)
@@ -619,13 +627,18 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let failed = select(jc, 1.0, ((((1.0 - ((0.5 * prm_gamma0(i)) * min(eta, prm_eos_eta_peak(i)))) * p_h) + ((prm_gamma0(i) * rho) * e_3)) <= (-prm_p_spall(i))));
     D_i = failed;
     eps_nl_i = nonlocal;
-    let floor = prm_rho0(i);
+    let e_4 = e_i;
+    let p3 = prm_c0(i);
+    let k_2 = ((prm_gamma0(i) * max(e_4, 0.0)) / (p3 * p3));
+    let p4 = (1.0 + k_2);
+    let eta0 = ((-2.0 * k_2) / ((1.0 + k_2) + sqrt(((p4 * p4) + ((2.0 * prm_gamma0(i)) * k_2)))));
+    let floor = select(prm_rho0(i), (prm_rho0(i) * (1.0 + eta0)), (prm_zero_pressure_floor(i) > 0.0));
     let rho_2 = rho_i;
     let D_2 = failed;
     let floor_2 = floor;
     rho_i = select(rho_2, max(rho_2, floor_2), (D_2 >= 1.0));
     // round_failed_kernels
-    kernel_shape_i = sel_m(kernel_shape_i, eye(), (D_i >= 1.0));
+    kernel_shape_i = sel_m(kernel_shape_i, eye(), ((D_i >= 1.0) && (prm_round_failed(i) > 0.0)));
     // shape_kernel
     var h_i: f32 = ld_h(i);
     var kernel_metric_i: mat2x2<f32> = ld_kernel_metric(i);
@@ -639,9 +652,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let spread = sqrt((ddot(b, b) / 2.0));
     let largest = (q + spread);
     let smallest = (q - spread);
-    let p3 = max(prm_shape_aspect(i), 1.0);
-    let bound = select(0.0, (select(smallest, largest, (sign > 0.0)) / (p3 * p3)), (prm_shape_aspect(i) > 0.0));
-    let p4 = prm_shape_floor(i);
+    let p5 = max(prm_shape_aspect(i), 1.0);
+    let bound = select(0.0, (select(smallest, largest, (sign > 0.0)) / (p5 * p5)), (prm_shape_aspect(i) > 0.0));
+    let p6 = prm_shape_floor(i);
     let C_2 = AAt;
     let sign_2 = -1.0;
     let q_2 = (trace(C_2) / 2.0);
@@ -649,7 +662,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let spread_2 = sqrt((ddot(b_2, b_2) / 2.0));
     let largest_2 = (q_2 + spread_2);
     let smallest_2 = (q_2 - spread_2);
-    let B = (AAt + (max((max((p4 * p4), bound) - select(smallest_2, largest_2, (sign_2 > 0.0))), 0.0) * eye()));
+    let B = (AAt + (max((max((p6 * p6), bound) - select(smallest_2, largest_2, (sign_2 > 0.0))), 0.0) * eye()));
     kernel_metric_i = sym(inv(B));
     kernel_norm_i = (1.0 / sqrt(determinant(B)));
     let C_3 = B;
@@ -667,21 +680,21 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let spread_4 = sqrt((ddot(b_4, b_4) / 2.0));
     let largest_4 = (q_4 + spread_4);
     let smallest_4 = (q_4 - spread_4);
-    let p5 = prm_shape_floor(i);
-    h_short_i = ((prm_h_ratio(i) * ld_dx(i)) * sqrt(max(select(smallest_4, largest_4, (sign_4 > 0.0)), (p5 * p5))));
+    let p7 = prm_shape_floor(i);
+    h_short_i = ((prm_h_ratio(i) * ld_dx(i)) * sqrt(max(select(smallest_4, largest_4, (sign_4 > 0.0)), (p7 * p7))));
     // eos
     var p_i: f32 = ld_p(i);
     var c_i: f32 = ld_c(i);
     let rho_3 = rho_i;
-    let e_4 = e_i;
+    let e_5 = e_i;
     let eta_2 = ((rho_3 / prm_rho0(i)) - 1.0);
-    let p6 = prm_c0(i);
-    let a0_2 = (prm_rho0(i) * (p6 * p6));
+    let p8 = prm_c0(i);
+    let a0_2 = (prm_rho0(i) * (p8 * p8));
     let b0_2 = (a0_2 * (1.0 + (2.0 * (prm_S_s(i) - 1.0))));
-    let p7 = (prm_S_s(i) - 1.0);
-    let c0_h_2 = (a0_2 * ((2.0 * (prm_S_s(i) - 1.0)) + (3.0 * (p7 * p7))));
+    let p9 = (prm_S_s(i) - 1.0);
+    let c0_h_2 = (a0_2 * ((2.0 * (prm_S_s(i) - 1.0)) + (3.0 * (p9 * p9))));
     let p_h_2 = select((a0_2 * eta_2), (((a0_2 * eta_2) + (b0_2 * (eta_2 * eta_2))) + (c0_h_2 * (eta_2 * eta_2 * eta_2))), (eta_2 > 0.0));
-    p_i = (((1.0 - ((0.5 * prm_gamma0(i)) * min(eta_2, prm_eos_eta_peak(i)))) * p_h_2) + ((prm_gamma0(i) * rho_3) * e_4));
+    p_i = (((1.0 - ((0.5 * prm_gamma0(i)) * min(eta_2, prm_eos_eta_peak(i)))) * p_h_2) + ((prm_gamma0(i) * rho_3) * e_5));
     c_i = prm_c0(i);
     st_x(i, x_i);
     st_v(i, v_i);

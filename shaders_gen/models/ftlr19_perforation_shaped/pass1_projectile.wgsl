@@ -523,27 +523,27 @@ fn st_p_contact(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 5u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 7u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 11u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 22u;
     return params[b];
 }
 fn prm_contact_colour(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 29u;
     return params[b];
 }
 fn prm_contact_stiffness(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 30u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -717,55 +717,55 @@ fn st_rate_lap_sum(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 1u;
     return params[b];
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 5u;
     return params[b];
 }
 fn prm_nonlocal_skips_failed(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 6u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 7u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 11u;
     return params[b];
 }
 fn prm_delta(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 12u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 13u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 22u;
     return params[b];
 }
 fn prm_hourglass_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 23u;
     return params[b];
 }
 fn prm_hourglass_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 24u;
     return params[b];
 }
 fn prm_contact_colour(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 29u;
     return params[b];
 }
 fn prm_contact_stiffness(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 30u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -636,35 +636,35 @@ fn st_a_contact(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 1u;
     return params[b];
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 5u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 14u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 15u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 16u;
     return params[b];
 }
 fn prm_visc_share(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 18u;
     return params[b];
 }
 fn prm_hourglass_visc(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 19u;
     return params[b];
 }
 fn prm_damage_coupling(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 25u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -477,127 +477,131 @@ fn st_eps_nl_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 1u;
     return params[b];
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 5u;
     return params[b];
 }
 fn prm_p_spall(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 8u;
     return params[b];
 }
 fn prm_zero_pressure_floor(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 9u;
+    return params[b];
+}
+fn prm_round_failed(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 10u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 13u;
     return params[b];
 }
 fn prm_shape_floor(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 20u;
     return params[b];
 }
 fn prm_shape_aspect(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 21u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 22u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 26u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 27u;
     return params[b];
 }
 fn prm_eos_eta_peak(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 28u;
     return params[b];
 }
 fn prm_nonlocal_hardening(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 31u;
     return params[b];
 }
 fn prm_nonlocal_rate(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 32u;
     return params[b];
 }
 fn prm_damage_length(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 32u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 33u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 33u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 34u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 34u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 35u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 35u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 36u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 36u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 37u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 37u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 38u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 38u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 39u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 39u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 40u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 40u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 41u;
     return params[b];
 }
 fn prm_D1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 41u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 42u;
     return params[b];
 }
 fn prm_D2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 42u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 43u;
     return params[b];
 }
 fn prm_D3(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 43u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 44u;
     return params[b];
 }
 fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 44u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 45u;
     return params[b];
 }
 fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 45u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 46u;
     return params[b];
 }
 fn prm_failure_band(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 46u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 47u;
     return params[b];
 }
 fn prm_failure_band_spacing(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 47u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 48u;
     return params[b];
 }
 fn prm_nonlocal_weight(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 48u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 49u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -741,7 +745,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let floor_2 = floor;
     rho_i = select(rho_2, max(rho_2, floor_2), (D_2 >= 1.0));
     // round_failed_kernels
-    kernel_shape_i = sel_m(kernel_shape_i, eye(), (D_i >= 1.0));
+    kernel_shape_i = sel_m(kernel_shape_i, eye(), ((D_i >= 1.0) && (prm_round_failed(i) > 0.0)));
     // shape_kernel
     var h_i: f32 = ld_h(i);
     var kernel_metric_i: mat3x3<f32> = ld_kernel_metric(i);
