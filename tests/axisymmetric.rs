@@ -209,3 +209,33 @@ fn a_disc_about_the_axis_sweeps_the_exact_volume_of_its_ball_or_torus() {
         assert!((swept(1) / plate - 1.0).abs() < 1e-12, "the plate's rings sweep {} m³, exactly {plate}", swept(1));
     }
 }
+
+/// `round_failed` (damage/round_failed_kernels.sph): with 1, the 3D models' default, a failed
+/// particle's kernel turns round; with 0, the axisymmetric Børvik case's default, it keeps its
+/// shape. The plate starts failed (D = 1) with its kernels stretched 1.2×; after
+/// one step its kernels' xx component is 1 with 1, and within 1e-3 of 1.2 with 0.
+#[test]
+fn a_failed_particles_kernel_turns_round_with_round_failed_1_and_keeps_its_shape_with_0() {
+    let text = std::fs::read_to_string(case("borvik_axisymmetric")).expect("case");
+    let plate = "name = \"plate\"\n";
+    let default = "\nround_failed = 0 ";
+    assert!(text.contains(plate) && text.contains(default), "the case's plate and its round_failed default");
+    let initial = r#"initial = { D = "1", kernel_shape = "1.2 * I" }"#;
+    let failed = text.replacen(plate, &format!("{plate}{initial}\n"), 1);
+    for (round, expected) in [(1, 1.0), (0, 1.2)] {
+        let mut e =
+            initialised(&failed.replacen(default, &format!("\nround_failed = {round} "), 1), &format!("round{round}"));
+        e.step().expect("a step");
+        let (comps, shape) = common::field_by_id(&e.backend, "kernel_shape");
+        let body = common::field_by_id(&e.backend, "body").1;
+        let plate: Vec<usize> = (0..body.len()).filter(|k| body[*k] == 1.0).collect();
+        assert!(plate.len() > 400, "{} plate particles", plate.len());
+        for k in plate {
+            let xx = shape[k * comps];
+            assert!(
+                (xx - expected).abs() <= 1e-3,
+                "round_failed = {round}: particle {k}'s kernel xx {xx}, not {expected}"
+            );
+        }
+    }
+}
