@@ -90,8 +90,8 @@ fn hypervelocity_impact_with_damage_over_a_length_keeps_the_crater_within_the_lo
     assert!(value(&o, "max_speed") <= 1.25 * 6180.0, "max speed {}", value(&o, "max_speed"));
 }
 
-/// The hypervelocity impact about its axis (CI: 1 mm, 240 particles, models::ek18_solid_failure
-/// with the hoop terms and the failed density floored, the damage over ℓ = 2 mm) against the 3D
+/// The hypervelocity impact about its axis (CI: 1 mm, 240 particles, its own model: that is,
+/// models::ek18_solid_failure with the failed density floored, the damage over ℓ = 2 mm) against the 3D
 /// quarter model at the same spacing and ℓ, an independent computation of the same crater: the
 /// crater with the failed rim within 3 % of the 3D one's and the intact crater within 5 % (24.96
 /// against 25.09 mm and 29.76 against 30.30 mm when pinned: at 1 mm the plate is four particles
