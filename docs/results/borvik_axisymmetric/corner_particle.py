@@ -25,9 +25,10 @@ def profiles(run):
 
 
 def summary(run):
-    if not glob.glob(run + "/profiles/plate_*.csv"):
+    series = profiles(run)
+    if not series:
         return print(f"{run:<12} no plate profile")
-    last = profiles(run)[-1]
+    last = series[-1]
     first, second = sorted(last, key=lambda p: -p["eps_p"])[:2]
     X, Y = origin(first)
     print(f"{run:<12} {load(run)[1][-1]:8.3f} {first['eps_p']:6.3f}  ({X:6.3f}, {Y:6.3f})  {second['eps_p']:6.3f}  {first['eps_p'] / second['eps_p']:5.2f}")

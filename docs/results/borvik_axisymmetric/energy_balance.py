@@ -3,11 +3,11 @@ kinetic energy it started with (stop 113). The profiles need the fields m, v and
 (profiles_energy.toml appended to the case).
     python3 energy_balance.py RUN...
 """
-import csv
 import math
 import sys
 
 from corner_particle import profile
+from history_diff import histories
 
 
 def ring(p):
@@ -24,8 +24,8 @@ def body(run, name):
 if __name__ == "__main__":
     print("run          plate e   plate KE  proj. e  proj. KE   total  start  excess (J)  speed (m/s)")
     for run in sys.argv[1:]:
-        rows = list(csv.reader(open(run + "/histories.csv")))[1:]
-        start, speed = float(rows[0][4]), -float(rows[-1][1])
+        rows = histories(run)
+        start, speed = rows[0, 4], -rows[-1, 1]
         parts = [*body(run, "plate"), *body(run, "projectile")]
         total = sum(parts)
         print(f"{run:<12}" + "".join(f"{x:9.1f}" for x in parts) + f" {total:8.1f} {start:6.0f} {total - start:8.1f}  {speed:10.3f}")

@@ -7,10 +7,14 @@ import sys
 import numpy as np
 
 
+def histories(run):
+    """A run's histories.csv as an array, one column a probe (time first, in s)."""
+    return np.array([[float(x) for x in row] for row in list(csv.reader(open(run + "/histories.csv")))[1:]])
+
+
 def load(run):
-    """A run's times (s) and the projectile's downward speed (m/s), from its histories.csv."""
-    rows = list(csv.reader(open(run + "/histories.csv")))[1:]
-    history = np.array([[float(x) for x in row[:2]] for row in rows])
+    """A run's times (s) and the projectile's downward speed (m/s)."""
+    history = histories(run)
     return history[:, 0], -history[:, 1]
 
 

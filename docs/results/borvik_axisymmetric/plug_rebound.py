@@ -1,17 +1,18 @@
 """The projectile's and the plug's speeds (m/s) at fixed times, from runs' histories (stop 113).
     python3 plug_rebound.py nh8_l1000 nh8_k5 nh8_l667
 """
-import csv
 import sys
 
 import numpy as np
+
+from history_diff import histories
 
 TIMES = [40, 50, 60, 65, 70, 75, 80, 85, 90, 100, 150]
 
 
 def speeds(run):
     """Times (us), the projectile's downward speed and the plug's (m/s)."""
-    rows = np.array([[float(x) for x in row[:3]] for row in list(csv.reader(open(run + "/histories.csv")))[1:]])
+    rows = histories(run)
     return rows[:, 0] * 1e6, -rows[:, 1], rows[:, 2]
 
 
