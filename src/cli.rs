@@ -132,9 +132,11 @@ enum Command {
     /// least-squares sense, as a convergence report's "Numerical uncertainty" table does
     Uncertainty {
         /// Each level as SPACING=VALUE, in any order and any one unit of spacing: 1.333=219.73
-        /// 1=222.78 0.8=222.76 0.667=222.91
+        /// 1=222.78 0.8=222.76 0.667=222.91. A level that is a mean over runs may give its standard
+        /// error, SPACING=VALUE±SE (or +-SE); given at every level, the order's and f0's range under
+        /// that noise is printed too
         #[arg(required = true, value_parser = parse_level)]
-        levels: Vec<(f64, f64)>,
+        levels: Vec<Level>,
         /// A reference value: whether it lies within the finest value ± U
         #[arg(long)]
         reference: Option<f64>,
@@ -247,28 +249,75 @@ pub fn main() -> i32 {
     code
 }
 
-/// `SPACING=VALUE`, both numbers.
-fn parse_level(s: &str) -> Result<(f64, f64), String> {
-    let number = |t: &str| t.trim().parse::<f64>().map_err(|_| format!("`{t}` is not a number"));
-    let (h, v) = s.split_once('=').ok_or_else(|| format!("`{s}` is not SPACING=VALUE (for example 0.8=222.76)"))?;
-    Ok((number(h)?, number(v)?))
+/// A level of `pairsum uncertainty`: its spacing, value and, for a mean over runs, standard error.
+#[derive(Clone, Copy, Debug)]
+pub struct Level {
+    spacing: f64,
+    value: f64,
+    standard_error: Option<f64>,
 }
 
-/// Prints the numerical uncertainty of the finest of `levels`, as text or one JSON object; 1
-/// where there is none.
-fn run_uncertainty(levels: &[(f64, f64)], reference: Option<f64>, json: bool) -> i32 {
-    let Some(u) = crate::report::uncertainty::uncertainty(levels) else {
+/// `SPACING=VALUE` or `SPACING=VALUE±SE` (`+-` for `±`), numbers all.
+fn parse_level(s: &str) -> Result<Level, String> {
+    let number = |t: &str| t.trim().parse::<f64>().map_err(|_| format!("`{t}` is not a number"));
+    let (h, v) = s
+        .split_once('=')
+        .ok_or_else(|| format!("`{s}` is not SPACING=VALUE or SPACING=VALUE±SE (for example 0.8=222.76)"))?;
+    let (v, se) = match v.split_once('±').or_else(|| v.split_once("+-")) {
+        Some((v, se)) => (v, Some(number(se)?)),
+        None => (v, None),
+    };
+    Ok(Level { spacing: number(h)?, value: number(v)?, standard_error: se })
+}
+
+/// Prints the numerical uncertainty of the finest of `levels`, as text or one JSON object, and,
+/// where every level has a standard error, the order's and f0's range under that noise; 1 where
+/// there is none, or where some levels have a standard error and some not.
+fn run_uncertainty(levels: &[Level], reference: Option<f64>, json: bool) -> i32 {
+    use crate::report::uncertainty::{uncertainty, under_noise};
+    let points: Vec<(f64, f64)> = levels.iter().map(|l| (l.spacing, l.value)).collect();
+    let Some(u) = uncertainty(&points) else {
         eprintln!(
             "error: no uncertainty: it needs four levels or more, each spacing positive and given once, each value finite"
         );
         return 1;
     };
+    let errors: Option<Vec<(f64, f64, f64)>> =
+        levels.iter().map(|l| Some((l.spacing, l.value, l.standard_error?))).collect();
+    let noise = match errors {
+        Some(e) => match under_noise(&e) {
+            Some(n) => Some(n),
+            None => {
+                eprintln!("error: a standard error is negative or not a number");
+                return 1;
+            }
+        },
+        None if levels.iter().any(|l| l.standard_error.is_some()) => {
+            eprintln!("error: give every level a standard error (SPACING=VALUE±SE), or none");
+            return 1;
+        }
+        None => None,
+    };
     say(&if json {
-        uncertainty_json(&u, levels.len(), reference)
+        uncertainty_json(&u, levels.len(), reference, noise.as_ref())
     } else {
-        uncertainty_text(&u, levels.len(), reference)
+        uncertainty_text(&u, levels.len(), reference) + &noise.as_ref().map(under_noise_text).unwrap_or_default()
     });
     0
+}
+
+fn under_noise_text(n: &crate::report::uncertainty::UnderNoise) -> String {
+    format!(
+        "steps between neighbouring levels larger than twice their combined standard error: {} of {}
+         under the levels' noise ({} draws, 10th–90th percentile): order {}, f0 {}–{}
+",
+        n.resolved_steps.0,
+        n.resolved_steps.1,
+        crate::report::uncertainty::DRAWS,
+        n.describe_order(),
+        n.limit.0,
+        n.limit.1
+    )
 }
 
 fn uncertainty_text(u: &crate::report::uncertainty::Uncertainty, levels: usize, reference: Option<f64>) -> String {
@@ -302,7 +351,12 @@ fn uncertainty_text(u: &crate::report::uncertainty::Uncertainty, levels: usize, 
 /// bounds), with five levels or more its range leaving out one level (and its text), the law the
 /// error is estimated with, its f0 and σ, Δφ, ε, Fs, the finest level and U, and with a reference
 /// how far it lies beyond the finest value ± U (≤ 0 within).
-fn uncertainty_json(u: &crate::report::uncertainty::Uncertainty, levels: usize, reference: Option<f64>) -> String {
+fn uncertainty_json(
+    u: &crate::report::uncertainty::Uncertainty,
+    levels: usize,
+    reference: Option<f64>,
+    noise: Option<&crate::report::uncertainty::UnderNoise>,
+) -> String {
     let fit = &u.chosen;
     let mut object = serde_json::json!({
         "levels": levels,
@@ -324,6 +378,15 @@ fn uncertainty_json(u: &crate::report::uncertainty::Uncertainty, levels: usize, 
     if let Some(r) = reference {
         object["reference"] = r.into();
         object["beyond"] = u.beyond(r).into();
+    }
+    if let Some(n) = noise {
+        object["under_noise"] = serde_json::json!({
+            "order": [n.order.0, n.order.1],
+            "order_text": n.describe_order(),
+            "f0": [n.limit.0, n.limit.1],
+            "resolved_steps": n.resolved_steps.0,
+            "steps": n.resolved_steps.1,
+        });
     }
     format!("{object}\n")
 }

@@ -946,6 +946,7 @@ pub fn run_study(path: &Path, opts: &RunOptions, reanalyse: bool) -> Result<RunO
         let quantity = sr.quantity.get_ref();
         // `study::validate` has checked every result before the runs.
         let Some(across) = sr.across() else { continue };
+        let mut standard_error = None;
         let value = match across {
             study::Across::RechtIpson { x, y, held } => {
                 let points: Vec<(f64, f64)> = outcomes
@@ -983,8 +984,15 @@ pub fn run_study(path: &Path, opts: &RunOptions, reanalyse: bool) -> Result<RunO
                 _ => f64::NAN,
             },
             study::Across::Run(run, of) => value_of(&run, &of).unwrap_or(f64::NAN),
+            study::Across::Mean(runs, of) => {
+                let values: Vec<f64> = runs.iter().map(|r| value_of(r, &of).unwrap_or(f64::NAN)).collect();
+                let (mean, se) = study::mean_and_standard_error(&values).unwrap_or((f64::NAN, f64::NAN));
+                standard_error = Some(se);
+                mean
+            }
         };
         let mut row = ResultRow::new(quantity.clone(), unit, value, reference);
+        row.standard_error = standard_error;
         if let Some(s) = &sr.source {
             row = row.with_source(s.clone());
         }

@@ -782,6 +782,22 @@ fn a_study_is_analysed_again_from_its_runs_reports_without_running() {
     assert!(a > 0.0 && b > 0.0, "{a}, {b}");
     assert_eq!(closer, (b - a) / a.abs());
 
+    // A mean over the two runs: (a + b) / 2, its standard error |a − b| / 2 (s = |a − b| / √2
+    // over √2), and in report.md beside the value; a mean over one run is refused.
+    let mean = |named: &str| format!("{runs}[[results]]\nquantity = \"mean\"\nmean = {named}\nof = \"{q}\"\n");
+    std::fs::write(&study, mean("[\"a\", \"b\"]")).unwrap();
+    let averaged = reanalyse_file(&study, &opts).expect("the study is analysed again").report;
+    let row = averaged.results.iter().find(|r| r.quantity == "mean").expect("the mean");
+    assert!((row.value - (a + b) / 2.0).abs() < 1e-12 * a, "{row:?}");
+    let se = row.standard_error.expect("a standard error");
+    assert!((se - (a - b).abs() / 2.0).abs() < 1e-12 * a, "{row:?}");
+    let md = std::fs::read_to_string(dir.join("out").join("report.md")).expect("report.md");
+    assert!(md.contains("(standard error)"), "{md}");
+    std::fs::write(&study, mean("[\"a\"]")).unwrap();
+    let err = reanalyse_file(&study, &opts).err().expect("a mean over one run").to_string();
+    assert!(err.contains("a mean over 1 run(s)"), "{err}");
+    std::fs::write(&study, runs).unwrap();
+
     // A study folder pairsum did not mark (its runs gathered by hand) that holds a user's file is
     // refused as a run's would be, and the file is left as it was; `--force` claims it.
     let out = dir.join("out");

@@ -173,3 +173,50 @@ fn the_uncertainty_commands_json_gives_five_levels_of_a_power_law_the_same_order
     assert_eq!(json["order_without_one_text"], "1.30–1.30", "{text}");
     assert_eq!(json["levels"], 5);
 }
+
+/// `pairsum uncertainty` with each level's standard error (SPACING=VALUE±SE): 228 − 8 Δx at six
+/// spacings with a standard error of 0.02 keeps the order 1 and f0 228 under the noise, with
+/// every step resolved; one level without a standard error, or a negative one, is refused.
+#[test]
+fn the_uncertainty_command_with_standard_errors_gives_the_order_and_f0_range_under_the_noise() {
+    let levels: Vec<String> =
+        [1.0, 0.8, 2.0 / 3.0, 0.5, 0.4, 1.0 / 3.0].iter().map(|h| format!("{h}={}±0.02", 228.0 - 8.0 * h)).collect();
+    let run = |levels: &[String], more: &[&str]| {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_pairsum"))
+            .arg("uncertainty")
+            .args(levels)
+            .args(more)
+            .output();
+        let out = out.expect("runs");
+        (
+            out.status.code(),
+            String::from_utf8_lossy(&out.stdout).into_owned(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    let (code, text, err) = run(&levels, &["--json"]);
+    assert_eq!(code, Some(0), "{err}");
+    let json: serde_json::Value = serde_json::from_str(&text).expect("one JSON object");
+    let noise = &json["under_noise"];
+    let pair = |k: &str| {
+        let a = noise[k].as_array().unwrap_or_else(|| panic!("{k} in {text}"));
+        (a[0].as_f64().expect("a number"), a[1].as_f64().expect("a number"))
+    };
+    let ((p0, p1), (f0, f1)) = (pair("order"), pair("f0"));
+    assert!(p0 > 0.9 && p1 < 1.1, "{text}");
+    assert!(f0 < 228.0 && f1 > 228.0 && f1 - f0 < 0.5, "{text}");
+    assert_eq!((noise["resolved_steps"].as_u64(), noise["steps"].as_u64()), (Some(5), Some(5)), "{text}");
+    let (code, text, _) = run(&levels.iter().map(|l| l.replace('±', "+-")).collect::<Vec<_>>(), &[]);
+    assert_eq!(code, Some(0));
+    assert!(text.contains("larger than twice their combined standard error: 5 of 5"), "{text}");
+    let mut some = levels.clone();
+    some[2] = some[2].split('±').next().unwrap().to_string();
+    let (code, _, err) = run(&some, &[]);
+    assert_eq!(code, Some(1));
+    assert!(err.contains("give every level a standard error"), "{err}");
+    let mut negative = levels.clone();
+    negative[0] = negative[0].replace("±0.02", "±-0.02");
+    let (code, _, err) = run(&negative, &[]);
+    assert_eq!(code, Some(1));
+    assert!(err.contains("negative"), "{err}");
+}

@@ -5,7 +5,7 @@
 
 use super::json::{Curve, History, ResultRow, RunReport, Table};
 use super::markdown::{fmt_num, fmt_percent};
-use super::uncertainty::{uncertainty, Uncertainty};
+use super::uncertainty::{uncertainty, under_noise, Uncertainty, DRAWS};
 
 /// How three values, coarse to fine, behave.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -129,6 +129,8 @@ pub struct Convergence {
 struct Followed<'a> {
     finest: &'a ResultRow,
     values: Vec<f64>,
+    /// Each level's standard error where the value is a mean over runs (a study's `mean`).
+    standard_errors: Vec<Option<f64>>,
 }
 
 impl Followed<'_> {
@@ -151,12 +153,14 @@ pub fn analyse(levels: &[(String, RunReport)]) -> Convergence {
         .1
         .results
         .iter()
-        .map(|row| Followed {
-            finest: row,
-            values: levels
-                .iter()
-                .map(|l| l.1.results.iter().find(|r| r.quantity == row.quantity).map_or(f64::NAN, |r| r.value))
-                .collect(),
+        .map(|row| {
+            let at: Vec<Option<&ResultRow>> =
+                levels.iter().map(|l| l.1.results.iter().find(|r| r.quantity == row.quantity)).collect();
+            Followed {
+                finest: row,
+                values: at.iter().map(|r| r.map_or(f64::NAN, |r| r.value)).collect(),
+                standard_errors: at.iter().map(|r| r.and_then(|r| r.standard_error)).collect(),
+            }
         })
         .collect();
 
@@ -230,12 +234,14 @@ pub fn analyse(levels: &[(String, RunReport)]) -> Convergence {
     });
     if h.len() >= 4 {
         out.tables.push(uncertainty_table(&h, &followed));
+        out.tables.extend(noise_table(&h, &followed));
     }
     out.histories = error_plots(&levels, &followed);
     out.notes = vec![
         "Observed order p: through the three finest spacings, f(Δx) = f0 + C Δx^p; none when their differences change sign or do not shrink enough for p in [0.05, 10]. Richardson estimate: that f0. It is trustworthy only in the asymptotic range: a p far from the scheme's order, or from the error order q, says the spacings are not there yet.".into(),
         "p through the three coarser: the observed order one level back (with four or more spacings). The order holds when both triples converge and their orders are within a factor of 1.5 of each other: a p that moves more than that as a level is added is not yet the scheme's order, and its Richardson estimate is not a limit.".into(),
         "Numerical uncertainty U (four or more spacings): power laws in Δx fitted through every level in the least-squares sense (after Eça & Hoekstra 2014; the rules in src/report/uncertainty.rs), so that a level's own scatter averages out where three levels' exact fit follows it; the finest value ± U is meant to hold the value at zero spacing (Eça & Hoekstra aim at 95 % coverage), and σ, the fit's standard deviation, is that scatter. A reference beyond the finest value ± U is missed by the model, not by the spacing.".into(),
+        "Under the levels' noise (results that are a study's `mean` over runs at every level): each level's value drawn again with its standard error, and the best f0 + α Δx^p fitted through every draw; the 10th–90th percentile of p and f0 over the draws. Where the noise is as large as the steps between levels, no step is resolved and p ranges over the search: a single run per level cannot show an order, and neither can these means until more runs make their noise smaller than the steps.".into(),
         "Error order q: the least-squares slope of ln |error| against ln Δx over every resolution (the error falls as Δx^q); none when the error changes sign or does not fall at every refinement, or when the values do not converge (no observed order p: an error that falls while the differences grow is passing through the reference).".into(),
     ];
     out
@@ -293,6 +299,44 @@ fn uncertainty_table(h: &[f64], followed: &[Followed]) -> Table {
         header,
         rows,
     }
+}
+
+/// For the results that are means over runs at every level (four or more): how many steps
+/// between levels their noise resolves, and the observed order's and f0's range under it
+/// ([`under_noise`]); none where no result is such a mean.
+fn noise_table(h: &[f64], followed: &[Followed]) -> Option<Table> {
+    let rows: Vec<Vec<String>> = followed
+        .iter()
+        .filter_map(|q| {
+            let se: Vec<f64> = q.standard_errors.iter().copied().collect::<Option<_>>()?;
+            let points: Vec<(f64, f64, f64)> =
+                h.iter().zip(&q.values).zip(&se).map(|((h, f), s)| (*h, *f, *s)).collect();
+            let (lo, hi) = se.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, s| (a.0.min(*s), a.1.max(*s)));
+            let mut row = vec![q.finest.quantity.clone(), format!("{}–{}", fmt_num(lo), fmt_num(hi))];
+            row.extend(match under_noise(&points) {
+                Some(n) => vec![
+                    format!("{} of {}", n.resolved_steps.0, n.resolved_steps.1),
+                    n.describe_order(),
+                    format!("{}–{}", fmt_num(n.limit.0), fmt_num(n.limit.1)),
+                ],
+                None => vec!["none: a value or a standard error is missing".into(), String::new(), String::new()],
+            });
+            Some(row)
+        })
+        .collect();
+    (!rows.is_empty()).then(|| Table {
+        title: format!("Under the levels' noise (means over runs; {DRAWS} draws, 10th–90th percentile)"),
+        header: [
+            "quantity",
+            "standard error at a level",
+            "steps larger than twice their standard error",
+            "observed order p under the noise",
+            "f0 under the noise",
+        ]
+        .map(String::from)
+        .to_vec(),
+        rows,
+    })
 }
 
 /// Whether the reference `r` lies within the finest value ± U, and if not by how much the
@@ -471,6 +515,36 @@ mod tests {
         let row = &analyse(&above).tables[3].rows[0];
         assert_eq!(row[8], "no: 8.75 % of it beyond U");
         assert!(analyse(&levels[1..4]).tables.iter().all(|t| !t.title.starts_with("Numerical")), "three levels: none");
+    }
+
+    #[test]
+    fn a_result_that_is_a_mean_over_runs_at_every_level_gets_its_order_and_f0_under_the_noise() {
+        // crater = 10 − 4 Δx^1.5, each level a mean with standard error 0.001: every step resolved,
+        // the order 1.5 and f0 10 under the noise; `gap` has no standard error and no row.
+        let levels: Vec<_> = [2.0, 1.0, 0.5, 0.35, 0.25]
+            .iter()
+            .map(|h: &f64| {
+                let (name, mut r) = level("l", *h, 10.0 - 4.0 * h.powf(1.5), 1.0);
+                r.results[0].standard_error = Some(0.001);
+                (name, r)
+            })
+            .collect();
+        let c = analyse(&levels);
+        let table = c.tables.iter().find(|t| t.title.starts_with("Under the levels' noise")).expect("the table");
+        assert_eq!(table.rows.len(), 1, "{:?}", table.rows);
+        let row = &table.rows[0];
+        assert_eq!((row[0].as_str(), row[2].as_str()), ("crater", "4 of 4"));
+        let range = |cell: &str| -> (f64, f64) {
+            let (a, b) = cell.split_once('–').expect("a range");
+            (a.parse().expect("a number"), b.parse().expect("a number"))
+        };
+        let (p0, p1) = range(&row[3]);
+        assert!(p0 > 1.45 && p1 < 1.55, "{row:?}");
+        let (f0, f1) = range(&row[4]);
+        assert!(f0 < 10.0 + 1e-3 && f1 > 10.0 - 1e-3 && f1 - f0 < 0.05, "{row:?}");
+        // Without standard errors there is no such table.
+        let plain: Vec<_> = [2.0, 1.0, 0.5, 0.35, 0.25].iter().map(|h| level("l", *h, 10.0 - 4.0 * h, 1.0)).collect();
+        assert!(analyse(&plain).tables.iter().all(|t| !t.title.starts_with("Under")));
     }
 
     #[test]

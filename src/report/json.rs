@@ -70,6 +70,10 @@ pub struct ResultRow {
     /// Where the reference comes from (a paper, an analytic solution).
     #[serde(default)]
     pub source: Option<String>,
+    /// The standard error of a value that is a mean over runs (a study's `mean`): the sample
+    /// standard deviation of the runs' values over √n.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub standard_error: Option<f64>,
 }
 
 impl ResultRow {
@@ -77,12 +81,26 @@ impl ResultRow {
     /// finite and non-zero, otherwise `None`.
     pub fn new(quantity: impl Into<String>, unit: impl Into<String>, value: f64, reference: Option<f64>) -> Self {
         let rel_error = reference.filter(|r| *r != 0.0 && r.is_finite()).map(|r| (value - r) / r.abs());
-        ResultRow { quantity: quantity.into(), unit: unit.into(), value, reference, rel_error, source: None }
+        ResultRow {
+            quantity: quantity.into(),
+            unit: unit.into(),
+            value,
+            reference,
+            rel_error,
+            source: None,
+            standard_error: None,
+        }
     }
 
     /// Sets where the reference value comes from.
     pub fn with_source(mut self, source: impl Into<String>) -> Self {
         self.source = Some(source.into());
+        self
+    }
+
+    /// Marks the value as a mean over runs with this standard error.
+    pub fn with_standard_error(mut self, standard_error: f64) -> Self {
+        self.standard_error = Some(standard_error);
         self
     }
 }

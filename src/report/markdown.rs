@@ -53,7 +53,10 @@ fn render_with(r: &RunReport, plot_errors: &[Option<String>]) -> String {
                 cell(&row.quantity),
                 cell(&row.unit),
                 row.reference.map(fmt_num).unwrap_or_default(),
-                fmt_num(row.value),
+                match row.standard_error {
+                    Some(se) => format!("{} ± {} (standard error)", fmt_num(row.value), fmt_num(se)),
+                    None => fmt_num(row.value),
+                },
                 row.rel_error.map(fmt_percent).unwrap_or_default(),
                 cell(row.source.as_deref().unwrap_or("")),
             );

@@ -228,6 +228,93 @@ pub fn uncertainty(points: &[(f64, f64)]) -> Option<Uncertainty> {
     Some(Uncertainty { observed, chosen, finest, data_range, error, safety, u, order_without_one })
 }
 
+/// How far the levels' own noise moves the observed order and the value at zero spacing, where
+/// each level's value is a mean over runs with a standard error (a study's `mean`): a parametric
+/// bootstrap. The levels are drawn again [`DRAWS`] times, each value moved by a normal deviate
+/// times its standard error, and the best `f0 + α Δx^p` is fitted through every draw as through
+/// the levels themselves. An order that holds keeps a narrow range; one the noise makes up
+/// ranges over the search.
+#[derive(Clone, Debug, PartialEq)]
+pub struct UnderNoise {
+    /// The 10th and the 90th percentile of the observed order over the draws.
+    pub order: (f64, f64),
+    /// The same of the observed fit's `f0`.
+    pub limit: (f64, f64),
+    /// How many steps between neighbouring levels exceed twice their combined standard error
+    /// (√(s_i² + s_j²)), and how many steps there are.
+    pub resolved_steps: (usize, usize),
+}
+
+impl UnderNoise {
+    /// The order's range as text (`0.62–1.48`), its bounds marked as [`Uncertainty::describe_order`] marks them.
+    pub fn describe_order(&self) -> String {
+        format!("{}–{}", describe_order(self.order.0), describe_order(self.order.1))
+    }
+}
+
+/// The draws [`under_noise`] makes; its generator is seeded, so a report is reproducible.
+pub const DRAWS: usize = 400;
+
+/// [`UnderNoise`] of `points` (spacing, value, standard error; any order); `None` where
+/// [`uncertainty`] has none or a standard error is negative or not finite.
+pub fn under_noise(points: &[(f64, f64, f64)]) -> Option<UnderNoise> {
+    if points.iter().any(|p| !(p.2 >= 0.0 && p.2.is_finite())) {
+        return None;
+    }
+    let mut sorted = points.to_vec();
+    sorted.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let levels: Vec<(f64, f64)> = sorted.iter().map(|p| (p.0, p.1)).collect();
+    let finest = uncertainty(&levels)?.finest.0;
+    let resolved = sorted.windows(2).filter(|w| (w[1].1 - w[0].1).abs() > 2.0 * w[0].2.hypot(w[1].2)).count();
+    let mut normal = Normal::seeded(0x5eed_0f11_a77c_e500);
+    let (mut orders, mut limits) = (Vec::with_capacity(DRAWS), Vec::with_capacity(DRAWS));
+    for _ in 0..DRAWS {
+        let drawn: Vec<(f64, f64)> = sorted.iter().map(|(h, f, s)| (h / finest, f + s * normal.next())).collect();
+        let fit = best_power(&drawn)?;
+        let Law::Power(p) = fit.law else { return None };
+        orders.push(p);
+        limits.push(fit.limit());
+    }
+    Some(UnderNoise {
+        order: percentiles(&mut orders),
+        limit: percentiles(&mut limits),
+        resolved_steps: (resolved, sorted.len() - 1),
+    })
+}
+
+/// The 10th and the 90th percentile (the nearest rank).
+fn percentiles(values: &mut [f64]) -> (f64, f64) {
+    values.sort_by(f64::total_cmp);
+    let at = |q: f64| values[((values.len() - 1) as f64 * q).round() as usize];
+    (at(0.1), at(0.9))
+}
+
+/// Standard normal deviates: SplitMix64's integers through the Box–Muller transform.
+struct Normal {
+    state: u64,
+}
+
+impl Normal {
+    fn seeded(seed: u64) -> Normal {
+        Normal { state: seed }
+    }
+
+    /// A uniform deviate in (0, 1].
+    fn uniform(&mut self) -> f64 {
+        self.state = self.state.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.state;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^= z >> 31;
+        ((z >> 11) as f64 + 1.0) / (1u64 << 53) as f64
+    }
+
+    fn next(&mut self) -> f64 {
+        let (u, v) = (self.uniform(), self.uniform());
+        (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
+    }
+}
+
 /// The least and the greatest observed order of the fits through `points` less one level each.
 fn leave_one_out(points: &[(f64, f64)]) -> Option<(f64, f64)> {
     let mut range = (f64::INFINITY, f64::NEG_INFINITY);
@@ -435,6 +522,43 @@ mod tests {
         assert_eq!(uncertainty(&[(3.0, 1.0), (2.0, 2.0), (1.0, 2.5)]), None);
         assert_eq!(uncertainty(&[(3.0, 1.0), (2.0, 2.0), (2.0, 2.1), (1.0, 2.5)]), None);
         assert_eq!(uncertainty(&[(4.0, 0.5), (3.0, 1.0), (2.0, f64::NAN), (1.0, 2.5)]), None);
+    }
+
+    #[test]
+    fn the_normal_deviates_have_mean_zero_and_variance_one() {
+        let mut n = Normal::seeded(7);
+        let x: Vec<f64> = (0..20000).map(|_| n.next()).collect();
+        let mean = x.iter().sum::<f64>() / x.len() as f64;
+        let var = x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (x.len() - 1) as f64;
+        assert!(mean.abs() < 0.03 && (var - 1.0).abs() < 0.04, "{mean}, {var}");
+    }
+
+    #[test]
+    fn small_noise_keeps_the_order_of_a_first_order_law_and_noise_as_large_as_the_steps_spreads_it() {
+        // 228 − 8 Δx through six levels, 0.5 mm to 1 mm apart as the Børvik ladder.
+        let h = [1.0, 0.8, 2.0 / 3.0, 0.5, 0.4, 1.0 / 3.0];
+        let exact = |s: f64| -> Vec<(f64, f64, f64)> { h.iter().map(|h| (*h, 228.0 - 8.0 * h, s)).collect() };
+        let quiet = under_noise(&exact(0.02)).expect("six levels");
+        assert!(quiet.order.0 > 0.9 && quiet.order.1 < 1.1, "{quiet:?}");
+        assert!(quiet.limit.0 < 228.0 && quiet.limit.1 > 228.0 && quiet.limit.1 - quiet.limit.0 < 0.5, "{quiet:?}");
+        assert_eq!(quiet.resolved_steps, (5, 5), "every step (0.53 to 1.6) is larger than 2 √2 × 0.02");
+        let noisy = under_noise(&exact(1.0)).expect("six levels");
+        assert!(noisy.order.1 - noisy.order.0 > 1.0, "{noisy:?}");
+        assert_eq!(noisy.resolved_steps, (0, 5), "no step is larger than 2 √2 × 1");
+        // The same draws each time.
+        assert_eq!(under_noise(&exact(1.0)), Some(noisy));
+    }
+
+    #[test]
+    fn a_negative_or_missing_standard_error_or_three_levels_give_no_range() {
+        let pts = [(4.0, 1.0, 0.1), (3.0, 2.0, 0.1), (2.0, 2.5, 0.1), (1.0, 2.7, 0.1)];
+        assert!(under_noise(&pts).is_some());
+        let mut bad = pts;
+        bad[1].2 = -0.1;
+        assert_eq!(under_noise(&bad), None);
+        bad[1].2 = f64::NAN;
+        assert_eq!(under_noise(&bad), None);
+        assert_eq!(under_noise(&pts[1..]), None);
     }
 
     #[test]

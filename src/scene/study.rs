@@ -68,6 +68,11 @@ pub struct StudyResult {
     /// One run: its result `of`.
     #[serde(default)]
     pub run: Option<String>,
+    /// Two runs or more: the mean of their result `of`, with its standard error (runs that
+    /// differ only in what a level's value should not depend on: where a body's edge falls on
+    /// the lattice, a 1 % change in a radius).
+    #[serde(default)]
+    pub mean: Option<Vec<String>>,
     #[serde(default)]
     pub of: Option<String>,
     #[serde(default)]
@@ -136,6 +141,8 @@ pub enum Across {
     Difference([String; 2], String),
     /// One run's value of the case's result `of`.
     Run(String, String),
+    /// The mean of the case's result `of` over the runs, with its standard error.
+    Mean(Vec<String>, String),
 }
 
 impl StudyResult {
@@ -149,10 +156,11 @@ impl StudyResult {
                 _ => None,
             };
         }
-        match (&self.ratio, &self.difference, &self.run, &self.of) {
-            (Some(r), None, None, None) => Some(Across::Ratio(r.clone())),
-            (None, Some(d), None, Some(of)) => Some(Across::Difference(d.clone(), of.clone())),
-            (None, None, Some(run), Some(of)) => Some(Across::Run(run.clone(), of.clone())),
+        match (&self.ratio, &self.difference, &self.run, &self.mean, &self.of) {
+            (Some(r), None, None, None, None) => Some(Across::Ratio(r.clone())),
+            (None, Some(d), None, None, Some(of)) => Some(Across::Difference(d.clone(), of.clone())),
+            (None, None, Some(run), None, Some(of)) => Some(Across::Run(run.clone(), of.clone())),
+            (None, None, None, Some(runs), Some(of)) => Some(Across::Mean(runs.clone(), of.clone())),
             _ => None,
         }
     }
@@ -177,7 +185,7 @@ pub fn validate(study: &Study, case_results: &[String], case_probes: &[String]) 
         let named_runs: Vec<String> = match sr.across() {
             None => {
                 err(
-                    "says neither `fit = \"recht_ipson\"` (with `x`, `y`), `ratio`, `difference` (with `of`) nor `run` (with `of`)".into(),
+                    "says none of `fit = \"recht_ipson\"` (with `x`, `y`), `ratio`, `difference`, `run` or `mean` (each with `of`)".into(),
                     "give exactly one of these".into(),
                 );
                 continue;
@@ -209,7 +217,16 @@ pub fn validate(study: &Study, case_results: &[String], case_probes: &[String]) 
                 vec![]
             }
             Some(Across::Ratio(r)) => r.to_vec(),
-            Some(Across::Difference(_, of)) | Some(Across::Run(_, of)) if !case_results.contains(&of) => {
+            Some(Across::Mean(runs, _)) if runs.len() < 2 => {
+                err(
+                    format!("a mean over {} run(s)", runs.len()),
+                    "name two runs or more: a mean's standard error needs them".into(),
+                );
+                vec![]
+            }
+            Some(Across::Difference(_, of)) | Some(Across::Run(_, of)) | Some(Across::Mean(_, of))
+                if !case_results.contains(&of) =>
+            {
                 err(
                     format!("the case has no result `{of}`"),
                     format!("the case's results: {}", case_results.join(", ")),
@@ -218,6 +235,7 @@ pub fn validate(study: &Study, case_results: &[String], case_probes: &[String]) 
             }
             Some(Across::Difference(d, _)) => d.to_vec(),
             Some(Across::Run(r, _)) => vec![r],
+            Some(Across::Mean(runs, _)) => runs,
         };
         for r in named_runs.into_iter().filter(|r| !runs.contains(&r.as_str())) {
             err(format!("no run is named `{r}`"), format!("the runs: {}", runs.join(", ")));
@@ -287,6 +305,19 @@ pub fn reference(v: &Option<toml::Value>) -> Option<f64> {
         toml::Value::String(s) => quantity::parse(s).ok().map(|q| q.value),
         _ => None,
     }
+}
+
+/// The mean of `values` and its standard error (the sample standard deviation over √n); `None`
+/// with fewer than two values. A value that is not finite makes both NaN: a run that blew up is
+/// not averaged away.
+pub fn mean_and_standard_error(values: &[f64]) -> Option<(f64, f64)> {
+    let n = values.len();
+    if n < 2 {
+        return None;
+    }
+    let mean = values.iter().sum::<f64>() / n as f64;
+    let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
+    Some((mean, (var / n as f64).sqrt()))
 }
 
 /// The Recht–Ipson fit `v_r = a (v_i^p − v_bl^p)^(1/p)` (0 below the ballistic limit v_bl).
@@ -375,6 +406,18 @@ pub fn fit_recht_ipson(points: &[(f64, f64)], held: Held) -> Option<RechtIpson> 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_mean_over_runs_has_the_sample_standard_deviation_over_root_n_and_keeps_nan() {
+        let (m, se) = mean_and_standard_error(&[222.81, 227.65, 229.43]).expect("three values");
+        assert!((m - 226.63).abs() < 1e-12, "{m}");
+        // Deviations −3.82, +1.02, +2.80: s² = (14.5924 + 1.0404 + 7.84) / 2.
+        let s = ((14.5924f64 + 1.0404 + 7.84) / 2.0).sqrt();
+        assert!((se - s / 3f64.sqrt()).abs() < 1e-12, "{se}");
+        assert!(mean_and_standard_error(&[1.0]).is_none());
+        let (m, se) = mean_and_standard_error(&[1.0, f64::NAN, 3.0]).expect("three values");
+        assert!(m.is_nan() && se.is_nan());
+    }
 
     #[test]
     fn recht_ipson_recovers_its_own_curve() {
