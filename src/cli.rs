@@ -308,9 +308,8 @@ fn run_uncertainty(levels: &[Level], reference: Option<f64>, json: bool) -> i32 
 
 fn under_noise_text(n: &crate::report::uncertainty::UnderNoise) -> String {
     format!(
-        "steps between neighbouring levels larger than twice their combined standard error: {} of {}
-         under the levels' noise ({} draws, 10th–90th percentile): order {}, f0 {}–{}
-",
+        "steps between neighbouring levels larger than twice their combined standard error: {} of {}\n\
+         under the levels' noise ({} draws, 10th–90th percentile): order {}, f0 {}–{}\n",
         n.resolved_steps.0,
         n.resolved_steps.1,
         crate::report::uncertainty::DRAWS,
