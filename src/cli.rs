@@ -309,9 +309,11 @@ fn run_uncertainty(levels: &[Level], reference: Option<f64>, json: bool) -> i32 
 fn under_noise_text(n: &crate::report::uncertainty::UnderNoise) -> String {
     format!(
         "steps between neighbouring levels larger than twice their combined standard error: {} of {}\n\
+         a constant within the levels' noise (χ² probability; above 0.05 they are one value): {}\n\
          under the levels' noise ({} draws, 10th–90th percentile): order {}, f0 {}–{}\n",
         n.resolved_steps.0,
         n.resolved_steps.1,
+        n.constant_fits.map_or("— (a standard error is 0)".into(), |p| format!("{p:.3}")),
         crate::report::uncertainty::DRAWS,
         n.describe_order(),
         n.limit.0,
@@ -384,6 +386,7 @@ fn uncertainty_json(
             "order_text": n.describe_order(),
             "f0": [n.limit.0, n.limit.1],
             "resolved_steps": n.resolved_steps.0,
+            "constant_fits": n.constant_fits,
             "steps": n.resolved_steps.1,
         });
     }

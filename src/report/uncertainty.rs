@@ -243,6 +243,11 @@ pub struct UnderNoise {
     /// How many steps between neighbouring levels exceed twice their combined standard error
     /// (√(s_i² + s_j²)), and how many steps there are.
     pub resolved_steps: (usize, usize),
+    /// How likely levels that do not depend on the spacing at all would lie as far from their
+    /// weighted mean (weights 1/s²) as these do: the χ² test with n − 1 degrees of freedom.
+    /// Above 0.05 the levels are one value within their noise, and no order can be read from
+    /// them; `None` where a standard error is 0.
+    pub constant_fits: Option<f64>,
 }
 
 impl UnderNoise {
@@ -279,7 +284,76 @@ pub fn under_noise(points: &[(f64, f64, f64)]) -> Option<UnderNoise> {
         order: percentiles(&mut orders),
         limit: percentiles(&mut limits),
         resolved_steps: (resolved, sorted.len() - 1),
+        constant_fits: constant_fits(&sorted),
     })
+}
+
+/// [`UnderNoise::constant_fits`] of `points` (spacing, value, standard error).
+fn constant_fits(points: &[(f64, f64, f64)]) -> Option<f64> {
+    if points.iter().any(|p| p.2 <= 0.0) {
+        return None;
+    }
+    let w: Vec<f64> = points.iter().map(|p| 1.0 / (p.2 * p.2)).collect();
+    let mean = points.iter().zip(&w).map(|(p, w)| w * p.1).sum::<f64>() / w.iter().sum::<f64>();
+    let chi2: f64 = points.iter().zip(&w).map(|(p, w)| w * (p.1 - mean).powi(2)).sum();
+    Some(upper_gamma_regularised(0.5 * (points.len() - 1) as f64, 0.5 * chi2))
+}
+
+/// Q(a, x) = Γ(a, x) / Γ(a), the chance that χ² with 2a degrees of freedom exceeds 2x: its
+/// series below x = a + 1, its continued fraction (Lentz) above (Numerical Recipes §6.2).
+fn upper_gamma_regularised(a: f64, x: f64) -> f64 {
+    if x <= 0.0 {
+        return 1.0;
+    }
+    let front = (a * x.ln() - x - ln_gamma(a)).exp();
+    if x < a + 1.0 {
+        let (mut term, mut sum, mut n) = (1.0 / a, 1.0 / a, a);
+        while term.abs() > sum.abs() * 1e-15 {
+            n += 1.0;
+            term *= x / n;
+            sum += term;
+        }
+        (1.0 - sum * front).max(0.0)
+    } else {
+        let tiny = 1e-300;
+        let mut b = x + 1.0 - a;
+        let (mut c, mut d) = (1.0 / tiny, 1.0 / b);
+        let mut h = d;
+        for i in 1..300 {
+            let an = -(i as f64) * (i as f64 - a);
+            b += 2.0;
+            d = an * d + b;
+            d = if d.abs() < tiny { tiny } else { d };
+            c = b + an / c;
+            c = if c.abs() < tiny { tiny } else { c };
+            d = 1.0 / d;
+            let step = d * c;
+            h *= step;
+            if (step - 1.0).abs() < 1e-15 {
+                break;
+            }
+        }
+        front * h
+    }
+}
+
+/// ln Γ(x) for x > 0 (Lanczos, g = 7, nine terms; relative error below 1e-13).
+fn ln_gamma(x: f64) -> f64 {
+    const G: [f64; 9] = [
+        0.999_999_999_999_809_9,
+        676.520_368_121_885_1,
+        -1_259.139_216_722_402_8,
+        771.323_428_777_653_1,
+        -176.615_029_162_140_6,
+        12.507_343_278_686_905,
+        -0.138_571_095_265_720_12,
+        9.984_369_578_019_572e-6,
+        1.505_632_735_149_311_6e-7,
+    ];
+    let x = x - 1.0;
+    let t = x + 7.5;
+    let sum = G[0] + (1..9).map(|i| G[i] / (x + i as f64)).sum::<f64>();
+    0.5 * std::f64::consts::TAU.ln() + (x + 0.5) * t.ln() - t + sum.ln()
 }
 
 /// The 10th and the 90th percentile (the nearest rank).
@@ -547,6 +621,39 @@ mod tests {
         assert_eq!(noisy.resolved_steps, (0, 5), "no step is larger than 2 √2 × 1");
         // The same draws each time.
         assert_eq!(under_noise(&exact(1.0)), Some(noisy));
+    }
+
+    #[test]
+    fn the_chi_square_tail_matches_its_closed_forms_and_tables() {
+        // Two degrees of freedom: exactly e^(−χ²/2).
+        for chi2 in [0.5, 2.0, 7.3, 40.0] {
+            let q = upper_gamma_regularised(1.0, 0.5 * chi2);
+            assert!((q - (-0.5 * chi2).exp()).abs() < 1e-12, "{chi2}: {q}");
+        }
+        // The 5 % points of χ² with 1, 7 and 12 degrees of freedom: 3.841, 14.067, 21.026.
+        for (dof, chi2) in [(1.0, 3.841_459), (7.0, 14.067_140), (12.0, 21.026_070)] {
+            let q = upper_gamma_regularised(0.5 * dof, 0.5 * chi2);
+            assert!((q - 0.05).abs() < 1e-6, "{dof}: {q}");
+        }
+        // Γ(5) = 24, Γ(1/2) = √π.
+        assert!((ln_gamma(5.0) - 24f64.ln()).abs() < 1e-12);
+        assert!((ln_gamma(0.5) - std::f64::consts::PI.sqrt().ln()).abs() < 1e-12);
+    }
+
+    #[test]
+    fn levels_within_their_noise_fit_a_constant_and_levels_on_a_trend_do_not() {
+        // Six levels 0.1 about 228 with standard errors 0.5: a constant fits. On 228 − 8 Δx with
+        // standard errors 0.05: it does not.
+        let h = [1.0, 0.8, 2.0 / 3.0, 0.5, 0.4, 1.0 / 3.0];
+        let flat: Vec<(f64, f64, f64)> =
+            h.iter().enumerate().map(|(i, h)| (*h, 228.0 + if i % 2 == 0 { 0.1 } else { -0.1 }, 0.5)).collect();
+        let p = under_noise(&flat).and_then(|n| n.constant_fits).expect("a probability");
+        assert!(p > 0.99, "{p}");
+        let trend: Vec<(f64, f64, f64)> = h.iter().map(|h| (*h, 228.0 - 8.0 * h, 0.05)).collect();
+        let p = under_noise(&trend).and_then(|n| n.constant_fits).expect("a probability");
+        assert!(p < 1e-10, "{p}");
+        let exact: Vec<(f64, f64, f64)> = h.iter().map(|h| (*h, 228.0 - 8.0 * h, 0.0)).collect();
+        assert_eq!(under_noise(&exact).map(|n| n.constant_fits), Some(None), "a standard error of 0");
     }
 
     #[test]
