@@ -1691,3 +1691,25 @@ fn pairsum_plan_splits_a_case_into_domains_and_sizes_their_halos() {
         assert!(line.contains(&format!("{:.1} kB", (halo * per) as f64 / 1e3)), "{line}");
     }
 }
+
+/// Every bundled study checks: its case loads and plans with every run's parameters, and each
+/// result names runs of the study and results of the case (a study is run in CI only where
+/// `tests/paper_cases.rs` runs it).
+#[test]
+fn every_bundled_study_checks() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("cases");
+    let mut studies: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .expect("cases/")
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| {
+            p.extension().is_some_and(|x| x == "toml")
+                && pairsum::scene::study::is_study(&std::fs::read_to_string(p).expect("a case file"))
+        })
+        .collect();
+    studies.sort();
+    assert!(studies.iter().any(|p| p.ends_with("borvik_axisymmetric_lattice_study.toml")), "{studies:?}");
+    for s in &studies {
+        pairsum::runner::check_file(s, &Default::default()).unwrap_or_else(|e| panic!("{}: {e}", s.display()));
+    }
+}
