@@ -310,10 +310,13 @@ fn under_noise_text(n: &crate::report::uncertainty::UnderNoise) -> String {
     format!(
         "steps between neighbouring levels larger than twice their combined standard error: {} of {}\n\
          a constant within the levels' noise (χ² probability; above 0.05 they are one value): {}\n\
+         weighted by 1/s²: the levels' mean {}, f0 of f0 + α Δx {}\n\
          under the levels' noise ({} draws, 10th–90th percentile): order {}, f0 {}–{}\n",
         n.resolved_steps.0,
         n.resolved_steps.1,
         n.constant_fits.map_or("— (a standard error is 0)".into(), |p| format!("{p:.3}")),
+        n.constant.map_or("—".into(), |(m, s)| format!("{m} ± {s}")),
+        n.first_order.map_or("—".into(), |(m, s)| format!("{m} ± {s}")),
         crate::report::uncertainty::DRAWS,
         n.describe_order(),
         n.limit.0,
@@ -387,6 +390,8 @@ fn uncertainty_json(
             "f0": [n.limit.0, n.limit.1],
             "resolved_steps": n.resolved_steps.0,
             "constant_fits": n.constant_fits,
+            "weighted_mean": n.constant.map(|(m, s)| [m, s]),
+            "first_order_f0": n.first_order.map(|(m, s)| [m, s]),
             "steps": n.resolved_steps.1,
         });
     }

@@ -207,6 +207,8 @@ fn the_uncertainty_command_with_standard_errors_gives_the_order_and_f0_range_und
     assert!(f0 < 228.0 && f1 > 228.0 && f1 - f0 < 0.5, "{text}");
     assert_eq!((noise["resolved_steps"].as_u64(), noise["steps"].as_u64()), (Some(5), Some(5)), "{text}");
     assert!(noise["constant_fits"].as_f64().is_some_and(|p| p < 1e-10), "a trend of 8 per unit against 0.02: {text}");
+    let first = noise["first_order_f0"].as_array().unwrap_or_else(|| panic!("first_order_f0 in {text}"));
+    assert!((first[0].as_f64().expect("f0") - 228.0).abs() < 1e-9, "the line is exact: {text}");
     let (code, text, _) = run(&levels.iter().map(|l| l.replace('±', "+-")).collect::<Vec<_>>(), &[]);
     assert_eq!(code, Some(0));
     assert!(text.contains("larger than twice their combined standard error: 5 of 5"), "{text}");

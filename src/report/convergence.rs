@@ -241,7 +241,7 @@ pub fn analyse(levels: &[(String, RunReport)]) -> Convergence {
         "Observed order p: through the three finest spacings, f(Δx) = f0 + C Δx^p; none when their differences change sign or do not shrink enough for p in [0.05, 10]. Richardson estimate: that f0. It is trustworthy only in the asymptotic range: a p far from the scheme's order, or from the error order q, says the spacings are not there yet.".into(),
         "p through the three coarser: the observed order one level back (with four or more spacings). The order holds when both triples converge and their orders are within a factor of 1.5 of each other: a p that moves more than that as a level is added is not yet the scheme's order, and its Richardson estimate is not a limit.".into(),
         "Numerical uncertainty U (four or more spacings): power laws in Δx fitted through every level in the least-squares sense (after Eça & Hoekstra 2014; the rules in src/report/uncertainty.rs), so that a level's own scatter averages out where three levels' exact fit follows it; the finest value ± U is meant to hold the value at zero spacing (Eça & Hoekstra aim at 95 % coverage), and σ, the fit's standard deviation, is that scatter. A reference beyond the finest value ± U is missed by the model, not by the spacing.".into(),
-        "Under the levels' noise (results that are a study's `mean` over runs at every level): each level's value drawn again with its standard error, and the best f0 + α Δx^p fitted through every draw; the 10th–90th percentile of p and f0 over the draws. A constant within the noise: how likely levels that do not depend on the spacing at all would lie as far from their weighted mean as these do (χ², n − 1 degrees of freedom); above 0.05 the levels are one value within their noise. Where the noise is as large as the steps between levels, no step is resolved and p ranges over the search: a single run per level cannot show an order, and neither can these means until more runs make their noise smaller than the steps.".into(),
+        "Under the levels' noise (results that are a study's `mean` over runs at every level): each level's value drawn again with its standard error, and the best f0 + α Δx^p fitted through every draw; the 10th–90th percentile of p and f0 over the draws. A constant within the noise: how likely levels that do not depend on the spacing at all would lie as far from their weighted mean as these do (χ², n − 1 degrees of freedom); above 0.05 the levels are one value within their noise, and their mean weighted by 1/s² (± its standard error) is that value; f0 of f0 + α Δx weighted so (± its standard error) is the value at zero spacing allowing a first-order error within the noise. Where the noise is as large as the steps between levels, no step is resolved and p ranges over the search: a single run per level cannot show an order, and neither can these means until more runs make their noise smaller than the steps.".into(),
         "Error order q: the least-squares slope of ln |error| against ln Δx over every resolution (the error falls as Δx^q); none when the error changes sign or does not fall at every refinement, or when the values do not converge (no observed order p: an error that falls while the differences grow is passing through the reference).".into(),
     ];
     out
@@ -317,15 +317,16 @@ fn noise_table(h: &[f64], followed: &[Followed]) -> Option<Table> {
                 Some(n) => vec![
                     format!("{} of {}", n.resolved_steps.0, n.resolved_steps.1),
                     n.constant_fits.map_or("— (a standard error is 0)".into(), |p| format!("{p:.3}")),
+                    n.constant.map_or(String::new(), |(m, s)| format!("{} ± {}", fmt_num(m), fmt_num(s))),
+                    n.first_order.map_or(String::new(), |(m, s)| format!("{} ± {}", fmt_num(m), fmt_num(s))),
                     n.describe_order(),
                     format!("{}–{}", fmt_num(n.limit.0), fmt_num(n.limit.1)),
                 ],
-                None => vec![
-                    "none: a value or a standard error is missing".into(),
-                    String::new(),
-                    String::new(),
-                    String::new(),
-                ],
+                None => {
+                    let mut none = vec![String::new(); 6];
+                    none[0] = "none: a value or a standard error is missing".into();
+                    none
+                }
             });
             Some(row)
         })
@@ -337,6 +338,8 @@ fn noise_table(h: &[f64], followed: &[Followed]) -> Option<Table> {
             "standard error at a level",
             "steps larger than twice their standard error",
             "a constant within the noise (χ² probability)",
+            "their mean weighted by 1/s²",
+            "f0 of f0 + α Δx weighted by 1/s²",
             "observed order p under the noise",
             "f0 under the noise",
         ]
@@ -545,9 +548,12 @@ mod tests {
             let (a, b) = cell.split_once('–').expect("a range");
             (a.parse().expect("a number"), b.parse().expect("a number"))
         };
-        let (p0, p1) = range(&row[4]);
+        // Equal standard errors: the weighted mean is the plain one, its error 0.001 / √5.
+        let mean: f64 = [2.0, 1.0, 0.5, 0.35, 0.25].iter().map(|h: &f64| 10.0 - 4.0 * h.powf(1.5)).sum::<f64>() / 5.0;
+        assert_eq!(row[4], format!("{} ± {}", fmt_num(mean), fmt_num(0.001 / 5f64.sqrt())));
+        let (p0, p1) = range(&row[6]);
         assert!(p0 > 1.45 && p1 < 1.55, "{row:?}");
-        let (f0, f1) = range(&row[5]);
+        let (f0, f1) = range(&row[7]);
         assert!(f0 < 10.0 + 1e-3 && f1 > 10.0 - 1e-3 && f1 - f0 < 0.05, "{row:?}");
         // Without standard errors there is no such table.
         let plain: Vec<_> = [2.0, 1.0, 0.5, 0.35, 0.25].iter().map(|h| level("l", *h, 10.0 - 4.0 * h, 1.0)).collect();

@@ -248,6 +248,12 @@ pub struct UnderNoise {
     /// Above 0.05 the levels are one value within their noise, and no order can be read from
     /// them; `None` where a standard error is 0.
     pub constant_fits: Option<f64>,
+    /// The levels' mean weighted by 1/s², and its standard error (1/√Σ 1/s²): the value where a
+    /// constant fits.
+    pub constant: Option<(f64, f64)>,
+    /// `f0` of `f0 + α Δx` fitted with the weights 1/s², and its standard error: the value at
+    /// zero spacing where a first-order error may hide within the noise.
+    pub first_order: Option<(f64, f64)>,
 }
 
 impl UnderNoise {
@@ -284,19 +290,35 @@ pub fn under_noise(points: &[(f64, f64, f64)]) -> Option<UnderNoise> {
         order: percentiles(&mut orders),
         limit: percentiles(&mut limits),
         resolved_steps: (resolved, sorted.len() - 1),
-        constant_fits: constant_fits(&sorted),
+        constant_fits: weighted(&sorted).map(|w| w.constant_fits),
+        constant: weighted(&sorted).map(|w| w.constant),
+        first_order: weighted(&sorted).map(|w| w.first_order),
     })
 }
 
-/// [`UnderNoise::constant_fits`] of `points` (spacing, value, standard error).
-fn constant_fits(points: &[(f64, f64, f64)]) -> Option<f64> {
+/// The levels fitted with the weights 1/s² (see [`UnderNoise`]).
+struct Weighted {
+    constant_fits: f64,
+    constant: (f64, f64),
+    first_order: (f64, f64),
+}
+
+/// [`Weighted`] of `points` (spacing, value, standard error); `None` where a standard error is 0.
+fn weighted(points: &[(f64, f64, f64)]) -> Option<Weighted> {
     if points.iter().any(|p| p.2 <= 0.0) {
         return None;
     }
-    let w: Vec<f64> = points.iter().map(|p| 1.0 / (p.2 * p.2)).collect();
-    let mean = points.iter().zip(&w).map(|(p, w)| w * p.1).sum::<f64>() / w.iter().sum::<f64>();
-    let chi2: f64 = points.iter().zip(&w).map(|(p, w)| w * (p.1 - mean).powi(2)).sum();
-    Some(upper_gamma_regularised(0.5 * (points.len() - 1) as f64, 0.5 * chi2))
+    let sum = |f: &dyn Fn(f64, f64) -> f64| points.iter().map(|(h, v, s)| f(*h, *v) / (s * s)).sum::<f64>();
+    let (w, wh, whh, wf, whf) =
+        (sum(&|_, _| 1.0), sum(&|h, _| h), sum(&|h, _| h * h), sum(&|_, f| f), sum(&|h, f| h * f));
+    let mean = wf / w;
+    let chi2 = sum(&|_, f| (f - mean).powi(2));
+    let det = w * whh - wh * wh;
+    Some(Weighted {
+        constant_fits: upper_gamma_regularised(0.5 * (points.len() - 1) as f64, 0.5 * chi2),
+        constant: (mean, w.sqrt().recip()),
+        first_order: ((whh * wf - wh * whf) / det, (whh / det).sqrt()),
+    })
 }
 
 /// Q(a, x) = Γ(a, x) / Γ(a), the chance that χ² with 2a degrees of freedom exceeds 2x: its
@@ -654,6 +676,24 @@ mod tests {
         assert!(p < 1e-10, "{p}");
         let exact: Vec<(f64, f64, f64)> = h.iter().map(|h| (*h, 228.0 - 8.0 * h, 0.0)).collect();
         assert_eq!(under_noise(&exact).map(|n| n.constant_fits), Some(None), "a standard error of 0");
+    }
+
+    #[test]
+    fn the_weighted_mean_and_first_order_limit_are_those_of_weighted_least_squares() {
+        // Two levels of equal error and one of half: the mean weights the third four times; the
+        // line through 228 − 8 Δx is exact, its f0 228, with the textbook standard error.
+        let pts = [(1.0, 220.0, 1.0), (0.5, 224.0, 1.0), (0.25, 226.0, 0.5)];
+        let mut four = pts.to_vec();
+        four.push((0.75, 222.0, 1.0));
+        let n = under_noise(&four).expect("four levels");
+        let (mean, se) = n.constant.expect("a mean");
+        assert!((mean - (220.0 + 224.0 + 4.0 * 226.0 + 222.0) / 7.0).abs() < 1e-12, "{mean}");
+        assert!((se - 7f64.sqrt().recip()).abs() < 1e-12, "{se}");
+        let (f0, se0) = n.first_order.expect("a line");
+        assert!((f0 - 228.0).abs() < 1e-9, "{f0}");
+        // Σw = 7, Σw h = 1 + 0.5 + 1 + 0.75 = 3.25, Σw h² = 1 + 0.25 + 0.25 + 0.5625 = 2.0625.
+        let det = 7.0 * 2.0625 - 3.25 * 3.25;
+        assert!((se0 - (2.0625f64 / det).sqrt()).abs() < 1e-12, "{se0}");
     }
 
     #[test]
