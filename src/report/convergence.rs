@@ -396,9 +396,15 @@ fn values_table(levels: &[&(String, RunReport)], followed: &[Followed]) -> Table
                 q.finest.unit.clone(),
                 q.finest.reference.map(fmt_num).unwrap_or_default(),
             ];
-            row.extend(q.values.iter().enumerate().map(|(i, v)| match errors.as_ref() {
-                Some(e) if v.is_finite() => format!("{} ({})", fmt_num(*v), fmt_percent(e[i])),
-                _ => fmt_num(*v),
+            row.extend(q.values.iter().enumerate().map(|(i, v)| {
+                let value = match q.standard_errors[i] {
+                    Some(se) => format!("{} ± {}", fmt_num(*v), fmt_num(se)),
+                    None => fmt_num(*v),
+                };
+                match errors.as_ref() {
+                    Some(e) if v.is_finite() => format!("{value} ({})", fmt_percent(e[i])),
+                    _ => value,
+                }
             }));
             row
         })
@@ -555,6 +561,10 @@ mod tests {
         assert!(p0 > 1.45 && p1 < 1.55, "{row:?}");
         let (f0, f1) = range(&row[7]);
         assert!(f0 < 10.0 + 1e-3 && f1 > 10.0 - 1e-3 && f1 - f0 < 0.05, "{row:?}");
+        let values = c.tables.iter().find(|t| t.title.starts_with("Value")).expect("the values");
+        let coarsest = 10.0 - 4.0 * 2f64.powf(1.5);
+        let error = fmt_percent((coarsest - 10.0) / 10.0);
+        assert_eq!(values.rows[0][3], format!("{} ± 0.001 ({error})", fmt_num(coarsest)));
         // Without standard errors there is no such table.
         let plain: Vec<_> = [2.0, 1.0, 0.5, 0.35, 0.25].iter().map(|h| level("l", *h, 10.0 - 4.0 * h, 1.0)).collect();
         assert!(analyse(&plain).tables.iter().all(|t| !t.title.starts_with("Under")));

@@ -5,7 +5,7 @@ For both plates, prints each level's residual speeds at 150 us with the projecti
 `pairsum uncertainty` arguments (Δx in mm, SPACING=MEAN±SE) over the levels named below. The
 runs are `e8_r<R>_k<k>` and `e12_r<R>_k<k>` (Δx = 4 mm / k; R in hundredths of a mm), the 8 mm
 plate at ℓ = 4 mm `L4_8_r<R>_k<k>`; stop 114's three radii (`z8r099_k*`, `z8r100_k*`,
-`z8r101_k*`, `z8_*`) stand in at k = 13–16, where the two other radii were not run.
+`z8r101_k*`, `z8_*`) stand in where this stop did not run a radius (k = 9, 11, 13–16).
 """
 import os
 import statistics
@@ -13,7 +13,7 @@ import statistics
 RADII = ["0990", "0995", "1000", "1005", "1010"]
 # Stop 114's names for the three radii it ran, where this stop did not rerun them.
 OLDER = {"0990": "z8r099_k{k}", "1000": "z8r100_k{k}", "1010": "z8r101_k{k}"}
-COMMITTED_8 = {13: "z8r100_k13", 14: "z8_k14", 15: "z8r100_k15", 16: "z8_l250"}
+COMMITTED_8 = {9: "z8_k9", 11: "z8r100_k11", 13: "z8r100_k13", 14: "z8_k14", 15: "z8r100_k15", 16: "z8_l250"}
 
 
 def residual(run):
@@ -30,8 +30,8 @@ def level(prefix, k):
     values = {}
     for r in RADII:
         v = residual(f"{prefix}_r{r}_k{k}")
-        if v is None and prefix == "e8" and k in COMMITTED_8:
-            v = residual(COMMITTED_8[k] if r == "1000" else OLDER.get(r, "-").format(k=k))
+        if v is None and prefix == "e8":
+            v = residual(COMMITTED_8.get(k, "-") if r == "1000" else OLDER.get(r, "-").format(k=k))
         if v is not None:
             values[r] = v
     return values
