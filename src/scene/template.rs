@@ -103,20 +103,28 @@ pub fn expand(text: &str, set: &[(String, String)]) -> Result<String, TemplateEr
             });
         };
         let name = &after[..close];
-        let value = match set.iter().rev().find(|(n, _)| n == name) {
-            Some((_, v)) => v.clone(),
-            None => match defaults.get(name) {
-                Some(v) => as_text(v),
-                None => {
-                    return Err(TemplateError {
-                        start: at + k,
-                        end: at + k + 3 + close,
-                        message: format!("`${{{name}}}` names no entry of `[parameters]`"),
-                        set_entry: None,
-                        not_toml: false,
-                    })
-                }
-            },
+        let value_of = |name: &str| match set.iter().rev().find(|(n, _)| n == name) {
+            Some((_, v)) => Some(v.clone()),
+            None => defaults.get(name).map(as_text),
+        };
+        let value = match value_of(name) {
+            Some(v) => v,
+            None if is_arithmetic(name) => arithmetic(name, &value_of).map_err(|why| TemplateError {
+                start: at + k,
+                end: at + k + 3 + close,
+                message: format!("`${{{name}}}`: {why}"),
+                set_entry: None,
+                not_toml: false,
+            })?,
+            None => {
+                return Err(TemplateError {
+                    start: at + k,
+                    end: at + k + 3 + close,
+                    message: format!("`${{{name}}}` names no entry of `[parameters]`"),
+                    set_entry: None,
+                    not_toml: false,
+                })
+            }
         };
         out.push_str(&value);
         let consumed = k + 3 + close;
@@ -125,6 +133,116 @@ pub fn expand(text: &str, set: &[(String, String)]) -> Result<String, TemplateEr
     }
     out.push_str(rest);
     Ok(out)
+}
+
+/// Whether a placeholder is arithmetic (`${radius + phase * 4 / coarse}`) rather than a name:
+/// it holds more than letters, digits and `_` (a parameter so named is found before this asks).
+fn is_arithmetic(text: &str) -> bool {
+    !text.chars().all(|c| c.is_alphanumeric() || c == '_')
+}
+
+/// The value of an arithmetic placeholder: numbers and parameters with a number for value,
+/// `+ - * /`, unary minus and parentheses, as text (Rust's shortest form of the `f64`).
+fn arithmetic(text: &str, value_of: &dyn Fn(&str) -> Option<String>) -> Result<String, String> {
+    let tokens = tokens(text)?;
+    let mut p = Parser { tokens: &tokens, at: 0, value_of };
+    let v = p.sum()?;
+    if p.at < tokens.len() {
+        return Err(format!("`{}` is not expected here", tokens[p.at]));
+    }
+    if !v.is_finite() {
+        return Err(format!("its value is {v}"));
+    }
+    Ok(format!("{v}"))
+}
+
+/// Numbers, names and the operators, in order.
+fn tokens(text: &str) -> Result<Vec<String>, String> {
+    let mut out = vec![];
+    let mut chars = text.char_indices().peekable();
+    while let Some((i, c)) = chars.next() {
+        match c {
+            c if c.is_whitespace() => {}
+            '+' | '-' | '*' | '/' | '(' | ')' => out.push(c.to_string()),
+            c if c.is_ascii_alphanumeric() || c == '_' || c == '.' => {
+                let mut end = i + c.len_utf8();
+                while let Some(&(j, d)) = chars.peek() {
+                    // An exponent's sign belongs to its number (`1e-3`).
+                    let exponent_sign = (d == '-' || d == '+')
+                        && text[i..j].ends_with(['e', 'E'])
+                        && text[i..i + 1].chars().all(|c| c.is_ascii_digit() || c == '.');
+                    if d.is_ascii_alphanumeric() || d == '_' || d == '.' || exponent_sign {
+                        end = j + d.len_utf8();
+                        chars.next();
+                    } else {
+                        break;
+                    }
+                }
+                out.push(text[i..end].to_string());
+            }
+            other => return Err(format!("`{other}` is no number, parameter or operator (+ - * / and parentheses)")),
+        }
+    }
+    Ok(out)
+}
+
+struct Parser<'a> {
+    tokens: &'a [String],
+    at: usize,
+    value_of: &'a dyn Fn(&str) -> Option<String>,
+}
+
+impl Parser<'_> {
+    fn peek(&self) -> Option<&str> {
+        self.tokens.get(self.at).map(String::as_str)
+    }
+
+    fn sum(&mut self) -> Result<f64, String> {
+        let mut v = self.product()?;
+        while let Some(op @ ("+" | "-")) = self.peek() {
+            let plus = op == "+";
+            self.at += 1;
+            let r = self.product()?;
+            v = if plus { v + r } else { v - r };
+        }
+        Ok(v)
+    }
+
+    fn product(&mut self) -> Result<f64, String> {
+        let mut v = self.factor()?;
+        while let Some(op @ ("*" | "/")) = self.peek() {
+            let times = op == "*";
+            self.at += 1;
+            let r = self.factor()?;
+            v = if times { v * r } else { v / r };
+        }
+        Ok(v)
+    }
+
+    fn factor(&mut self) -> Result<f64, String> {
+        let token = self.peek().ok_or("it ends where a number or a parameter is expected")?.to_string();
+        self.at += 1;
+        match token.as_str() {
+            "-" => Ok(-self.factor()?),
+            "(" => {
+                let v = self.sum()?;
+                match self.peek() {
+                    Some(")") => {
+                        self.at += 1;
+                        Ok(v)
+                    }
+                    _ => Err("a `(` without its `)`".into()),
+                }
+            }
+            t if t.starts_with(|c: char| c.is_ascii_digit() || c == '.') => {
+                t.parse::<f64>().map_err(|_| format!("`{t}` is not a number"))
+            }
+            name => {
+                let text = (self.value_of)(name).ok_or_else(|| format!("`{name}` names no entry of `[parameters]`"))?;
+                text.trim().parse::<f64>().map_err(|_| format!("`{name}` is `{text}`, not a number"))
+            }
+        }
+    }
 }
 
 #[cfg(test)]
@@ -138,6 +256,27 @@ mod tests {
         assert!(out.contains("velocity = \"-250.8 m/s\"") && out.contains("thick = \"8 mm\""), "{out}");
         assert_eq!(out.lines().count(), text.lines().count());
         assert!(expand("x = \"${nope}\"", &[]).expect_err("error").message.contains("nope"));
+    }
+
+    #[test]
+    fn an_arithmetic_placeholder_takes_parameters_and_set_values_with_the_usual_precedence() {
+        let text = "[parameters]\nr = 10\nphase = 0\nk = 8\n[b]\nmax = \"${r + phase * 4 / k} mm\"\nt = \"${-(r - 2) * 1e-1}\"\n";
+        let out = expand(text, &[]).ok().expect("expands");
+        assert!(out.contains("max = \"10 mm\"") && out.contains("t = \"-0.8\""), "{out}");
+        let out = expand(text, &[("phase".into(), "-0.4".into())]).ok().expect("expands");
+        assert!(out.contains(&format!("max = \"{} mm\"", 10.0 + -0.4 * 4.0 / 8.0)), "{out}");
+        for (bad, why) in [
+            ("${r + nope}", "`nope` names no entry"),
+            ("${r + (phase}", "without its `)`"),
+            ("${r + }", "it ends where"),
+            ("${r / phase}", "its value is inf"),
+            ("${r % 2}", "`%` is no number"),
+        ] {
+            let e = expand(&text.replace("${-(r - 2) * 1e-1}", bad), &[]).expect_err(bad);
+            assert!(e.message.contains(why), "{bad}: {}", e.message);
+        }
+        let words = "[parameters]\nm = \"models::x\"\n[b]\nx = \"${m + 1}\"\n";
+        assert!(expand(words, &[]).expect_err("a word").message.contains("not a number"));
     }
 
     #[test]
