@@ -3,17 +3,23 @@
 For both plates, prints each level's residual speeds at 150 us with the projectile's radius
 9.90 / 9.95 / 10.00 / 10.05 / 10.10 mm, their mean, standard error and spread, and the
 `pairsum uncertainty` arguments (Δx in mm, SPACING=MEAN±SE) over the levels named below. The
-runs are `e8_r<R>_k<k>` and `e12_r<R>_k<k>` (Δx = 4 mm / k; R in hundredths of a mm), the 8 mm
-plate at ℓ = 4 mm `L4_8_r<R>_k<k>`; stop 114's three radii (`z8r099_k*`, `z8r100_k*`,
-`z8r101_k*`, `z8_*`) stand in where this stop did not run a radius (k = 9, 11, 13–16).
+runs are `m8_r<R>_k<k>` and `m12_r<R>_k<k>` (Δx = 4 mm / k; R in hundredths of a mm), the 8 mm
+plate at ℓ = 4 mm `m8l4_r<R>_k<k>`, and the 8 mm plate with the edge moved by a fraction of the
+spacing (`edge_phase` −0.4 … +0.4) `p8_<phase>_k<k>` (phase m04, m02, 0, p02, p04); stop 114's three radii (`z8r099_k*`, `z8r100_k*`,
+`z8r101_k*`, `z8_*`, `z12_*`, `z12r099_*`, `z12r101_*`) stand in where this stop did not run a
+radius (k = 9, 11, 13–16) or reran it to the same digits (not kept twice).
 """
+import glob
 import os
 import statistics
 
 RADII = ["0990", "0995", "1000", "1005", "1010"]
 # Stop 114's names for the three radii it ran, where this stop did not rerun them.
 OLDER = {"0990": "z8r099_k{k}", "1000": "z8r100_k{k}", "1010": "z8r101_k{k}"}
-COMMITTED_8 = {9: "z8_k9", 11: "z8r100_k11", 13: "z8r100_k13", 14: "z8_k14", 15: "z8r100_k15", 16: "z8_l250"}
+COMMITTED_8 = {4: "z8_l1000", 5: "z8_k5", 6: "z8_l667", 7: "z8_k7", 8: "z8_l500", 9: "z8_k9", 10: "z8_l400",
+               11: "z8r100_k11", 12: "z8_l333", 13: "z8r100_k13", 14: "z8_k14", 15: "z8r100_k15", 16: "z8_l250"}
+# The 12 mm plate's, from stops 108 and 114.
+COMMITTED_12 = {4: "z12_l1000", 6: "z12_l667", 8: "z12_l500", 10: "z12_l400", 12: "z12_l333"}
 
 
 def residual(run):
@@ -30,8 +36,10 @@ def level(prefix, k):
     values = {}
     for r in RADII:
         v = residual(f"{prefix}_r{r}_k{k}")
-        if v is None and prefix == "e8":
-            v = residual(COMMITTED_8.get(k, "-") if r == "1000" else OLDER.get(r, "-").format(k=k))
+        if v is None and prefix in ("m8", "m12"):
+            committed = COMMITTED_8 if prefix == "m8" else COMMITTED_12
+            older = OLDER.get(r, "-").replace("z8", "z" + prefix[1:])
+            v = residual(committed.get(k, "-") if r == "1000" else older.format(k=k))
         if v is not None:
             values[r] = v
     return values
@@ -56,12 +64,44 @@ def arguments(levels, ks):
     return "pairsum uncertainty " + " ".join(f"{4 / k:.6g}={m:.4f}±{s:.4f}" for k, m, s in levels if k in ks)
 
 
+PHASES = ["m04", "m02", "0", "p02", "p04"]
+
+
+def phase_table(ks):
+    """The 8 mm plate at each level with its edge at five places over one period of the lattice."""
+    print("p8: k  dx (mm)  " + "  ".join(f"{p:>7}" for p in PHASES) + "    mean ± se     spread")
+    levels = []
+    for k in ks:
+        v = [residual(f"p8_{p}_k{k}") for p in PHASES]
+        if None in v:
+            continue
+        mean, se = statistics.mean(v), statistics.stdev(v) / len(v) ** 0.5
+        cells = "  ".join(f"{x:7.2f}" for x in v)
+        print(f"  {k:<3} {4 / k:7.4f}  {cells}   {mean:7.2f} ± {se:4.2f}  {max(v) - min(v):5.2f}")
+        levels.append((k, mean, se))
+    print("  " + arguments(levels, ks))
+
+
+def every_radius():
+    """The 8 mm plate at 0.5 mm (k = 8) at every radius run, 9.80 to 10.20 mm."""
+    found = {r.split("_r")[1][:4]: residual(r) for r in glob.glob("m8_r*_k8")}
+    found.update({r: v for r, v in level("m8", 8).items() if r not in found})
+    values = sorted((int(r) / 100, v) for r, v in found.items() if v is not None)
+    print("m8 at k = 8: " + ", ".join(f"{r:.2f} mm {v:.2f}" for r, v in values))
+    speeds = [v for _, v in values]
+    sd = statistics.stdev(speeds)
+    print(f"  {len(speeds)} radii: mean {statistics.mean(speeds):.2f}, standard deviation {sd:.2f}, "
+          f"standard error {sd / len(speeds) ** 0.5:.2f}, range {min(speeds):.2f}–{max(speeds):.2f} m/s")
+
+
 if __name__ == "__main__":
-    eight = table("e8", range(4, 17))
+    eight = table("m8", range(4, 17))
     print("  all levels:   " + arguments(eight, range(4, 17)))
     print("  from 0.5 mm:  " + arguments(eight, range(8, 17)))
     print("  from 0.444 mm: " + arguments(eight, range(9, 17)))
-    twelve = table("e12", range(4, 13))
+    twelve = table("m12", range(4, 13))
     print("  all levels:   " + arguments(twelve, range(4, 13)))
     print("  from 0.667 mm: " + arguments(twelve, range(6, 13)))
-    table("L4_8", range(4, 9))
+    table("m8l4", range(4, 9))
+    every_radius()
+    phase_table(range(4, 13))
