@@ -198,23 +198,25 @@ impl Parser<'_> {
     }
 
     fn sum(&mut self) -> Result<f64, String> {
-        let mut v = self.product()?;
-        while let Some(op @ ("+" | "-")) = self.peek() {
-            let plus = op == "+";
-            self.at += 1;
-            let r = self.product()?;
-            v = if plus { v + r } else { v - r };
-        }
-        Ok(v)
+        self.left_to_right(["+", "-"], Self::product)
     }
 
     fn product(&mut self) -> Result<f64, String> {
-        let mut v = self.factor()?;
-        while let Some(op @ ("*" | "/")) = self.peek() {
-            let times = op == "*";
+        self.left_to_right(["*", "/"], Self::factor)
+    }
+
+    /// `operand (op operand)*` for the two operators of one precedence, applied left to right.
+    fn left_to_right(&mut self, ops: [&str; 2], operand: fn(&mut Self) -> Result<f64, String>) -> Result<f64, String> {
+        let mut v = operand(self)?;
+        while let Some(op) = self.peek().filter(|t| ops.contains(t)).map(str::to_string) {
             self.at += 1;
-            let r = self.factor()?;
-            v = if times { v * r } else { v / r };
+            let r = operand(self)?;
+            v = match op.as_str() {
+                "+" => v + r,
+                "-" => v - r,
+                "*" => v * r,
+                _ => v / r,
+            };
         }
         Ok(v)
     }

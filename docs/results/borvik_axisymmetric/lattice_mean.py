@@ -10,8 +10,9 @@ spacing (`edge_phase` −0.4 … +0.4) `p8_<phase>_k<k>` (phase m04, m02, 0, p02
 radius (k = 9, 11, 13–16) or reran it to the same digits (not kept twice).
 """
 import glob
-import os
 import statistics
+
+from phase_average import residual  # the residual speed from a run's report.md
 
 RADII = ["0990", "0995", "1000", "1005", "1010"]
 # Stop 114's names for the three radii it ran, where this stop did not rerun them.
@@ -20,16 +21,6 @@ COMMITTED_8 = {4: "z8_l1000", 5: "z8_k5", 6: "z8_l667", 7: "z8_k7", 8: "z8_l500"
                11: "z8r100_k11", 12: "z8_l333", 13: "z8r100_k13", 14: "z8_k14", 15: "z8r100_k15", 16: "z8_l250"}
 # The 12 mm plate's, from stops 108 and 114.
 COMMITTED_12 = {4: "z12_l1000", 6: "z12_l667", 8: "z12_l500", 10: "z12_l400", 12: "z12_l333"}
-
-
-def residual(run):
-    """The projectile's residual speed (m/s) from a run's report, or None where it was not run."""
-    path = run + "/report.md"
-    if not os.path.exists(path):
-        return None
-    for line in open(path):
-        if line.startswith("| projectile_residual_velocity"):
-            return float(line.split("|")[4])
 
 
 def level(prefix, k):
