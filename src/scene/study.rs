@@ -69,8 +69,8 @@ pub struct StudyResult {
     #[serde(default)]
     pub run: Option<String>,
     /// Two runs or more: the mean of their result `of`, with its standard error (runs that
-    /// differ only in what a level's value should not depend on: where a body's edge falls on
-    /// the lattice, a 1 % change in a radius).
+    /// differ only in what a level's value should not depend on, such as where a body's edge
+    /// falls on the lattice).
     #[serde(default)]
     pub mean: Option<Vec<String>>,
     #[serde(default)]
