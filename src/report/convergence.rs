@@ -4,7 +4,7 @@
 //! against wall time and against particle count. Plain `f64` data in, report parts out.
 
 use super::json::{Curve, History, ResultRow, RunReport, Table};
-use super::markdown::{fmt_num, fmt_percent};
+use super::markdown::{fmt_num, fmt_percent, plus_minus};
 use super::uncertainty::{uncertainty, under_noise, Uncertainty, DRAWS};
 
 /// How three values, coarse to fine, behave.
@@ -317,8 +317,8 @@ fn noise_table(h: &[f64], followed: &[Followed]) -> Option<Table> {
                 Some(n) => vec![
                     format!("{} of {}", n.resolved_steps.0, n.resolved_steps.1),
                     n.constant_fits.map_or("— (a standard error is 0)".into(), |p| format!("{p:.3}")),
-                    n.constant.map_or(String::new(), |(m, s)| format!("{} ± {}", fmt_num(m), fmt_num(s))),
-                    n.first_order.map_or(String::new(), |(m, s)| format!("{} ± {}", fmt_num(m), fmt_num(s))),
+                    n.constant.map_or(String::new(), plus_minus),
+                    n.first_order.map_or(String::new(), plus_minus),
                     n.describe_order(),
                     format!("{}–{}", fmt_num(n.limit.0), fmt_num(n.limit.1)),
                 ],
@@ -397,10 +397,7 @@ fn values_table(levels: &[&(String, RunReport)], followed: &[Followed]) -> Table
                 q.finest.reference.map(fmt_num).unwrap_or_default(),
             ];
             row.extend(q.values.iter().enumerate().map(|(i, v)| {
-                let value = match q.standard_errors[i] {
-                    Some(se) => format!("{} ± {}", fmt_num(*v), fmt_num(se)),
-                    None => fmt_num(*v),
-                };
+                let value = q.standard_errors[i].map_or_else(|| fmt_num(*v), |se| plus_minus((*v, se)));
                 match errors.as_ref() {
                     Some(e) if v.is_finite() => format!("{value} ({})", fmt_percent(e[i])),
                     _ => value,

@@ -97,12 +97,6 @@ impl ResultRow {
         self.source = Some(source.into());
         self
     }
-
-    /// Marks the value as a mean over runs with this standard error.
-    pub fn with_standard_error(mut self, standard_error: f64) -> Self {
-        self.standard_error = Some(standard_error);
-        self
-    }
 }
 
 /// Particle state bytes per particle of one particle group.

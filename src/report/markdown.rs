@@ -54,7 +54,7 @@ fn render_with(r: &RunReport, plot_errors: &[Option<String>]) -> String {
                 cell(&row.unit),
                 row.reference.map(fmt_num).unwrap_or_default(),
                 match row.standard_error {
-                    Some(se) => format!("{} ± {} (standard error)", fmt_num(row.value), fmt_num(se)),
+                    Some(se) => format!("{} (standard error)", plus_minus((row.value, se))),
                     None => fmt_num(row.value),
                 },
                 row.rel_error.map(fmt_percent).unwrap_or_default(),
@@ -133,6 +133,11 @@ fn inline(text: &str) -> String {
 
 fn alt_text(text: &str) -> String {
     inline(text).replace(['[', ']'], "")
+}
+
+/// A value and its standard error as `value ± se`.
+pub fn plus_minus((value, se): (f64, f64)) -> String {
+    format!("{} ± {}", fmt_num(value), fmt_num(se))
 }
 
 /// Up to six significant digits for moderate magnitudes, exponent form otherwise.

@@ -178,13 +178,7 @@ fn describe_order(p: f64) -> String {
 /// than four levels, a spacing repeated or not positive, or a value not finite.
 pub fn uncertainty(points: &[(f64, f64)]) -> Option<Uncertainty> {
     let n = points.len();
-    let valid = points.iter().all(|(h, f)| *h > 0.0 && h.is_finite() && f.is_finite());
-    let mut sorted: Vec<f64> = points.iter().map(|p| p.0).collect();
-    sorted.sort_by(f64::total_cmp);
-    if n < 4 || !valid || sorted.windows(2).any(|w| w[1] <= w[0] * (1.0 + 1e-9)) {
-        return None;
-    }
-    let finest = *points.iter().min_by(|a, b| a.0.total_cmp(&b.0))?;
+    let finest = finest_of(points)?;
     // Spacings over the finest's: the fits' equations stay well scaled whatever the unit.
     let scaled: Vec<(f64, f64)> = points.iter().map(|(h, f)| (h / finest.0, *f)).collect();
     let points = &scaled[..];
@@ -226,6 +220,18 @@ pub fn uncertainty(points: &[(f64, f64)]) -> Option<Uncertainty> {
     };
     let order_without_one = (n >= 5).then(|| leave_one_out(points)).flatten();
     Some(Uncertainty { observed, chosen, finest, data_range, error, safety, u, order_without_one })
+}
+
+/// The finest of `points` (spacing, value), or `None` with fewer than four levels, a spacing
+/// repeated or not positive, or a value not finite: what [`uncertainty`] needs of its levels.
+fn finest_of(points: &[(f64, f64)]) -> Option<(f64, f64)> {
+    let valid = points.iter().all(|(h, f)| *h > 0.0 && h.is_finite() && f.is_finite());
+    let mut sorted: Vec<f64> = points.iter().map(|p| p.0).collect();
+    sorted.sort_by(f64::total_cmp);
+    if points.len() < 4 || !valid || sorted.windows(2).any(|w| w[1] <= w[0] * (1.0 + 1e-9)) {
+        return None;
+    }
+    points.iter().min_by(|a, b| a.0.total_cmp(&b.0)).copied()
 }
 
 /// How far the levels' own noise moves the observed order and the value at zero spacing, where
@@ -275,7 +281,7 @@ pub fn under_noise(points: &[(f64, f64, f64)]) -> Option<UnderNoise> {
     let mut sorted = points.to_vec();
     sorted.sort_by(|a, b| b.0.total_cmp(&a.0));
     let levels: Vec<(f64, f64)> = sorted.iter().map(|p| (p.0, p.1)).collect();
-    let finest = uncertainty(&levels)?.finest.0;
+    let finest = finest_of(&levels)?.0;
     let resolved = sorted.windows(2).filter(|w| (w[1].1 - w[0].1).abs() > 2.0 * w[0].2.hypot(w[1].2)).count();
     let mut normal = Normal::seeded(0x5eed_0f11_a77c_e500);
     let (mut orders, mut limits) = (Vec::with_capacity(DRAWS), Vec::with_capacity(DRAWS));
@@ -286,13 +292,14 @@ pub fn under_noise(points: &[(f64, f64, f64)]) -> Option<UnderNoise> {
         orders.push(p);
         limits.push(fit.limit());
     }
+    let weighted = weighted(&sorted);
     Some(UnderNoise {
         order: percentiles(&mut orders),
         limit: percentiles(&mut limits),
         resolved_steps: (resolved, sorted.len() - 1),
-        constant_fits: weighted(&sorted).map(|w| w.constant_fits),
-        constant: weighted(&sorted).map(|w| w.constant),
-        first_order: weighted(&sorted).map(|w| w.first_order),
+        constant_fits: weighted.as_ref().map(|w| w.constant_fits),
+        constant: weighted.as_ref().map(|w| w.constant),
+        first_order: weighted.map(|w| w.first_order),
     })
 }
 
