@@ -93,6 +93,10 @@ enum Command {
         /// pairsum run CASE` runs N processes instead
         #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1024))]
         domains: Option<u32>,
+        /// Run this many of a study's runs, or of a case's --convergence levels, at once, each on
+        /// its share of the threads (RAYON_NUM_THREADS or the cores, divided by N)
+        #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1024), value_name = "N")]
+        jobs: Option<u32>,
     },
     /// List the bundled cases
     Cases,
@@ -207,6 +211,7 @@ pub fn main() -> i32 {
             convergence,
             reanalyse,
             domains,
+            jobs,
         } => {
             let opts = RunArgs {
                 backend,
@@ -225,6 +230,7 @@ pub fn main() -> i32 {
                 convergence,
                 reanalyse,
                 domains,
+                jobs,
             };
             run_run(&case, opts)
         }
@@ -591,6 +597,7 @@ struct RunArgs {
     convergence: Option<String>,
     reanalyse: bool,
     domains: Option<u32>,
+    jobs: Option<u32>,
 }
 
 fn run_run(case: &str, a: RunArgs) -> i32 {
@@ -621,6 +628,7 @@ fn run_run(case: &str, a: RunArgs) -> i32 {
         force: a.force,
         timing: a.timing,
         domains: a.domains.map(|d| d as usize),
+        jobs: a.jobs.unwrap_or(1) as usize,
     };
     // Under `mpirun` every rank runs the case; rank 0 writes the outputs, the others only their
     // pieces of the VTK snapshots into the same folder.
@@ -631,6 +639,12 @@ fn run_run(case: &str, a: RunArgs) -> i32 {
             return 1;
         }
     };
+    if opts.jobs > 1 && crate::backend::transport::launched_ranks().is_some_and(|n| n > 1) {
+        eprintln!(
+            "error: --jobs runs in one process; under mpirun every run is split across the ranks: leave --jobs out"
+        );
+        return 1;
+    }
     let mut opts = opts;
     if rank > 0 {
         (opts.progress, opts.timing) = (false, false);

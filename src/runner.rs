@@ -53,6 +53,9 @@ pub struct RunOptions {
     /// Split the run into this many domains, each a thread of this process as a rank
     /// (`backend::domains`; on the CPU backend). Under `mpirun` the ranks are MPI's instead.
     pub domains: Option<usize>,
+    /// Run this many of a study's runs (or a case's convergence levels) side by side, each on
+    /// its share of the threads (`run_side_by_side`); 1: one after another.
+    pub jobs: usize,
 }
 
 impl Default for RunOptions {
@@ -70,6 +73,7 @@ impl Default for RunOptions {
             force: false,
             timing: false,
             domains: None,
+            jobs: 1,
         }
     }
 }
@@ -917,15 +921,27 @@ pub fn run_study(path: &Path, opts: &RunOptions, reanalyse: bool) -> Result<RunO
     if leads() {
         claim_out(opts)?;
     }
+    let jobs = if reanalyse { 1 } else { opts.jobs };
+    let runs: Vec<_> =
+        runs.into_iter().map(|(r, o)| (r, RunOptions { progress: o.progress && jobs == 1, ..o })).collect();
+    let done = run_side_by_side(
+        jobs,
+        &runs,
+        |_| true,
+        |(r, o)| {
+            if reanalyse {
+                earlier_outcome(&o.out)
+            } else {
+                eprintln!("{}: run `{}`", st.file.name, r.name);
+                run_case(&st.case_path, o)
+            }
+        },
+    );
     let mut outcomes: Vec<(study::RunSpec, RunOutcome)> = vec![];
-    for (r, o) in runs {
-        let outcome = if reanalyse {
-            earlier_outcome(&o.out)?
-        } else {
-            eprintln!("{}: run `{}`", st.file.name, r.name);
-            run_case(&st.case_path, &o)?
-        };
-        outcomes.push((r, outcome));
+    for ((r, _), outcome) in runs.into_iter().zip(done) {
+        // A run not made follows one that failed and stopped the rest (`run_side_by_side`).
+        let Some(outcome) = outcome else { break };
+        outcomes.push((r, outcome?));
     }
     let first = &outcomes
         .first()
@@ -1200,8 +1216,14 @@ pub fn run_convergence(
     opts: &RunOptions,
     reanalyse: bool,
 ) -> Result<RunOutcome, RunFailure> {
+    // A study's levels run one after another, its runs side by side within each (`run_study`).
+    let jobs = if reanalyse || crate::scene::study::is_study(&read_text(path)?) { 1 } else { opts.jobs };
     let at = |level: &str| {
         let mut o = opts.clone();
+        if jobs > 1 {
+            // The levels are the jobs; each level is one run.
+            (o.jobs, o.progress) = (1, false);
+        }
         o.scene.resolution = Some(level.to_string());
         o.out = opts.out.join(sanitize(level));
         o
@@ -1229,13 +1251,17 @@ pub fn run_convergence(
     }
     let mut reports = vec![];
     let mut notes = vec![];
-    for level in levels {
-        let outcome = if reanalyse {
+    let stops = |e: &RunFailure| matches!(e, RunFailure::Input(_));
+    let done = run_side_by_side(jobs, levels, stops, |level| {
+        if reanalyse {
             reanalyse_file(path, &at(level)).map(|o| o.report)
         } else {
             eprintln!("convergence: resolution `{level}`");
             run_file(path, &at(level)).map(|o| o.report)
-        };
+        }
+    });
+    for (level, outcome) in levels.iter().zip(done) {
+        let Some(outcome) = outcome else { break };
         match outcome {
             Ok(r) => {
                 notes.push(format!(
@@ -1274,6 +1300,50 @@ pub fn run_convergence(
         report::write(&opts.out, &report).map_err(|e| RunFailure::Run(format!("writing the report: {e}")))?;
     }
     Ok(RunOutcome { report, out: opts.out.clone(), histories: vec![] })
+}
+
+/// Runs `run` on every task, `jobs` of them at a time, and returns their results in the tasks'
+/// order. With more than one job each task runs on its own thread inside a rayon pool of its
+/// share of the threads (the current pool's divided by `jobs`, at least one); the callers turn
+/// the runs' progress bars off, which would overwrite one another. A failure that `stops`
+/// starts no further task: the tasks not started are `None`, and they all follow it in order,
+/// as one after another the caller would have stopped there.
+fn run_side_by_side<T: Sync, X: Send>(
+    jobs: usize,
+    tasks: &[T],
+    stops: impl Fn(&RunFailure) -> bool + Sync,
+    run: impl Fn(&T) -> Result<X, RunFailure> + Sync,
+) -> Vec<Option<Result<X, RunFailure>>> {
+    use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+    use std::sync::Mutex;
+    let done: Vec<Mutex<Option<Result<X, RunFailure>>>> = tasks.iter().map(|_| Mutex::new(None)).collect();
+    let (next, stopped) = (AtomicUsize::new(0), AtomicBool::new(false));
+    let work = || {
+        while !stopped.load(Ordering::SeqCst) {
+            let i = next.fetch_add(1, Ordering::SeqCst);
+            let Some(task) = tasks.get(i) else { break };
+            let result = run(task);
+            if result.as_ref().is_err_and(&stops) {
+                stopped.store(true, Ordering::SeqCst);
+            }
+            *done[i].lock().unwrap_or_else(|e| e.into_inner()) = Some(result);
+        }
+    };
+    let jobs = jobs.clamp(1, tasks.len().max(1));
+    if jobs == 1 {
+        work();
+    } else {
+        let threads = (rayon::current_num_threads() / jobs).max(1);
+        std::thread::scope(|s| {
+            for _ in 0..jobs {
+                s.spawn(|| match rayon::ThreadPoolBuilder::new().num_threads(threads).build() {
+                    Ok(pool) => pool.install(work),
+                    Err(_) => work(),
+                });
+            }
+        });
+    }
+    done.into_iter().map(|m| m.into_inner().unwrap_or_else(|e| e.into_inner())).collect()
 }
 
 /// A completed run's report and probe histories, read back from what it wrote into `dir`.
@@ -1320,6 +1390,11 @@ pub fn run_file(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunFailure
     let text = read_text(path)?;
     if crate::scene::study::is_study(&text) {
         run_study(path, opts, false)
+    } else if opts.jobs > 1 {
+        Err(RunFailure::Input(format!(
+            "error: `{}` is a case, one run: --jobs runs a study's runs, or a case's --convergence levels, side by side\n",
+            path.display()
+        )))
     } else {
         run_case(path, opts)
     }
@@ -1333,5 +1408,36 @@ pub fn reanalyse_file(path: &Path, opts: &RunOptions) -> Result<RunOutcome, RunF
         run_study(path, opts, true)
     } else {
         earlier_outcome(&opts.out)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Side by side or one after another, the results come back in the tasks' order, and a
+    /// failure that stops starts nothing after it: every task not made follows it.
+    #[test]
+    fn tasks_run_side_by_side_come_back_in_order_and_a_stop_starts_nothing_after_it() {
+        let tasks: Vec<usize> = (0..8).collect();
+        let run = |&i: &usize| if i == 2 { Err(RunFailure::Input(format!("task {i}"))) } else { Ok(10 * i) };
+        for jobs in [1, 3] {
+            let done = run_side_by_side(jobs, &tasks, |_| true, run);
+            assert_eq!(done.len(), 8);
+            for (i, d) in done.iter().enumerate().take(2) {
+                assert!(matches!(d, Some(Ok(x)) if *x == 10 * i), "jobs {jobs}, task {i}: {d:?}");
+            }
+            assert!(matches!(&done[2], Some(Err(RunFailure::Input(m))) if m == "task 2"), "jobs {jobs}");
+            let first_not_made = done.iter().position(Option::is_none).unwrap_or(done.len());
+            assert!(first_not_made > 2, "jobs {jobs}: {done:?}");
+            assert!(done[first_not_made..].iter().all(Option::is_none), "jobs {jobs}: {done:?}");
+            if jobs == 1 {
+                assert_eq!(first_not_made, 3, "one after another, nothing runs after the stop");
+            }
+        }
+        // A failure that does not stop (a convergence level that did not complete) lets the rest run.
+        let done = run_side_by_side(3, &tasks, |_| false, run);
+        assert!(done.iter().all(Option::is_some));
+        assert!(matches!(&done[7], Some(Ok(70))));
     }
 }

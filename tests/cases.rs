@@ -817,6 +817,45 @@ fn a_study_is_analysed_again_from_its_runs_reports_without_running() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// `--jobs 2` runs a study's two runs side by side, each on its share of the threads, and gives
+/// every result the runs give one after another; on a case, which is one run, it is refused.
+#[test]
+fn a_study_run_two_at_a_time_gives_the_results_of_one_at_a_time() {
+    use pairsum::runner::run_file;
+    let dir = out_dir("study-jobs");
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::copy(case("cube_on_cube"), dir.join("cube_on_cube.toml")).unwrap();
+    let study = dir.join("study.toml");
+    std::fs::write(
+        &study,
+        "name = \"s\"\ncase = \"cube_on_cube.toml\"\n\
+         [[runs]]\nname = \"a\"\nset = { v_impact = 400 }\n[[runs]]\nname = \"b\"\nset = { v_impact = 600 }\n",
+    )
+    .unwrap();
+    let opts = |jobs: usize, out: &str| RunOptions {
+        backend: BackendChoice::Cpu,
+        scene: pairsum::scene::Options { resolution: Some("1 mm".into()), ..Default::default() },
+        out: dir.join(out),
+        vtk: false,
+        jobs,
+        ..Default::default()
+    };
+    let one = run_file(&study, &opts(1, "one")).expect("the study runs one run at a time").report;
+    let two = run_file(&study, &opts(2, "two")).expect("the study runs two runs at a time").report;
+    let values = |r: &pairsum::report::RunReport| -> Vec<(String, f64)> {
+        r.results.iter().map(|x| (x.quantity.clone(), x.value)).collect()
+    };
+    assert!(one.results.len() >= 2, "{:?}", values(&one));
+    assert_eq!(values(&two), values(&one));
+    assert_eq!(two.steps, one.steps);
+    for run in ["a", "b"] {
+        assert!(dir.join("two").join(run).join("report.json").is_file(), "run `{run}` wrote its report");
+    }
+    let err = run_file(&dir.join("cube_on_cube.toml"), &opts(2, "case")).err().expect("--jobs on a case").to_string();
+    assert!(err.contains("is a case, one run"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// A wrong `[neighbours]` table is an error at its line: an unknown search, a skin beyond the
 /// cut-off, an adaptive search without its field or on a field the model lacks.
 #[test]
