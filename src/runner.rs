@@ -1216,13 +1216,14 @@ pub fn run_convergence(
     opts: &RunOptions,
     reanalyse: bool,
 ) -> Result<RunOutcome, RunFailure> {
-    // A study's levels run one after another, its runs side by side within each (`run_study`).
-    let jobs = if reanalyse || crate::scene::study::is_study(&read_text(path)?) { 1 } else { opts.jobs };
+    let study = crate::scene::study::is_study(&read_text(path)?);
+    let jobs = if reanalyse { 1 } else { opts.jobs };
     let at = |level: &str| {
         let mut o = opts.clone();
-        if jobs > 1 {
-            // The levels are the jobs; each level is one run.
-            (o.jobs, o.progress) = (1, false);
+        o.progress &= jobs == 1;
+        if !study {
+            // A case's levels are the jobs, each one run.
+            o.jobs = 1;
         }
         o.scene.resolution = Some(level.to_string());
         o.out = opts.out.join(sanitize(level));
@@ -1252,8 +1253,15 @@ pub fn run_convergence(
     let mut reports = vec![];
     let mut notes = vec![];
     let stops = |e: &RunFailure| matches!(e, RunFailure::Input(_));
-    let done = run_side_by_side(jobs, levels, stops, |level| {
-        if reanalyse {
+    // A study's runs, at every level, are the jobs: all of them side by side first, then each
+    // level's report from what they wrote, as `--reanalyse` makes it.
+    let runs_made = study && jobs > 1;
+    if runs_made {
+        make_study_runs(path, levels, &at, jobs)?;
+    }
+    let level_jobs = if study { 1 } else { jobs };
+    let done = run_side_by_side(level_jobs, levels, stops, |level| {
+        if reanalyse || runs_made {
             reanalyse_file(path, &at(level)).map(|o| o.report)
         } else {
             eprintln!("convergence: resolution `{level}`");
@@ -1300,6 +1308,35 @@ pub fn run_convergence(
         report::write(&opts.out, &report).map_err(|e| RunFailure::Run(format!("writing the report: {e}")))?;
     }
     Ok(RunOutcome { report, out: opts.out.clone(), histories: vec![] })
+}
+
+/// Every run of a study at every level, `jobs` at a time, each writing into `<level>/<run>/` as
+/// the study would. A run that does not complete wrote its report saying so, and its level is
+/// left out when the levels are analysed; an input error stops the rest and is returned.
+fn make_study_runs(
+    path: &Path,
+    levels: &[String],
+    at: &dyn Fn(&str) -> RunOptions,
+    jobs: usize,
+) -> Result<(), RunFailure> {
+    let mut tasks = vec![];
+    for level in levels {
+        let o = at(level);
+        let PreparedStudy { study: st, runs, .. } = prepare_study(path, &o)?;
+        if leads() {
+            claim_out(&o)?;
+        }
+        tasks.extend(runs.into_iter().map(|(r, ro)| (level.clone(), r.name, ro, st.case_path.clone())));
+    }
+    let stops = |e: &RunFailure| matches!(e, RunFailure::Input(_));
+    let done = run_side_by_side(jobs, &tasks, stops, |(level, run, o, case)| {
+        eprintln!("convergence: resolution `{level}`, run `{run}`");
+        run_case(case, o).map(|_| ())
+    });
+    match done.into_iter().flatten().find_map(|d| d.err().filter(stops)) {
+        Some(e) => Err(e),
+        None => Ok(()),
+    }
 }
 
 /// Runs `run` on every task, `jobs` of them at a time, and returns their results in the tasks'

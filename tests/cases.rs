@@ -818,7 +818,8 @@ fn a_study_is_analysed_again_from_its_runs_reports_without_running() {
 }
 
 /// `--jobs 2` runs a study's two runs side by side, each on its share of the threads, and gives
-/// every result the runs give one after another; on a case, which is one run, it is refused.
+/// every result the runs give one after another, alone and at every level of a convergence
+/// study; on a case, which is one run, it is refused.
 #[test]
 fn a_study_run_two_at_a_time_gives_the_results_of_one_at_a_time() {
     use pairsum::runner::run_file;
@@ -851,6 +852,15 @@ fn a_study_run_two_at_a_time_gives_the_results_of_one_at_a_time() {
     for run in ["a", "b"] {
         assert!(dir.join("two").join(run).join("report.json").is_file(), "run `{run}` wrote its report");
     }
+    // With --convergence every level's runs are the jobs, and each level's report is made from them.
+    let levels = ["2 mm".to_string(), "1.5 mm".to_string(), "1 mm".to_string()];
+    let converge = |jobs: usize, out: &str| {
+        pairsum::runner::run_convergence(&study, &levels, &opts(jobs, out), false).expect("the convergence study runs")
+    };
+    let (one, two) = (converge(1, "c-one").report, converge(2, "c-two").report);
+    assert!(!one.results.is_empty());
+    assert_eq!(values(&two), values(&one));
+    assert!(dir.join("c-two").join("1.5_mm").join("b").join("report.json").is_file());
     let err = run_file(&dir.join("cube_on_cube.toml"), &opts(2, "case")).err().expect("--jobs on a case").to_string();
     assert!(err.contains("is a case, one run"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
