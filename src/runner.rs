@@ -1256,12 +1256,12 @@ pub fn run_convergence(
     // A study's runs, at every level, are the jobs: all of them side by side first, then each
     // level's report from what they wrote, as `--reanalyse` makes it.
     let runs_made = study && jobs > 1;
-    if runs_made {
-        make_study_runs(path, levels, &at, jobs)?;
-    }
+    let failed = if runs_made { make_study_runs(path, levels, &at, jobs)? } else { vec![] };
     let level_jobs = if study { 1 } else { jobs };
     let done = run_side_by_side(level_jobs, levels, stops, |level| {
-        if reanalyse || runs_made {
+        if let Some((_, msg)) = failed.iter().find(|(l, _)| l == level) {
+            Err(RunFailure::Run(msg.clone()))
+        } else if reanalyse || runs_made {
             reanalyse_file(path, &at(level)).map(|o| o.report)
         } else {
             eprintln!("convergence: resolution `{level}`");
@@ -1311,14 +1311,15 @@ pub fn run_convergence(
 }
 
 /// Every run of a study at every level, `jobs` at a time, each writing into `<level>/<run>/` as
-/// the study would. A run that does not complete wrote its report saying so, and its level is
-/// left out when the levels are analysed; an input error stops the rest and is returned.
+/// the study would. Returns the levels with a run that did not complete, each with the first such
+/// run's failure, to be left out as one at a time they would be; an input error stops the rest
+/// and is returned.
 fn make_study_runs(
     path: &Path,
     levels: &[String],
     at: &dyn Fn(&str) -> RunOptions,
     jobs: usize,
-) -> Result<(), RunFailure> {
+) -> Result<Vec<(String, String)>, RunFailure> {
     let mut tasks = vec![];
     for level in levels {
         let o = at(level);
@@ -1333,10 +1334,17 @@ fn make_study_runs(
         eprintln!("convergence: resolution `{level}`, run `{run}`");
         run_case(case, o).map(|_| ())
     });
-    match done.into_iter().flatten().find_map(|d| d.err().filter(stops)) {
-        Some(e) => Err(e),
-        None => Ok(()),
+    let mut failed: Vec<(String, String)> = vec![];
+    for ((level, run, ..), d) in tasks.iter().zip(done) {
+        match d {
+            Some(Err(RunFailure::Input(e))) => return Err(RunFailure::Input(e)),
+            Some(Err(RunFailure::Run(e))) if !failed.iter().any(|(l, _)| l == level) => {
+                failed.push((level.clone(), format!("run `{run}`: {e}")));
+            }
+            _ => {}
+        }
     }
+    Ok(failed)
 }
 
 /// Runs `run` on every task, `jobs` of them at a time, and returns their results in the tasks'

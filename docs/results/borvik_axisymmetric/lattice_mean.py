@@ -4,8 +4,10 @@ For both plates, prints each level's residual speeds at 150 us with the projecti
 9.90 / 9.95 / 10.00 / 10.05 / 10.10 mm, their mean, standard error and spread, and the
 `pairsum uncertainty` arguments (Δx in mm, SPACING=MEAN±SE) over the levels named below. The
 runs are `m8_r<R>_k<k>` and `m12_r<R>_k<k>` (Δx = 4 mm / k; R in hundredths of a mm), the 8 mm
-plate at ℓ = 4 mm `m8l4_r<R>_k<k>`, and the 8 mm plate with the edge moved by a fraction of the
-spacing (`edge_phase` −0.4 … +0.4) `p8_<phase>_k<k>` (phase m04, m02, 0, p02, p04); stop 114's three radii (`z8r099_k*`, `z8r100_k*`,
+plate at ℓ = 4 mm `m8l4_r<R>_k<k>`, and each plate with the edge moved by a fraction of the
+spacing (`edge_phase` −0.4 … +0.4) `p8_<phase>_k<k>` and `p12_<phase>_k<k>` (phase m04, m02, 0,
+p02, p04; stop 116 added k = 16 and the 12 mm plate, whose phase 0 is the committed case's
+`z12_*`, `m12_r1000_k5`); stop 114's three radii (`z8r099_k*`, `z8r100_k*`,
 `z8r101_k*`, `z8_*`, `z12_*`, `z12r099_*`, `z12r101_*`) stand in where this stop did not run a
 radius (k = 9, 11, 13–16) or reran it to the same digits (not kept twice).
 """
@@ -58,12 +60,22 @@ def arguments(levels, ks):
 PHASES = ["m04", "m02", "0", "p02", "p04"]
 
 
-def phase_table(ks):
-    """The 8 mm plate at each level with its edge at five places over one period of the lattice."""
-    print("p8: k  dx (mm)  " + "  ".join(f"{p:>7}" for p in PHASES) + "    mean ± se     spread")
+def phase_run(plate, phase, k):
+    """A run with the edge at `phase`; at phase 0 the 12 mm plate's is the committed case's."""
+    name = f"p{plate}_{phase}_k{k}"
+    if phase == "0" and plate == 12 and residual(name) is None:
+        name = COMMITTED_12.get(k, {5: "m12_r1000_k5", 16: "z12_l250"}.get(k, "-"))
+    if phase == "0" and plate == 8 and k == 16 and residual(name) is None:
+        name = COMMITTED_8[16]
+    return residual(name)
+
+
+def phase_table(plate, ks):
+    """A plate at each level with its edge at five places over one period of the lattice."""
+    print(f"p{plate}: k  dx (mm)  " + "  ".join(f"{p:>7}" for p in PHASES) + "    mean ± se     spread")
     levels = []
     for k in ks:
-        v = [residual(f"p8_{p}_k{k}") for p in PHASES]
+        v = [phase_run(plate, p, k) for p in PHASES]
         if None in v:
             continue
         mean, se = statistics.mean(v), statistics.stdev(v) / len(v) ** 0.5
@@ -85,6 +97,35 @@ def every_radius():
           f"standard error {sd / len(speeds) ** 0.5:.2f}, range {min(speeds):.2f}–{max(speeds):.2f} m/s")
 
 
+def phase_name(phase):
+    """edge_phase as the run names write it: -0.4 -> m04, 1.0 -> p10, 0 -> 0."""
+    if phase == 0:
+        return "0"
+    return ("m" if phase < 0 else "p") + f"{abs(phase):.1f}".replace(".", "")
+
+
+def two_periods():
+    """The 8 mm plate at 0.5 mm over two periods of the lattice (stop 116): the radius 9.5 to 10.5 mm
+    in steps of 0.1 mm (edge_phase -1.0 ... +1.0). Pairs one spacing apart sit at the same place on
+    the lattice; what differs between them is the radius itself."""
+    phases = [round(-1.0 + 0.2 * i, 1) for i in range(11)]
+    v = {f: phase_run(8, phase_name(f), 8) for f in phases}
+    print("p8 at k = 8, radius 9.5 ... 10.5 mm: " + ", ".join(f"{10 + f / 2:.1f} {x:.2f}" for f, x in v.items() if x))
+    steps = [v[f + 1.0] - v[f] for f in phases if f + 1.0 <= 1.0 and v.get(f) and v.get(round(f + 1.0, 1))]
+    slope = statistics.mean(steps) / 0.5
+    print("  one spacing (0.5 mm) apart: " + ", ".join(f"{d:+.2f}" for d in steps)
+          + f" m/s; mean {statistics.mean(steps):+.2f}, the radius's own slope {slope:.2f} m/s per mm")
+    flat = {f: x - slope * f / 2 for f, x in v.items() if x}
+    by_phase = {}
+    for f, x in flat.items():
+        by_phase.setdefault(round(f % 1.0, 1) % 1.0, []).append(x)
+    print("  less that slope, by place on the lattice (edge_phase mod 1): " + ", ".join(
+        f"{p:.1f}: " + "/".join(f"{x:.2f}" for x in xs) for p, xs in sorted(by_phase.items())))
+    means = [statistics.mean(xs) for xs in by_phase.values()]
+    print(f"  the period's mean {statistics.mean(means):.2f}, its swing {max(means) - min(means):.2f} m/s; "
+          f"runs at one place differ by {max(max(xs) - min(xs) for xs in by_phase.values() if len(xs) > 1):.2f} at most")
+
+
 if __name__ == "__main__":
     eight = table("m8", range(4, 17))
     print("  all levels:   " + arguments(eight, range(4, 17)))
@@ -95,4 +136,6 @@ if __name__ == "__main__":
     print("  from 0.667 mm: " + arguments(twelve, range(6, 13)))
     table("m8l4", range(4, 9))
     every_radius()
-    phase_table(range(4, 13))
+    phase_table(8, range(4, 17))
+    phase_table(12, range(4, 17))
+    two_periods()
