@@ -703,8 +703,10 @@ fn report_outcome(outcome: Result<crate::runner::RunOutcome, crate::runner::RunF
             for row in &r.results {
                 let reference = row.reference.map(|x| format!("{x:.6e}")).unwrap_or_else(|| "-".into());
                 let err = row.rel_error.map(|e| format!("{:+.2} %", 100.0 * e)).unwrap_or_default();
+                // A study's mean carries its standard error, as report.md shows it.
+                let se = row.standard_error.map(|s| format!(" ± {s:.2e}")).unwrap_or_default();
                 eprintln!(
-                    "  {:<32} {:>14.6e} {:<6} reference {:>14} {}",
+                    "  {:<32} {:>14.6e}{se} {:<6} reference {:>14} {}",
                     row.quantity, row.value, row.unit, reference, err
                 );
             }
