@@ -63,10 +63,16 @@ PHASES = ["m04", "m02", "0", "p02", "p04"]
 def phase_run(plate, phase, k):
     """A run with the edge at `phase`; at phase 0 the 12 mm plate's is the committed case's."""
     name = f"p{plate}_{phase}_k{k}"
-    if phase == "0" and plate == 12 and residual(name) is None:
-        name = COMMITTED_12.get(k, {5: "m12_r1000_k5", 16: "z12_l250"}.get(k, "-"))
-    if phase == "0" and plate == 8 and k == 16 and residual(name) is None:
-        name = COMMITTED_8[16]
+    if plate == 12 and residual(name) is None:
+        if phase == "0":
+            name = COMMITTED_12.get(k, {5: "m12_r1000_k5", 16: "z12_l250"}.get(k, "-"))
+        elif k == 8:
+            # ±0.2 at 0.5 mm are the radii 9.9 and 10.1 mm of stop 114.
+            name = {"m02": "z12r099_k8", "p02": "z12r101_k8"}.get(phase, name)
+    if plate == 8 and k == 16 and residual(name) is None:
+        # Phase 0 and ±0.4 (the radii 10.0, 9.9 and 10.1 mm) are stop 108's and 114's runs,
+        # which stop 116's reruns matched to the last digit.
+        name = {"0": COMMITTED_8[16], "m04": "z8r099_k16", "p04": "z8r101_k16"}.get(phase, name)
     return residual(name)
 
 
@@ -111,7 +117,7 @@ def two_periods():
     phases = [round(-1.0 + 0.2 * i, 1) for i in range(11)]
     v = {f: phase_run(8, phase_name(f), 8) for f in phases}
     print("p8 at k = 8, radius 9.5 ... 10.5 mm: " + ", ".join(f"{10 + f / 2:.1f} {x:.2f}" for f, x in v.items() if x))
-    steps = [v[f + 1.0] - v[f] for f in phases if f + 1.0 <= 1.0 and v.get(f) and v.get(round(f + 1.0, 1))]
+    steps = [v[round(f + 1.0, 1)] - v[f] for f in phases if f + 1.0 <= 1.0 and v.get(f) and v.get(round(f + 1.0, 1))]
     slope = statistics.mean(steps) / 0.5
     print("  one spacing (0.5 mm) apart: " + ", ".join(f"{d:+.2f}" for d in steps)
           + f" m/s; mean {statistics.mean(steps):+.2f}, the radius's own slope {slope:.2f} m/s per mm")
