@@ -87,6 +87,14 @@ pub enum RunFailure {
     Run(String),
 }
 
+impl RunFailure {
+    /// An error in what was asked for, which every further run would meet too: it stops a
+    /// convergence study, where a run that did not complete only leaves its level out.
+    fn is_input(&self) -> bool {
+        matches!(self, RunFailure::Input(_))
+    }
+}
+
 impl std::fmt::Display for RunFailure {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
@@ -1252,13 +1260,12 @@ pub fn run_convergence(
     }
     let mut reports = vec![];
     let mut notes = vec![];
-    let stops = |e: &RunFailure| matches!(e, RunFailure::Input(_));
     // A study's runs, at every level, are the jobs: all of them side by side first, then each
     // level's report from what they wrote, as `--reanalyse` makes it.
     let runs_made = study && jobs > 1;
     let failed = if runs_made { make_study_runs(path, levels, &at, jobs)? } else { vec![] };
     let level_jobs = if study { 1 } else { jobs };
-    let done = run_side_by_side(level_jobs, levels, stops, |level| {
+    let done = run_side_by_side(level_jobs, levels, RunFailure::is_input, |level| {
         if let Some((_, msg)) = failed.iter().find(|(l, _)| l == level) {
             Err(RunFailure::Run(msg.clone()))
         } else if reanalyse || runs_made {
@@ -1329,8 +1336,7 @@ fn make_study_runs(
         }
         tasks.extend(runs.into_iter().map(|(r, ro)| (level.clone(), r.name, ro, st.case_path.clone())));
     }
-    let stops = |e: &RunFailure| matches!(e, RunFailure::Input(_));
-    let done = run_side_by_side(jobs, &tasks, stops, |(level, run, o, case)| {
+    let done = run_side_by_side(jobs, &tasks, RunFailure::is_input, |(level, run, o, case)| {
         eprintln!("convergence: resolution `{level}`, run `{run}`");
         run_case(case, o).map(|_| ())
     });
