@@ -93,6 +93,15 @@ impl RunFailure {
     fn is_input(&self) -> bool {
         matches!(self, RunFailure::Input(_))
     }
+
+    /// The failure as a study's run `name` reports it: a run that did not complete is named (an
+    /// input error is the study's, whichever run met it).
+    fn of_run(self, name: &str) -> RunFailure {
+        match self {
+            RunFailure::Run(s) => RunFailure::Run(format!("run `{name}`: {s}")),
+            input => input,
+        }
+    }
 }
 
 impl std::fmt::Display for RunFailure {
@@ -949,7 +958,8 @@ pub fn run_study(path: &Path, opts: &RunOptions, reanalyse: bool) -> Result<RunO
     for ((r, _), outcome) in runs.into_iter().zip(done) {
         // A run not made follows one that failed and stopped the rest (`run_side_by_side`).
         let Some(outcome) = outcome else { break };
-        outcomes.push((r, outcome?));
+        let outcome = outcome.map_err(|e| e.of_run(&r.name))?;
+        outcomes.push((r, outcome));
     }
     let first = &outcomes
         .first()
@@ -1338,14 +1348,14 @@ fn make_study_runs(
     }
     let done = run_side_by_side(jobs, &tasks, RunFailure::is_input, |(level, run, o, case)| {
         eprintln!("convergence: resolution `{level}`, run `{run}`");
-        run_case(case, o).map(|_| ())
+        run_case(case, o).map(|_| ()).map_err(|e| e.of_run(run))
     });
     let mut failed: Vec<(String, String)> = vec![];
-    for ((level, run, ..), d) in tasks.iter().zip(done) {
+    for ((level, ..), d) in tasks.iter().zip(done) {
         match d {
             Some(Err(RunFailure::Input(e))) => return Err(RunFailure::Input(e)),
             Some(Err(RunFailure::Run(e))) if !failed.iter().any(|(l, _)| l == level) => {
-                failed.push((level.clone(), format!("run `{run}`: {e}")));
+                failed.push((level.clone(), e));
             }
             _ => {}
         }

@@ -866,6 +866,55 @@ fn a_study_run_two_at_a_time_gives_the_results_of_one_at_a_time() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// A convergence study of a study, where one level's run stops (its watchdog set to trip at the
+/// first step by that level's `set`): one run at a time and two at a time (every level's runs as
+/// the jobs) both leave that level out with the run's failure and analyse the other three alike.
+#[test]
+fn a_study_level_whose_run_stops_is_left_out_alike_one_or_two_at_a_time() {
+    let dir = out_dir("study-jobs-left-out");
+    std::fs::create_dir_all(&dir).unwrap();
+    let text = std::fs::read_to_string(case("cube_on_cube")).unwrap();
+    let text = text
+        .replace("[parameters]\n", "[parameters]\nspeed_factor = 3\n")
+        .replace("[resolutions]\n", "[resolutions]\ntrips = { dx = \"1.25 mm\", set = { speed_factor = 1e-6 } }\n")
+        + "\n[watchdog]\nspeed_factor = ${speed_factor}\n";
+    std::fs::write(dir.join("cube_on_cube.toml"), text).unwrap();
+    let study = dir.join("study.toml");
+    std::fs::write(
+        &study,
+        "name = \"s\"\ncase = \"cube_on_cube.toml\"\n\
+         [[runs]]\nname = \"a\"\nset = { v_impact = 400 }\n[[runs]]\nname = \"b\"\nset = { v_impact = 600 }\n",
+    )
+    .unwrap();
+    let levels = ["2 mm", "1.5 mm", "trips", "1 mm"].map(String::from);
+    let converge = |jobs: usize, out: &str| {
+        let opts =
+            RunOptions { backend: BackendChoice::Cpu, out: dir.join(out), vtk: false, jobs, ..Default::default() };
+        pairsum::runner::run_convergence(&study, &levels, &opts, false)
+            .unwrap_or_else(|e| panic!("the convergence study runs with {jobs} job(s): {e}"))
+            .report
+    };
+    let (one, two) = (converge(1, "one"), converge(2, "two"));
+    for (jobs, r) in [(1, &one), (2, &two)] {
+        let left_out: Vec<&String> =
+            r.notes.iter().filter(|n| n.contains("did not complete and is left out")).collect();
+        assert_eq!(left_out.len(), 1, "{jobs} job(s): {:?}", r.notes);
+        assert!(
+            left_out[0].starts_with("`trips`") && left_out[0].contains("run `a`"),
+            "{jobs} job(s): {}",
+            left_out[0]
+        );
+        let analysed = r.notes.iter().filter(|n| n.contains(" particles, ") && n.contains(" steps, ")).count();
+        assert_eq!(analysed, 3, "{jobs} job(s): {:?}", r.notes);
+    }
+    let values = |r: &pairsum::report::RunReport| -> Vec<(String, f64)> {
+        r.results.iter().map(|x| (x.quantity.clone(), x.value)).collect()
+    };
+    assert!(!one.results.is_empty());
+    assert_eq!(values(&two), values(&one));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// A wrong `[neighbours]` table is an error at its line: an unknown search, a skin beyond the
 /// cut-off, an adaptive search without its field or on a field the model lacks.
 #[test]
