@@ -9,8 +9,11 @@ spacing (`edge_phase` −0.4 … +0.4) `p8_<phase>_k<k>` and `p12_<phase>_k<k>` 
 p02, p04; stop 116 added k = 16 and the 12 mm plate, whose phase 0 is the committed case's
 `z12_*`, `m12_r1000_k5`); stop 114's three radii (`z8r099_k*`, `z8r100_k*`,
 `z8r101_k*`, `z8_*`, `z12_*`, `z12r099_*`, `z12r101_*`) stand in where this stop did not run a
-radius (k = 9, 11, 13–16) or reran it to the same digits (not kept twice).
+radius (k = 9, 11, 13–16) or reran it to the same digits (not kept twice). Stop 117 added the
+8 mm plate at k = 20 and `timeline`: each level's period mean of the projectile's speed over time,
+from the runs' histories.csv.
 """
+import csv
 import glob
 import statistics
 
@@ -60,8 +63,8 @@ def arguments(levels, ks):
 PHASES = ["m04", "m02", "0", "p02", "p04"]
 
 
-def phase_run(plate, phase, k):
-    """A run with the edge at `phase`; at phase 0 the 12 mm plate's is the committed case's."""
+def phase_folder(plate, phase, k):
+    """The run with the edge at `phase`; at phase 0 the 12 mm plate's is the committed case's."""
     name = f"p{plate}_{phase}_k{k}"
     if plate == 12 and residual(name) is None:
         if phase == "0":
@@ -73,7 +76,12 @@ def phase_run(plate, phase, k):
         # Phase 0 and ±0.4 (the radii 10.0, 9.9 and 10.1 mm) are stop 108's and 114's runs,
         # which stop 116's reruns matched to the last digit.
         name = {"0": COMMITTED_8[16], "m04": "z8r099_k16", "p04": "z8r101_k16"}.get(phase, name)
-    return residual(name)
+    return name
+
+
+def phase_run(plate, phase, k):
+    """The projectile's residual speed with the edge at `phase`, or None where not run."""
+    return residual(phase_folder(plate, phase, k))
 
 
 def phase_table(plate, ks):
@@ -132,6 +140,35 @@ def two_periods():
           f"runs at one place differ by {max(max(xs) - min(xs) for xs in by_phase.values() if len(xs) > 1):.2f} at most")
 
 
+def speed_at(run, t):
+    """The projectile's speed (m/s) at t (s) in a run's histories.csv, linearly interpolated."""
+    with open(run + "/histories.csv") as f:
+        rows = list(csv.reader(f))
+    col = rows[0].index("projectile_velocity [m/s]")
+    points = [(float(r[0]), abs(float(r[col]))) for r in rows[1:]]
+    for (t0, v0), (t1, v1) in zip(points, points[1:]):
+        if t0 <= t <= t1:
+            return v0 + (v1 - v0) * (t - t0) / (t1 - t0) if t1 > t0 else v0
+    return points[-1][1]
+
+
+def timeline(plate, ks, times_us, uncertain_at=()):
+    """The period's mean of the projectile's speed over time at each level (stop 117): where in the
+    perforation the levels part. With `pairsum uncertainty` arguments at the times `uncertain_at`."""
+    print(f"p{plate} over time (us): k " + " ".join(f"{t:7g}" for t in times_us))
+    means = {}
+    for k in ks:
+        runs = [phase_folder(plate, p, k) for p in PHASES]
+        if any(residual(r) is None for r in runs):
+            continue
+        rows = [[speed_at(r, t * 1e-6) for t in times_us] for r in runs]
+        means[k] = [(statistics.mean(c), statistics.stdev(c) / len(c) ** 0.5) for c in zip(*rows)]
+        print(f"  {k:<3} " + " ".join(f"{m:7.2f}" for m, _ in means[k]))
+    for t in uncertain_at:
+        i = list(times_us).index(t)
+        print(f"  at {t} us: " + arguments([(k, m[i][0], m[i][1]) for k, m in means.items()], ks))
+
+
 if __name__ == "__main__":
     eight = table("m8", range(4, 17))
     print("  all levels:   " + arguments(eight, range(4, 17)))
@@ -142,6 +179,8 @@ if __name__ == "__main__":
     print("  from 0.667 mm: " + arguments(twelve, range(6, 13)))
     table("m8l4", range(4, 9))
     every_radius()
-    phase_table(8, range(4, 17))
+    phase_table(8, range(4, 21))
     phase_table(12, range(4, 17))
     two_periods()
+    timeline(8, range(8, 21), [20, 40, 50, 55, 60, 61, 62, 63, 64, 65, 70, 80, 100, 150], (50, 60, 150))
+    timeline(12, range(4, 17), [20, 40, 50, 51, 52, 53, 54, 55, 60, 80, 100, 150], (40, 50, 150))
