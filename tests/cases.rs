@@ -817,6 +817,18 @@ fn a_study_is_analysed_again_from_its_runs_reports_without_running() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// A study beside `dir/cube_on_cube.toml` of two runs, `a` at 400 m/s and `b` at 600 m/s.
+fn two_speed_study(dir: &Path) -> PathBuf {
+    let study = dir.join("study.toml");
+    std::fs::write(
+        &study,
+        "name = \"s\"\ncase = \"cube_on_cube.toml\"\n\
+         [[runs]]\nname = \"a\"\nset = { v_impact = 400 }\n[[runs]]\nname = \"b\"\nset = { v_impact = 600 }\n",
+    )
+    .unwrap();
+    study
+}
+
 /// `--jobs 2` runs a study's two runs side by side, each on its share of the threads, and gives
 /// every result the runs give one after another, alone and at every level of a convergence
 /// study; on a case, which is one run, it is refused.
@@ -826,13 +838,7 @@ fn a_study_run_two_at_a_time_gives_the_results_of_one_at_a_time() {
     let dir = out_dir("study-jobs");
     std::fs::create_dir_all(&dir).unwrap();
     std::fs::copy(case("cube_on_cube"), dir.join("cube_on_cube.toml")).unwrap();
-    let study = dir.join("study.toml");
-    std::fs::write(
-        &study,
-        "name = \"s\"\ncase = \"cube_on_cube.toml\"\n\
-         [[runs]]\nname = \"a\"\nset = { v_impact = 400 }\n[[runs]]\nname = \"b\"\nset = { v_impact = 600 }\n",
-    )
-    .unwrap();
+    let study = two_speed_study(&dir);
     let opts = |jobs: usize, out: &str| RunOptions {
         backend: BackendChoice::Cpu,
         scene: pairsum::scene::Options { resolution: Some("1 mm".into()), ..Default::default() },
@@ -879,13 +885,7 @@ fn a_study_level_whose_run_stops_is_left_out_alike_one_or_two_at_a_time() {
         .replace("[resolutions]\n", "[resolutions]\ntrips = { dx = \"1.25 mm\", set = { speed_factor = 1e-6 } }\n")
         + "\n[watchdog]\nspeed_factor = ${speed_factor}\n";
     std::fs::write(dir.join("cube_on_cube.toml"), text).unwrap();
-    let study = dir.join("study.toml");
-    std::fs::write(
-        &study,
-        "name = \"s\"\ncase = \"cube_on_cube.toml\"\n\
-         [[runs]]\nname = \"a\"\nset = { v_impact = 400 }\n[[runs]]\nname = \"b\"\nset = { v_impact = 600 }\n",
-    )
-    .unwrap();
+    let study = two_speed_study(&dir);
     let levels = ["2 mm", "1.5 mm", "trips", "1 mm"].map(String::from);
     let converge = |jobs: usize, out: &str| {
         let opts =
