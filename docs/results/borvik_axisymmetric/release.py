@@ -4,9 +4,10 @@ OUT is a run of borvik_axisymmetric.toml with the `[[profiles]]` of release_prof
 (the plate within 14 mm of the axis and the projectile, every microsecond from 56 to 68 us). Prints,
 at each time, the axial momentum (N s, each particle's ring: m 2 pi r v_y) of the projectile, of
 the plug (the plate within 1 mm inside the projectile's edge), of the band (1 mm inside to 1.5 mm
-outside the edge) and of the plate beyond it to 14 mm; the projectile's nose; the mean pressure of
+outside the edge) and of the plate beyond it (to the profile's edge); the projectile's nose; the mean pressure of
 the plate particles within 2 mm ahead of the nose (positive: compressed); and the band's intact and
-failed particles.
+failed particles; and the two bodies' momentum as the profiles hold it (the whole plate's only
+with the plate's box widened to r < 260 mm: the axial momentum the scheme makes, stop 117).
 """
 import csv
 import math
@@ -26,7 +27,7 @@ def momentum(particles):
 
 def release(out):
     print(out)
-    print(" t (us)  projectile    plug    band  beyond  nose (mm)  p ahead (GPa)  band intact  failed")
+    print(" t (us)  projectile    plug    band  beyond  nose (mm)  p ahead (GPa)  band intact  failed  bodies")
     for k in range(13):
         projectile = load(f"{out}/profiles/projectile_{k}.csv")
         plate = load(f"{out}/profiles/plate_{k}.csv")
@@ -38,7 +39,8 @@ def release(out):
         p = sum(d["p"] for d in ahead) / max(len(ahead), 1)
         failed = sum(1 for d in band if d["D"] >= 1)
         print(f"  {56 + k:5d}  {momentum(projectile):10.3f}  {momentum(plug):6.3f}  {momentum(band):6.3f}  "
-              f"{momentum(beyond):6.3f}  {nose * 1e3:9.3f}  {p / 1e9:13.3f}  {len(band) - failed:11d}  {failed:6d}")
+              f"{momentum(beyond):6.3f}  {nose * 1e3:9.3f}  {p / 1e9:13.3f}  {len(band) - failed:11d}  {failed:6d}  "
+              f"{momentum(projectile) + momentum(plate):7.3f}")
 
 
 if __name__ == "__main__":
