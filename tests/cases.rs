@@ -817,6 +817,11 @@ fn a_study_is_analysed_again_from_its_runs_reports_without_running() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// A report's results as (quantity, value), to compare two runs' figures.
+fn result_values(r: &pairsum::report::RunReport) -> Vec<(String, f64)> {
+    r.results.iter().map(|x| (x.quantity.clone(), x.value)).collect()
+}
+
 /// A study beside `dir/cube_on_cube.toml` of two runs, `a` at 400 m/s and `b` at 600 m/s.
 fn two_speed_study(dir: &Path) -> PathBuf {
     let study = dir.join("study.toml");
@@ -849,11 +854,8 @@ fn a_study_run_two_at_a_time_gives_the_results_of_one_at_a_time() {
     };
     let one = run_file(&study, &opts(1, "one")).expect("the study runs one run at a time").report;
     let two = run_file(&study, &opts(2, "two")).expect("the study runs two runs at a time").report;
-    let values = |r: &pairsum::report::RunReport| -> Vec<(String, f64)> {
-        r.results.iter().map(|x| (x.quantity.clone(), x.value)).collect()
-    };
-    assert!(one.results.len() >= 2, "{:?}", values(&one));
-    assert_eq!(values(&two), values(&one));
+    assert!(one.results.len() >= 2, "{:?}", result_values(&one));
+    assert_eq!(result_values(&two), result_values(&one));
     assert_eq!(two.steps, one.steps);
     for run in ["a", "b"] {
         assert!(dir.join("two").join(run).join("report.json").is_file(), "run `{run}` wrote its report");
@@ -865,7 +867,7 @@ fn a_study_run_two_at_a_time_gives_the_results_of_one_at_a_time() {
     };
     let (one, two) = (converge(1, "c-one").report, converge(2, "c-two").report);
     assert!(!one.results.is_empty());
-    assert_eq!(values(&two), values(&one));
+    assert_eq!(result_values(&two), result_values(&one));
     assert!(dir.join("c-two").join("1.5_mm").join("b").join("report.json").is_file());
     let err = run_file(&dir.join("cube_on_cube.toml"), &opts(2, "case")).err().expect("--jobs on a case").to_string();
     assert!(err.contains("is a case, one run"), "{err}");
@@ -907,11 +909,8 @@ fn a_study_level_whose_run_stops_is_left_out_alike_one_or_two_at_a_time() {
         let analysed = r.notes.iter().filter(|n| n.contains(" particles, ") && n.contains(" steps, ")).count();
         assert_eq!(analysed, 3, "{jobs} job(s): {:?}", r.notes);
     }
-    let values = |r: &pairsum::report::RunReport| -> Vec<(String, f64)> {
-        r.results.iter().map(|x| (x.quantity.clone(), x.value)).collect()
-    };
     assert!(!one.results.is_empty());
-    assert_eq!(values(&two), values(&one));
+    assert_eq!(result_values(&two), result_values(&one));
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -140,16 +140,21 @@ def two_periods():
           f"runs at one place differ by {max(max(xs) - min(xs) for xs in by_phase.values() if len(xs) > 1):.2f} at most")
 
 
-def speed_at(run, t):
-    """The projectile's speed (m/s) at t (s) in a run's histories.csv, linearly interpolated."""
+def speeds_at(run, times):
+    """The projectile's speed (m/s) at each of `times` (s) in a run's histories.csv, linearly
+    interpolated (the last recorded speed beyond its end)."""
     with open(run + "/histories.csv") as f:
         rows = list(csv.reader(f))
     col = rows[0].index("projectile_velocity [m/s]")
     points = [(float(r[0]), abs(float(r[col]))) for r in rows[1:]]
-    for (t0, v0), (t1, v1) in zip(points, points[1:]):
-        if t0 <= t <= t1:
-            return v0 + (v1 - v0) * (t - t0) / (t1 - t0) if t1 > t0 else v0
-    return points[-1][1]
+
+    def at(t):
+        for (t0, v0), (t1, v1) in zip(points, points[1:]):
+            if t0 <= t <= t1:
+                return v0 + (v1 - v0) * (t - t0) / (t1 - t0) if t1 > t0 else v0
+        return points[-1][1]
+
+    return [at(t) for t in times]
 
 
 def timeline(plate, ks, times_us, uncertain_at=()):
@@ -161,7 +166,7 @@ def timeline(plate, ks, times_us, uncertain_at=()):
         runs = [phase_folder(plate, p, k) for p in PHASES]
         if any(residual(r) is None for r in runs):
             continue
-        rows = [[speed_at(r, t * 1e-6) for t in times_us] for r in runs]
+        rows = [speeds_at(r, [t * 1e-6 for t in times_us]) for r in runs]
         means[k] = [(statistics.mean(c), statistics.stdev(c) / len(c) ** 0.5) for c in zip(*rows)]
         print(f"  {k:<3} " + " ".join(f"{m:7.2f}" for m, _ in means[k]))
     for t in uncertain_at:

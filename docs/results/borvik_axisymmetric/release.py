@@ -3,11 +3,11 @@
 OUT is a run of borvik_axisymmetric.toml with the `[[profiles]]` of release_profiles.toml appended
 (the plate within 14 mm of the axis and the projectile, every microsecond from 56 to 68 us). Prints,
 at each time, the axial momentum (N s, each particle's ring: m 2 pi r v_y) of the projectile, of
-the plug (the plate within 1 mm inside the projectile's edge), of the band (1 mm inside to 1.5 mm
-outside the edge) and of the plate beyond it (to the profile's edge); the projectile's nose; the mean pressure of
-the plate particles within 2 mm ahead of the nose (positive: compressed); and the band's intact and
-failed particles; and the two bodies' momentum as the profiles hold it (the whole plate's only
-with the plate's box widened to r < 260 mm: the axial momentum the scheme makes, stop 117).
+the plug (the plate more than 1 mm inside the projectile's edge), of the band (1 mm inside to
+1.5 mm outside the edge) and of the plate beyond it (to the profile's edge); the projectile's nose;
+the mean pressure of the plate particles within 2 mm ahead of the nose (positive: compressed); the
+band's intact and failed particles; and the two bodies' momentum as the profiles hold it (the whole
+plate's only with the plate's box widened to r < 260 mm: the axial momentum the scheme makes).
 """
 import csv
 import math
