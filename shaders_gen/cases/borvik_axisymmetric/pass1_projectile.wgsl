@@ -189,23 +189,23 @@ fn st_p_contact(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 54u + 6u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 54u + 10u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 54u + 22u;
     return params[b];
 }
 fn prm_contact_colour(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 54u + 29u;
     return params[b];
 }
 fn prm_contact_stiffness(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 54u + 30u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -277,7 +277,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         if (in_groups(1u, ints[j])) {
             grad_v = grad_v + outer((ldj_v(j, sgn) - v_i), ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * gradW_ij));
         }
-        // pairsum other_body_colour (stdlib/contact/overlap_pressure.sph:39)
+        // pairsum other_body_colour (stdlib/contact/overlap_pressure.sph:42)
         if ((body_i != ldj_body(j, sgn))) {
             colour_other = colour_other + ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * W_ij);
         }

@@ -57,6 +57,11 @@ fn st_x(i: u32, v: vec2<f32>) {
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
+fn ldj_x(j: u32, sgn: vec3<f32>) -> vec2<f32> {
+    let base = info[5u];
+    let b = u32(base + i32(j) * 2);
+    return (vec2<f32>(data[b], data[b + 1u]) * sgn.xy);
+}
 fn ld_v(i: u32) -> vec2<f32> {
     let b = u32(info[7 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
@@ -355,47 +360,47 @@ fn st_lap_weight(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 54u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 54u + 1u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 54u + 6u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 54u + 10u;
     return params[b];
 }
 fn prm_delta(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 54u + 11u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 54u + 12u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 54u + 22u;
     return params[b];
 }
 fn prm_hourglass_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 54u + 23u;
     return params[b];
 }
 fn prm_hourglass_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 54u + 24u;
     return params[b];
 }
 fn prm_contact_colour(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 54u + 29u;
     return params[b];
 }
 fn prm_contact_stiffness(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 54u + 30u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -433,6 +438,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let c0_i = prm_c0(i);
     let hourglass_alpha_i = prm_hourglass_alpha(i);
     let hourglass_E_i = prm_hourglass_E(i);
+    let x_i = ld_x(i);
     let v_i = ld_v(i);
     let dx_i = ld_dx(i);
     let body_i = ld_body(i);
@@ -501,7 +507,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 grad_v_2 = grad_v_2 + outer((ldj_v(j, sgn) - v_i), ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * g));
             }
         }
-        // pairsum shaped_hourglass (stdlib/solid/shaped_hourglass.sph:32)
+        // pairsum shaped_hourglass (stdlib/solid/shaped_hourglass.sph:35)
         if (in_groups(2u, ints[j])) {
             if ((((body_i == ldj_body(j, sgn)) && (D_i < 1.0)) && (ldj_D(j, sgn) < 1.0))) {
                 let X_ij = (x_ij - (u_i - ldj_u(j, sgn)));
@@ -509,7 +515,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 let along = (x_ij / r_ij);
                 let miss = dot((((0.5 * (kernel_shape_i + ldj_kernel_shape(j, sgn))) * X_ij) - x_ij), along);
                 let k_2 = (((((hourglass_alpha_i * ldj_m(j, sgn)) / rho0_i) * kernel_w_at(r0, (h_ratio_i * (0.5 * (dx_i + ldj_dx(j, sgn)))))) * hourglass_E_i) / (rho0_i * (r0 * r0)));
-                dv_hourglass = dv_hourglass + ((k_2 * miss) * along);
+                dv_hourglass = dv_hourglass + (((((max(x_i[0], (0.1 * dx_i)) + abs(ldj_x(j, sgn)[0])) / (2.0 * max(x_i[0], (0.1 * dx_i)))) * k_2) * miss) * along);
                 hourglass_rate2 = hourglass_rate2 + k_2;
             }
         }
@@ -538,7 +544,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 sum = sum + (((((((c0_i * h0_3) * ldj_m(j, sgn)) / ldj_rho(j, sgn)) * 2.0) * (rho_i - ldj_rho(j, sgn))) * dot(x_ij, ((select(((0.0 * x_6) / 1.0), (((slope_3 / max(q_3, 1e-30)) * norm_3) * (M_5 * x_6)), (q_3 > 0.0)) + select(((0.0 * x_8) / 1.0), (((slope_4 / max(q_4, 1e-30)) * norm_4) * (M_7 * x_8)), (q_4 > 0.0))) / 2.0))) / ((r_ij * r_ij) + (0.01 * (h0_3 * h0_3))));
             }
         }
-        // pairsum other_body_colour (stdlib/contact/overlap_pressure.sph:39)
+        // pairsum other_body_colour (stdlib/contact/overlap_pressure.sph:42)
         if ((body_i != ldj_body(j, sgn))) {
             colour_other = colour_other + ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * W_ij);
         }
@@ -565,19 +571,19 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     dkernel_shape = (gv * kernel_shape_i);
     // then continuity_from_strain_rate
     var drho_i: f32 = ld_drho(i);
-    let w = min((ld_x(i)[0] / (2.0 * dx_i)), 1.0);
-    drho_i = ((-rho_i) * (trace(edot) + (((w * v_i[0]) / max(ld_x(i)[0], (0.1 * dx_i))) + ((1.0 - w) * edot[0][0]))));
+    let w = min((x_i[0] / (2.0 * dx_i)), 1.0);
+    drho_i = ((-rho_i) * (trace(edot) + (((w * v_i[0]) / max(x_i[0], (0.1 * dx_i))) + ((1.0 - w) * edot[0][0]))));
     // then shaped_density_diffusion
     drho_diffusion = (prm_delta(i) * sum);
     // then jaumann
     var ds_i: mat2x2<f32> = ld_ds(i);
-    let w_2 = min((ld_x(i)[0] / (2.0 * dx_i)), 1.0);
-    ds_i = (((2.0 * prm_G(i)) * (dev(edot) - (((((w_2 * v_i[0]) / max(ld_x(i)[0], (0.1 * dx_i))) + ((1.0 - w_2) * edot[0][0])) / 3.0) * eye()))) + sym(((ld_s(i) * transpose(spin)) + (spin * ld_s(i)))));
+    let w_2 = min((x_i[0] / (2.0 * dx_i)), 1.0);
+    ds_i = (((2.0 * prm_G(i)) * (dev(edot) - (((((w_2 * v_i[0]) / max(x_i[0], (0.1 * dx_i))) + ((1.0 - w_2) * edot[0][0])) / 3.0) * eye()))) + sym(((ld_s(i) * transpose(spin)) + (spin * ld_s(i)))));
     // then jaumann_hoop
     var ds_hoop_i: f32 = ld_ds_hoop(i);
-    let w_3 = min((ld_x(i)[0] / (2.0 * dx_i)), 1.0);
-    let w_4 = min((ld_x(i)[0] / (2.0 * dx_i)), 1.0);
-    ds_hoop_i = ((2.0 * prm_G(i)) * ((((w_3 * v_i[0]) / max(ld_x(i)[0], (0.1 * dx_i))) + ((1.0 - w_3) * edot[0][0])) - ((trace(edot) + (((w_4 * v_i[0]) / max(ld_x(i)[0], (0.1 * dx_i))) + ((1.0 - w_4) * edot[0][0]))) / 3.0)));
+    let w_3 = min((x_i[0] / (2.0 * dx_i)), 1.0);
+    let w_4 = min((x_i[0] / (2.0 * dx_i)), 1.0);
+    ds_hoop_i = ((2.0 * prm_G(i)) * ((((w_3 * v_i[0]) / max(x_i[0], (0.1 * dx_i))) + ((1.0 - w_3) * edot[0][0])) - ((trace(edot) + (((w_4 * v_i[0]) / max(x_i[0], (0.1 * dx_i))) + ((1.0 - w_4) * edot[0][0]))) / 3.0)));
     // then contact_pressure
     var p_contact_i: f32 = ld_p_contact(i);
     p_contact_i = ((prm_contact_stiffness(i) * prm_bulk(i)) * max((colour_other - prm_contact_colour(i)), 0.0));
@@ -587,8 +593,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     lap_weight = (exact_for_quadratics * weight);
     // then compressive_share
     var compression_i: f32 = ld_compression(i);
-    let w_5 = min((ld_x(i)[0] / (2.0 * dx_i)), 1.0);
-    let volumetric = abs((trace(edot) + (((w_5 * v_i[0]) / max(ld_x(i)[0], (0.1 * dx_i))) + ((1.0 - w_5) * edot[0][0]))));
+    let w_5 = min((x_i[0] / (2.0 * dx_i)), 1.0);
+    let volumetric = abs((trace(edot) + (((w_5 * v_i[0]) / max(x_i[0], (0.1 * dx_i))) + ((1.0 - w_5) * edot[0][0]))));
     compression_i = (volumetric / ((volumetric + frob(dev(edot))) + ((0.01 * ld_c(i)) / ld_h(i))));
     st_L_inv(i, L_inv);
     st_edot(i, edot);

@@ -53,6 +53,11 @@ fn st_x(i: u32, v: vec2<f32>) {
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
+fn ldj_x(j: u32, sgn: vec3<f32>) -> vec2<f32> {
+    let base = info[5u];
+    let b = u32(base + i32(j) * 2);
+    return (vec2<f32>(data[b], data[b + 1u]) * sgn.xy);
+}
 fn ld_v(i: u32) -> vec2<f32> {
     let b = u32(info[7 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
@@ -124,6 +129,11 @@ fn st_L_inv(i: u32, v: mat2x2<f32>) {
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[0][1];
     data[b + 3u] = v[1][1];
+}
+fn ldj_L_inv(j: u32, sgn: vec3<f32>) -> mat2x2<f32> {
+    let base = info[21u];
+    let b = u32(base + i32(j) * 4);
+    return flip_m(mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u])), sgn.xy);
 }
 fn ld_edot(i: u32) -> mat2x2<f32> {
     let b = u32(info[23 + G] + i32(i) * 3);
@@ -247,23 +257,23 @@ fn st_a_contact(i: u32, v: vec2<f32>) {
     data[b + 1u] = v[1];
 }
 fn prm_delta(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 54u + 11u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 54u + 12u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 54u + 14u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 54u + 15u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 54u + 16u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -288,16 +298,19 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let sigma_hoop = (ld_s_hoop(i) - ld_p(i));
     let w = min((ld_x(i)[0] / (2.0 * ld_dx(i))), 1.0);
     de = ((sigma_hoop * (((w * ld_v(i)[0]) / max(ld_x(i)[0], (0.1 * ld_dx(i)))) + ((1.0 - w) * ld_edot(i)[0][0]))) / ld_rho(i));
-    let s_2 = ld_s(i);
     let s_hoop = ld_s_hoop(i);
+    let p = ld_p(i);
     let w_2 = 1.0;
-    dv = ((w_2 * ((s_2 - (s_hoop * eye())) * vec2<f32>(1.0, 0.0))) / (ld_rho(i) * max(ld_x(i)[0], (0.1 * ld_dx(i)))));
+    let sigma_hoop_2 = ((w_2 * (s_hoop - min(p, 0.0))) - max(p, 0.0));
+    dv = (((-sigma_hoop_2) * vec2<f32>(1.0, 0.0)) / (ld_rho(i) * max(ld_x(i)[0], (0.1 * ld_dx(i)))));
     let delta_i = prm_delta(i);
     let c0_i = prm_c0(i);
     let visc_a_i = prm_visc_a(i);
     let visc_b_i = prm_visc_b(i);
     let eta_ratio_i = prm_eta_ratio(i);
+    let x_i = ld_x(i);
     let v_i = ld_v(i);
+    let dx_i = ld_dx(i);
     let body_i = ld_body(i);
     let rho_i = ld_rho(i);
     let h_i = ld_h(i);
@@ -340,9 +353,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         let r_ij = sqrt(r2);
         let W_ij = kernel_w(r_ij, h_ij);
         let gradW_ij = kernel_grad(r_ij, h_ij) * x_ij;
-        // pairsum contact (stdlib/contact/overlap_pressure.sph:49)
+        // pairsum contact (stdlib/contact/overlap_pressure.sph:52)
         if ((body_i != ldj_body(j, sgn))) {
-            a_contact = a_contact + ((((-ldj_m(j, sgn)) * (p_contact_i + ldj_p_contact(j, sgn))) / (rho_i * ldj_rho(j, sgn))) * gradW_ij);
+            a_contact = a_contact + (((((-((max(x_i[0], (0.1 * dx_i)) + abs(ldj_x(j, sgn)[0])) / (2.0 * max(x_i[0], (0.1 * dx_i))))) * ldj_m(j, sgn)) * (p_contact_i + ldj_p_contact(j, sgn))) / (rho_i * ldj_rho(j, sgn))) * gradW_ij);
         }
         // pairsum continuity (stdlib/continuity/delta_sph.sph:26)
         if (in_groups(1u, ints[j])) {
@@ -370,7 +383,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let A = ((div_m(sig_i, (rho_i * rho_i)) + div_m(sig_j, (p2 * p2))) - (pi_ij * eye()));
             de = de + (-((0.5 * ldj_m(j, sgn)) * dot((v_i - ldj_v(j, sgn)), (A * gradW_ij))));
         }
-        // pairsum momentum (stdlib/momentum/corrected.sph:14)
+        // pairsum momentum (stdlib/momentum/corrected.sph:17)
         if (in_groups(1u, ints[j])) {
             if ((body_i == ldj_body(j, sgn))) {
                 let sig_i_2 = (s_i - (p_i * eye()));
@@ -384,16 +397,20 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 let c_bar_2 = ((c_i_3 + c_j_2) / 2.0);
                 let rho_bar_2 = (0.5 * (rho_i + ldj_rho(j, sgn)));
                 let pi_ij_2 = select(0.0, (((((-visc_a_i) * c_bar_2) * phi_3) + (visc_b_i * (phi_3 * phi_3))) / rho_bar_2), (vr_2 < 0.0));
-                let p4 = ldj_rho(j, sgn);
-                let L_inv_2 = L_inv_i;
+                let sig_i_3 = sig_i_2;
+                let sig_j_3 = sig_j_2;
+                let visc = pi_ij_2;
                 let g_2 = gradW_ij;
-                dv = dv + ((ldj_m(j, sgn) * ((div_m(sig_i_2, (rho_i * rho_i)) + div_m(sig_j_2, (p4 * p4))) - (pi_ij_2 * eye()))) * (L_inv_2 * g_2));
+                let half = (((((max(x_i[0], (0.1 * dx_i)) + abs(ldj_x(j, sgn)[0])) / (2.0 * max(x_i[0], (0.1 * dx_i)))) * visc) / 2.0) * eye());
+                let p4 = ldj_rho(j, sgn);
+                let each = (((div_m(((ldj_x(j, sgn)[0] / max(x_i[0], (0.1 * dx_i))) * sig_i_3), (rho_i * rho_i)) - half) * (L_inv_i * g_2)) + ((div_m(sig_j_3, (p4 * p4)) - half) * (ldj_L_inv(j, sgn) * g_2)));
+                dv = dv + (ldj_m(j, sgn) * each);
             }
         }
     }
     // then continuity
-    let w_3 = min((ld_x(i)[0] / (2.0 * ld_dx(i))), 1.0);
-    drho = ((rho_i * (div_v - (((w_3 * v_i[0]) / max(ld_x(i)[0], (0.1 * ld_dx(i)))) + ((1.0 - w_3) * ld_edot(i)[0][0])))) + diffusion);
+    let w_3 = min((x_i[0] / (2.0 * dx_i)), 1.0);
+    drho = ((rho_i * (div_v - (((w_3 * v_i[0]) / max(x_i[0], (0.1 * dx_i))) + ((1.0 - w_3) * ld_edot(i)[0][0])))) + diffusion);
     st_drho(i, drho);
     st_de(i, de);
     st_dv(i, dv);

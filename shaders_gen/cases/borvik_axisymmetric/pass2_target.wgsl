@@ -57,6 +57,11 @@ fn st_x(i: u32, v: vec2<f32>) {
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
+fn ldj_x(j: u32, sgn: vec3<f32>) -> vec2<f32> {
+    let base = info[5u];
+    let b = u32(base + i32(j) * 2);
+    return (vec2<f32>(data[b], data[b + 1u]) * sgn.xy);
+}
 fn ld_v(i: u32) -> vec2<f32> {
     let b = u32(info[7 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
@@ -125,6 +130,11 @@ fn st_L_inv(i: u32, v: mat2x2<f32>) {
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[0][1];
     data[b + 3u] = v[1][1];
+}
+fn ldj_L_inv(j: u32, sgn: vec3<f32>) -> mat2x2<f32> {
+    let base = info[21u];
+    let b = u32(base + i32(j) * 4);
+    return flip_m(mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u])), sgn.xy);
 }
 fn ld_edot(i: u32) -> mat2x2<f32> {
     let b = u32(info[23 + G] + i32(i) * 3);
@@ -301,27 +311,27 @@ fn st_a_contact(i: u32, v: vec2<f32>) {
     data[b + 1u] = v[1];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 54u + 1u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 54u + 14u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 54u + 15u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 54u + 16u;
     return params[b];
 }
 fn prm_hourglass_visc(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 54u + 19u;
     return params[b];
 }
 fn prm_damage_coupling(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 54u + 25u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -341,19 +351,21 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let D = ld_D(i);
     let coupling = prm_damage_coupling(i);
     let w = (1.0 - select((coupling * D), 1.0, (D >= 1.0)));
-    let s_2 = ld_s(i);
     let s_hoop = ld_s_hoop(i);
+    let p = ld_p(i);
     let w_2 = w;
-    dv = ((w_2 * ((s_2 - (s_hoop * eye())) * vec2<f32>(1.0, 0.0))) / (ld_rho(i) * max(ld_x(i)[0], (0.1 * ld_dx(i)))));
-    let sigma_hoop = ((w * (ld_s_hoop(i) - min(ld_p(i), 0.0))) - max(ld_p(i), 0.0));
+    let sigma_hoop = ((w_2 * (s_hoop - min(p, 0.0))) - max(p, 0.0));
+    dv = (((-sigma_hoop) * vec2<f32>(1.0, 0.0)) / (ld_rho(i) * max(ld_x(i)[0], (0.1 * ld_dx(i)))));
+    let sigma_hoop_2 = ((w * (ld_s_hoop(i) - min(ld_p(i), 0.0))) - max(ld_p(i), 0.0));
     let w_3 = min((ld_x(i)[0] / (2.0 * ld_dx(i))), 1.0);
-    de = ((sigma_hoop * (((w_3 * ld_v(i)[0]) / max(ld_x(i)[0], (0.1 * ld_dx(i)))) + ((1.0 - w_3) * ld_edot(i)[0][0]))) / ld_rho(i));
+    de = ((sigma_hoop_2 * (((w_3 * ld_v(i)[0]) / max(ld_x(i)[0], (0.1 * ld_dx(i)))) + ((1.0 - w_3) * ld_edot(i)[0][0]))) / ld_rho(i));
     let h_ratio_i = prm_h_ratio(i);
     let visc_a_i = prm_visc_a(i);
     let visc_b_i = prm_visc_b(i);
     let eta_ratio_i = prm_eta_ratio(i);
     let hourglass_visc_i = prm_hourglass_visc(i);
     let damage_coupling_i = prm_damage_coupling(i);
+    let x_i = ld_x(i);
     let v_i = ld_v(i);
     let dx_i = ld_dx(i);
     let body_i = ld_body(i);
@@ -402,41 +414,42 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         let r_ij = sqrt(r2);
         let W_ij = kernel_w(r_ij, h_ij);
         let gradW_ij = kernel_grad(r_ij, h_ij) * x_ij;
-        // pairsum contact (stdlib/contact/overlap_pressure.sph:49)
+        // pairsum contact (stdlib/contact/overlap_pressure.sph:52)
         if ((body_i != ldj_body(j, sgn))) {
-            a_contact = a_contact + ((((-ldj_m(j, sgn)) * (p_contact_i + ldj_p_contact(j, sgn))) / (rho_i * ldj_rho(j, sgn))) * gradW_ij);
+            a_contact = a_contact + (((((-((max(x_i[0], (0.1 * dx_i)) + abs(ldj_x(j, sgn)[0])) / (2.0 * max(x_i[0], (0.1 * dx_i))))) * ldj_m(j, sgn)) * (p_contact_i + ldj_p_contact(j, sgn))) / (rho_i * ldj_rho(j, sgn))) * gradW_ij);
         }
-        // pairsum shaped_failing_momentum (stdlib/momentum/shaped_failing.sph:15)
+        // pairsum shaped_failing_momentum (stdlib/momentum/shaped_failing.sph:19)
         if (in_groups(2u, ints[j])) {
             if ((body_i == ldj_body(j, sgn))) {
-                let s_3 = s_i;
-                let p = p_i;
+                let s_2 = s_i;
+                let p_2 = p_i;
                 let D_2 = D_i;
                 let coupling_2 = damage_coupling_i;
                 let D_3 = D_2;
                 let coupling_3 = coupling_2;
-                let sig_i = (((1.0 - select((coupling_3 * D_3), 1.0, (D_3 >= 1.0))) * (s_3 - (min(p, 0.0) * eye()))) - (max(p, 0.0) * eye()));
-                let s_4 = ldj_s(j, sgn);
-                let p_2 = ldj_p(j, sgn);
+                let sig_i = (((1.0 - select((coupling_3 * D_3), 1.0, (D_3 >= 1.0))) * (s_2 - (min(p_2, 0.0) * eye()))) - (max(p_2, 0.0) * eye()));
+                let s_3 = ldj_s(j, sgn);
+                let p_3 = ldj_p(j, sgn);
                 let D_4 = ldj_D(j, sgn);
                 let coupling_4 = prm_damage_coupling(j);
                 let D_5 = D_4;
                 let coupling_5 = coupling_4;
-                let sig_j = (((1.0 - select((coupling_5 * D_5), 1.0, (D_5 >= 1.0))) * (s_4 - (min(p_2, 0.0) * eye()))) - (max(p_2, 0.0) * eye()));
-                let p1 = ldj_rho(j, sgn);
+                let sig_j = (((1.0 - select((coupling_5 * D_5), 1.0, (D_5 >= 1.0))) * (s_3 - (min(p_3, 0.0) * eye()))) - (max(p_3, 0.0) * eye()));
+                let sig_i_2 = sig_i;
+                let sig_j_2 = sig_j;
                 let M = kernel_metric_i;
                 let x_2 = x_ij;
                 let M_2 = ldj_kernel_metric(j, sgn);
                 let x_3 = x_ij;
                 let hh = ((((h_ratio_i * (0.5 * (dx_i + ldj_dx(j, sgn)))) * 2.0) * r_ij) / max((sqrt(dot(x_2, (M * x_2))) + sqrt(dot(x_3, (M_2 * x_3)))), 1e-12));
                 let vr = dot((v_i - ldj_v(j, sgn)), x_ij);
-                let p2 = (eta_ratio_i * hh);
-                let phi = ((hh * vr) / ((r_ij * r_ij) + (p2 * p2)));
+                let p1 = (eta_ratio_i * hh);
+                let phi = ((hh * vr) / ((r_ij * r_ij) + (p1 * p1)));
                 let share = (0.5 * (compression_i + ldj_compression(j, sgn)));
                 let beyond_linear = dot(((v_i - ldj_v(j, sgn)) - (div_m((((edot_i + spin_i) + ldj_edot(j, sgn)) + ldj_spin(j, sgn)), 2.0) * x_ij)), x_ij);
-                let p3 = (eta_ratio_i * hh);
-                let phi_hourglass = ((hh * beyond_linear) / ((r_ij * r_ij) + (p3 * p3)));
-                let A = ((div_m(sig_i, (rho_i * rho_i)) + div_m(sig_j, (p1 * p1))) - (((share * select(0.0, ((((((-visc_a_i) * (c_i + ldj_c(j, sgn))) / 2.0) * phi) + (visc_b_i * (phi * phi))) / (0.5 * (rho_i + ldj_rho(j, sgn)))), (vr < 0.0))) - ((((hourglass_visc_i * (c_i + ldj_c(j, sgn))) / 2.0) * phi_hourglass) / (0.5 * (rho_i + ldj_rho(j, sgn))))) * eye()));
+                let p2 = (eta_ratio_i * hh);
+                let phi_hourglass = ((hh * beyond_linear) / ((r_ij * r_ij) + (p2 * p2)));
+                let visc = ((share * select(0.0, ((((((-visc_a_i) * (c_i + ldj_c(j, sgn))) / 2.0) * phi) + (visc_b_i * (phi * phi))) / (0.5 * (rho_i + ldj_rho(j, sgn)))), (vr < 0.0))) - ((((hourglass_visc_i * (c_i + ldj_c(j, sgn))) / 2.0) * phi_hourglass) / (0.5 * (rho_i + ldj_rho(j, sgn)))));
                 let M_3 = kernel_metric_i;
                 let norm = kernel_norm_i;
                 let x_4 = x_ij;
@@ -455,9 +468,13 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 let q_2 = sqrt(dot(x_7, (M_6 * x_7)));
                 let axis_3 = vec2<f32>(1.0, 0.0);
                 let slope_2 = dot(kernel_grad_at((q_2 * axis_3), h0_2), axis_3);
-                let g = (L_inv_i * ((select(((0.0 * x_4) / 1.0), (((slope / max(q, 1e-30)) * norm) * (M_3 * x_4)), (q > 0.0)) + select(((0.0 * x_6) / 1.0), (((slope_2 / max(q_2, 1e-30)) * norm_2) * (M_5 * x_6)), (q_2 > 0.0))) / 2.0));
-                dv = dv + ((ldj_m(j, sgn) * A) * g);
-                de = de + (-((0.5 * ldj_m(j, sgn)) * dot((v_i - ldj_v(j, sgn)), (A * g))));
+                let g = ((select(((0.0 * x_4) / 1.0), (((slope / max(q, 1e-30)) * norm) * (M_3 * x_4)), (q > 0.0)) + select(((0.0 * x_6) / 1.0), (((slope_2 / max(q_2, 1e-30)) * norm_2) * (M_5 * x_6)), (q_2 > 0.0))) / 2.0);
+                let half = (((((max(x_i[0], (0.1 * dx_i)) + abs(ldj_x(j, sgn)[0])) / (2.0 * max(x_i[0], (0.1 * dx_i)))) * visc) / 2.0) * eye());
+                let p3 = ldj_rho(j, sgn);
+                let each = (((div_m(((ldj_x(j, sgn)[0] / max(x_i[0], (0.1 * dx_i))) * sig_i_2), (rho_i * rho_i)) - half) * (L_inv_i * g)) + ((div_m(sig_j_2, (p3 * p3)) - half) * (ldj_L_inv(j, sgn) * g)));
+                let F = each;
+                dv = dv + (ldj_m(j, sgn) * F);
+                de = de + (-((0.5 * ldj_m(j, sgn)) * dot((v_i - ldj_v(j, sgn)), F)));
             }
         }
     }

@@ -507,23 +507,23 @@ fn st_dv(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_delta(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 8u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 9u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 15u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 16u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 48u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 17u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -607,7 +607,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             div_v = div_v + (vol_j * dot((v_i - ldj_v(j, sgn)), (L_inv * g)));
             let phi = ((((2.0 * (rho_i - ldj_rho(j, sgn))) * x_ij) / (r_ij * r_ij)) - (grad_rho_i + ldj_grad_rho(j, sgn)));
             diffusion = diffusion + ((((delta_i * h_i) * c0_i) * vol_j) * dot(phi, gradW_ij));
-            // pairsum momentum (stdlib/momentum/corrected.sph:14)
+            // pairsum momentum (stdlib/momentum/corrected.sph:17)
             if ((body_i == ldj_body(j, sgn))) {
                 let sig_i = (s_i - (p_i * eye()));
                 let sig_j = (ldj_s(j, sgn) - (ldj_p(j, sgn) * eye()));
@@ -620,10 +620,13 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 let c_bar = ((c_i_2 + c_j) / 2.0);
                 let rho_bar = (0.5 * (rho_i + ldj_rho(j, sgn)));
                 let pi_ij = select(0.0, (((((-visc_a_i) * c_bar) * phi_2) + (visc_b_i * (phi_2 * phi_2))) / rho_bar), (vr < 0.0));
-                let p2 = ldj_rho(j, sgn);
-                let L_inv_2 = L_inv_i;
+                let sig_i_2 = sig_i;
+                let sig_j_2 = sig_j;
+                let visc = pi_ij;
                 let g_2 = gradW_ij;
-                dv = dv + ((ldj_m(j, sgn) * ((div_m(sig_i, (rho_i * rho_i)) + div_m(sig_j, (p2 * p2))) - (pi_ij * eye()))) * (L_inv_2 * g_2));
+                let p2 = ldj_rho(j, sgn);
+                let by_i = (((div_m(sig_i_2, (rho_i * rho_i)) + div_m(sig_j_2, (p2 * p2))) - (visc * eye())) * (L_inv_i * g_2));
+                dv = dv + (ldj_m(j, sgn) * by_i);
             }
         }
         }}}

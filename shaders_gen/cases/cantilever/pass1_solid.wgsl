@@ -523,15 +523,15 @@ fn st_a_contact(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 8u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 10u;
     return params[b];
 }
 fn prm_K_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 15u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -476,15 +476,15 @@ fn st_dv(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 12u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 13u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 14u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -552,7 +552,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let r_ij = sqrt(r2);
             let W_ij = kernel_w(r_ij, h_ij);
             let gradW_ij = kernel_grad(r_ij, h_ij) * x_ij;
-            // pairsum momentum (stdlib/momentum/corrected.sph:14)
+            // pairsum momentum (stdlib/momentum/corrected.sph:17)
             if ((body_i == ldj_body(j, sgn))) {
                 let sig_i = (s_i - (p_i * eye()));
                 let sig_j = (ldj_s(j, sgn) - (ldj_p(j, sgn) * eye()));
@@ -565,10 +565,13 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 let c_bar = ((c_i_2 + c_j) / 2.0);
                 let rho_bar = (0.5 * (rho_i + ldj_rho(j, sgn)));
                 let pi_ij = select(0.0, (((((-visc_a_i) * c_bar) * phi) + (visc_b_i * (phi * phi))) / rho_bar), (vr < 0.0));
-                let p2 = ldj_rho(j, sgn);
-                let L_inv = L_inv_i;
+                let sig_i_2 = sig_i;
+                let sig_j_2 = sig_j;
+                let visc = pi_ij;
                 let g = gradW_ij;
-                dv = dv + ((ldj_m(j, sgn) * ((div_m(sig_i, (rho_i * rho_i)) + div_m(sig_j, (p2 * p2))) - (pi_ij * eye()))) * (L_inv * g));
+                let p2 = ldj_rho(j, sgn);
+                let by_i = (((div_m(sig_i_2, (rho_i * rho_i)) + div_m(sig_j_2, (p2 * p2))) - (visc * eye())) * (L_inv_i * g));
+                dv = dv + (ldj_m(j, sgn) * by_i);
             }
         }
         }}}

@@ -181,19 +181,19 @@ fn st_s_0(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 0u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 9u;
     return params[b];
 }
 fn prm__load0(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 17u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm__constraint0(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 22u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 20u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 @compute @workgroup_size(64)

@@ -37,11 +37,11 @@ fn st_c(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 0u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 7u;
     return params[b];
 }
 @compute @workgroup_size(64)

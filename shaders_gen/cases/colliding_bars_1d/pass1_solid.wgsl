@@ -472,15 +472,15 @@ fn st_a_contact(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 6u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 8u;
     return params[b];
 }
 fn prm_K_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 14u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 13u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -133,19 +133,19 @@ fn st_s_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 0u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 7u;
     return params[b];
 }
 fn prm__constraint0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 15u;
     return params[b];
 }
 fn prm__constraint1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 16u;
     return params[b];
 }
 @compute @workgroup_size(64)

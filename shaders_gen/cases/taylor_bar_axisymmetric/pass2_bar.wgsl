@@ -254,23 +254,23 @@ fn st_dv(i: u32, v: vec2<f32>) {
     data[b + 1u] = v[1];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 1u;
     return params[b];
 }
 fn prm_hourglass_visc(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 7u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 12u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 13u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 36u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 14u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -287,7 +287,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let s_2 = ld_s(i);
     let s_hoop = ld_s_hoop(i);
     let w = 1.0;
-    dv = ((w * ((s_2 - (s_hoop * eye())) * vec2<f32>(1.0, 0.0))) / (ld_rho(i) * max(ld_x(i)[0], (0.1 * ld_dx(i)))));
+    let s_3 = s_2;
+    let s_hoop_2 = s_hoop;
+    let w_2 = w;
+    dv = ((w_2 * ((s_3 - (s_hoop_2 * eye())) * vec2<f32>(1.0, 0.0))) / (ld_rho(i) * max(ld_x(i)[0], (0.1 * ld_dx(i)))));
     let h_ratio_i = prm_h_ratio(i);
     let hourglass_visc_i = prm_hourglass_visc(i);
     let visc_a_i = prm_visc_a(i);
@@ -337,23 +340,25 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         if (r2 >= rc * rc || r2 == 0.0) { continue; }
         let x_ij = (dxv * sgn).xy;
         let r_ij = sqrt(r2);
-        // pairsum momentum_shaped (stdlib/momentum/shaped.sph:8)
+        // pairsum momentum_shaped (stdlib/momentum/shaped.sph:11)
         if ((body_i == ldj_body(j, sgn))) {
             let sig_i = (s_i - (p_i * eye()));
             let sig_j = (ldj_s(j, sgn) - (ldj_p(j, sgn) * eye()));
-            let p1 = ldj_rho(j, sgn);
+            let sig_i_2 = sig_i;
+            let sig_j_2 = sig_j;
             let M = kernel_metric_i;
             let x_2 = x_ij;
             let M_2 = ldj_kernel_metric(j, sgn);
             let x_3 = x_ij;
             let hh = ((((h_ratio_i * (0.5 * (dx_i + ldj_dx(j, sgn)))) * 2.0) * r_ij) / max((sqrt(dot(x_2, (M * x_2))) + sqrt(dot(x_3, (M_2 * x_3)))), 1e-12));
             let vr = dot((v_i - ldj_v(j, sgn)), x_ij);
-            let p2 = (eta_ratio_i * hh);
-            let phi = ((hh * vr) / ((r_ij * r_ij) + (p2 * p2)));
+            let p1 = (eta_ratio_i * hh);
+            let phi = ((hh * vr) / ((r_ij * r_ij) + (p1 * p1)));
             let share = (0.5 * (compression_i + ldj_compression(j, sgn)));
             let beyond_linear = dot(((v_i - ldj_v(j, sgn)) - (div_m((((edot_i + spin_i) + ldj_edot(j, sgn)) + ldj_spin(j, sgn)), 2.0) * x_ij)), x_ij);
-            let p3 = (eta_ratio_i * hh);
-            let phi_hourglass = ((hh * beyond_linear) / ((r_ij * r_ij) + (p3 * p3)));
+            let p2 = (eta_ratio_i * hh);
+            let phi_hourglass = ((hh * beyond_linear) / ((r_ij * r_ij) + (p2 * p2)));
+            let visc = ((share * select(0.0, ((((((-visc_a_i) * (c_i + ldj_c(j, sgn))) / 2.0) * phi) + (visc_b_i * (phi * phi))) / (0.5 * (rho_i + ldj_rho(j, sgn)))), (vr < 0.0))) - ((((hourglass_visc_i * (c_i + ldj_c(j, sgn))) / 2.0) * phi_hourglass) / (0.5 * (rho_i + ldj_rho(j, sgn)))));
             let M_3 = kernel_metric_i;
             let norm = kernel_norm_i;
             let x_4 = x_ij;
@@ -372,7 +377,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let q_2 = sqrt(dot(x_7, (M_6 * x_7)));
             let axis_3 = vec2<f32>(1.0, 0.0);
             let slope_2 = dot(kernel_grad_at((q_2 * axis_3), h0_2), axis_3);
-            dv = dv + ((ldj_m(j, sgn) * ((div_m(sig_i, (rho_i * rho_i)) + div_m(sig_j, (p1 * p1))) - (((share * select(0.0, ((((((-visc_a_i) * (c_i + ldj_c(j, sgn))) / 2.0) * phi) + (visc_b_i * (phi * phi))) / (0.5 * (rho_i + ldj_rho(j, sgn)))), (vr < 0.0))) - ((((hourglass_visc_i * (c_i + ldj_c(j, sgn))) / 2.0) * phi_hourglass) / (0.5 * (rho_i + ldj_rho(j, sgn))))) * eye()))) * (L_inv_i * ((select(((0.0 * x_4) / 1.0), (((slope / max(q, 1e-30)) * norm) * (M_3 * x_4)), (q > 0.0)) + select(((0.0 * x_6) / 1.0), (((slope_2 / max(q_2, 1e-30)) * norm_2) * (M_5 * x_6)), (q_2 > 0.0))) / 2.0)));
+            let g = ((select(((0.0 * x_4) / 1.0), (((slope / max(q, 1e-30)) * norm) * (M_3 * x_4)), (q > 0.0)) + select(((0.0 * x_6) / 1.0), (((slope_2 / max(q_2, 1e-30)) * norm_2) * (M_5 * x_6)), (q_2 > 0.0))) / 2.0);
+            let p3 = ldj_rho(j, sgn);
+            let by_i = (((div_m(sig_i_2, (rho_i * rho_i)) + div_m(sig_j_2, (p3 * p3))) - (visc * eye())) * (L_inv_i * g));
+            dv = dv + (ldj_m(j, sgn) * by_i);
         }
     }
     st_dv(i, dv);

@@ -533,19 +533,19 @@ fn st_a_contact(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 5u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 8u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 10u;
     return params[b];
 }
 fn prm_K_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 15u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -369,6 +369,11 @@ fn st_x(i: u32, v: vec3<f32>) {
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
+fn ldj_x(j: u32, sgn: vec3<f32>) -> vec3<f32> {
+    let base = info[3u];
+    let b = u32(base + i32(j) * 3);
+    return (vec3<f32>(data[b], data[b + 1u], data[b + 2u]) * sgn);
+}
 fn ld_v(i: u32) -> vec3<f32> {
     let b = u32(info[4 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
@@ -439,6 +444,11 @@ fn st_L_inv(i: u32, v: mat3x3<f32>) {
     data[b + 7u] = v[1][2];
     data[b + 8u] = v[2][2];
 }
+fn ldj_L_inv(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
+    let base = info[10u];
+    let b = u32(base + i32(j) * 9);
+    return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u])), sgn);
+}
 fn ld_s_hoop(i: u32) -> f32 {
     let b = u32(info[12 + G] + i32(i) * 1);
     return data[b];
@@ -502,19 +512,23 @@ fn st_dv(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 5u;
+    return params[b];
+}
+fn prm_conservative(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 11u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 12u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 13u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 14u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -530,12 +544,21 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var dv: vec3<f32> = vec3<f32>(0.0);
     let s_2 = ld_s(i);
     let s_hoop = ld_s_hoop(i);
+    let p = ld_p(i);
     let w = 1.0;
-    dv = select(vec3<f32>(0.0), ((w * ((s_2 - (s_hoop * eye())) * vec3<f32>(1.0, 0.0, 0.0))) / (ld_rho(i) * max(ld_x(i)[0], (0.1 * ld_dx(i))))), (prm_axisymmetric(i) > 0.0));
+    let sigma_hoop = ((w * (s_hoop - min(p, 0.0))) - max(p, 0.0));
+    let s_3 = s_2;
+    let s_hoop_2 = s_hoop;
+    let w_2 = w;
+    dv = select(select(vec3<f32>(0.0), ((w_2 * ((s_3 - (s_hoop_2 * eye())) * vec3<f32>(1.0, 0.0, 0.0))) / (ld_rho(i) * max(ld_x(i)[0], (0.1 * ld_dx(i))))), (prm_axisymmetric(i) > 0.0)), select(vec3<f32>(0.0), (((-sigma_hoop) * vec3<f32>(1.0, 0.0, 0.0)) / (ld_rho(i) * max(ld_x(i)[0], (0.1 * ld_dx(i))))), (prm_axisymmetric(i) > 0.0)), (prm_conservative(i) > 0.0));
+    let axisymmetric_i = prm_axisymmetric(i);
+    let conservative_i = prm_conservative(i);
     let visc_a_i = prm_visc_a(i);
     let visc_b_i = prm_visc_b(i);
     let eta_ratio_i = prm_eta_ratio(i);
+    let x_i = ld_x(i);
     let v_i = ld_v(i);
+    let dx_i = ld_dx(i);
     let body_i = ld_body(i);
     let rho_i = ld_rho(i);
     let L_inv_i = ld_L_inv(i);
@@ -585,7 +608,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let r_ij = sqrt(r2);
             let W_ij = kernel_w(r_ij, h_ij);
             let gradW_ij = kernel_grad(r_ij, h_ij) * x_ij;
-            // pairsum momentum (stdlib/momentum/corrected.sph:14)
+            // pairsum momentum (stdlib/momentum/corrected.sph:17)
             if ((body_i == ldj_body(j, sgn))) {
                 let sig_i = (s_i - (p_i * eye()));
                 let sig_j = (ldj_s(j, sgn) - (ldj_p(j, sgn) * eye()));
@@ -598,10 +621,16 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 let c_bar = ((c_i_2 + c_j) / 2.0);
                 let rho_bar = (0.5 * (rho_i + ldj_rho(j, sgn)));
                 let pi_ij = select(0.0, (((((-visc_a_i) * c_bar) * phi) + (visc_b_i * (phi * phi))) / rho_bar), (vr < 0.0));
-                let p2 = ldj_rho(j, sgn);
-                let L_inv = L_inv_i;
+                let sig_i_2 = sig_i;
+                let sig_j_2 = sig_j;
+                let visc = pi_ij;
                 let g = gradW_ij;
-                dv = dv + ((ldj_m(j, sgn) * ((div_m(sig_i, (rho_i * rho_i)) + div_m(sig_j, (p2 * p2))) - (pi_ij * eye()))) * (L_inv * g));
+                let p2 = ldj_rho(j, sgn);
+                let by_i = (((div_m(sig_i_2, (rho_i * rho_i)) + div_m(sig_j_2, (p2 * p2))) - (visc * eye())) * (L_inv_i * g));
+                let half = (((select(1.0, ((max(x_i[0], (0.1 * dx_i)) + abs(ldj_x(j, sgn)[0])) / (2.0 * max(x_i[0], (0.1 * dx_i)))), ((axisymmetric_i > 0.0) && (conservative_i > 0.0))) * visc) / 2.0) * eye());
+                let p3 = ldj_rho(j, sgn);
+                let each = (((div_m((select(1.0, (ldj_x(j, sgn)[0] / max(x_i[0], (0.1 * dx_i))), ((axisymmetric_i > 0.0) && (conservative_i > 0.0))) * sig_i_2), (rho_i * rho_i)) - half) * (L_inv_i * g)) + ((div_m(sig_j_2, (p3 * p3)) - half) * (ldj_L_inv(j, sgn) * g)));
+                dv = dv + (ldj_m(j, sgn) * select(by_i, each, (conservative_i > 0.0)));
             }
         }
         }}}

@@ -577,23 +577,23 @@ fn st_rate_lap_sum(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 5u;
     return params[b];
 }
 fn prm_nonlocal_skips_failed(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 6u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 7u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 11u;
     return params[b];
 }
 fn prm_K_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 19u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -369,6 +369,11 @@ fn st_x(i: u32, v: vec3<f32>) {
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
+fn ldj_x(j: u32, sgn: vec3<f32>) -> vec3<f32> {
+    let base = info[5u];
+    let b = u32(base + i32(j) * 3);
+    return (vec3<f32>(data[b], data[b + 1u], data[b + 2u]) * sgn);
+}
 fn ld_v(i: u32) -> vec3<f32> {
     let b = u32(info[7 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
@@ -446,6 +451,11 @@ fn st_L_inv(i: u32, v: mat3x3<f32>) {
     data[b + 6u] = v[0][2];
     data[b + 7u] = v[1][2];
     data[b + 8u] = v[2][2];
+}
+fn ldj_L_inv(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
+    let base = info[19u];
+    let b = u32(base + i32(j) * 9);
+    return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u])), sgn);
 }
 fn ld_edot(i: u32) -> mat3x3<f32> {
     let b = u32(info[21 + G] + i32(i) * 6);
@@ -554,27 +564,31 @@ fn st_dv(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 5u;
     return params[b];
 }
 fn prm_delta(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 8u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 9u;
+    return params[b];
+}
+fn prm_conservative(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 10u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 15u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 16u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 17u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -599,14 +613,23 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     de = select(0.0, ((sigma_hoop * select(0.0, (((w * ld_v(i)[0]) / max(ld_x(i)[0], (0.1 * ld_dx(i)))) + ((1.0 - w) * ld_edot(i)[0][0])), (prm_axisymmetric(i) > 0.0))) / ld_rho(i)), (prm_axisymmetric(i) > 0.0));
     let s_2 = ld_s(i);
     let s_hoop = ld_s_hoop(i);
+    let p = ld_p(i);
     let w_2 = 1.0;
-    dv = select(vec3<f32>(0.0), ((w_2 * ((s_2 - (s_hoop * eye())) * vec3<f32>(1.0, 0.0, 0.0))) / (ld_rho(i) * max(ld_x(i)[0], (0.1 * ld_dx(i))))), (prm_axisymmetric(i) > 0.0));
+    let sigma_hoop_2 = ((w_2 * (s_hoop - min(p, 0.0))) - max(p, 0.0));
+    let s_3 = s_2;
+    let s_hoop_2 = s_hoop;
+    let w_3 = w_2;
+    dv = select(select(vec3<f32>(0.0), ((w_3 * ((s_3 - (s_hoop_2 * eye())) * vec3<f32>(1.0, 0.0, 0.0))) / (ld_rho(i) * max(ld_x(i)[0], (0.1 * ld_dx(i))))), (prm_axisymmetric(i) > 0.0)), select(vec3<f32>(0.0), (((-sigma_hoop_2) * vec3<f32>(1.0, 0.0, 0.0)) / (ld_rho(i) * max(ld_x(i)[0], (0.1 * ld_dx(i))))), (prm_axisymmetric(i) > 0.0)), (prm_conservative(i) > 0.0));
+    let axisymmetric_i = prm_axisymmetric(i);
     let delta_i = prm_delta(i);
     let c0_i = prm_c0(i);
+    let conservative_i = prm_conservative(i);
     let visc_a_i = prm_visc_a(i);
     let visc_b_i = prm_visc_b(i);
     let eta_ratio_i = prm_eta_ratio(i);
+    let x_i = ld_x(i);
     let v_i = ld_v(i);
+    let dx_i = ld_dx(i);
     let body_i = ld_body(i);
     let rho_i = ld_rho(i);
     let h_i = ld_h(i);
@@ -674,7 +697,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let p2 = ldj_rho(j, sgn);
             let A = ((div_m(sig_i, (rho_i * rho_i)) + div_m(sig_j, (p2 * p2))) - (pi_ij * eye()));
             de = de + (-((0.5 * ldj_m(j, sgn)) * dot((v_i - ldj_v(j, sgn)), (A * gradW_ij))));
-            // pairsum momentum (stdlib/momentum/corrected.sph:14)
+            // pairsum momentum (stdlib/momentum/corrected.sph:17)
             if ((body_i == ldj_body(j, sgn))) {
                 let sig_i_2 = (s_i - (p_i * eye()));
                 let sig_j_2 = (ldj_s(j, sgn) - (ldj_p(j, sgn) * eye()));
@@ -687,24 +710,30 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 let c_bar_2 = ((c_i_3 + c_j_2) / 2.0);
                 let rho_bar_2 = (0.5 * (rho_i + ldj_rho(j, sgn)));
                 let pi_ij_2 = select(0.0, (((((-visc_a_i) * c_bar_2) * phi_2) + (visc_b_i * (phi_2 * phi_2))) / rho_bar_2), (vr_2 < 0.0));
-                let p4 = ldj_rho(j, sgn);
-                let L_inv = L_inv_i;
+                let sig_i_3 = sig_i_2;
+                let sig_j_3 = sig_j_2;
+                let visc = pi_ij_2;
                 let g = gradW_ij;
-                dv = dv + ((ldj_m(j, sgn) * ((div_m(sig_i_2, (rho_i * rho_i)) + div_m(sig_j_2, (p4 * p4))) - (pi_ij_2 * eye()))) * (L_inv * g));
+                let p4 = ldj_rho(j, sgn);
+                let by_i = (((div_m(sig_i_3, (rho_i * rho_i)) + div_m(sig_j_3, (p4 * p4))) - (visc * eye())) * (L_inv_i * g));
+                let half = (((select(1.0, ((max(x_i[0], (0.1 * dx_i)) + abs(ldj_x(j, sgn)[0])) / (2.0 * max(x_i[0], (0.1 * dx_i)))), ((axisymmetric_i > 0.0) && (conservative_i > 0.0))) * visc) / 2.0) * eye());
+                let p5 = ldj_rho(j, sgn);
+                let each = (((div_m((select(1.0, (ldj_x(j, sgn)[0] / max(x_i[0], (0.1 * dx_i))), ((axisymmetric_i > 0.0) && (conservative_i > 0.0))) * sig_i_3), (rho_i * rho_i)) - half) * (L_inv_i * g)) + ((div_m(sig_j_3, (p5 * p5)) - half) * (ldj_L_inv(j, sgn) * g)));
+                dv = dv + (ldj_m(j, sgn) * select(by_i, each, (conservative_i > 0.0)));
             }
             // pairsum continuity (stdlib/continuity/delta_sph.sph:26)
             let vol_j = (ldj_m(j, sgn) / ldj_rho(j, sgn));
-            let L_inv_2 = L_inv_i;
+            let L_inv = L_inv_i;
             let g_2 = gradW_ij;
-            div_v = div_v + (vol_j * dot((v_i - ldj_v(j, sgn)), (L_inv_2 * g_2)));
+            div_v = div_v + (vol_j * dot((v_i - ldj_v(j, sgn)), (L_inv * g_2)));
             let phi_3 = ((((2.0 * (rho_i - ldj_rho(j, sgn))) * x_ij) / (r_ij * r_ij)) - (grad_rho_i + ldj_grad_rho(j, sgn)));
             diffusion = diffusion + ((((delta_i * h_i) * c0_i) * vol_j) * dot(phi_3, gradW_ij));
         }
         }}}
     }
     // then continuity
-    let w_3 = min((ld_x(i)[0] / (2.0 * ld_dx(i))), 1.0);
-    drho = ((rho_i * (div_v - select(0.0, (((w_3 * v_i[0]) / max(ld_x(i)[0], (0.1 * ld_dx(i)))) + ((1.0 - w_3) * ld_edot(i)[0][0])), (prm_axisymmetric(i) > 0.0)))) + diffusion);
+    let w_4 = min((x_i[0] / (2.0 * dx_i)), 1.0);
+    drho = ((rho_i * (div_v - select(0.0, (((w_4 * v_i[0]) / max(x_i[0], (0.1 * dx_i))) + ((1.0 - w_4) * ld_edot(i)[0][0])), (axisymmetric_i > 0.0)))) + diffusion);
     st_drho(i, drho);
     st_de(i, de);
     st_dv(i, dv);

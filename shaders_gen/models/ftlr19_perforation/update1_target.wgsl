@@ -298,107 +298,107 @@ fn st_e_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 0u;
     return params[b];
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 5u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 9u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 11u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 12u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 13u;
     return params[b];
 }
 fn prm_eos_eta_peak(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 14u;
     return params[b];
 }
 fn prm_nonlocal_hardening(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 20u;
     return params[b];
 }
 fn prm_nonlocal_rate(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 21u;
     return params[b];
 }
 fn prm_damage_length(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 22u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 23u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 24u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 25u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 26u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 27u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 28u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 29u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 30u;
     return params[b];
 }
 fn prm_D1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 31u;
     return params[b];
 }
 fn prm_D2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 32u;
     return params[b];
 }
 fn prm_D3(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 32u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 33u;
     return params[b];
 }
 fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 33u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 34u;
     return params[b];
 }
 fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 34u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 35u;
     return params[b];
 }
 fn prm_failure_band(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 35u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 36u;
     return params[b];
 }
 fn prm_failure_band_spacing(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 36u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 37u;
     return params[b];
 }
 fn prm_nonlocal_weight(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 37u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 38u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -373,6 +373,11 @@ fn st_x(i: u32, v: vec3<f32>) {
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
+fn ldj_x(j: u32, sgn: vec3<f32>) -> vec3<f32> {
+    let base = info[5u];
+    let b = u32(base + i32(j) * 3);
+    return (vec3<f32>(data[b], data[b + 1u], data[b + 2u]) * sgn);
+}
 fn ld_v(i: u32) -> vec3<f32> {
     let b = u32(info[7 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
@@ -447,6 +452,11 @@ fn st_L_inv(i: u32, v: mat3x3<f32>) {
     data[b + 6u] = v[0][2];
     data[b + 7u] = v[1][2];
     data[b + 8u] = v[2][2];
+}
+fn ldj_L_inv(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
+    let base = info[19u];
+    let b = u32(base + i32(j) * 9);
+    return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u])), sgn);
 }
 fn ld_edot(i: u32) -> mat3x3<f32> {
     let b = u32(info[21 + G] + i32(i) * 6);
@@ -636,35 +646,39 @@ fn st_a_contact(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 1u;
     return params[b];
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 5u;
+    return params[b];
+}
+fn prm_conservative(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 14u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 15u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 16u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 17u;
     return params[b];
 }
 fn prm_visc_share(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 19u;
     return params[b];
 }
 fn prm_hourglass_visc(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 20u;
     return params[b];
 }
 fn prm_damage_coupling(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 26u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -686,18 +700,26 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let w = (1.0 - select((coupling * D), 1.0, (D >= 1.0)));
     let s_2 = ld_s(i);
     let s_hoop = ld_s_hoop(i);
+    let p = ld_p(i);
     let w_2 = w;
-    dv = select(vec3<f32>(0.0), ((w_2 * ((s_2 - (s_hoop * eye())) * vec3<f32>(1.0, 0.0, 0.0))) / (ld_rho(i) * max(ld_x(i)[0], (0.1 * ld_dx(i))))), (prm_axisymmetric(i) > 0.0));
-    let sigma_hoop = ((w * (ld_s_hoop(i) - min(ld_p(i), 0.0))) - max(ld_p(i), 0.0));
-    let w_3 = min((ld_x(i)[0] / (2.0 * ld_dx(i))), 1.0);
-    de = select(0.0, ((sigma_hoop * select(0.0, (((w_3 * ld_v(i)[0]) / max(ld_x(i)[0], (0.1 * ld_dx(i)))) + ((1.0 - w_3) * ld_edot(i)[0][0])), (prm_axisymmetric(i) > 0.0))) / ld_rho(i)), (prm_axisymmetric(i) > 0.0));
+    let sigma_hoop = ((w_2 * (s_hoop - min(p, 0.0))) - max(p, 0.0));
+    let s_3 = s_2;
+    let s_hoop_2 = s_hoop;
+    let w_3 = w_2;
+    dv = select(select(vec3<f32>(0.0), ((w_3 * ((s_3 - (s_hoop_2 * eye())) * vec3<f32>(1.0, 0.0, 0.0))) / (ld_rho(i) * max(ld_x(i)[0], (0.1 * ld_dx(i))))), (prm_axisymmetric(i) > 0.0)), select(vec3<f32>(0.0), (((-sigma_hoop) * vec3<f32>(1.0, 0.0, 0.0)) / (ld_rho(i) * max(ld_x(i)[0], (0.1 * ld_dx(i))))), (prm_axisymmetric(i) > 0.0)), (prm_conservative(i) > 0.0));
+    let sigma_hoop_2 = ((w * (ld_s_hoop(i) - min(ld_p(i), 0.0))) - max(ld_p(i), 0.0));
+    let w_4 = min((ld_x(i)[0] / (2.0 * ld_dx(i))), 1.0);
+    de = select(0.0, ((sigma_hoop_2 * select(0.0, (((w_4 * ld_v(i)[0]) / max(ld_x(i)[0], (0.1 * ld_dx(i)))) + ((1.0 - w_4) * ld_edot(i)[0][0])), (prm_axisymmetric(i) > 0.0))) / ld_rho(i)), (prm_axisymmetric(i) > 0.0));
     let h_ratio_i = prm_h_ratio(i);
+    let axisymmetric_i = prm_axisymmetric(i);
+    let conservative_i = prm_conservative(i);
     let visc_a_i = prm_visc_a(i);
     let visc_b_i = prm_visc_b(i);
     let eta_ratio_i = prm_eta_ratio(i);
     let visc_share_i = prm_visc_share(i);
     let hourglass_visc_i = prm_hourglass_visc(i);
     let damage_coupling_i = prm_damage_coupling(i);
+    let x_i = ld_x(i);
     let v_i = ld_v(i);
     let dx_i = ld_dx(i);
     let body_i = ld_body(i);
@@ -756,41 +778,42 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let r_ij = sqrt(r2);
             let W_ij = kernel_w(r_ij, h_ij);
             let gradW_ij = kernel_grad(r_ij, h_ij) * x_ij;
-            // pairsum contact (stdlib/contact/overlap_pressure.sph:49)
+            // pairsum contact (stdlib/contact/overlap_pressure.sph:52)
             if ((body_i != ldj_body(j, sgn))) {
-                a_contact = a_contact + ((((-ldj_m(j, sgn)) * (p_contact_i + ldj_p_contact(j, sgn))) / (rho_i * ldj_rho(j, sgn))) * gradW_ij);
+                a_contact = a_contact + (((((-select(1.0, ((max(x_i[0], (0.1 * dx_i)) + abs(ldj_x(j, sgn)[0])) / (2.0 * max(x_i[0], (0.1 * dx_i)))), ((axisymmetric_i > 0.0) && (conservative_i > 0.0)))) * ldj_m(j, sgn)) * (p_contact_i + ldj_p_contact(j, sgn))) / (rho_i * ldj_rho(j, sgn))) * gradW_ij);
             }
-            // pairsum shaped_failing_momentum (stdlib/momentum/shaped_failing.sph:15)
+            // pairsum shaped_failing_momentum (stdlib/momentum/shaped_failing.sph:19)
             if (in_groups(2u, ints[j])) {
                 if ((body_i == ldj_body(j, sgn))) {
-                    let s_3 = s_i;
-                    let p = p_i;
+                    let s_4 = s_i;
+                    let p_2 = p_i;
                     let D_2 = D_i;
                     let coupling_2 = damage_coupling_i;
                     let D_3 = D_2;
                     let coupling_3 = coupling_2;
-                    let sig_i = (((1.0 - select((coupling_3 * D_3), 1.0, (D_3 >= 1.0))) * (s_3 - (min(p, 0.0) * eye()))) - (max(p, 0.0) * eye()));
-                    let s_4 = ldj_s(j, sgn);
-                    let p_2 = ldj_p(j, sgn);
+                    let sig_i = (((1.0 - select((coupling_3 * D_3), 1.0, (D_3 >= 1.0))) * (s_4 - (min(p_2, 0.0) * eye()))) - (max(p_2, 0.0) * eye()));
+                    let s_5 = ldj_s(j, sgn);
+                    let p_3 = ldj_p(j, sgn);
                     let D_4 = ldj_D(j, sgn);
                     let coupling_4 = prm_damage_coupling(j);
                     let D_5 = D_4;
                     let coupling_5 = coupling_4;
-                    let sig_j = (((1.0 - select((coupling_5 * D_5), 1.0, (D_5 >= 1.0))) * (s_4 - (min(p_2, 0.0) * eye()))) - (max(p_2, 0.0) * eye()));
-                    let p1 = ldj_rho(j, sgn);
+                    let sig_j = (((1.0 - select((coupling_5 * D_5), 1.0, (D_5 >= 1.0))) * (s_5 - (min(p_3, 0.0) * eye()))) - (max(p_3, 0.0) * eye()));
+                    let sig_i_2 = sig_i;
+                    let sig_j_2 = sig_j;
                     let M = kernel_metric_i;
                     let x_2 = x_ij;
                     let M_2 = ldj_kernel_metric(j, sgn);
                     let x_3 = x_ij;
                     let hh = ((((h_ratio_i * (0.5 * (dx_i + ldj_dx(j, sgn)))) * 2.0) * r_ij) / max((sqrt(dot(x_2, (M * x_2))) + sqrt(dot(x_3, (M_2 * x_3)))), 1e-12));
                     let vr = dot((v_i - ldj_v(j, sgn)), x_ij);
-                    let p2 = (eta_ratio_i * hh);
-                    let phi = ((hh * vr) / ((r_ij * r_ij) + (p2 * p2)));
+                    let p1 = (eta_ratio_i * hh);
+                    let phi = ((hh * vr) / ((r_ij * r_ij) + (p1 * p1)));
                     let share = select(1.0, (0.5 * (compression_i + ldj_compression(j, sgn))), (visc_share_i > 0.0));
                     let beyond_linear = dot(((v_i - ldj_v(j, sgn)) - (div_m((((edot_i + spin_i) + ldj_edot(j, sgn)) + ldj_spin(j, sgn)), 2.0) * x_ij)), x_ij);
-                    let p3 = (eta_ratio_i * hh);
-                    let phi_hourglass = ((hh * beyond_linear) / ((r_ij * r_ij) + (p3 * p3)));
-                    let A = ((div_m(sig_i, (rho_i * rho_i)) + div_m(sig_j, (p1 * p1))) - (((share * select(0.0, ((((((-visc_a_i) * (c_i + ldj_c(j, sgn))) / 2.0) * phi) + (visc_b_i * (phi * phi))) / (0.5 * (rho_i + ldj_rho(j, sgn)))), (vr < 0.0))) - ((((hourglass_visc_i * (c_i + ldj_c(j, sgn))) / 2.0) * phi_hourglass) / (0.5 * (rho_i + ldj_rho(j, sgn))))) * eye()));
+                    let p2 = (eta_ratio_i * hh);
+                    let phi_hourglass = ((hh * beyond_linear) / ((r_ij * r_ij) + (p2 * p2)));
+                    let visc = ((share * select(0.0, ((((((-visc_a_i) * (c_i + ldj_c(j, sgn))) / 2.0) * phi) + (visc_b_i * (phi * phi))) / (0.5 * (rho_i + ldj_rho(j, sgn)))), (vr < 0.0))) - ((((hourglass_visc_i * (c_i + ldj_c(j, sgn))) / 2.0) * phi_hourglass) / (0.5 * (rho_i + ldj_rho(j, sgn)))));
                     let M_3 = kernel_metric_i;
                     let norm = kernel_norm_i;
                     let x_4 = x_ij;
@@ -809,9 +832,15 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                     let q_2 = sqrt(dot(x_7, (M_6 * x_7)));
                     let axis_3 = vec3<f32>(1.0, 0.0, 0.0);
                     let slope_2 = dot(kernel_grad_at((q_2 * axis_3), h0_2), axis_3);
-                    let g = (L_inv_i * ((select(((0.0 * x_4) / 1.0), (((slope / max(q, 1e-30)) * norm) * (M_3 * x_4)), (q > 0.0)) + select(((0.0 * x_6) / 1.0), (((slope_2 / max(q_2, 1e-30)) * norm_2) * (M_5 * x_6)), (q_2 > 0.0))) / 2.0));
-                    dv = dv + ((ldj_m(j, sgn) * A) * g);
-                    de = de + (-((0.5 * ldj_m(j, sgn)) * dot((v_i - ldj_v(j, sgn)), (A * g))));
+                    let g = ((select(((0.0 * x_4) / 1.0), (((slope / max(q, 1e-30)) * norm) * (M_3 * x_4)), (q > 0.0)) + select(((0.0 * x_6) / 1.0), (((slope_2 / max(q_2, 1e-30)) * norm_2) * (M_5 * x_6)), (q_2 > 0.0))) / 2.0);
+                    let p3 = ldj_rho(j, sgn);
+                    let by_i = (((div_m(sig_i_2, (rho_i * rho_i)) + div_m(sig_j_2, (p3 * p3))) - (visc * eye())) * (L_inv_i * g));
+                    let half = (((select(1.0, ((max(x_i[0], (0.1 * dx_i)) + abs(ldj_x(j, sgn)[0])) / (2.0 * max(x_i[0], (0.1 * dx_i)))), ((axisymmetric_i > 0.0) && (conservative_i > 0.0))) * visc) / 2.0) * eye());
+                    let p4 = ldj_rho(j, sgn);
+                    let each = (((div_m((select(1.0, (ldj_x(j, sgn)[0] / max(x_i[0], (0.1 * dx_i))), ((axisymmetric_i > 0.0) && (conservative_i > 0.0))) * sig_i_2), (rho_i * rho_i)) - half) * (L_inv_i * g)) + ((div_m(sig_j_2, (p4 * p4)) - half) * (ldj_L_inv(j, sgn) * g)));
+                    let F = select(by_i, each, (conservative_i > 0.0));
+                    dv = dv + (ldj_m(j, sgn) * F);
+                    de = de + (-((0.5 * ldj_m(j, sgn)) * dot((v_i - ldj_v(j, sgn)), F)));
                 }
             }
         }

@@ -577,23 +577,23 @@ fn st_rate_lap_sum(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 5u;
     return params[b];
 }
 fn prm_nonlocal_skips_failed(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 6u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 7u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 11u;
     return params[b];
 }
 fn prm_K_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 19u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -51,11 +51,11 @@ fn st_h(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 9u;
     return params[b];
 }
 fn prm_C_cfl(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 38u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 39u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -197,23 +197,23 @@ fn st_e_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 0u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 9u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 12u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 13u;
     return params[b];
 }
 fn prm_eos_eta_peak(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 14u;
     return params[b];
 }
 @compute @workgroup_size(64)
