@@ -57,6 +57,11 @@ fn st_x(i: u32, v: vec2<f32>) {
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
+fn ldj_x(j: u32, sgn: vec3<f32>) -> vec2<f32> {
+    let base = info[3u];
+    let b = u32(base + i32(j) * 2);
+    return (vec2<f32>(data[b], data[b + 1u]) * sgn.xy);
+}
 fn ld_v(i: u32) -> vec2<f32> {
     let b = u32(info[4 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
@@ -337,6 +342,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let h_ratio_i = prm_h_ratio(i);
     let hourglass_alpha_i = prm_hourglass_alpha(i);
     let hourglass_E_i = prm_hourglass_E(i);
+    let x_i = ld_x(i);
     let v_i = ld_v(i);
     let dx_i = ld_dx(i);
     let body_i = ld_body(i);
@@ -406,7 +412,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let along = (x_ij / r_ij);
             let miss = dot((((0.5 * (kernel_shape_i + ldj_kernel_shape(j, sgn))) * X_ij) - x_ij), along);
             let k_2 = (((((hourglass_alpha_i * ldj_m(j, sgn)) / rho0_i) * kernel_w_at(r0, (h_ratio_i * (0.5 * (dx_i + ldj_dx(j, sgn)))))) * hourglass_E_i) / (rho0_i * (r0 * r0)));
-            dv_hourglass = dv_hourglass + (((1.0 * k_2) * miss) * along);
+            dv_hourglass = dv_hourglass + (((((max(x_i[0], (0.1 * dx_i)) + abs(ldj_x(j, sgn)[0])) / (2.0 * max(x_i[0], (0.1 * dx_i)))) * k_2) * miss) * along);
             hourglass_rate2 = hourglass_rate2 + k_2;
         }
     }
@@ -418,21 +424,21 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     dkernel_shape = (gv * kernel_shape_i);
     // then continuity_from_strain_rate
     var drho_i: f32 = ld_drho(i);
-    let w = min((ld_x(i)[0] / (2.0 * dx_i)), 1.0);
-    drho_i = ((-ld_rho(i)) * (trace(edot) + (((w * v_i[0]) / max(ld_x(i)[0], (0.1 * dx_i))) + ((1.0 - w) * edot[0][0]))));
+    let w = min((x_i[0] / (2.0 * dx_i)), 1.0);
+    drho_i = ((-ld_rho(i)) * (trace(edot) + (((w * v_i[0]) / max(x_i[0], (0.1 * dx_i))) + ((1.0 - w) * edot[0][0]))));
     // then jaumann
     var ds_i: mat2x2<f32> = ld_ds(i);
-    let w_2 = min((ld_x(i)[0] / (2.0 * dx_i)), 1.0);
-    ds_i = (((2.0 * prm_G(i)) * (dev(edot) - (((((w_2 * v_i[0]) / max(ld_x(i)[0], (0.1 * dx_i))) + ((1.0 - w_2) * edot[0][0])) / 3.0) * eye()))) + sym(((ld_s(i) * transpose(spin)) + (spin * ld_s(i)))));
+    let w_2 = min((x_i[0] / (2.0 * dx_i)), 1.0);
+    ds_i = (((2.0 * prm_G(i)) * (dev(edot) - (((((w_2 * v_i[0]) / max(x_i[0], (0.1 * dx_i))) + ((1.0 - w_2) * edot[0][0])) / 3.0) * eye()))) + sym(((ld_s(i) * transpose(spin)) + (spin * ld_s(i)))));
     // then jaumann_hoop
     var ds_hoop_i: f32 = ld_ds_hoop(i);
-    let w_3 = min((ld_x(i)[0] / (2.0 * dx_i)), 1.0);
-    let w_4 = min((ld_x(i)[0] / (2.0 * dx_i)), 1.0);
-    ds_hoop_i = ((2.0 * prm_G(i)) * ((((w_3 * v_i[0]) / max(ld_x(i)[0], (0.1 * dx_i))) + ((1.0 - w_3) * edot[0][0])) - ((trace(edot) + (((w_4 * v_i[0]) / max(ld_x(i)[0], (0.1 * dx_i))) + ((1.0 - w_4) * edot[0][0]))) / 3.0)));
+    let w_3 = min((x_i[0] / (2.0 * dx_i)), 1.0);
+    let w_4 = min((x_i[0] / (2.0 * dx_i)), 1.0);
+    ds_hoop_i = ((2.0 * prm_G(i)) * ((((w_3 * v_i[0]) / max(x_i[0], (0.1 * dx_i))) + ((1.0 - w_3) * edot[0][0])) - ((trace(edot) + (((w_4 * v_i[0]) / max(x_i[0], (0.1 * dx_i))) + ((1.0 - w_4) * edot[0][0]))) / 3.0)));
     // then compressive_share
     var compression_i: f32 = ld_compression(i);
-    let w_5 = min((ld_x(i)[0] / (2.0 * dx_i)), 1.0);
-    let volumetric = abs((trace(edot) + (((w_5 * v_i[0]) / max(ld_x(i)[0], (0.1 * dx_i))) + ((1.0 - w_5) * edot[0][0]))));
+    let w_5 = min((x_i[0] / (2.0 * dx_i)), 1.0);
+    let volumetric = abs((trace(edot) + (((w_5 * v_i[0]) / max(x_i[0], (0.1 * dx_i))) + ((1.0 - w_5) * edot[0][0]))));
     compression_i = (volumetric / ((volumetric + frob(dev(edot))) + ((0.01 * ld_c(i)) / ld_h(i))));
     st_edot(i, edot);
     st_spin(i, spin);

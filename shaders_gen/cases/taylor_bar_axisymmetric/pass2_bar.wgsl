@@ -57,6 +57,11 @@ fn st_x(i: u32, v: vec2<f32>) {
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
+fn ldj_x(j: u32, sgn: vec3<f32>) -> vec2<f32> {
+    let base = info[3u];
+    let b = u32(base + i32(j) * 2);
+    return (vec2<f32>(data[b], data[b + 1u]) * sgn.xy);
+}
 fn ld_v(i: u32) -> vec2<f32> {
     let b = u32(info[4 + G] + i32(i) * 2);
     return vec2<f32>(data[b], data[b + 1u]);
@@ -223,6 +228,11 @@ fn st_L_inv(i: u32, v: mat2x2<f32>) {
     data[b + 2u] = v[0][1];
     data[b + 3u] = v[1][1];
 }
+fn ldj_L_inv(j: u32, sgn: vec3<f32>) -> mat2x2<f32> {
+    let base = info[19u];
+    let b = u32(base + i32(j) * 4);
+    return flip_m(mat2x2<f32>(vec2<f32>(data[b], data[b + 2u]), vec2<f32>(data[b + 1u], data[b + 3u])), sgn.xy);
+}
 fn ld_s_hoop(i: u32) -> f32 {
     let b = u32(info[20 + G] + i32(i) * 1);
     return data[b];
@@ -284,18 +294,17 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let dt = globals[1u];
     // pairsum momentum_shaped: accumulators
     var dv: vec2<f32> = vec2<f32>(0.0);
-    let s_2 = ld_s(i);
     let s_hoop = ld_s_hoop(i);
+    let p = ld_p(i);
     let w = 1.0;
-    let s_3 = s_2;
-    let s_hoop_2 = s_hoop;
-    let w_2 = w;
-    dv = ((w_2 * ((s_3 - (s_hoop_2 * eye())) * vec2<f32>(1.0, 0.0))) / (ld_rho(i) * max(ld_x(i)[0], (0.1 * ld_dx(i)))));
+    let sigma_hoop = ((w * (s_hoop - min(p, 0.0))) - max(p, 0.0));
+    dv = (((-sigma_hoop) * vec2<f32>(1.0, 0.0)) / (ld_rho(i) * max(ld_x(i)[0], (0.1 * ld_dx(i)))));
     let h_ratio_i = prm_h_ratio(i);
     let hourglass_visc_i = prm_hourglass_visc(i);
     let visc_a_i = prm_visc_a(i);
     let visc_b_i = prm_visc_b(i);
     let eta_ratio_i = prm_eta_ratio(i);
+    let x_i = ld_x(i);
     let v_i = ld_v(i);
     let dx_i = ld_dx(i);
     let body_i = ld_body(i);
@@ -378,9 +387,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let axis_3 = vec2<f32>(1.0, 0.0);
             let slope_2 = dot(kernel_grad_at((q_2 * axis_3), h0_2), axis_3);
             let g = ((select(((0.0 * x_4) / 1.0), (((slope / max(q, 1e-30)) * norm) * (M_3 * x_4)), (q > 0.0)) + select(((0.0 * x_6) / 1.0), (((slope_2 / max(q_2, 1e-30)) * norm_2) * (M_5 * x_6)), (q_2 > 0.0))) / 2.0);
+            let half = (((((max(x_i[0], (0.1 * dx_i)) + abs(ldj_x(j, sgn)[0])) / (2.0 * max(x_i[0], (0.1 * dx_i)))) * visc) / 2.0) * eye());
             let p3 = ldj_rho(j, sgn);
-            let by_i = (((div_m(sig_i_2, (rho_i * rho_i)) + div_m(sig_j_2, (p3 * p3))) - (visc * eye())) * (L_inv_i * g));
-            dv = dv + (ldj_m(j, sgn) * by_i);
+            let each = (((div_m(((ldj_x(j, sgn)[0] / max(x_i[0], (0.1 * dx_i))) * sig_i_2), (rho_i * rho_i)) - half) * (L_inv_i * g)) + ((div_m(sig_j_2, (p3 * p3)) - half) * (ldj_L_inv(j, sgn) * g)));
+            dv = dv + (ldj_m(j, sgn) * each);
         }
     }
     st_dv(i, dv);
