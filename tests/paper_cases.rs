@@ -130,13 +130,15 @@ fn perforated_without_gaining_energy(o: &RunOutcome, prefix: &str, v_i: f64) {
 }
 
 /// The Taylor bar about its axis (CI: 0.8 mm, 4 rings across the radius): its final length and
-/// foot against the 3D finite elements, as the 3D quarter model's (+0.20 %, −10.4 % at 0.8 mm).
-/// Measured: +0.60 % and −14.67 %; −0.12 % and −2.62 % at 0.2 mm (docs/results/taylor_bar_axisymmetric/).
+/// foot against the 3D finite elements (the 3D quarter model: +0.20 %, −10.4 % at 0.8 mm).
+/// Measured with pair forces that conserve the rings' momentum (stop 118): −0.05 % and −7.87 %;
+/// −0.32 % and +0.04 % at 0.2 mm (docs/results/taylor_bar_axisymmetric/); with the plane's pair
+/// forces the foot was −14.67 % here.
 #[test]
-fn taylor_bar_about_its_axis_keeps_its_length_within_1_percent_and_its_foot_within_16() {
+fn taylor_bar_about_its_axis_keeps_its_length_within_1_percent_and_its_foot_within_9() {
     let o = run_ci("taylor_bar_axisymmetric");
     within(&o, "final_length", 0.01);
-    within(&o, "foot_diameter", 0.16);
+    within(&o, "foot_diameter", 0.09);
 }
 
 /// The 12 mm Børvik plate about its axis at 399.6 m/s (CI: 1 mm near the axis, 150 µs): the

@@ -256,6 +256,10 @@ fn st_a_contact(i: u32, v: vec2<f32>) {
     data[b] = v[0];
     data[b + 1u] = v[1];
 }
+fn prm_axisymmetric(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 54u + 4u;
+    return params[b];
+}
 fn prm_delta(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 54u + 11u;
     return params[b];
@@ -265,14 +269,18 @@ fn prm_c0(i: u32) -> f32 {
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 54u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 54u + 13u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 54u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 54u + 14u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 54u + 15u;
+    return params[b];
+}
+fn prm_conservative(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 54u + 16u;
     return params[b];
 }
@@ -303,11 +311,13 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let w_2 = 1.0;
     let sigma_hoop_2 = ((w_2 * (s_hoop - min(p, 0.0))) - max(p, 0.0));
     dv = (((-sigma_hoop_2) * vec2<f32>(1.0, 0.0)) / (ld_rho(i) * max(ld_x(i)[0], (0.1 * ld_dx(i)))));
+    let axisymmetric_i = prm_axisymmetric(i);
     let delta_i = prm_delta(i);
     let c0_i = prm_c0(i);
     let visc_a_i = prm_visc_a(i);
     let visc_b_i = prm_visc_b(i);
     let eta_ratio_i = prm_eta_ratio(i);
+    let conservative_i = prm_conservative(i);
     let x_i = ld_x(i);
     let v_i = ld_v(i);
     let dx_i = ld_dx(i);
@@ -353,9 +363,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         let r_ij = sqrt(r2);
         let W_ij = kernel_w(r_ij, h_ij);
         let gradW_ij = kernel_grad(r_ij, h_ij) * x_ij;
-        // pairsum contact (stdlib/contact/overlap_pressure.sph:52)
+        // pairsum contact (stdlib/contact/overlap_pressure.sph:53)
         if ((body_i != ldj_body(j, sgn))) {
-            a_contact = a_contact + (((((-((max(x_i[0], (0.1 * dx_i)) + abs(ldj_x(j, sgn)[0])) / (2.0 * max(x_i[0], (0.1 * dx_i))))) * ldj_m(j, sgn)) * (p_contact_i + ldj_p_contact(j, sgn))) / (rho_i * ldj_rho(j, sgn))) * gradW_ij);
+            let conservative = conservative_i;
+            a_contact = a_contact + (((((-select(1.0, ((max(x_i[0], (0.1 * dx_i)) + abs(ldj_x(j, sgn)[0])) / (2.0 * max(x_i[0], (0.1 * dx_i)))), ((axisymmetric_i > 0.0) && (conservative > 0.0)))) * ldj_m(j, sgn)) * (p_contact_i + ldj_p_contact(j, sgn))) / (rho_i * ldj_rho(j, sgn))) * gradW_ij);
         }
         // pairsum continuity (stdlib/continuity/delta_sph.sph:26)
         if (in_groups(1u, ints[j])) {
@@ -401,9 +412,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 let sig_j_3 = sig_j_2;
                 let visc = pi_ij_2;
                 let g_2 = gradW_ij;
-                let half = (((((max(x_i[0], (0.1 * dx_i)) + abs(ldj_x(j, sgn)[0])) / (2.0 * max(x_i[0], (0.1 * dx_i)))) * visc) / 2.0) * eye());
+                let conservative_2 = conservative_i;
+                let half = (((select(1.0, ((max(x_i[0], (0.1 * dx_i)) + abs(ldj_x(j, sgn)[0])) / (2.0 * max(x_i[0], (0.1 * dx_i)))), ((axisymmetric_i > 0.0) && (conservative_2 > 0.0))) * visc) / 2.0) * eye());
+                let conservative_3 = conservative_i;
                 let p4 = ldj_rho(j, sgn);
-                let each = (((div_m(((ldj_x(j, sgn)[0] / max(x_i[0], (0.1 * dx_i))) * sig_i_3), (rho_i * rho_i)) - half) * (L_inv_i * g_2)) + ((div_m(sig_j_3, (p4 * p4)) - half) * (ldj_L_inv(j, sgn) * g_2)));
+                let each = (((div_m((select(1.0, (ldj_x(j, sgn)[0] / max(x_i[0], (0.1 * dx_i))), ((axisymmetric_i > 0.0) && (conservative_3 > 0.0))) * sig_i_3), (rho_i * rho_i)) - half) * (L_inv_i * g_2)) + ((div_m(sig_j_3, (p4 * p4)) - half) * (ldj_L_inv(j, sgn) * g_2)));
                 dv = dv + (ldj_m(j, sgn) * each);
             }
         }

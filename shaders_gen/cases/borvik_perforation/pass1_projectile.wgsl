@@ -568,19 +568,19 @@ fn prm_det_min(i: u32) -> f32 {
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 10u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 14u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 15u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 16u;
     return params[b];
 }
 fn prm_K_p(i: u32) -> f32 {

@@ -213,15 +213,15 @@ fn prm_c0(i: u32) -> f32 {
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 11u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 12u;
     return params[b];
 }
 fn prm_eos_eta_peak(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 13u;
     return params[b];
 }
 fn prm__constraint0(i: u32) -> vec3<f32> {

@@ -274,19 +274,19 @@ fn prm_c0(i: u32) -> f32 {
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 10u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 11u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 12u;
     return params[b];
 }
 fn prm_eos_eta_peak(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 13u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {

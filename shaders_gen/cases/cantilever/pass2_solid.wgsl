@@ -476,15 +476,15 @@ fn st_dv(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 11u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 12u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 23u + 13u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -438,15 +438,15 @@ fn st_dv(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 9u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 10u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 11u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -84,15 +84,15 @@ fn st_R_art(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 0u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 8u;
     return params[b];
 }
 fn prm_art_eps(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 9u;
     return params[b];
 }
 @compute @workgroup_size(64)

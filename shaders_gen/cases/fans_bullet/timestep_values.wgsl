@@ -59,7 +59,7 @@ fn st_c(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_cfl_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 19u;
     return params[b];
 }
 @compute @workgroup_size(64)

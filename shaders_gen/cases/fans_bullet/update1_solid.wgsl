@@ -202,27 +202,27 @@ fn st_s_0(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 0u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 7u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 8u;
     return params[b];
 }
 fn prm_art_eps(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 9u;
     return params[b];
 }
 fn prm_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 15u;
     return params[b];
 }
 fn prm_E_T(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 16u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -218,35 +218,35 @@ fn st_sigma_y_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 0u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 7u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 8u;
     return params[b];
 }
 fn prm_art_eps(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 9u;
     return params[b];
 }
 fn prm_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 15u;
     return params[b];
 }
 fn prm_E_T(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 16u;
     return params[b];
 }
 fn prm__symmetry0(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 20u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 fn prm__symmetry1(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 26u + 23u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 @compute @workgroup_size(64)

@@ -549,27 +549,27 @@ fn st_lap_weight(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_nonlocal_skips_failed(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 6u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 7u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 12u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 13u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 14u;
     return params[b];
 }
 fn prm_damage_coupling(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 15u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -92,19 +92,19 @@ fn st_R_art(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 0u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 6u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 7u;
     return params[b];
 }
 fn prm_art_eps(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 10u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -230,27 +230,27 @@ fn st_v_xsph(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 9u;
     return params[b];
 }
 fn prm_art_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 11u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 13u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 14u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 15u;
     return params[b];
 }
 fn prm_xsph_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 19u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 16u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -508,27 +508,27 @@ fn st_v_xsph(i: u32, v: vec2<f32>) {
     data[b + 1u] = v[1];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 7u;
     return params[b];
 }
 fn prm_art_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 10u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 12u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 13u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 14u;
     return params[b];
 }
 fn prm_xsph_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 15u;
     return params[b];
 }
 @compute @workgroup_size(64)

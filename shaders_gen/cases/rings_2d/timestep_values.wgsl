@@ -51,7 +51,7 @@ fn st_c(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_cfl_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 16u;
     return params[b];
 }
 @compute @workgroup_size(64)

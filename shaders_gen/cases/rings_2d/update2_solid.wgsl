@@ -161,15 +161,15 @@ fn st_s_0(i: u32, v: mat2x2<f32>) {
     data[b + 2u] = v[1][1];
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 0u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 8u;
     return params[b];
 }
 fn prm_art_eps(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 9u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -303,8 +303,16 @@ fn prm_h_ratio(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 37u + 1u;
     return params[b];
 }
+fn prm_axisymmetric(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 4u;
+    return params[b];
+}
 fn prm_det_min(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 37u + 5u;
+    return params[b];
+}
+fn prm_conservative(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 15u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
@@ -340,6 +348,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var hourglass_rate2: f32 = 0.0;
     let rho0_i = prm_rho0(i);
     let h_ratio_i = prm_h_ratio(i);
+    let axisymmetric_i = prm_axisymmetric(i);
+    let conservative_i = prm_conservative(i);
     let hourglass_alpha_i = prm_hourglass_alpha(i);
     let hourglass_E_i = prm_hourglass_E(i);
     let x_i = ld_x(i);
@@ -405,14 +415,15 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             L = L + neg_m(((ldj_m(j, sgn) / ldj_rho(j, sgn)) * outer(g, x_ij)));
             grad_v = grad_v + outer((ldj_v(j, sgn) - v_i), ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * g));
         }
-        // pairsum shaped_hourglass (stdlib/solid/shaped_hourglass.sph:35)
+        // pairsum shaped_hourglass (stdlib/solid/shaped_hourglass.sph:36)
         if ((((body_i == ldj_body(j, sgn)) && (0.0 < 1.0)) && (0.0 < 1.0))) {
             let X_ij = (x_ij - (u_i - ldj_u(j, sgn)));
             let r0 = max(length(X_ij), 1e-9);
             let along = (x_ij / r_ij);
             let miss = dot((((0.5 * (kernel_shape_i + ldj_kernel_shape(j, sgn))) * X_ij) - x_ij), along);
             let k_2 = (((((hourglass_alpha_i * ldj_m(j, sgn)) / rho0_i) * kernel_w_at(r0, (h_ratio_i * (0.5 * (dx_i + ldj_dx(j, sgn)))))) * hourglass_E_i) / (rho0_i * (r0 * r0)));
-            dv_hourglass = dv_hourglass + (((((max(x_i[0], (0.1 * dx_i)) + abs(ldj_x(j, sgn)[0])) / (2.0 * max(x_i[0], (0.1 * dx_i)))) * k_2) * miss) * along);
+            let conservative = conservative_i;
+            dv_hourglass = dv_hourglass + (((select(1.0, ((max(x_i[0], (0.1 * dx_i)) + abs(ldj_x(j, sgn)[0])) / (2.0 * max(x_i[0], (0.1 * dx_i)))), ((axisymmetric_i > 0.0) && (conservative > 0.0))) * k_2) * miss) * along);
             hourglass_rate2 = hourglass_rate2 + k_2;
         }
     }

@@ -267,6 +267,10 @@ fn prm_h_ratio(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 37u + 1u;
     return params[b];
 }
+fn prm_axisymmetric(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 4u;
+    return params[b];
+}
 fn prm_hourglass_visc(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 37u + 7u;
     return params[b];
@@ -281,6 +285,10 @@ fn prm_visc_b(i: u32) -> f32 {
 }
 fn prm_eta_ratio(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 37u + 14u;
+    return params[b];
+}
+fn prm_conservative(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 15u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -300,10 +308,12 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let sigma_hoop = ((w * (s_hoop - min(p, 0.0))) - max(p, 0.0));
     dv = (((-sigma_hoop) * vec2<f32>(1.0, 0.0)) / (ld_rho(i) * max(ld_x(i)[0], (0.1 * ld_dx(i)))));
     let h_ratio_i = prm_h_ratio(i);
+    let axisymmetric_i = prm_axisymmetric(i);
     let hourglass_visc_i = prm_hourglass_visc(i);
     let visc_a_i = prm_visc_a(i);
     let visc_b_i = prm_visc_b(i);
     let eta_ratio_i = prm_eta_ratio(i);
+    let conservative_i = prm_conservative(i);
     let x_i = ld_x(i);
     let v_i = ld_v(i);
     let dx_i = ld_dx(i);
@@ -387,9 +397,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let axis_3 = vec2<f32>(1.0, 0.0);
             let slope_2 = dot(kernel_grad_at((q_2 * axis_3), h0_2), axis_3);
             let g = ((select(((0.0 * x_4) / 1.0), (((slope / max(q, 1e-30)) * norm) * (M_3 * x_4)), (q > 0.0)) + select(((0.0 * x_6) / 1.0), (((slope_2 / max(q_2, 1e-30)) * norm_2) * (M_5 * x_6)), (q_2 > 0.0))) / 2.0);
-            let half = (((((max(x_i[0], (0.1 * dx_i)) + abs(ldj_x(j, sgn)[0])) / (2.0 * max(x_i[0], (0.1 * dx_i)))) * visc) / 2.0) * eye());
+            let conservative = conservative_i;
+            let half = (((select(1.0, ((max(x_i[0], (0.1 * dx_i)) + abs(ldj_x(j, sgn)[0])) / (2.0 * max(x_i[0], (0.1 * dx_i)))), ((axisymmetric_i > 0.0) && (conservative > 0.0))) * visc) / 2.0) * eye());
+            let conservative_2 = conservative_i;
             let p3 = ldj_rho(j, sgn);
-            let each = (((div_m(((ldj_x(j, sgn)[0] / max(x_i[0], (0.1 * dx_i))) * sig_i_2), (rho_i * rho_i)) - half) * (L_inv_i * g)) + ((div_m(sig_j_2, (p3 * p3)) - half) * (ldj_L_inv(j, sgn) * g)));
+            let each = (((div_m((select(1.0, (ldj_x(j, sgn)[0] / max(x_i[0], (0.1 * dx_i))), ((axisymmetric_i > 0.0) && (conservative_2 > 0.0))) * sig_i_2), (rho_i * rho_i)) - half) * (L_inv_i * g)) + ((div_m(sig_j_2, (p3 * p3)) - half) * (ldj_L_inv(j, sgn) * g)));
             dv = dv + (ldj_m(j, sgn) * each);
         }
     }

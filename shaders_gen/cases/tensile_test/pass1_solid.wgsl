@@ -532,27 +532,27 @@ fn st_v_xsph(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 7u;
     return params[b];
 }
 fn prm_art_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 10u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 12u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 13u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 14u;
     return params[b];
 }
 fn prm_xsph_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 33u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 18u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -79,23 +79,23 @@ fn st_sigma(i: u32, v: mat2x2<f32>) {
     data[b + 2u] = v[1][1];
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 0u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 6u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 7u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 8u;
     return params[b];
 }
 fn prm_eos_eta_peak(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 9u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -429,7 +429,7 @@ fn st_ds(i: u32, v: mat2x2<f32>) {
     data[b + 2u] = v[1][1];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 5u;
     return params[b];
 }
 @compute @workgroup_size(64)

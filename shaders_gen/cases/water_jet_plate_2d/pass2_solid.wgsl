@@ -369,7 +369,7 @@ fn st_p_interface(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_gravity(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 2u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 2u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 @compute @workgroup_size(64)

@@ -441,15 +441,15 @@ fn st_de(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 26u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 27u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 28u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -104,7 +104,7 @@ fn st_rho_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm__constraint0(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 30u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 @compute @workgroup_size(64)

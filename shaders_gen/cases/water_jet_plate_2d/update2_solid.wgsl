@@ -218,71 +218,71 @@ fn st_eps_p_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 0u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 5u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 6u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 7u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 8u;
     return params[b];
 }
 fn prm_eos_eta_peak(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 9u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 13u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 14u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 15u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 16u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 17u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 18u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 19u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 20u;
     return params[b];
 }
 fn prm_C_v(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 21u;
     return params[b];
 }
 fn prm__constraint0(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 30u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 fn prm__symmetry0(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 33u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 32u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 @compute @workgroup_size(64)

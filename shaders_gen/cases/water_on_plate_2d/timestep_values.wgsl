@@ -43,15 +43,15 @@ fn st_h(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 6u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 7u;
     return params[b];
 }
 fn prm_cfl_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 35u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 34u + 29u;
     return params[b];
 }
 @compute @workgroup_size(64)

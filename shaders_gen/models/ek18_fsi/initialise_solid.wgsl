@@ -92,23 +92,23 @@ fn st_sigma(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 0u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 7u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 8u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 9u;
     return params[b];
 }
 fn prm_eos_eta_peak(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 10u;
     return params[b];
 }
 @compute @workgroup_size(64)

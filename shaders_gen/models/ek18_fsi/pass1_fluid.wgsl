@@ -486,23 +486,23 @@ fn st_p_interface(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 0u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 23u;
     return params[b];
 }
 fn prm_p_cav(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 24u;
     return params[b];
 }
 fn prm_surface_threshold(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 25u;
     return params[b];
 }
 fn prm_mu(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 26u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -466,11 +466,11 @@ fn st_ds(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 5u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 6u;
     return params[b];
 }
 @compute @workgroup_size(64)

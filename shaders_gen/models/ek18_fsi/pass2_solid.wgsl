@@ -376,7 +376,7 @@ fn st_p_interface(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_gravity(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 2u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 2u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 @compute @workgroup_size(64)

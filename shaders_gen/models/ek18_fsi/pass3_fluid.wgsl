@@ -445,15 +445,15 @@ fn st_dv(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 27u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 28u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 32u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 31u + 29u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -482,19 +482,19 @@ fn st_de(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 5u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 11u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 12u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 13u;
     return params[b];
 }
 @compute @workgroup_size(64)

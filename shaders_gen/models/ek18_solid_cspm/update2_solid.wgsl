@@ -264,79 +264,79 @@ fn st_eps_p_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 0u;
     return params[b];
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 5u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 6u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 7u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 8u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 9u;
     return params[b];
 }
 fn prm_eos_eta_peak(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 10u;
     return params[b];
 }
 fn prm_nonlocal_hardening(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 14u;
     return params[b];
 }
 fn prm_nonlocal_rate(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 15u;
     return params[b];
 }
 fn prm_damage_length(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 16u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 17u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 18u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 19u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 20u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 21u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 22u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 23u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 24u;
     return params[b];
 }
 fn prm_C_v(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 25u;
     return params[b];
 }
 @compute @workgroup_size(64)

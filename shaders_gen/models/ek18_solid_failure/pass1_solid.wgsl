@@ -583,31 +583,31 @@ fn st_rate_lap_sum(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 5u;
     return params[b];
 }
 fn prm_nonlocal_skips_failed(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 6u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 7u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 12u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 13u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 14u;
     return params[b];
 }
 fn prm_damage_coupling(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 15u;
     return params[b];
 }
 @compute @workgroup_size(64)

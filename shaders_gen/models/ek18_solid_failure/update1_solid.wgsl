@@ -320,115 +320,115 @@ fn st_e_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 0u;
     return params[b];
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 5u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 7u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 8u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 9u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 10u;
     return params[b];
 }
 fn prm_eos_eta_peak(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 11u;
     return params[b];
 }
 fn prm_nonlocal_hardening(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 16u;
     return params[b];
 }
 fn prm_nonlocal_rate(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 17u;
     return params[b];
 }
 fn prm_damage_length(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 18u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 19u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 20u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 21u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 22u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 23u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 24u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 25u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 26u;
     return params[b];
 }
 fn prm_p_spall(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 27u;
     return params[b];
 }
 fn prm_D1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 28u;
     return params[b];
 }
 fn prm_D2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 29u;
     return params[b];
 }
 fn prm_D3(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 30u;
     return params[b];
 }
 fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 32u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 31u;
     return params[b];
 }
 fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 33u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 32u;
     return params[b];
 }
 fn prm_failure_band(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 34u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 33u;
     return params[b];
 }
 fn prm_failure_band_spacing(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 35u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 34u;
     return params[b];
 }
 fn prm_nonlocal_weight(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 36u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 35u;
     return params[b];
 }
 fn prm_C_v(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 37u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 36u;
     return params[b];
 }
 @compute @workgroup_size(64)

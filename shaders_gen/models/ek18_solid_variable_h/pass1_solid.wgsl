@@ -507,23 +507,23 @@ fn st_dv(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 5u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 6u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 11u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 12u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 13u;
     return params[b];
 }
 @compute @workgroup_size(64)

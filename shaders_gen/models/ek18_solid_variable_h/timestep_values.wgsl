@@ -51,15 +51,15 @@ fn st_h(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 7u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 8u;
     return params[b];
 }
 fn prm_cfl_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 28u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 27u + 26u;
     return params[b];
 }
 @compute @workgroup_size(64)

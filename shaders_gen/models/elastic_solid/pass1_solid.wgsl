@@ -558,27 +558,27 @@ fn st_a_contact(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 5u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 8u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 10u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 11u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 12u;
     return params[b];
 }
 fn prm_K_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 13u;
     return params[b];
 }
 @compute @workgroup_size(64)

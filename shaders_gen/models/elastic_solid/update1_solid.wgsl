@@ -173,11 +173,11 @@ fn st_s_0(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 0u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 16u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 15u + 9u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -515,19 +515,19 @@ fn prm_axisymmetric(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 17u + 5u;
     return params[b];
 }
-fn prm_conservative(i: u32) -> f32 {
+fn prm_visc_a(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 17u + 11u;
     return params[b];
 }
-fn prm_visc_a(i: u32) -> f32 {
+fn prm_visc_b(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 17u + 12u;
     return params[b];
 }
-fn prm_visc_b(i: u32) -> f32 {
+fn prm_eta_ratio(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 17u + 13u;
     return params[b];
 }
-fn prm_eta_ratio(i: u32) -> f32 {
+fn prm_conservative(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 17u + 14u;
     return params[b];
 }
@@ -552,10 +552,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let w_2 = w;
     dv = select(select(vec3<f32>(0.0), ((w_2 * ((s_3 - (s_hoop_2 * eye())) * vec3<f32>(1.0, 0.0, 0.0))) / (ld_rho(i) * max(ld_x(i)[0], (0.1 * ld_dx(i))))), (prm_axisymmetric(i) > 0.0)), select(vec3<f32>(0.0), (((-sigma_hoop) * vec3<f32>(1.0, 0.0, 0.0)) / (ld_rho(i) * max(ld_x(i)[0], (0.1 * ld_dx(i))))), (prm_axisymmetric(i) > 0.0)), (prm_conservative(i) > 0.0));
     let axisymmetric_i = prm_axisymmetric(i);
-    let conservative_i = prm_conservative(i);
     let visc_a_i = prm_visc_a(i);
     let visc_b_i = prm_visc_b(i);
     let eta_ratio_i = prm_eta_ratio(i);
+    let conservative_i = prm_conservative(i);
     let x_i = ld_x(i);
     let v_i = ld_v(i);
     let dx_i = ld_dx(i);
@@ -627,9 +627,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 let g = gradW_ij;
                 let p2 = ldj_rho(j, sgn);
                 let by_i = (((div_m(sig_i_2, (rho_i * rho_i)) + div_m(sig_j_2, (p2 * p2))) - (visc * eye())) * (L_inv_i * g));
-                let half = (((select(1.0, ((max(x_i[0], (0.1 * dx_i)) + abs(ldj_x(j, sgn)[0])) / (2.0 * max(x_i[0], (0.1 * dx_i)))), ((axisymmetric_i > 0.0) && (conservative_i > 0.0))) * visc) / 2.0) * eye());
+                let conservative = conservative_i;
+                let half = (((select(1.0, ((max(x_i[0], (0.1 * dx_i)) + abs(ldj_x(j, sgn)[0])) / (2.0 * max(x_i[0], (0.1 * dx_i)))), ((axisymmetric_i > 0.0) && (conservative > 0.0))) * visc) / 2.0) * eye());
+                let conservative_2 = conservative_i;
                 let p3 = ldj_rho(j, sgn);
-                let each = (((div_m((select(1.0, (ldj_x(j, sgn)[0] / max(x_i[0], (0.1 * dx_i))), ((axisymmetric_i > 0.0) && (conservative_i > 0.0))) * sig_i_2), (rho_i * rho_i)) - half) * (L_inv_i * g)) + ((div_m(sig_j_2, (p3 * p3)) - half) * (ldj_L_inv(j, sgn) * g)));
+                let each = (((div_m((select(1.0, (ldj_x(j, sgn)[0] / max(x_i[0], (0.1 * dx_i))), ((axisymmetric_i > 0.0) && (conservative_2 > 0.0))) * sig_i_2), (rho_i * rho_i)) - half) * (L_inv_i * g)) + ((div_m(sig_j_2, (p3 * p3)) - half) * (ldj_L_inv(j, sgn) * g)));
                 dv = dv + (ldj_m(j, sgn) * select(by_i, each, (conservative_i > 0.0)));
             }
         }

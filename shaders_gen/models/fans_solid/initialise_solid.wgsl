@@ -84,19 +84,19 @@ fn st_R_art(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 20u + 0u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 20u + 8u;
     return params[b];
 }
 fn prm_art_eps(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 20u + 9u;
     return params[b];
 }
 fn prm_art_axes(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 21u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 20u + 11u;
     return params[b];
 }
 @compute @workgroup_size(64)

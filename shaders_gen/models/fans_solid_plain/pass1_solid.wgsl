@@ -519,27 +519,27 @@ fn st_v_xsph(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 5u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 7u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 9u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 10u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 11u;
     return params[b];
 }
 fn prm_xsph_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 15u;
     return params[b];
 }
 @compute @workgroup_size(64)

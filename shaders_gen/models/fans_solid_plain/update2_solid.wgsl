@@ -189,23 +189,23 @@ fn st_sigma_y_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 0u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 7u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 8u;
     return params[b];
 }
 fn prm_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 12u;
     return params[b];
 }
 fn prm_E_T(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 18u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 17u + 13u;
     return params[b];
 }
 @compute @workgroup_size(64)

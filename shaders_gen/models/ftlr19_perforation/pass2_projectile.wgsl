@@ -575,20 +575,20 @@ fn prm_c0(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 40u + 9u;
     return params[b];
 }
-fn prm_conservative(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 10u;
-    return params[b];
-}
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 14u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 15u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 16u;
+    return params[b];
+}
+fn prm_conservative(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 18u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -623,10 +623,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let axisymmetric_i = prm_axisymmetric(i);
     let delta_i = prm_delta(i);
     let c0_i = prm_c0(i);
-    let conservative_i = prm_conservative(i);
     let visc_a_i = prm_visc_a(i);
     let visc_b_i = prm_visc_b(i);
     let eta_ratio_i = prm_eta_ratio(i);
+    let conservative_i = prm_conservative(i);
     let x_i = ld_x(i);
     let v_i = ld_v(i);
     let dx_i = ld_dx(i);
@@ -716,9 +716,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 let g = gradW_ij;
                 let p4 = ldj_rho(j, sgn);
                 let by_i = (((div_m(sig_i_3, (rho_i * rho_i)) + div_m(sig_j_3, (p4 * p4))) - (visc * eye())) * (L_inv_i * g));
-                let half = (((select(1.0, ((max(x_i[0], (0.1 * dx_i)) + abs(ldj_x(j, sgn)[0])) / (2.0 * max(x_i[0], (0.1 * dx_i)))), ((axisymmetric_i > 0.0) && (conservative_i > 0.0))) * visc) / 2.0) * eye());
+                let conservative = conservative_i;
+                let half = (((select(1.0, ((max(x_i[0], (0.1 * dx_i)) + abs(ldj_x(j, sgn)[0])) / (2.0 * max(x_i[0], (0.1 * dx_i)))), ((axisymmetric_i > 0.0) && (conservative > 0.0))) * visc) / 2.0) * eye());
+                let conservative_2 = conservative_i;
                 let p5 = ldj_rho(j, sgn);
-                let each = (((div_m((select(1.0, (ldj_x(j, sgn)[0] / max(x_i[0], (0.1 * dx_i))), ((axisymmetric_i > 0.0) && (conservative_i > 0.0))) * sig_i_3), (rho_i * rho_i)) - half) * (L_inv_i * g)) + ((div_m(sig_j_3, (p5 * p5)) - half) * (ldj_L_inv(j, sgn) * g)));
+                let each = (((div_m((select(1.0, (ldj_x(j, sgn)[0] / max(x_i[0], (0.1 * dx_i))), ((axisymmetric_i > 0.0) && (conservative_2 > 0.0))) * sig_i_3), (rho_i * rho_i)) - half) * (L_inv_i * g)) + ((div_m(sig_j_3, (p5 * p5)) - half) * (ldj_L_inv(j, sgn) * g)));
                 dv = dv + (ldj_m(j, sgn) * select(by_i, each, (conservative_i > 0.0)));
             }
             // pairsum continuity (stdlib/continuity/delta_sph.sph:26)

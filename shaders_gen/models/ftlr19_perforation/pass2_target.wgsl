@@ -580,19 +580,19 @@ fn prm_c0(i: u32) -> f32 {
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 14u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 15u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 16u;
     return params[b];
 }
 fn prm_damage_coupling(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 17u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -625,7 +625,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             if (in_groups(1u, ints[j])) {
                 grad_v = grad_v + outer((ldj_v(j, sgn) - v_i), ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * gradW_ij));
             }
-            // pairsum other_body_colour (stdlib/contact/overlap_pressure.sph:42)
+            // pairsum other_body_colour (stdlib/contact/overlap_pressure.sph:43)
             if ((body_i != ldj_body(j, sgn))) {
                 colour_other = colour_other + ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * W_ij);
             }

@@ -754,7 +754,7 @@ fn prm_c0(i: u32) -> f32 {
     return params[b];
 }
 fn prm_conservative(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 17u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
@@ -898,7 +898,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                     grad_v_2 = grad_v_2 + outer((ldj_v(j, sgn) - v_i), ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * g));
                 }
             }
-            // pairsum shaped_hourglass (stdlib/solid/shaped_hourglass.sph:35)
+            // pairsum shaped_hourglass (stdlib/solid/shaped_hourglass.sph:36)
             if (in_groups(2u, ints[j])) {
                 if ((((body_i == ldj_body(j, sgn)) && (D_i < 1.0)) && (ldj_D(j, sgn) < 1.0))) {
                     let X_ij = (x_ij - (u_i - ldj_u(j, sgn)));
@@ -906,7 +906,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                     let along = (x_ij / r_ij);
                     let miss = dot((((0.5 * (kernel_shape_i + ldj_kernel_shape(j, sgn))) * X_ij) - x_ij), along);
                     let k_2 = (((((hourglass_alpha_i * ldj_m(j, sgn)) / rho0_i) * kernel_w_at(r0, (h_ratio_i * (0.5 * (dx_i + ldj_dx(j, sgn)))))) * hourglass_E_i) / (rho0_i * (r0 * r0)));
-                    dv_hourglass = dv_hourglass + (((select(1.0, ((max(x_i[0], (0.1 * dx_i)) + abs(ldj_x(j, sgn)[0])) / (2.0 * max(x_i[0], (0.1 * dx_i)))), ((axisymmetric_i > 0.0) && (conservative_i > 0.0))) * k_2) * miss) * along);
+                    let conservative = conservative_i;
+                    dv_hourglass = dv_hourglass + (((select(1.0, ((max(x_i[0], (0.1 * dx_i)) + abs(ldj_x(j, sgn)[0])) / (2.0 * max(x_i[0], (0.1 * dx_i)))), ((axisymmetric_i > 0.0) && (conservative > 0.0))) * k_2) * miss) * along);
                     hourglass_rate2 = hourglass_rate2 + k_2;
                 }
             }
@@ -935,7 +936,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                     sum = sum + (((((((c0_i * h0_3) * ldj_m(j, sgn)) / ldj_rho(j, sgn)) * 2.0) * (rho_i - ldj_rho(j, sgn))) * dot(x_ij, ((select(((0.0 * x_6) / 1.0), (((slope_3 / max(q_3, 1e-30)) * norm_3) * (M_5 * x_6)), (q_3 > 0.0)) + select(((0.0 * x_8) / 1.0), (((slope_4 / max(q_4, 1e-30)) * norm_4) * (M_7 * x_8)), (q_4 > 0.0))) / 2.0))) / ((r_ij * r_ij) + (0.01 * (h0_3 * h0_3))));
                 }
             }
-            // pairsum other_body_colour (stdlib/contact/overlap_pressure.sph:42)
+            // pairsum other_body_colour (stdlib/contact/overlap_pressure.sph:43)
             if ((body_i != ldj_body(j, sgn))) {
                 colour_other = colour_other + ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * W_ij);
             }

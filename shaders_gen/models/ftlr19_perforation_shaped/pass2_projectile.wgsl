@@ -599,19 +599,19 @@ fn prm_c0(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 51u + 13u;
     return params[b];
 }
-fn prm_conservative(i: u32) -> f32 {
+fn prm_visc_a(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 51u + 14u;
     return params[b];
 }
-fn prm_visc_a(i: u32) -> f32 {
+fn prm_visc_b(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 51u + 15u;
     return params[b];
 }
-fn prm_visc_b(i: u32) -> f32 {
+fn prm_eta_ratio(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 51u + 16u;
     return params[b];
 }
-fn prm_eta_ratio(i: u32) -> f32 {
+fn prm_conservative(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 51u + 17u;
     return params[b];
 }
@@ -649,10 +649,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let axisymmetric_i = prm_axisymmetric(i);
     let delta_i = prm_delta(i);
     let c0_i = prm_c0(i);
-    let conservative_i = prm_conservative(i);
     let visc_a_i = prm_visc_a(i);
     let visc_b_i = prm_visc_b(i);
     let eta_ratio_i = prm_eta_ratio(i);
+    let conservative_i = prm_conservative(i);
     let x_i = ld_x(i);
     let v_i = ld_v(i);
     let dx_i = ld_dx(i);
@@ -708,9 +708,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let r_ij = sqrt(r2);
             let W_ij = kernel_w(r_ij, h_ij);
             let gradW_ij = kernel_grad(r_ij, h_ij) * x_ij;
-            // pairsum contact (stdlib/contact/overlap_pressure.sph:52)
+            // pairsum contact (stdlib/contact/overlap_pressure.sph:53)
             if ((body_i != ldj_body(j, sgn))) {
-                a_contact = a_contact + (((((-select(1.0, ((max(x_i[0], (0.1 * dx_i)) + abs(ldj_x(j, sgn)[0])) / (2.0 * max(x_i[0], (0.1 * dx_i)))), ((axisymmetric_i > 0.0) && (conservative_i > 0.0)))) * ldj_m(j, sgn)) * (p_contact_i + ldj_p_contact(j, sgn))) / (rho_i * ldj_rho(j, sgn))) * gradW_ij);
+                let conservative = conservative_i;
+                a_contact = a_contact + (((((-select(1.0, ((max(x_i[0], (0.1 * dx_i)) + abs(ldj_x(j, sgn)[0])) / (2.0 * max(x_i[0], (0.1 * dx_i)))), ((axisymmetric_i > 0.0) && (conservative > 0.0)))) * ldj_m(j, sgn)) * (p_contact_i + ldj_p_contact(j, sgn))) / (rho_i * ldj_rho(j, sgn))) * gradW_ij);
             }
             // pairsum continuity (stdlib/continuity/delta_sph.sph:26)
             if (in_groups(1u, ints[j])) {
@@ -758,9 +759,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                     let g_2 = gradW_ij;
                     let p4 = ldj_rho(j, sgn);
                     let by_i = (((div_m(sig_i_3, (rho_i * rho_i)) + div_m(sig_j_3, (p4 * p4))) - (visc * eye())) * (L_inv_i * g_2));
-                    let half = (((select(1.0, ((max(x_i[0], (0.1 * dx_i)) + abs(ldj_x(j, sgn)[0])) / (2.0 * max(x_i[0], (0.1 * dx_i)))), ((axisymmetric_i > 0.0) && (conservative_i > 0.0))) * visc) / 2.0) * eye());
+                    let conservative_2 = conservative_i;
+                    let half = (((select(1.0, ((max(x_i[0], (0.1 * dx_i)) + abs(ldj_x(j, sgn)[0])) / (2.0 * max(x_i[0], (0.1 * dx_i)))), ((axisymmetric_i > 0.0) && (conservative_2 > 0.0))) * visc) / 2.0) * eye());
+                    let conservative_3 = conservative_i;
                     let p5 = ldj_rho(j, sgn);
-                    let each = (((div_m((select(1.0, (ldj_x(j, sgn)[0] / max(x_i[0], (0.1 * dx_i))), ((axisymmetric_i > 0.0) && (conservative_i > 0.0))) * sig_i_3), (rho_i * rho_i)) - half) * (L_inv_i * g_2)) + ((div_m(sig_j_3, (p5 * p5)) - half) * (ldj_L_inv(j, sgn) * g_2)));
+                    let each = (((div_m((select(1.0, (ldj_x(j, sgn)[0] / max(x_i[0], (0.1 * dx_i))), ((axisymmetric_i > 0.0) && (conservative_3 > 0.0))) * sig_i_3), (rho_i * rho_i)) - half) * (L_inv_i * g_2)) + ((div_m(sig_j_3, (p5 * p5)) - half) * (ldj_L_inv(j, sgn) * g_2)));
                     dv = dv + (ldj_m(j, sgn) * select(by_i, each, (conservative_i > 0.0)));
                 }
             }

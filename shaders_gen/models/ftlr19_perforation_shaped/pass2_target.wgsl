@@ -653,19 +653,19 @@ fn prm_axisymmetric(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 51u + 5u;
     return params[b];
 }
-fn prm_conservative(i: u32) -> f32 {
+fn prm_visc_a(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 51u + 14u;
     return params[b];
 }
-fn prm_visc_a(i: u32) -> f32 {
+fn prm_visc_b(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 51u + 15u;
     return params[b];
 }
-fn prm_visc_b(i: u32) -> f32 {
+fn prm_eta_ratio(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 51u + 16u;
     return params[b];
 }
-fn prm_eta_ratio(i: u32) -> f32 {
+fn prm_conservative(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 51u + 17u;
     return params[b];
 }
@@ -712,10 +712,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     de = select(0.0, ((sigma_hoop_2 * select(0.0, (((w_4 * ld_v(i)[0]) / max(ld_x(i)[0], (0.1 * ld_dx(i)))) + ((1.0 - w_4) * ld_edot(i)[0][0])), (prm_axisymmetric(i) > 0.0))) / ld_rho(i)), (prm_axisymmetric(i) > 0.0));
     let h_ratio_i = prm_h_ratio(i);
     let axisymmetric_i = prm_axisymmetric(i);
-    let conservative_i = prm_conservative(i);
     let visc_a_i = prm_visc_a(i);
     let visc_b_i = prm_visc_b(i);
     let eta_ratio_i = prm_eta_ratio(i);
+    let conservative_i = prm_conservative(i);
     let visc_share_i = prm_visc_share(i);
     let hourglass_visc_i = prm_hourglass_visc(i);
     let damage_coupling_i = prm_damage_coupling(i);
@@ -778,9 +778,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let r_ij = sqrt(r2);
             let W_ij = kernel_w(r_ij, h_ij);
             let gradW_ij = kernel_grad(r_ij, h_ij) * x_ij;
-            // pairsum contact (stdlib/contact/overlap_pressure.sph:52)
+            // pairsum contact (stdlib/contact/overlap_pressure.sph:53)
             if ((body_i != ldj_body(j, sgn))) {
-                a_contact = a_contact + (((((-select(1.0, ((max(x_i[0], (0.1 * dx_i)) + abs(ldj_x(j, sgn)[0])) / (2.0 * max(x_i[0], (0.1 * dx_i)))), ((axisymmetric_i > 0.0) && (conservative_i > 0.0)))) * ldj_m(j, sgn)) * (p_contact_i + ldj_p_contact(j, sgn))) / (rho_i * ldj_rho(j, sgn))) * gradW_ij);
+                let conservative = conservative_i;
+                a_contact = a_contact + (((((-select(1.0, ((max(x_i[0], (0.1 * dx_i)) + abs(ldj_x(j, sgn)[0])) / (2.0 * max(x_i[0], (0.1 * dx_i)))), ((axisymmetric_i > 0.0) && (conservative > 0.0)))) * ldj_m(j, sgn)) * (p_contact_i + ldj_p_contact(j, sgn))) / (rho_i * ldj_rho(j, sgn))) * gradW_ij);
             }
             // pairsum shaped_failing_momentum (stdlib/momentum/shaped_failing.sph:19)
             if (in_groups(2u, ints[j])) {
@@ -835,9 +836,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                     let g = ((select(((0.0 * x_4) / 1.0), (((slope / max(q, 1e-30)) * norm) * (M_3 * x_4)), (q > 0.0)) + select(((0.0 * x_6) / 1.0), (((slope_2 / max(q_2, 1e-30)) * norm_2) * (M_5 * x_6)), (q_2 > 0.0))) / 2.0);
                     let p3 = ldj_rho(j, sgn);
                     let by_i = (((div_m(sig_i_2, (rho_i * rho_i)) + div_m(sig_j_2, (p3 * p3))) - (visc * eye())) * (L_inv_i * g));
-                    let half = (((select(1.0, ((max(x_i[0], (0.1 * dx_i)) + abs(ldj_x(j, sgn)[0])) / (2.0 * max(x_i[0], (0.1 * dx_i)))), ((axisymmetric_i > 0.0) && (conservative_i > 0.0))) * visc) / 2.0) * eye());
+                    let conservative_2 = conservative_i;
+                    let half = (((select(1.0, ((max(x_i[0], (0.1 * dx_i)) + abs(ldj_x(j, sgn)[0])) / (2.0 * max(x_i[0], (0.1 * dx_i)))), ((axisymmetric_i > 0.0) && (conservative_2 > 0.0))) * visc) / 2.0) * eye());
+                    let conservative_3 = conservative_i;
                     let p4 = ldj_rho(j, sgn);
-                    let each = (((div_m((select(1.0, (ldj_x(j, sgn)[0] / max(x_i[0], (0.1 * dx_i))), ((axisymmetric_i > 0.0) && (conservative_i > 0.0))) * sig_i_2), (rho_i * rho_i)) - half) * (L_inv_i * g)) + ((div_m(sig_j_2, (p4 * p4)) - half) * (ldj_L_inv(j, sgn) * g)));
+                    let each = (((div_m((select(1.0, (ldj_x(j, sgn)[0] / max(x_i[0], (0.1 * dx_i))), ((axisymmetric_i > 0.0) && (conservative_3 > 0.0))) * sig_i_2), (rho_i * rho_i)) - half) * (L_inv_i * g)) + ((div_m(sig_j_2, (p4 * p4)) - half) * (ldj_L_inv(j, sgn) * g)));
                     let F = select(by_i, each, (conservative_i > 0.0));
                     dv = dv + (ldj_m(j, sgn) * F);
                     de = de + (-((0.5 * ldj_m(j, sgn)) * dot((v_i - ldj_v(j, sgn)), F)));

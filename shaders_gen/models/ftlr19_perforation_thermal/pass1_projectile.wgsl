@@ -543,7 +543,7 @@ fn prm_det_min(i: u32) -> f32 {
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 10u;
     return params[b];
 }
 fn prm_K_p(i: u32) -> f32 {
