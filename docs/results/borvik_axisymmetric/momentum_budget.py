@@ -8,16 +8,11 @@ cancel in a scheme whose pair forces are equal and opposite; the contact, whose 
 so; and the plate's hourglass pull. Forces are the last evaluation of the step the profile took.
 """
 import csv
-import math
 import sys
 
-from release import load
+from release import load, ring_sum
 
 TIMES = [10, 30, 50, 58, 62, 66]  # us, momentum_profiles.toml's
-
-
-def ring_sum(particles, key):
-    return sum(d["m"] * 2 * math.pi * d["x"] * d[key] for d in particles)
 
 
 def impact_momentum(out):

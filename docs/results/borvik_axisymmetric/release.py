@@ -21,8 +21,13 @@ def load(path):
         return [{k.split(" ")[0]: float(v) for k, v in row.items()} for row in csv.DictReader(f)]
 
 
+def ring_sum(particles, key):
+    """Σ m 2π r q over the particles, for the field q named `key`: each particle weighed as its ring."""
+    return sum(d["m"] * 2 * math.pi * d["x"] * d[key] for d in particles)
+
+
 def momentum(particles):
-    return sum(d["m"] * 2 * math.pi * d["x"] * d["v.y"] for d in particles)
+    return ring_sum(particles, "v.y")
 
 
 def release(out):
