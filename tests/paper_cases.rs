@@ -174,8 +174,9 @@ fn borvik_8mm_plate_is_perforated_without_gaining_energy() {
     }
     // The ballistic limit from Recht and Ipson's plugging curve (p = 2, a = m_p / (m_p + m_plug)
     // = 0.909) through these three runs, on a plate of 40 mm radius with four particles through
-    // the thickness: −3.7 %; −9.7 / −3.7 / −0.3 % at 2.667 / 2 / 1.6 mm, Richardson +11.6 %
-    // (docs/results/borvik_8mm_convergence/). The free fit (a and p fitted too) has three
+    // the thickness: +2.4 %; +3.7 / +2.4 / −0.4 % at 2.667 / 2 / 1.6 mm, no order
+    // (docs/results/borvik_8mm_convergence/, pair forces that conserve momentum; FTLR19's
+    // one-sided form gave −3.7 % here). The free fit (a and p fitted too) has three
     // unknowns for three runs and swings (−46 % here); the full plate's runs are the figures to
     // quote (docs/results/README.md, Børvik).
     within(&o, "ballistic_limit_plugging", 0.15);

@@ -429,6 +429,11 @@ fn st_L_inv(i: u32, v: mat3x3<f32>) {
     data[b + 7u] = v[1][2];
     data[b + 8u] = v[2][2];
 }
+fn ldj_L_inv(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
+    let base = info[21u];
+    let b = u32(base + i32(j) * 9);
+    return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u])), sgn);
+}
 fn ld_s(i: u32) -> mat3x3<f32> {
     let b = u32(info[25 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
@@ -624,9 +629,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 let sig_j_2 = sig_j;
                 let visc = pi_ij;
                 let g_2 = gradW_ij;
+                let half = (((1.0 * visc) / 2.0) * eye());
                 let p2 = ldj_rho(j, sgn);
-                let by_i = (((div_m(sig_i_2, (rho_i * rho_i)) + div_m(sig_j_2, (p2 * p2))) - (visc * eye())) * (L_inv_i * g_2));
-                dv = dv + (ldj_m(j, sgn) * by_i);
+                let each = (((div_m((1.0 * sig_i_2), (rho_i * rho_i)) - half) * (L_inv_i * g_2)) + ((div_m(sig_j_2, (p2 * p2)) - half) * (ldj_L_inv(j, sgn) * g_2)));
+                dv = dv + (ldj_m(j, sgn) * each);
             }
         }
         }}}

@@ -429,6 +429,11 @@ fn st_L_inv(i: u32, v: mat3x3<f32>) {
     data[b + 7u] = v[1][2];
     data[b + 8u] = v[2][2];
 }
+fn ldj_L_inv(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
+    let base = info[21u];
+    let b = u32(base + i32(j) * 9);
+    return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u])), sgn);
+}
 fn ld_s(i: u32) -> mat3x3<f32> {
     let b = u32(info[25 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
@@ -626,7 +631,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             div_v = div_v + (vol_j * dot((v_i - ldj_v(j, sgn)), (L_inv * g)));
             let phi = ((((2.0 * (rho_i - ldj_rho(j, sgn))) * x_ij) / (r_ij * r_ij)) - (grad_rho_i + ldj_grad_rho(j, sgn)));
             diffusion = diffusion + ((((delta_i * h_i) * c0_i) * vol_j) * dot(phi, gradW_ij));
-            // pairsum failed_in_compression_momentum (stdlib/momentum/failed_in_compression.sph:24)
+            // pairsum failed_in_compression_momentum (stdlib/momentum/failed_in_compression.sph:27)
             if ((body_i == ldj_body(j, sgn))) {
                 let s_2 = s_i;
                 let p = p_i;
@@ -651,10 +656,14 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 let c_bar = ((c_i_2 + c_j) / 2.0);
                 let rho_bar = (0.5 * (rho_i + ldj_rho(j, sgn)));
                 let pi_ij = select(0.0, (((((-visc_a_i) * c_bar) * phi_2) + (visc_b_i * (phi_2 * phi_2))) / rho_bar), (vr < 0.0));
-                let p2 = ldj_rho(j, sgn);
-                let L_inv_2 = L_inv_i;
+                let sig_i_2 = sig_i;
+                let sig_j_2 = sig_j;
+                let visc = pi_ij;
                 let g_2 = gradW_ij;
-                dv = dv + ((ldj_m(j, sgn) * ((div_m(sig_i, (rho_i * rho_i)) + div_m(sig_j, (p2 * p2))) - (pi_ij * eye()))) * (L_inv_2 * g_2));
+                let half = (((1.0 * visc) / 2.0) * eye());
+                let p2 = ldj_rho(j, sgn);
+                let each = (((div_m((1.0 * sig_i_2), (rho_i * rho_i)) - half) * (L_inv_i * g_2)) + ((div_m(sig_j_2, (p2 * p2)) - half) * (ldj_L_inv(j, sgn) * g_2)));
+                dv = dv + (ldj_m(j, sgn) * each);
             }
         }
         }}}

@@ -369,6 +369,11 @@ fn st_x(i: u32, v: vec3<f32>) {
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
+fn ldj_x(j: u32, sgn: vec3<f32>) -> vec3<f32> {
+    let base = info[5u];
+    let b = u32(base + i32(j) * 3);
+    return (vec3<f32>(data[b], data[b + 1u], data[b + 2u]) * sgn);
+}
 fn ld_v(i: u32) -> vec3<f32> {
     let b = u32(info[7 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
@@ -446,6 +451,11 @@ fn st_L_inv(i: u32, v: mat3x3<f32>) {
     data[b + 6u] = v[0][2];
     data[b + 7u] = v[1][2];
     data[b + 8u] = v[2][2];
+}
+fn ldj_L_inv(j: u32, sgn: vec3<f32>) -> mat3x3<f32> {
+    let base = info[19u];
+    let b = u32(base + i32(j) * 9);
+    return flip_m(mat3x3<f32>(vec3<f32>(data[b], data[b + 3u], data[b + 6u]), vec3<f32>(data[b + 1u], data[b + 4u], data[b + 7u]), vec3<f32>(data[b + 2u], data[b + 5u], data[b + 8u])), sgn);
 }
 fn ld_edot(i: u32) -> mat3x3<f32> {
     let b = u32(info[21 + G] + i32(i) * 6);
@@ -595,6 +605,10 @@ fn prm_damage_coupling(i: u32) -> f32 {
     let b = ints[arrayLength(&ints) / 2u + i] * 42u + 17u;
     return params[b];
 }
+fn prm_conservative(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 18u;
+    return params[b];
+}
 @compute @workgroup_size(64)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) li: u32) {
     let k = (wg.x + wg.y * nwg.x) * 64u + li;
@@ -618,13 +632,17 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let sigma_hoop = ((w * (ld_s_hoop(i) - min(ld_p(i), 0.0))) - max(ld_p(i), 0.0));
     let w_2 = min((ld_x(i)[0] / (2.0 * ld_dx(i))), 1.0);
     de = select(0.0, ((sigma_hoop * select(0.0, (((w_2 * ld_v(i)[0]) / max(ld_x(i)[0], (0.1 * ld_dx(i)))) + ((1.0 - w_2) * ld_edot(i)[0][0])), (prm_axisymmetric(i) > 0.0))) / ld_rho(i)), (prm_axisymmetric(i) > 0.0));
+    let axisymmetric_i = prm_axisymmetric(i);
     let delta_i = prm_delta(i);
     let c0_i = prm_c0(i);
     let visc_a_i = prm_visc_a(i);
     let visc_b_i = prm_visc_b(i);
     let eta_ratio_i = prm_eta_ratio(i);
     let damage_coupling_i = prm_damage_coupling(i);
+    let conservative_i = prm_conservative(i);
+    let x_i = ld_x(i);
     let v_i = ld_v(i);
+    let dx_i = ld_dx(i);
     let body_i = ld_body(i);
     let rho_i = ld_rho(i);
     let h_i = ld_h(i);
@@ -705,7 +723,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let p2 = ldj_rho(j, sgn);
             let A = ((div_m(sig_i, (rho_i * rho_i)) + div_m(sig_j, (p2 * p2))) - (pi_ij * eye()));
             de = de + (-((0.5 * ldj_m(j, sgn)) * dot((v_i - ldj_v(j, sgn)), (A * gradW_ij))));
-            // pairsum failed_in_compression_momentum (stdlib/momentum/failed_in_compression.sph:24)
+            // pairsum failed_in_compression_momentum (stdlib/momentum/failed_in_compression.sph:27)
             if ((body_i == ldj_body(j, sgn))) {
                 let s_4 = s_i;
                 let p_3 = p_i;
@@ -730,24 +748,32 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 let c_bar_2 = ((c_i_3 + c_j_2) / 2.0);
                 let rho_bar_2 = (0.5 * (rho_i + ldj_rho(j, sgn)));
                 let pi_ij_2 = select(0.0, (((((-visc_a_i) * c_bar_2) * phi_2) + (visc_b_i * (phi_2 * phi_2))) / rho_bar_2), (vr_2 < 0.0));
-                let p4 = ldj_rho(j, sgn);
-                let L_inv = L_inv_i;
+                let sig_i_3 = sig_i_2;
+                let sig_j_3 = sig_j_2;
+                let visc = pi_ij_2;
                 let g = gradW_ij;
-                dv = dv + ((ldj_m(j, sgn) * ((div_m(sig_i_2, (rho_i * rho_i)) + div_m(sig_j_2, (p4 * p4))) - (pi_ij_2 * eye()))) * (L_inv * g));
+                let p4 = ldj_rho(j, sgn);
+                let by_i = (((div_m(sig_i_3, (rho_i * rho_i)) + div_m(sig_j_3, (p4 * p4))) - (visc * eye())) * (L_inv_i * g));
+                let conservative = conservative_i;
+                let half = (((select(1.0, ((max(x_i[0], (0.1 * dx_i)) + abs(ldj_x(j, sgn)[0])) / (2.0 * max(x_i[0], (0.1 * dx_i)))), ((axisymmetric_i > 0.0) && (conservative > 0.0))) * visc) / 2.0) * eye());
+                let conservative_2 = conservative_i;
+                let p5 = ldj_rho(j, sgn);
+                let each = (((div_m((select(1.0, (ldj_x(j, sgn)[0] / max(x_i[0], (0.1 * dx_i))), ((axisymmetric_i > 0.0) && (conservative_2 > 0.0))) * sig_i_3), (rho_i * rho_i)) - half) * (L_inv_i * g)) + ((div_m(sig_j_3, (p5 * p5)) - half) * (ldj_L_inv(j, sgn) * g)));
+                dv = dv + (ldj_m(j, sgn) * select(by_i, each, (conservative_i > 0.0)));
             }
             // pairsum continuity (stdlib/continuity/delta_sph.sph:26)
             let vol_j = (ldj_m(j, sgn) / ldj_rho(j, sgn));
-            let L_inv_2 = L_inv_i;
+            let L_inv = L_inv_i;
             let g_2 = gradW_ij;
-            div_v = div_v + (vol_j * dot((v_i - ldj_v(j, sgn)), (L_inv_2 * g_2)));
+            div_v = div_v + (vol_j * dot((v_i - ldj_v(j, sgn)), (L_inv * g_2)));
             let phi_3 = ((((2.0 * (rho_i - ldj_rho(j, sgn))) * x_ij) / (r_ij * r_ij)) - (grad_rho_i + ldj_grad_rho(j, sgn)));
             diffusion = diffusion + ((((delta_i * h_i) * c0_i) * vol_j) * dot(phi_3, gradW_ij));
         }
         }}}
     }
     // then continuity
-    let w_3 = min((ld_x(i)[0] / (2.0 * ld_dx(i))), 1.0);
-    drho = ((rho_i * (div_v - select(0.0, (((w_3 * v_i[0]) / max(ld_x(i)[0], (0.1 * ld_dx(i)))) + ((1.0 - w_3) * ld_edot(i)[0][0])), (prm_axisymmetric(i) > 0.0)))) + diffusion);
+    let w_3 = min((x_i[0] / (2.0 * dx_i)), 1.0);
+    drho = ((rho_i * (div_v - select(0.0, (((w_3 * v_i[0]) / max(x_i[0], (0.1 * dx_i))) + ((1.0 - w_3) * ld_edot(i)[0][0])), (axisymmetric_i > 0.0)))) + diffusion);
     st_drho(i, drho);
     st_de(i, de);
     st_dv(i, dv);
