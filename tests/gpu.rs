@@ -555,12 +555,13 @@ fn borvik_perforation_on_shaped_kernels_with_a_failure_band_on_the_gpu_matches_t
 
 #[test]
 fn borvik_perforation_on_shaped_kernels_with_spall_on_the_gpu_matches_the_cpu_in_contact() {
-    // The same plate with a spall strength of 1 GPa (the case's optional `p_spall`,
+    // The same plate with a spall strength of 0.8 GPa (the case's optional `p_spall`,
     // damage/johnson_cook_or_spall_now.sph: the Mie–Grüneisen pressure of each update's density
     // and energy, and the failed particle's density floored in the same correction): 60 steps in
-    // contact, in which the CPU spalls 18 particles at f64.
+    // contact, in which the CPU spalls 33 particles at f64. (At 1 GPa it spalled 18 with FTLR19's
+    // one-sided momentum and 5 with the pair forces that conserve it, the case's since stop 119.)
     let path = std::path::PathBuf::from(case("borvik_perforation"));
-    let set = [("model", "models::ftlr19_perforation_shaped"), ("gap", "0.2"), ("p_spall", "1")];
+    let set = [("model", "models::ftlr19_perforation_shaped"), ("gap", "0.2"), ("p_spall", "0.8")];
     let engines = run_both(&path, &set, 60);
     let (_, d) = stored_field(&engines.0.backend, "D");
     let failed = d.iter().filter(|d| **d >= 1.0).count();
