@@ -19,12 +19,13 @@ fn names(plan: &Plan, fields: &[pairsum::ir::FieldId]) -> Vec<String> {
 }
 
 /// Børvik's perforation model: its first pass reads the state at j (with the mass and smoothing
-/// length, which no step writes); its second reads at j the density gradient the first pass
-/// computed. Per step, each of the two evaluations sends the changed state before pass 1 and the
-/// new gradient before pass 2; the mass and h, read at j by pass 1, travel only with a rebuilt
-/// halo.
+/// length, which no step writes); its second reads at j the density gradient and the corrected
+/// gradient's L⁻¹ the first pass computed (the case's pair forces that conserve momentum send
+/// each stress through its own particle's L⁻¹). Per step, each of the two evaluations sends the
+/// changed state before pass 1 and the new gradient and L⁻¹ before pass 2; the mass and h, read
+/// at j by pass 1, travel only with a rebuilt halo.
 #[test]
-fn the_perforation_halo_sends_the_state_then_the_density_gradient_and_never_the_mass() {
+fn the_perforation_halo_sends_the_state_then_the_density_gradient_and_l_inverse_and_never_the_mass() {
     let p = plan("borvik_perforation");
     let read = names(&p, &p.fields_read_at_j(0));
     assert!(read.contains(&"m".to_string()) && read.contains(&"h".to_string()), "pass 1 reads at j: {read:?}");
@@ -32,7 +33,7 @@ fn the_perforation_halo_sends_the_state_then_the_density_gradient_and_never_the_
     let got: Vec<(usize, usize, Vec<String>)> =
         ex.iter().map(|x| (x.evaluation, x.pass, names(&p, &x.fields))).collect();
     let state: Vec<String> = ["D", "c", "p", "rho", "s", "v", "x"].iter().map(|s| s.to_string()).collect();
-    let gradient = vec!["grad_rho".to_string()];
+    let gradient = vec!["L_inv".to_string(), "grad_rho".to_string()];
     let expected = vec![(0, 0, state.clone()), (0, 1, gradient.clone()), (1, 0, state), (1, 1, gradient)];
     assert_eq!(got, expected);
 }
