@@ -82,6 +82,30 @@ fn use_on_restricts_a_module_and_what_it_pulls_in() {
     assert_eq!(groups(*from), "target");
 }
 
+/// `from own body` holds for a module only when every `use` that reaches it says so: a model that
+/// asks for the corrected gradient's sums `from own body` while a module it uses (the corrected
+/// velocity gradient) uses the same module without gets warning W0503 at both `use` lines (before
+/// stop 120 `models::elastic_solid_corrected` was in that state, its correction summed over the
+/// other bar of `colliding_bars_1d`); with both uses restricted, none.
+#[test]
+fn a_from_own_body_that_another_plain_use_undoes_is_warning_w0503_at_both_uses() {
+    let check = |strain_rate_use: &str| {
+        let text = format!("use correction::kernel_gradient from own body\n{strain_rate_use}\n");
+        let mut sources = Sources::new();
+        let checked = pairsum::check::check_text(&mut sources, "m.sph", &text, Stdlib::Dir(stdlib_dir()));
+        let undone: Vec<_> = checked.diags.iter().filter(|d| d.code == "W0503").collect();
+        (undone.len(), render(&sources, &checked.diags))
+    };
+    let (count, text) = check("use solid::strain_rate_corrected");
+    assert_eq!(count, 1, "{text}");
+    for part in ["this `from own body` does not hold", "m.sph:1:1", "strain_rate_corrected.sph", "used here without it"]
+    {
+        assert!(text.contains(part), "{part} not in:\n{text}");
+    }
+    let (count, text) = check("use solid::strain_rate_corrected from own body");
+    assert_eq!(count, 0, "{text}");
+}
+
 /// Two modules may give one parameter a default when it is the same constant (the corrected
 /// gradient's and the shaped kernel's `det_min = 0.1`): the model keeps it. Different defaults
 /// stay error E0107 (tests/ui/parameter_with_two_defaults.sph).

@@ -131,6 +131,8 @@ pub struct UseEdge {
     pub from: Option<Vec<Ident>>,
     pub own: bool,
     pub own_body: bool,
+    /// The `use` as written, for diagnostics.
+    pub span: Span,
 }
 
 pub struct Loader<'s> {
@@ -243,6 +245,7 @@ impl<'s> Loader<'s> {
                             from: u.from,
                             own: u.own,
                             own_body: u.own_body,
+                            span: u.span,
                         });
                     }
                 }

@@ -382,8 +382,54 @@ impl Checker {
                 }
             }
             if !changed {
+                self.warn_own_undone(modules, &scopes);
                 return scopes;
             }
+        }
+    }
+
+    /// W0503: a `use … from own` (or `from own body`) that another path undoes. `from own` holds
+    /// for a module only when every path to it says so, so a plain `use` of the same module
+    /// anywhere else (a library module that only wanted its fields) silently widens its sums to
+    /// every neighbour: the model's restriction is not what runs.
+    fn warn_own_undone(&mut self, modules: &[load::Module], scopes: &[Scope]) {
+        let reached = |k: usize| !scopes[k].on.is_empty();
+        let edges: Vec<(usize, &load::UseEdge)> =
+            modules.iter().enumerate().flat_map(|(k, m)| m.uses.iter().map(move |e| (k, e))).collect();
+        for &(a, asked) in &edges {
+            let target = &scopes[asked.target];
+            let (undone, clause) = if asked.own && !target.own_group {
+                (true, "from own")
+            } else if asked.own_body && !target.own_body {
+                (true, "from own body")
+            } else {
+                (false, "")
+            };
+            if !undone || !reached(a) {
+                continue;
+            }
+            let keeps = |k: usize, e: &load::UseEdge| match clause {
+                "from own" => e.own || scopes[k].own_group,
+                _ => e.own_body || scopes[k].own_body,
+            };
+            let Some((_, freeing)) =
+                edges.iter().find(|&&(k, e)| e.target == asked.target && reached(k) && !keeps(k, e))
+            else {
+                continue;
+            };
+            self.diags.push(
+                Diagnostic::warning(
+                    "W0503",
+                    format!("this `{clause}` does not hold: another `use` of the module has none"),
+                )
+                .at(asked.span, format!("`{clause}` asked here"))
+                .also(freeing.span, "used here without it")
+                .note(format!(
+                    "`{clause}` holds for a module only when every `use` that reaches it says so; here the module's \
+                         pair sums see every neighbour"
+                ))
+                .help(format!("add `{clause}` to the other `use`, or drop it if that module only needs the fields")),
+            );
         }
     }
 
