@@ -612,7 +612,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             div_v = div_v + (vol_j * dot((v_i - ldj_v(j, sgn)), (L_inv * g)));
             let phi = ((((2.0 * (rho_i - ldj_rho(j, sgn))) * x_ij) / (r_ij * r_ij)) - (grad_rho_i + ldj_grad_rho(j, sgn)));
             diffusion = diffusion + ((((delta_i * h_i) * c0_i) * vol_j) * dot(phi, gradW_ij));
-            // pairsum momentum (stdlib/momentum/corrected.sph:17)
+            // pairsum momentum (stdlib/momentum/corrected.sph:16)
             if ((body_i == ldj_body(j, sgn))) {
                 let sig_i = (s_i - (p_i * eye()));
                 let sig_j = (ldj_s(j, sgn) - (ldj_p(j, sgn) * eye()));

@@ -631,7 +631,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             div_v = div_v + (vol_j * dot((v_i - ldj_v(j, sgn)), (L_inv * g)));
             let phi = ((((2.0 * (rho_i - ldj_rho(j, sgn))) * x_ij) / (r_ij * r_ij)) - (grad_rho_i + ldj_grad_rho(j, sgn)));
             diffusion = diffusion + ((((delta_i * h_i) * c0_i) * vol_j) * dot(phi, gradW_ij));
-            // pairsum failed_in_compression_momentum (stdlib/momentum/failed_in_compression.sph:27)
+            // pairsum failed_in_compression_momentum (stdlib/momentum/failed_in_compression.sph:26)
             if ((body_i == ldj_body(j, sgn))) {
                 let s_2 = s_i;
                 let p = p_i;

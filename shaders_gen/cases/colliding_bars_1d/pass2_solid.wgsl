@@ -514,7 +514,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let r_ij = sqrt(r2);
             let W_ij = kernel_w(r_ij, h_ij);
             let gradW_ij = kernel_grad(r_ij, h_ij) * x_ij;
-            // pairsum momentum (stdlib/momentum/corrected.sph:17)
+            // pairsum momentum (stdlib/momentum/corrected.sph:16)
             if ((body_i == ldj_body(j, sgn))) {
                 let sig_i = (s_i - (p_i * 1.0));
                 let sig_j = (ldj_s(j, sgn) - (ldj_p(j, sgn) * 1.0));

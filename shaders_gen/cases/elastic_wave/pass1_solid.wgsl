@@ -553,7 +553,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let W_ij = kernel_w(r_ij, h_ij);
             let gradW_ij = kernel_grad(r_ij, h_ij) * x_ij;
             // pairsum gradient_correction (stdlib/correction/kernel_gradient.sph:15)
-            L = L + (-((ldj_m(j, sgn) / ldj_rho(j, sgn)) * (gradW_ij * x_ij)));
+            if ((body_i == ldj_body(j, sgn))) {
+                L = L + (-((ldj_m(j, sgn) / ldj_rho(j, sgn)) * (gradW_ij * x_ij)));
+            }
             // pairsum velocity_gradient (stdlib/solid/strain_rate_corrected.sph:8)
             if ((body_i == ldj_body(j, sgn))) {
                 grad_v = grad_v + ((ldj_v(j, sgn) - v_i) * ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * gradW_ij));

@@ -697,7 +697,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let p2 = ldj_rho(j, sgn);
             let A = ((div_m(sig_i, (rho_i * rho_i)) + div_m(sig_j, (p2 * p2))) - (pi_ij * eye()));
             de = de + (-((0.5 * ldj_m(j, sgn)) * dot((v_i - ldj_v(j, sgn)), (A * gradW_ij))));
-            // pairsum momentum (stdlib/momentum/corrected.sph:17)
+            // pairsum momentum (stdlib/momentum/corrected.sph:16)
             if ((body_i == ldj_body(j, sgn))) {
                 let sig_i_2 = (s_i - (p_i * eye()));
                 let sig_j_2 = (ldj_s(j, sgn) - (ldj_p(j, sgn) * eye()));

@@ -723,7 +723,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let p2 = ldj_rho(j, sgn);
             let A = ((div_m(sig_i, (rho_i * rho_i)) + div_m(sig_j, (p2 * p2))) - (pi_ij * eye()));
             de = de + (-((0.5 * ldj_m(j, sgn)) * dot((v_i - ldj_v(j, sgn)), (A * gradW_ij))));
-            // pairsum failed_in_compression_momentum (stdlib/momentum/failed_in_compression.sph:27)
+            // pairsum failed_in_compression_momentum (stdlib/momentum/failed_in_compression.sph:26)
             if ((body_i == ldj_body(j, sgn))) {
                 let s_4 = s_i;
                 let p_3 = p_i;
