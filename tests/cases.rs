@@ -1408,6 +1408,30 @@ fn a_failure_band_beside_a_damage_length_is_error_c0048_naming_the_material_and_
     assert!(err.contains("(nonlocal_hardening = 1, damage_length = 0 m)"), "a dimensionless value has no unit: {err}");
 }
 
+/// The axisymmetric Børvik plate's switches take 0 or 1 only (before stop 120 any other value acted
+/// as 1): `conservative = 2`, `round_failed = 2` and `zero_pressure_floor = 0.5` are each error
+/// C0048 naming the switch's meaning and the value; the case's own values build the store.
+#[test]
+fn a_switch_other_than_0_or_1_on_the_axisymmetric_borvik_case_is_error_c0048_naming_its_meaning_and_value() {
+    let store_with = |set: &[(&str, &str)]| {
+        let (scene, plan) = prepare(&case("borvik_axisymmetric"), &with_set(set)).unwrap_or_else(|e| panic!("{e}"));
+        setup::build_store::<f64>(&plan, &scene.particles, &scene.materials).map(|_| ()).map_err(|e| e.to_string())
+    };
+    for (switch, value, meaning) in [
+        ("conservative", "2", "pair forces that conserve momentum"),
+        ("round_failed", "2", "kernel turns round"),
+        ("zero_pressure_floor", "0.5", "floored where it carries no pressure"),
+    ] {
+        let err = store_with(&[(switch, value)]).expect_err(switch);
+        for part in
+            ["C0048", "breaks a requirement", &format!("{switch} is a switch"), meaning, &format!("{switch} = {value}")]
+        {
+            assert!(err.contains(part), "{part} not in: {err}");
+        }
+    }
+    assert_eq!(store_with(&[]), Ok(()));
+}
+
 /// The over-nonlocal damage driver's weight m (damage/nonlocal_strain.sph) mixes in ε̄_p, so it
 /// needs a damage length, and it is a share, so not negative: on the Børvik plate m = 2 without a
 /// damage length and m = −1 with one are each error C0048 naming the reason, and m = 2 with a
