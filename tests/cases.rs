@@ -1386,16 +1386,20 @@ fn total_lagrangian_beam_vibration_2d_keeps_its_amplitude_within_1_percent_over_
     assert!((last / first - 1.0).abs() < 0.01, "amplitude {first:e} m in the first period, {last:e} m in the last");
 }
 
+/// Builds a bundled case's store with `--set` values: Ok, or the error's text (a model's `require`
+/// is checked here, C0048).
+fn build_store_with(name: &str, set: &[(&str, &str)]) -> Result<(), String> {
+    let (scene, plan) = prepare(&case(name), &with_set(set)).unwrap_or_else(|e| panic!("{e}"));
+    setup::build_store::<f64>(&plan, &scene.particles, &scene.materials).map(|_| ()).map_err(|e| e.to_string())
+}
+
 /// A model's `require` holds for each material where it applies, checked when the case binds
 /// the parameters: the Børvik plate with a failure band beside a damage length (which replaces the
 /// local damage the band scales) is error C0048 naming the material, the reason and both values,
 /// and with either one alone the store builds; a dimensionless value is shown without a unit.
 #[test]
 fn a_failure_band_beside_a_damage_length_is_error_c0048_naming_the_material_and_both_values_in_their_units() {
-    let store_with = |set: &[(&str, &str)]| {
-        let (scene, plan) = prepare(&case("borvik_perforation"), &with_set(set)).unwrap_or_else(|e| panic!("{e}"));
-        setup::build_store::<f64>(&plan, &scene.particles, &scene.materials).map(|_| ()).map_err(|e| e.to_string())
-    };
+    let store_with = |set: &[(&str, &str)]| build_store_with("borvik_perforation", set);
     let err = store_with(&[("failure_band", "1"), ("damage_length", "2")]).expect_err("both set");
     for part in
         ["C0048", "material `weldox`", "set one of them to 0", "damage_length = 0.002 m", "failure_band = 0.001 m"]
@@ -1413,10 +1417,7 @@ fn a_failure_band_beside_a_damage_length_is_error_c0048_naming_the_material_and_
 /// C0048 naming the switch's meaning and the value; the case's own values build the store.
 #[test]
 fn a_switch_other_than_0_or_1_on_the_axisymmetric_borvik_case_is_error_c0048_naming_its_meaning_and_value() {
-    let store_with = |set: &[(&str, &str)]| {
-        let (scene, plan) = prepare(&case("borvik_axisymmetric"), &with_set(set)).unwrap_or_else(|e| panic!("{e}"));
-        setup::build_store::<f64>(&plan, &scene.particles, &scene.materials).map(|_| ()).map_err(|e| e.to_string())
-    };
+    let store_with = |set: &[(&str, &str)]| build_store_with("borvik_axisymmetric", set);
     for (switch, value, meaning) in [
         ("conservative", "2", "pair forces that conserve momentum"),
         ("round_failed", "2", "kernel turns round"),
@@ -1438,10 +1439,7 @@ fn a_switch_other_than_0_or_1_on_the_axisymmetric_borvik_case_is_error_c0048_nam
 /// 2 mm length builds the store.
 #[test]
 fn a_nonlocal_weight_without_a_damage_length_or_below_zero_is_error_c0048_and_two_with_one_builds() {
-    let store_with = |set: &[(&str, &str)]| {
-        let (scene, plan) = prepare(&case("borvik_perforation"), &with_set(set)).unwrap_or_else(|e| panic!("{e}"));
-        setup::build_store::<f64>(&plan, &scene.particles, &scene.materials).map(|_| ()).map_err(|e| e.to_string())
-    };
+    let store_with = |set: &[(&str, &str)]| build_store_with("borvik_perforation", set);
     let err = store_with(&[("nonlocal_weight", "2")]).expect_err("no damage length");
     for part in ["C0048", "material `weldox`", "set damage_length > 0", "nonlocal_weight = 2"] {
         assert!(err.contains(part), "{part} not in: {err}");

@@ -398,19 +398,17 @@ impl Checker {
             modules.iter().enumerate().flat_map(|(k, m)| m.uses.iter().map(move |e| (k, e))).collect();
         for &(a, asked) in &edges {
             let target = &scopes[asked.target];
-            let (undone, clause) = if asked.own && !target.own_group {
-                (true, "from own")
-            } else if asked.own_body && !target.own_body {
-                (true, "from own body")
-            } else {
-                (false, "")
-            };
-            if !undone || !reached(a) {
+            let group = asked.own && !target.own_group;
+            if !(group || asked.own_body && !target.own_body) || !reached(a) {
                 continue;
             }
-            let keeps = |k: usize, e: &load::UseEdge| match clause {
-                "from own" => e.own || scopes[k].own_group,
-                _ => e.own_body || scopes[k].own_body,
+            let clause = if group { "from own" } else { "from own body" };
+            let keeps = |k: usize, e: &load::UseEdge| {
+                if group {
+                    e.own || scopes[k].own_group
+                } else {
+                    e.own_body || scopes[k].own_body
+                }
             };
             let Some((_, freeing)) =
                 edges.iter().find(|&&(k, e)| e.target == asked.target && reached(k) && !keeps(k, e))
