@@ -1,0 +1,53 @@
+#!/usr/bin/env python3
+"""Stop 121's single-place series (edge_phase 0) beside the case's (../c{8,12}_0_k*): the
+projectile's speed at given times, the residual speed, its steps, and an unweighted line in
+ln(1 mm / Δx) through the residuals. Series: r20 (the edge rounded to 2 mm, ../edge_case.py 2),
+nhm1 (`--set nonlocal_hardening=-1`), nh0 (`--set nonlocal_hardening=0`), c (the case).
+Run from anywhere: python3 docs/results/borvik_axisymmetric/edge_hardening/series.py"""
+import bisect
+import csv
+import math
+import os
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+TIMES = [20, 40, 56, 65, 100, 150]  # µs
+SERIES = {"c": "the case (edge_phase 0)", "r20": "edge rounded to 2 mm",
+          "nhm1": "nonlocal_hardening = -1", "nh0": "nonlocal_hardening = 0"}
+
+
+def folder(series, plate, k):
+    if series == "c":
+        return os.path.join(HERE, "..", f"c{plate}_0_k{k}")
+    return os.path.join(HERE, f"{series}_{plate}_k{k}")
+
+
+def speeds(path):
+    rows = list(csv.reader(open(os.path.join(path, "histories.csv"))))[1:]
+    t = [float(r[0]) * 1e6 for r in rows]
+    v = [-float(r[1]) for r in rows]
+    return [v[min(bisect.bisect_left(t, x), len(t) - 1)] for x in TIMES]
+
+
+def line(points):
+    n = len(points)
+    mx = sum(x for x, _ in points) / n
+    my = sum(y for _, y in points) / n
+    b = sum((x - mx) * (y - my) for x, y in points) / sum((x - mx) ** 2 for x, _ in points)
+    rms = math.sqrt(sum((y - my - b * (x - mx)) ** 2 for x, y in points) / n)
+    return my - b * mx, b, rms
+
+
+for plate in (12, 8):
+    for series, what in SERIES.items():
+        rows = [(k, speeds(folder(series, plate, k))) for k in (6, 8, 10, 12, 16)
+                if os.path.exists(os.path.join(folder(series, plate, k), "histories.csv"))]
+        if not rows:
+            continue
+        print(f"== {plate} mm, {what}: the projectile's speed (m/s) at t (µs)")
+        print("Δx (mm)".ljust(8), " ".join(f"{t:>7}" for t in TIMES), "   step")
+        for i, (k, v) in enumerate(rows):
+            step = f"{v[-1] - rows[i - 1][1][-1]:+7.2f}" if i else ""
+            print(f"{4 / k:<8.3f}", " ".join(f"{x:7.2f}" for x in v), step)
+        if len(rows) >= 3:
+            a, b, rms = line([(math.log(k / 4), v[-1]) for k, v in rows])
+            print(f"  residual ≈ {a:.2f} + {b:.2f} ln(1 mm / Δx) m/s, rms {rms:.2f} m/s")
