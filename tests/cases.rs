@@ -1412,10 +1412,10 @@ fn a_failure_band_beside_a_damage_length_is_error_c0048_naming_the_material_and_
     assert!(err.contains("(nonlocal_hardening = 1, damage_length = 0 m)"), "a dimensionless value has no unit: {err}");
 }
 
-/// The axisymmetric Børvik plate's switches take 0 or 1 only (before stops 120 and 121 any other value acted
-/// as 1): `conservative = 2`, `round_failed = 2`, `zero_pressure_floor = 0.5` and `nonlocal_rate = 2`
-/// are each error C0048 naming the switch's meaning and the value; the case's own values build the
-/// store.
+/// The axisymmetric Børvik plate's switches take 0 or 1 only (before stops 120 and 121 any other
+/// value acted as 1): `conservative = 2`, `round_failed = 2`, `zero_pressure_floor = 0.5` and
+/// `nonlocal_rate = 2` are each error C0048 naming the switch's meaning and the value; the case's
+/// own values build the store.
 #[test]
 fn a_switch_other_than_0_or_1_on_the_axisymmetric_borvik_case_is_error_c0048_naming_its_meaning_and_value() {
     let store_with = |set: &[(&str, &str)]| build_store_with("borvik_axisymmetric", set);
