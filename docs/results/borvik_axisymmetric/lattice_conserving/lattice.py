@@ -3,7 +3,8 @@
 119–120): each level's residual speed averaged over five places of the projectile's edge
 (edge_phase -0.4 … +0.4; phase 0 is ../c{8,12}_0_k*), with its standard error, the arguments of
 `pairsum uncertainty`, and a weighted least-squares fit f = a + b ln(1 mm / Δx) with its χ².
-Run from anywhere: python3 docs/results/borvik_axisymmetric/lattice_conserving/lattice.py"""
+Run from anywhere: python3 docs/results/borvik_axisymmetric/lattice_conserving/lattice.py
+(edge_hardening/lattice.py reads another series through `report`)."""
 import math
 import os
 import statistics as st
@@ -12,10 +13,14 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 PHASES = ["m04", "m02", "0", "p02", "p04"]
 
 
-def residual(plate, phase, k):
-    folder = os.path.join(HERE, "..", f"c{plate}_0_k{k}") if phase == "0" else os.path.join(HERE, f"c{plate}_{phase}_k{k}")
+def folder(plate, phase, k):
+    """This study's run of a plate at an edge place and coarse factor."""
+    return os.path.join(HERE, "..", f"c{plate}_0_k{k}") if phase == "0" else os.path.join(HERE, f"c{plate}_{phase}_k{k}")
+
+
+def residual(plate, phase, k, folder=folder):
     try:
-        for line in open(os.path.join(folder, "report.md")):
+        for line in open(os.path.join(folder(plate, phase, k), "report.md")):
             if line.startswith("| projectile_residual_velocity"):
                 return float(line.split("|")[4])
     except FileNotFoundError:
@@ -45,23 +50,29 @@ def log_fit(levels):
     return a, b, chi, len(levels) - 2
 
 
-for plate in (12, 8):
-    print(f"== {plate} mm plate")
-    levels = []
-    for k in (6, 8, 10, 12, 16, 20):
-        values = [residual(plate, p, k) for p in PHASES]
-        got = [v for v in values if v is not None]
-        if not got:
-            continue
-        mean = st.mean(got)
-        se = st.stdev(got) / math.sqrt(len(got)) if len(got) > 1 else float("nan")
-        shown = " / ".join("—" if v is None else f"{v:.2f}" for v in values)
-        print(f"Δx {4 / k:.3f} mm: {shown}   mean {mean:.2f} ± {se:.2f} (n = {len(got)})")
-        if len(got) == 5:
-            levels.append((4 / k, mean, se))
-    print("pairsum uncertainty " + " ".join(f"{h:.6f}={v:.3f}±{s:.3f}" for h, v, s in levels))
-    if len(levels) >= 3:
-        a, b, chi, dof = log_fit(levels)
-        print(f"f = {a:.2f} + {b:.2f} ln(1 mm / Δx) m/s: χ² {chi:.2f} on {dof}, probability {chi2_sf(chi, dof):.2f}")
-        for h, v, s in levels:
-            print(f"  Δx {h:.3f}: {v:.2f}, fit {a + b * math.log(1 / h):.2f}, ({(v - a - b * math.log(1 / h)) / s:+.2f} σ)")
+def report(folder=folder, plates=(12, 8)):
+    """Print each plate's lattice means, the `pairsum uncertainty` arguments and the log fit."""
+    for plate in plates:
+        print(f"== {plate} mm plate")
+        levels = []
+        for k in (6, 8, 10, 12, 16, 20):
+            values = [residual(plate, p, k, folder) for p in PHASES]
+            got = [v for v in values if v is not None]
+            if not got:
+                continue
+            mean = st.mean(got)
+            se = st.stdev(got) / math.sqrt(len(got)) if len(got) > 1 else float("nan")
+            shown = " / ".join("—" if v is None else f"{v:.2f}" for v in values)
+            print(f"Δx {4 / k:.3f} mm: {shown}   mean {mean:.2f} ± {se:.2f} (n = {len(got)})")
+            if len(got) == 5:
+                levels.append((4 / k, mean, se))
+        print("pairsum uncertainty " + " ".join(f"{h:.6f}={v:.3f}±{s:.3f}" for h, v, s in levels))
+        if len(levels) >= 3:
+            a, b, chi, dof = log_fit(levels)
+            print(f"f = {a:.2f} + {b:.2f} ln(1 mm / Δx) m/s: χ² {chi:.2f} on {dof}, probability {chi2_sf(chi, dof):.2f}")
+            for h, v, s in levels:
+                print(f"  Δx {h:.3f}: {v:.2f}, fit {a + b * math.log(1 / h):.2f}, ({(v - a - b * math.log(1 / h)) / s:+.2f} σ)")
+
+
+if __name__ == "__main__":
+    report()
