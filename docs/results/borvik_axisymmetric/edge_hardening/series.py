@@ -2,7 +2,8 @@
 """Stop 121's single-place series (edge_phase 0) beside the case's (../c{8,12}_0_k*): the
 projectile's speed at given times, the residual speed, its steps, and an unweighted line in
 ln(1 mm / Δx) through the residuals. Series: r20 (the edge rounded to 2 mm, ../edge_case.py 2),
-nhm1 (`--set nonlocal_hardening=-1`), nh0 (`--set nonlocal_hardening=0`), c (the case).
+nhm1 (`--set nonlocal_hardening=-1`), nh0 (`--set nonlocal_hardening=0`), nhm3 (`-3`, stop 122),
+c (the case).
 Run from anywhere: python3 docs/results/borvik_axisymmetric/edge_hardening/series.py"""
 import bisect
 import csv
@@ -10,9 +11,10 @@ import math
 import os
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-TIMES = [20, 40, 56, 65, 100, 150]  # µs
+TIMES = [20, 40, 56, 65, 100, 120, 150]  # µs
 SERIES = {"c": "the case (edge_phase 0)", "r20": "edge rounded to 2 mm",
-          "nhm1": "nonlocal_hardening = -1", "nh0": "nonlocal_hardening = 0"}
+          "nhm1": "nonlocal_hardening = -1", "nh0": "nonlocal_hardening = 0",
+          "nhm3": "nonlocal_hardening = -3"}
 
 
 def folder(series, plate, k):
