@@ -5,12 +5,14 @@ ln(1 mm / Δx) through the residuals. Series: r20 (the edge rounded to 2 mm, ../
 nhm1 (`--set nonlocal_hardening=-1`), nh0 (`--set nonlocal_hardening=0`), nhm3 (`-3`, stop 122),
 c (the case).
 Run from anywhere: python3 docs/results/borvik_axisymmetric/edge_hardening/series.py"""
-import bisect
-import csv
 import math
 import os
+import sys
 
 HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.join(HERE, "..", "lattice_conserving"))
+from lattice import speeds_at  # noqa: E402
+
 TIMES = [20, 40, 56, 65, 100, 120, 150]  # µs
 SERIES = {"c": "the case (edge_phase 0)", "r20": "edge rounded to 2 mm",
           "nhm1": "nonlocal_hardening = -1", "nh0": "nonlocal_hardening = 0",
@@ -21,13 +23,6 @@ def folder(series, plate, k):
     if series == "c":
         return os.path.join(HERE, "..", f"c{plate}_0_k{k}")
     return os.path.join(HERE, f"{series}_{plate}_k{k}")
-
-
-def speeds(path):
-    rows = list(csv.reader(open(os.path.join(path, "histories.csv"))))[1:]
-    t = [float(r[0]) * 1e6 for r in rows]
-    v = [-float(r[1]) for r in rows]
-    return [v[min(bisect.bisect_left(t, x), len(t) - 1)] for x in TIMES]
 
 
 def line(points):
@@ -41,7 +36,7 @@ def line(points):
 
 for plate in (12, 8):
     for series, what in SERIES.items():
-        rows = [(k, speeds(folder(series, plate, k))) for k in (6, 8, 10, 12, 16)
+        rows = [(k, speeds_at(folder(series, plate, k), TIMES)) for k in (6, 8, 10, 12, 16)
                 if os.path.exists(os.path.join(folder(series, plate, k), "histories.csv"))]
         if not rows:
             continue

@@ -4,7 +4,10 @@
 (edge_phase -0.4 … +0.4; phase 0 is ../c{8,12}_0_k*), with its standard error, the arguments of
 `pairsum uncertainty`, and a weighted least-squares fit f = a + b ln(1 mm / Δx) with its χ².
 Run from anywhere: python3 docs/results/borvik_axisymmetric/lattice_conserving/lattice.py
-(edge_hardening/lattice.py reads another series through `report`)."""
+(edge_hardening/lattice.py reads another series through `report`; when.py and
+edge_hardening/series.py read the projectile's speed at given times through `speeds_at`)."""
+import bisect
+import csv
 import math
 import os
 import statistics as st
@@ -16,6 +19,15 @@ PHASES = ["m04", "m02", "0", "p02", "p04"]
 def folder(plate, phase, k):
     """This study's run of a plate at an edge place and coarse factor."""
     return os.path.join(HERE, "..", f"c{plate}_0_k{k}") if phase == "0" else os.path.join(HERE, f"c{plate}_{phase}_k{k}")
+
+
+def speeds_at(path, times_us):
+    """The projectile's speed (m/s, towards the plate) at each time (µs) from a run's histories.csv:
+    the first row at or after it, or the last row."""
+    rows = list(csv.reader(open(os.path.join(path, "histories.csv"))))[1:]
+    t = [float(r[0]) * 1e6 for r in rows]
+    v = [-float(r[1]) for r in rows]
+    return [v[min(bisect.bisect_left(t, x), len(t) - 1)] for x in times_us]
 
 
 def residual(plate, phase, k, folder=folder):
