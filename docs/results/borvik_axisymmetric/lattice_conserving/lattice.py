@@ -62,13 +62,14 @@ def log_fit(levels):
     return a, b, chi, len(levels) - 2
 
 
-def report(folder=folder, plates=(12, 8)):
-    """Print each plate's lattice means, the `pairsum uncertainty` arguments and the log fit."""
+def report(folder=folder, plates=(12, 8), phases=PHASES):
+    """Print each plate's lattice means over the edge places `phases`, the `pairsum uncertainty`
+    arguments and the log fit (over the levels run at every place)."""
     for plate in plates:
         print(f"== {plate} mm plate")
         levels = []
         for k in (6, 8, 10, 12, 16, 20):
-            values = [residual(plate, p, k, folder) for p in PHASES]
+            values = [residual(plate, p, k, folder) for p in phases]
             got = [v for v in values if v is not None]
             if not got:
                 continue
@@ -76,7 +77,7 @@ def report(folder=folder, plates=(12, 8)):
             se = st.stdev(got) / math.sqrt(len(got)) if len(got) > 1 else float("nan")
             shown = " / ".join("—" if v is None else f"{v:.2f}" for v in values)
             print(f"Δx {4 / k:.3f} mm: {shown}   mean {mean:.2f} ± {se:.2f} (n = {len(got)})")
-            if len(got) == 5:
+            if len(got) == len(phases):
                 levels.append((4 / k, mean, se))
         print("pairsum uncertainty " + " ".join(f"{h:.6f}={v:.3f}±{s:.3f}" for h, v, s in levels))
         if len(levels) >= 3:
