@@ -28,12 +28,29 @@ GROUPS = {"core": (0, 9), "rim": (9, 10), "ring": (10, 11.5)}
 EVERY_US = 2.5
 
 
-def table(run):
+def outputs(run):
+    """A dense run's VTK files in time order (every EVERY_US) and where each particle started:
+    {id: (r0 mm, y0 mm, body)}, body 0 the projectile and 1 the plate."""
     files = sorted(glob.glob(os.path.join(run, "vtk", "*.vtu")))
     first = shear_band.read_vtu(files[0])
     if "eps_nl" not in first:
         sys.exit(f"{run}: no eps_nl in its VTK; run the case dense_case.sh writes")
     start = {int(i): (p[0] * 1e3, p[1] * 1e3, int(b)) for i, p, b in zip(first["id"], first["Points"], first["body"])}
+    return files, start
+
+
+def projectile_speed(a, start):
+    """The projectile's ring-weighted mean speed towards the plate (m/s) in one output."""
+    total = weight = 0.0
+    for i, p, v in zip(a["id"], a["Points"], a["v"]):
+        if start[int(i)][2] == 0:
+            total += -v[1] * max(p[0], 1e-9)
+            weight += max(p[0], 1e-9)
+    return total / weight
+
+
+def table(run):
+    files, start = outputs(run)
     print(f"== {run}: speeds (m/s) along the axis; % of each group's weight failed")
     print("  t µs  proj |   core   % |    rim   % |   ring   % | max D, D/ε̄p there | max ε̄p at (r0, y0 mm) | max εp | first failed at")
     first_failed, seen = None, {}
@@ -73,8 +90,9 @@ def table(run):
     return run, first_failed, seen[50][1], seen[60][1], seen[60][2], seen[65][0], seen[end][0], end
 
 
-summary = [table(run) for run in sys.argv[1:]]
-print("== run: first failed (µs; r0, y0 mm) | max ε̄p at 50, 60 µs | max εp at 60 µs | projectile at 65 µs, at the end, lost")
-for run, first, nl50, nl60, ep60, v65, v_end, end in summary:
-    where = f"{first[0]:5.1f} ({first[1]:.2f}, {first[2]:.2f})" if first else "none"
-    print(f"{run}: {where} | {nl50:.3f} {nl60:.3f} | {ep60:.2f} | {v65:.1f}, {v_end:.1f} at {end:.0f} µs, {v65 - v_end:.1f}")
+if __name__ == "__main__":
+    summary = [table(run) for run in sys.argv[1:]]
+    print("== run: first failed (µs; r0, y0 mm) | max ε̄p at 50, 60 µs | max εp at 60 µs | projectile at 65 µs, at the end, lost")
+    for run, first, nl50, nl60, ep60, v65, v_end, end in summary:
+        where = f"{first[0]:5.1f} ({first[1]:.2f}, {first[2]:.2f})" if first else "none"
+        print(f"{run}: {where} | {nl50:.3f} {nl60:.3f} | {ep60:.2f} | {v65:.1f}, {v_end:.1f} at {end:.0f} µs, {v65 - v_end:.1f}")
