@@ -2,8 +2,12 @@
 """Stop 121's single-place series (edge_phase 0) beside the case's (../c{8,12}_0_k*): the
 projectile's speed at given times, the residual speed, its steps, and an unweighted line in
 ln(1 mm / Δx) through the residuals. Series: r20 (the edge rounded to 2 mm, ../edge_case.py 2),
-nhm1 (`--set nonlocal_hardening=-1`), nh0 (`--set nonlocal_hardening=0`), nhm3 (`-3`, stop 122),
-c (the case).
+nhm1 (`--set nonlocal_hardening=-1`), nh0 (`--set nonlocal_hardening=0`), nhm3 (`-3`, stop 122,
+to 0.2 mm at stop 123), c (the case). Stop 123's probes of the tearing, on 8 mm with m = -3:
+ef1m3 (a fixed failure strain: `--set D1=1 --set D2=0 --set D3=0 --set D4=0`), nsef1m3 (the same
+without the spall: `--set p_spall=1e20`), av05ef1m3 (ef1m3 with `--set visc_a=0.5`) and sk1m3
+(failed neighbours left out of ε̄_p: the case with `nonlocal_skips_failed = 1` under
+[materials.weldox]).
 Run from anywhere: python3 docs/results/borvik_axisymmetric/edge_hardening/series.py"""
 import math
 import os
@@ -16,7 +20,9 @@ from lattice import speeds_at  # noqa: E402
 TIMES = [20, 40, 56, 65, 100, 120, 150]  # µs
 SERIES = {"c": "the case (edge_phase 0)", "r20": "edge rounded to 2 mm",
           "nhm1": "nonlocal_hardening = -1", "nh0": "nonlocal_hardening = 0",
-          "nhm3": "nonlocal_hardening = -3"}
+          "nhm3": "nonlocal_hardening = -3",
+          "ef1m3": "m = -3, a fixed failure strain 1", "nsef1m3": "m = -3, failure strain 1, no spall",
+          "av05ef1m3": "m = -3, failure strain 1, visc_a 0.5", "sk1m3": "m = -3, failed neighbours left out"}
 
 
 def folder(series, plate, k):
@@ -36,7 +42,7 @@ def line(points):
 
 for plate in (12, 8):
     for series, what in SERIES.items():
-        rows = [(k, speeds_at(folder(series, plate, k), TIMES)) for k in (6, 8, 10, 12, 16)
+        rows = [(k, speeds_at(folder(series, plate, k), TIMES)) for k in (6, 8, 10, 12, 16, 20)
                 if os.path.exists(os.path.join(folder(series, plate, k), "histories.csv"))]
         if not rows:
             continue
