@@ -7,7 +7,8 @@ to 0.2 mm at stop 123), c (the case). Stop 123's probes of the tearing, on 8 mm 
 ef1m3 (a fixed failure strain: `--set D1=1 --set D2=0 --set D3=0 --set D4=0`), nsef1m3 (the same
 without the spall: `--set p_spall=1e20`), av05ef1m3 (ef1m3 with `--set visc_a=0.5`), sk1m3
 (failed neighbours left out of ε̄_p: the case with `nonlocal_skips_failed = 1` under
-[materials.weldox]) and r20m3 (m = -3 with the edge rounded to 2 mm, ../edge_case.py 2).
+[materials.weldox]), r20m3 (m = -3 with the edge rounded to 2 mm, ../edge_case.py 2) and c4m3
+(m = -3 with the contact four times stiffer: `contact_stiffness = 4` under both [materials]).
 Run from anywhere: python3 docs/results/borvik_axisymmetric/edge_hardening/series.py"""
 import math
 import os
@@ -23,7 +24,8 @@ SERIES = {"c": "the case (edge_phase 0)", "r20": "edge rounded to 2 mm",
           "nhm3": "nonlocal_hardening = -3",
           "ef1m3": "m = -3, a fixed failure strain 1", "nsef1m3": "m = -3, failure strain 1, no spall",
           "av05ef1m3": "m = -3, failure strain 1, visc_a 0.5", "sk1m3": "m = -3, failed neighbours left out",
-          "r20m3": "m = -3, edge rounded to 2 mm"}
+          "r20m3": "m = -3, edge rounded to 2 mm",
+          "c4m3": "m = -3, contact four times stiffer"}
 
 
 def folder(series, plate, k):
