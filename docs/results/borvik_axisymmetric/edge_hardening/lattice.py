@@ -33,7 +33,6 @@ if __name__ == "__main__":
         print(f"== {plate} mm: the projectile's speed (m/s) at t (µs), the mean over {len(phases)} places")
         print("Δx (mm)".ljust(8), " ".join(f"{t:>7}" for t in TIMES))
         for k in (6, 8, 10, 12, 16, 20):
-            runs = [folder(plate, p, k) for p in phases]
-            if all(os.path.exists(os.path.join(r, "histories.csv")) for r in runs):
-                speeds = [lattice.speeds_at(r, TIMES) for r in runs]
-                print(f"{4 / k:<8.3f}", " ".join(f"{sum(v) / len(v):7.2f}" for v in zip(*speeds)))
+            if all(os.path.exists(os.path.join(folder(plate, p, k), "histories.csv")) for p in phases):
+                mean = lattice.mean_speeds_at(plate, k, TIMES, folder, phases)
+                print(f"{4 / k:<8.3f}", " ".join(f"{v:7.2f}" for v in mean))

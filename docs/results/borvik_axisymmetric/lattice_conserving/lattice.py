@@ -5,7 +5,8 @@
 `pairsum uncertainty`, and a weighted least-squares fit f = a + b ln(1 mm / Δx) with its χ².
 Run from anywhere: python3 docs/results/borvik_axisymmetric/lattice_conserving/lattice.py
 (edge_hardening/lattice.py reads another series through `report`; when.py and
-edge_hardening/series.py read the projectile's speed at given times through `speeds_at`)."""
+edge_hardening/series.py read the projectile's speed at given times through `speeds_at`, and when.py
+and edge_hardening/lattice.py its mean over the edge places through `mean_speeds_at`)."""
 import bisect
 import csv
 import math
@@ -28,6 +29,11 @@ def speeds_at(path, times_us):
     t = [float(r[0]) * 1e6 for r in rows]
     v = [-float(r[1]) for r in rows]
     return [v[min(bisect.bisect_left(t, x), len(t) - 1)] for x in times_us]
+
+
+def mean_speeds_at(plate, k, times_us, folder=folder, phases=PHASES):
+    """The projectile's speed at each time, the mean over the edge places of a plate's level."""
+    return [st.mean(c) for c in zip(*(speeds_at(folder(plate, p, k), times_us) for p in phases))]
 
 
 def residual(plate, phase, k, folder=folder):

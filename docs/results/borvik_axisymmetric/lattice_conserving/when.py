@@ -3,9 +3,7 @@
 places of its edge on the lattice (the runs of lattice.py), level by level, and each level's step
 over the coarser one. Run from anywhere:
     python3 docs/results/borvik_axisymmetric/lattice_conserving/when.py"""
-import statistics as st
-
-from lattice import PHASES, folder, speeds_at
+from lattice import mean_speeds_at
 
 TIMES = [20, 30, 40, 48, 56, 65, 100, 150]  # µs
 
@@ -14,7 +12,7 @@ for plate in (12, 8):
     print("Δx (mm)".ljust(9), " ".join(f"{t:>7}" for t in TIMES))
     first = before = None
     for k in (6, 8, 10, 12, 16):
-        mean = [st.mean(c) for c in zip(*(speeds_at(folder(plate, p, k), TIMES) for p in PHASES))]
+        mean = mean_speeds_at(plate, k, TIMES)
         print(f"{4 / k:<9.3f}", " ".join(f"{v:7.2f}" for v in mean))
         if before:
             print("  step".ljust(9), " ".join(f"{a - b:+7.2f}" for a, b in zip(mean, before)))

@@ -60,14 +60,11 @@ def table(run):
             continue
         a = shear_band.read_vtu(path)
         sums = {g: [0.0, 0.0, 0.0] for g in GROUPS}
-        proj = [0.0, 0.0]
         most_d, most_nl, at, most_ep, ratio = 0.0, 0.0, None, 0.0, float("nan")
         for i, p, v, d, nl, ep in zip(a["id"], a["Points"], a["v"], a["D"], a["eps_nl"], a["eps_p"]):
             r0, y0, body = start[int(i)]
             weight = max(p[0], 1e-9)  # the ring's: 2π r, the 2π and Δx² alike within a body
             if body == 0:
-                proj[0] += -v[1] * weight
-                proj[1] += weight
                 continue
             for g, (lo, hi) in GROUPS.items():
                 if lo <= r0 < hi:
@@ -84,8 +81,9 @@ def table(run):
                     first_failed = (t, r0, y0)
         groups = " | ".join(f"{s[0] / s[1]:6.1f} {100 * s[2] / s[1]:3.0f}" for s in sums.values())
         where = f"{first_failed[0]:.1f} µs ({first_failed[1]:.2f}, {first_failed[2]:.2f})" if first_failed else "—"
-        seen[t] = (proj[0] / proj[1], most_nl, most_ep)
-        print(f"{t:6.1f} {proj[0] / proj[1]:5.1f} | {groups} | {most_d:5.3f} {ratio:5.3f} | {most_nl:5.3f} ({at[0]:5.2f}, {at[1]:5.2f}) | {most_ep:4.2f} | {where}")
+        proj = projectile_speed(a, start)
+        seen[t] = (proj, most_nl, most_ep)
+        print(f"{t:6.1f} {proj:5.1f} | {groups} | {most_d:5.3f} {ratio:5.3f} | {most_nl:5.3f} ({at[0]:5.2f}, {at[1]:5.2f}) | {most_ep:4.2f} | {where}")
     end = max(seen)
     return run, first_failed, seen[50][1], seen[60][1], seen[60][2], seen[65][0], seen[end][0], end
 
