@@ -5,8 +5,9 @@ projectile's edge, as ../lattice_conserving/lattice.py does for the case.
     python3 docs/results/borvik_axisymmetric/edge_hardening/lattice.py nhm3     # nhm3, 8 mm
 nh0 (stop 122): local hardening (`--set nonlocal_hardening=0`) on the 12 mm plate at five places
 (edge_phase -0.4 … +0.4); runs nh0_12_k<k> (phase 0, stop 121) and nh0<phase>_12_k<k>.
-nhm3 (stop 123): gradient hardening (`--set nonlocal_hardening=-3`) on the 8 mm plate at three
-places (-0.4, 0, +0.4); runs nhm3_8_k<k> (phase 0, stop 122) and nhm3<phase>_8_k<k>.
+nhm3 (stops 123–124): gradient hardening (`--set nonlocal_hardening=-3`) on the 8 mm plate (stop 123)
+and the 12 mm plate (stop 124) at three places (-0.4, 0, +0.4); runs nhm3_<plate>_k<k> (phase 0,
+stop 122) and nhm3<phase>_<plate>_k<k>.
 Last, the mean over the places of the projectile's speed at given times, for the levels run at
 every place: where the levels part."""
 import os
@@ -17,7 +18,7 @@ sys.path.insert(0, os.path.join(HERE, "..", "lattice_conserving"))
 import lattice  # noqa: E402
 
 TIMES = [40, 65, 100, 120, 150]  # µs
-SERIES = {"nh0": ((12,), lattice.PHASES), "nhm3": ((8,), ["m04", "0", "p04"])}
+SERIES = {"nh0": ((12,), lattice.PHASES), "nhm3": ((8, 12), ["m04", "0", "p04"])}
 
 if __name__ == "__main__":
     series = sys.argv[1] if len(sys.argv) > 1 else "nh0"
