@@ -9,6 +9,10 @@ without the spall: `--set p_spall=1e20`), av05ef1m3 (ef1m3 with `--set visc_a=0.
 (failed neighbours left out of ε̄_p: the case with `nonlocal_skips_failed = 1` under
 [materials.weldox]), r20m3 (m = -3 with the edge rounded to 2 mm, ../edge_case.py 2) and c4m3
 (m = -3 with the contact four times stiffer: `contact_stiffness = 4` under both [materials]).
+Stop 124's, on 8 mm with m = -3: ncm3 (a failed particle carries no stress at all, its compression
+too: failed_free.diff applied to a copy of the stdlib, run with PAIRSUM_STDLIB), dc0m3 (no
+weakening by the damage before failure: `--set damage_coupling=0`) and l4m3 (ℓ = 4 mm: `--set
+damage_length=4`).
 Run from anywhere: python3 docs/results/borvik_axisymmetric/edge_hardening/series.py"""
 import math
 import os
@@ -25,7 +29,9 @@ SERIES = {"c": "the case (edge_phase 0)", "r20": "edge rounded to 2 mm",
           "ef1m3": "m = -3, a fixed failure strain 1", "nsef1m3": "m = -3, failure strain 1, no spall",
           "av05ef1m3": "m = -3, failure strain 1, visc_a 0.5", "sk1m3": "m = -3, failed neighbours left out",
           "r20m3": "m = -3, edge rounded to 2 mm",
-          "c4m3": "m = -3, contact four times stiffer"}
+          "c4m3": "m = -3, contact four times stiffer",
+          "ncm3": "m = -3, failed particles carry nothing", "dc0m3": "m = -3, no weakening before failure",
+          "l4m3": "m = -3, ℓ = 4 mm"}
 
 
 def folder(series, plate, k):
