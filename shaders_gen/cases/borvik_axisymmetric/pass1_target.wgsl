@@ -517,7 +517,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 grad_v_2 = grad_v_2 + outer((ldj_v(j, sgn) - v_i), ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * g));
             }
         }
-        // pairsum shaped_hourglass (stdlib/solid/shaped_hourglass.sph:36)
+        // pairsum shaped_hourglass (stdlib/solid/shaped_hourglass.sph:43)
         if (in_groups(2u, ints[j])) {
             if ((((body_i == ldj_body(j, sgn)) && (D_i < 1.0)) && (ldj_D(j, sgn) < 1.0))) {
                 let X_ij = (x_ij - (u_i - ldj_u(j, sgn)));

@@ -421,7 +421,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             L = L + neg_m(((ldj_m(j, sgn) / ldj_rho(j, sgn)) * outer(g, x_ij)));
             grad_v = grad_v + outer((ldj_v(j, sgn) - v_i), ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * g));
         }
-        // pairsum shaped_hourglass (stdlib/solid/shaped_hourglass.sph:36)
+        // pairsum shaped_hourglass (stdlib/solid/shaped_hourglass.sph:43)
         if ((((body_i == ldj_body(j, sgn)) && (0.0 < 1.0)) && (0.0 < 1.0))) {
             let X_ij = (x_ij - (u_i - ldj_u(j, sgn)));
             let r0 = max(length(X_ij), 1e-9);

@@ -1,0 +1,79 @@
+#!/usr/bin/env python3
+"""The shaped plate's hourglass pull on the Børvik plates about their axis (stop 124).
+
+    python3 docs/results/borvik_axisymmetric/hourglass_pull/pull.py
+
+Runs of pull_case.sh's case (the case with the pull's and the contact's power as probes), gradient
+hardening m = -3 (`--set nonlocal_hardening=-3`), 8 mm at 298 m/s unless named _12_:
+  pwm3_<plate>_k<k>        the case's pull, α = 0.01
+  pwa005m3_<plate>_k<k>    α = 0.005 (`--set hourglass_alpha=0.005`)
+  pwa0m3<place>_<plate>_k<k>  no pull (`--set hourglass_alpha=0`), at edge places m04 / 0 / p04
+Δx = 4 mm / k. For each run, at 65, 100 and 150 µs: the projectile's speed, the work the pull has
+done on the bodies (the time integral of Σ m v · a_hourglass over the rings), the contact's, and
+the energy the balance misses (the projectile's kinetic energy at impact less Σ m (e + ½ |v|²)).
+Last, the no-pull series over the lattice, through ../lattice_conserving/lattice.py's report."""
+import csv
+import os
+import sys
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.join(HERE, "..", "lattice_conserving"))
+import lattice  # noqa: E402
+
+TIMES = [65, 100, 150]  # µs
+SERIES = [("pwm3", "α = 0.01 (the case)"), ("pwa005m3", "α = 0.005"), ("pwa0m3", "α = 0, no pull")]
+
+
+def histories(run):
+    rows = list(csv.reader(open(os.path.join(run, "histories.csv"))))
+    column = {h.split(" [")[0]: i for i, h in enumerate(rows[0])}
+    return column, rows[1:]
+
+
+def sampled(column, rows, name):
+    """(t, value) where the probe has a value."""
+    return [(float(r[0]), float(r[column[name]])) for r in rows if r[column[name]] != ""]
+
+
+def integral(points):
+    """The running trapezoidal integral of (t, value) points."""
+    out = [(points[0][0], 0.0)]
+    for (a, pa), (b, pb) in zip(points, points[1:]):
+        out.append((b, out[-1][1] + 0.5 * (pa + pb) * (b - a)))
+    return out
+
+
+def at(points, t_us):
+    return min(points, key=lambda p: abs(p[0] - t_us * 1e-6))[1]
+
+
+def energies(run):
+    """Per time: the projectile's speed, the pull's work, the contact's work, the energy missed."""
+    column, rows = histories(run)
+    v = sampled(column, rows, "projectile_velocity")
+    total = sampled(column, rows, "total_energy")
+    pull = integral(sampled(column, rows, "hourglass_power"))
+    contact = integral(sampled(column, rows, "contact_power"))
+    start = total[0][1]
+    return [(-at(v, t), at(pull, t), at(contact, t), start - at(total, t)) for t in TIMES]
+
+
+def folder(series, plate, place, k):
+    return os.path.join(HERE, f"{series}{'' if place == '0' else place}_{plate}_k{k}")
+
+
+if __name__ == "__main__":
+    for plate in (8, 12):
+        for series, what in SERIES:
+            runs = [(k, folder(series, plate, "0", k)) for k in (6, 8, 10, 12, 16, 20)]
+            runs = [(k, r) for k, r in runs if os.path.exists(os.path.join(r, "histories.csv"))]
+            if not runs:
+                continue
+            print(f"== {plate} mm, {what}, edge place 0: at " + " / ".join(f"{t} µs" for t in TIMES))
+            print("Δx (mm)  residual | speed m/s | pull's work J | contact's work J | energy missed J")
+            for k, run in runs:
+                rows = energies(run)
+                cells = [" / ".join(f"{row[i]:.{2 if i == 0 else 1}f}" for row in rows) for i in range(4)]
+                print(f"{4 / k:<8.3f} {lattice.residual(plate, '0', k, lambda p, ph, kk: run):8.2f} | " + " | ".join(cells))
+    print("== no pull over the lattice (edge places -0.4, 0, +0.4)")
+    lattice.report(lambda plate, place, k: folder("pwa0m3", plate, place, k), plates=(8, 12), phases=["m04", "0", "p04"])
