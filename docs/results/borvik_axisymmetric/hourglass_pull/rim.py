@@ -12,14 +12,8 @@ import math
 import os
 import sys
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "../../../../scripts"))
-from shear_band import outputs, read_vtu  # noqa: E402
-
-
-def by_id(d):
-    """The arrays in particle-id order (the output's order follows the cell list)."""
-    order = sorted(range(len(d["id"])), key=lambda k: int(d["id"][k]))
-    return {key: [d[key][k] for k in order] for key in d}
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
+from reach import by_id, outputs, read_vtu  # noqa: E402
 
 
 def mean(values):
