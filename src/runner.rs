@@ -489,6 +489,10 @@ struct RecordSoFar {
     next_output: u64,
     vtk: Vec<(u64, String)>,
     histories: Vec<HistoryBits>,
+    /// Each probe's last value sampled, which an integrating probe integrates on from (absent
+    /// from the checkpoints of runs before `integrate` was a key: none then integrates).
+    #[serde(default)]
+    last_values: Vec<Option<u64>>,
 }
 
 /// A probe's points (t, value) and the value a relative probe measures from, as bits.
@@ -507,6 +511,7 @@ impl Recorder<'_> {
                     (points, h.initial().map(f64::to_bits))
                 })
                 .collect(),
+            last_values: self.histories.iter().map(|h| h.last().map(f64::to_bits)).collect(),
         };
         serde_json::to_vec(&record).expect("plain data serialises")
     }
@@ -527,8 +532,12 @@ impl Recorder<'_> {
         if let Some(series) = &mut self.series {
             series.continue_after(record.vtk.into_iter().map(|(t, name)| (f(t), name)).collect());
         }
-        for (h, (points, initial)) in self.histories.iter_mut().zip(record.histories) {
-            *h = measure::History::resumed(points.into_iter().map(|(t, v)| (f(t), f(v))).collect(), initial.map(f));
+        let last_values = record.last_values.into_iter().chain(std::iter::repeat(None));
+        for (h, ((points, initial), last)) in
+            self.histories.iter_mut().zip(record.histories.into_iter().zip(last_values))
+        {
+            let points = points.into_iter().map(|(t, v)| (f(t), f(v))).collect();
+            *h = measure::History::resumed(points, initial.map(f), last.map(f));
         }
         Ok(())
     }

@@ -609,6 +609,22 @@ fn a_coordinate_beyond_the_cases_axes_is_an_error() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// A probe records its change from the first value or its integral in time, not both: the case
+/// is refused with C0017 at the probe's name.
+#[test]
+fn a_probe_both_relative_and_integrating_is_an_error_at_its_name() {
+    let (text, dir, path) = rings_copy("relative-integral");
+    let bad = format!(
+        "{text}\n[[probes]]\nname = \"impulse\"\nfield = \"v\"\nreduce = \"sum\"\nrelative = true\nintegrate = true\n"
+    );
+    std::fs::write(&path, &bad).unwrap();
+    let err = prepare(&path, &Default::default()).err().map(|e| e.to_string()).expect("an error");
+    let line = bad.lines().position(|l| l == "name = \"impulse\"").unwrap() + 1;
+    assert!(err.contains("C0017") && err.contains("not both"), "{err}");
+    assert!(err.contains(&format!("rings_2d.toml:{line}:8")), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// A node list given as a region was dropped without a word and the case failed with no message.
 #[test]
 fn a_node_list_as_a_region_is_a_clear_error() {

@@ -14,7 +14,7 @@ use pairsum::engine::setup::build_store;
 use pairsum::engine::Engine;
 use pairsum::runner::prepare;
 use pairsum::scene::measure::{evaluate, Moment};
-use pairsum::scene::spec::{Pick, ProbeKind, ProbeSpec, ProbeValue};
+use pairsum::scene::spec::{Pick, ProbeKind, ProbeSpec, ProbeValue, Record};
 use std::path::Path;
 
 /// A bundled case by name, or a case file by its path.
@@ -355,7 +355,7 @@ fn probes_of(scene: &pairsum::scene::Scene, plan: &pairsum::schedule::Plan) -> V
     let v = plan.model.field_id("v").expect("v");
     let probe = |select: Option<Vec<bool>>, value: ProbeValue, pick: Pick, reduce: &str, locate: Option<usize>| {
         let kind = ProbeKind::Field { select, value, pick, reduce: reduce.into(), locate };
-        ProbeSpec { name: format!("{reduce} {pick:?}"), kind, relative: false, unit: String::new(), every: 1 }
+        ProbeSpec { name: format!("{reduce} {pick:?}"), kind, record: Record::Value, unit: String::new(), every: 1 }
     };
     let even: Vec<bool> = (0..scene.particles.x.len()).map(|i| i % 2 == 0).collect();
     let mut out = vec![];
@@ -479,7 +479,7 @@ fn measures_of_neighbours_reduced_on_each_rank_give_the_undivided_values_within_
             .map(|m| ProbeSpec {
                 name: m.name().into(),
                 kind: ProbeKind::Measure(*m),
-                relative: false,
+                record: Record::Value,
                 unit: String::new(),
                 every: 1,
             })

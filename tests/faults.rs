@@ -32,11 +32,27 @@ fn pairsum() -> Command {
     Command::new(env!("CARGO_BIN_EXE_pairsum"))
 }
 
-/// The run of the elastic wave used throughout: 1D, VTK every 0.2 ms, a checkpoint every 50 steps.
-/// On the CPU it runs at 0.5 mm (2,006 particles, about 4,400 steps, seconds); on lavapipe, whose
-/// every step costs milliseconds whatever the size, at the CI spacing to 0.6 ms.
+/// The bundled elastic wave with one more probe, the bar's mean velocity integrated in time
+/// (`integrate = true`): its sum runs across every checkpoint, so a restart must carry it on.
+fn wave_case() -> &'static Path {
+    static CASE: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+    CASE.get_or_init(|| {
+        let dir = fresh_dir("wave-case");
+        let text = std::fs::read_to_string(case("elastic_wave")).expect("case");
+        let probe = "\n[[probes]]\nname = \"mean_displacement\"\nfield = \"v\"\ncomponent = \"x\"\nreduce = \"mean\"\n\
+                     integrate = true\nunit = \"m\"\n";
+        let path = dir.join("elastic_wave.toml");
+        std::fs::write(&path, text + probe).expect("write the case");
+        path
+    })
+}
+
+/// The run of the elastic wave used throughout (`wave_case`): 1D, VTK every 0.2 ms, a checkpoint
+/// every 50 steps. On the CPU it runs at 0.5 mm (2,006 particles, about 4,400 steps, seconds); on
+/// lavapipe, whose every step costs milliseconds whatever the size, at the CI spacing to 0.6 ms.
 fn wave_args(backend: &str, out: &Path) -> Vec<String> {
-    let mut a: Vec<String> = ["run", "elastic_wave", "--quiet", "--checkpoint-every", "50", "--backend", backend]
+    let case = wave_case().display().to_string();
+    let mut a: Vec<String> = ["run", &case, "--quiet", "--checkpoint-every", "50", "--backend", backend]
         .iter()
         .map(|s| s.to_string())
         .collect();
@@ -184,7 +200,8 @@ fn rows(csv: &str) -> Vec<(f64, &str)> {
 fn a_finished_run_restarted_with_a_later_end_time_continues_its_histories_to_the_straight_runs_result() {
     let work = fresh_dir("extend");
     let args = |out: &Path, end: &str| -> Vec<String> {
-        let a = ["run", "elastic_wave", "--quiet", "--checkpoint-every", "1000", "--end-time", end, "--out"];
+        let case = wave_case().display().to_string();
+        let a = ["run", &case, "--quiet", "--checkpoint-every", "1000", "--end-time", end, "--out"];
         a.iter().map(|s| s.to_string()).chain([out.display().to_string()]).collect()
     };
     let (first, straight) = (work.join("first"), work.join("straight"));

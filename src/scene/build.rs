@@ -6,7 +6,7 @@ use super::case::{self, CaseFile, Value};
 use super::geometry::{self, Primitive};
 use super::measure::Measure;
 use super::quantity;
-use super::spec::{BodyInfo, Options, Pick, ProbeKind, ProbeSpec, ProbeValue, ProfileSpec, ResultSpec, Scene};
+use super::spec::{BodyInfo, Options, Pick, ProbeKind, ProbeSpec, ProbeValue, ProfileSpec, Record, ResultSpec, Scene};
 use crate::backend::Mirror;
 use crate::check::{self, Stdlib};
 use crate::diag::{closest, Diagnostic, Sources, Span};
@@ -1041,8 +1041,26 @@ fn build(
             };
             ProbeKind::Field { select, value, pick, reduce, locate }
         };
+        let record = match (p.relative, p.integrate) {
+            (false, false) => Record::Value,
+            (true, false) => Record::Change,
+            (false, true) => Record::Integral,
+            (true, true) => {
+                cx.err(
+                    p.name.span(),
+                    "C0017",
+                    format!(
+                        "probe `{}` records its change from the first value (`relative`) or its integral in time \
+                         (`integrate`), not both",
+                        p.name.get_ref()
+                    ),
+                    "this probe",
+                );
+                continue;
+            }
+        };
         probes.push(ProbeSpec {
-            relative: p.relative,
+            record,
             name: p.name.get_ref().clone(),
             kind,
             unit: p.unit.clone().unwrap_or_default(),

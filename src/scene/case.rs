@@ -362,6 +362,9 @@ pub struct Probe {
     /// Subtract the value at t = 0.
     #[serde(default)]
     pub relative: bool,
+    /// Record the integral in time of the sampled values (a power's work).
+    #[serde(default)]
+    pub integrate: bool,
     /// Report this coordinate (`x`, `y`, `z`) of the particle where `reduce` is reached.
     #[serde(default)]
     pub locate: Option<Spanned<String>>,

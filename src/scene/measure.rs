@@ -2,7 +2,7 @@
 //! measurement with a documented, automatic definition — and the results taken from them.
 
 use super::max_keeping_nan;
-use super::spec::{Pick, ProbeKind, ProbeSpec, ProbeValue, ResultSpec, Scene};
+use super::spec::{Pick, ProbeKind, ProbeSpec, ProbeValue, Record, ResultSpec, Scene};
 use crate::backend::{Backend, BackendError, FieldReduction, Nearby, Partial, WatchValues};
 use crate::ir::FieldId;
 use crate::ir::{component_indices, Shape};
@@ -96,6 +96,8 @@ impl Measure {
 pub struct History {
     pub points: Vec<(f64, f64)>,
     initial: Option<f64>,
+    /// The last value sampled: an integrating probe's integrand at its last point.
+    last: Option<f64>,
 }
 
 /// A field of every particle as a [`Reader`] gives it: components per particle, and `n × comps`
@@ -977,10 +979,10 @@ fn interbody(x: &[[f64; 3]], body: &[u32], dim: usize, dx: f64) -> (f64, usize) 
 }
 
 impl History {
-    /// A history resumed from a checkpoint: its points so far and the value a relative probe
-    /// measures from.
-    pub fn resumed(points: Vec<(f64, f64)>, initial: Option<f64>) -> History {
-        History { points, initial }
+    /// A history resumed from a checkpoint: its points so far, the value a relative probe
+    /// measures from and the last value sampled.
+    pub fn resumed(points: Vec<(f64, f64)>, initial: Option<f64>, last: Option<f64>) -> History {
+        History { points, initial, last }
     }
 
     /// The value a relative probe measures from (its first value), once recorded.
@@ -988,9 +990,23 @@ impl History {
         self.initial
     }
 
+    /// The last value sampled, once recorded (what an integrating probe integrates on from).
+    pub fn last(&self) -> Option<f64> {
+        self.last
+    }
+
     pub fn record(&mut self, p: &ProbeSpec, t: f64, value: f64) {
         let base = *self.initial.get_or_insert(value);
-        self.points.push((t, if p.relative { value - base } else { value }));
+        let recorded = match p.record {
+            Record::Value => value,
+            Record::Change => value - base,
+            Record::Integral => match (self.points.last(), self.last) {
+                (Some(&(t0, sum)), Some(v0)) => sum + 0.5 * (v0 + value) * (t - t0),
+                _ => 0.0,
+            },
+        };
+        self.last = Some(value);
+        self.points.push((t, recorded));
     }
 }
 
@@ -1131,7 +1147,7 @@ mod tests {
     #[test]
     fn a_result_is_its_value_at_times_scale_plus_offset() {
         // A foot's radius grows by 0.5 mm from 3.2 mm: its diameter is 2 × 0.5 mm + 6.4 mm.
-        let h = History { points: vec![(0.0, 0.0), (1.0, 2.5e-4), (2.0, 5e-4)], initial: None };
+        let h = History { points: vec![(0.0, 0.0), (1.0, 2.5e-4), (2.0, 5e-4)], initial: None, last: None };
         let r = ResultSpec { scale: 2.0, offset: 6.4e-3, ..result("end", None) };
         assert!((result_value(&r, &h) - 7.4e-3).abs() < 1e-15);
         let r = ResultSpec { scale: 2.0, offset: 6.4e-3, ..result("at_time", Some(1.0)) };
@@ -1147,7 +1163,7 @@ mod tests {
                 (t, 0.3 + (-t / 20.0).exp() * (2.0 * std::f64::consts::PI * t / 0.7).sin())
             })
             .collect();
-        let h = History { points, initial: None };
+        let h = History { points, initial: None, last: None };
         let window = |at: &str, from: f64, to: f64| {
             let r = ResultSpec { from: Some(from), to: Some(to), ..result(at, None) };
             result_value(&r, &h)
@@ -1167,21 +1183,43 @@ mod tests {
         assert!((mean - 0.3).abs() < 0.01, "mean over seven periods {mean}");
     }
 
+    fn probe_recording(record: Record) -> ProbeSpec {
+        ProbeSpec { name: "e".into(), kind: ProbeKind::Measure(Measure::ALL[0]), record, unit: String::new(), every: 1 }
+    }
+
     #[test]
     fn a_relative_measure_records_its_change_from_the_first_value() {
-        let probe = |relative| ProbeSpec {
-            name: "e".into(),
-            kind: ProbeKind::Measure(Measure::ALL[0]),
-            relative,
-            unit: String::new(),
-            every: 1,
-        };
-        for (relative, expected) in [(true, [0.0, 2.5]), (false, [4.0, 6.5])] {
+        for (record, expected) in [(Record::Change, [0.0, 2.5]), (Record::Value, [4.0, 6.5])] {
             let mut h = History::default();
-            h.record(&probe(relative), 0.0, 4.0);
-            h.record(&probe(relative), 1.0, 6.5);
-            assert_eq!(h.points, vec![(0.0, expected[0]), (1.0, expected[1])], "relative = {relative}");
+            h.record(&probe_recording(record), 0.0, 4.0);
+            h.record(&probe_recording(record), 1.0, 6.5);
+            assert_eq!(h.points, vec![(0.0, expected[0]), (1.0, expected[1])], "{record:?}");
         }
+    }
+
+    /// A power P(t) = 3 + 2 t sampled at uneven times: the trapezoidal rule integrates a line
+    /// exactly, so each point is 3 t + t² from the first sample; a checkpoint's history resumed
+    /// with its last value goes on to the same points, and a NaN sampled stays in the sum.
+    #[test]
+    fn an_integrating_probe_records_the_work_of_a_power_from_its_first_sample_and_resumes_it() {
+        let probe = probe_recording(Record::Integral);
+        let times = [0.0, 0.5, 0.75, 2.0, 3.5];
+        let mut h = History::default();
+        for &t in &times {
+            h.record(&probe, t, 3.0 + 2.0 * t);
+        }
+        for (&(t, w), &t_expected) in h.points.iter().zip(&times) {
+            assert_eq!(t, t_expected);
+            assert!((w - (3.0 * t + t * t)).abs() < 1e-12, "work {w} at t = {t}, expected {}", 3.0 * t + t * t);
+        }
+        let mut resumed = History::resumed(h.points[..3].to_vec(), h.initial(), Some(3.0 + 2.0 * 0.75));
+        for &t in &times[3..] {
+            resumed.record(&probe, t, 3.0 + 2.0 * t);
+        }
+        assert_eq!(resumed.points, h.points);
+        h.record(&probe, 4.0, f64::NAN);
+        h.record(&probe, 5.0, 1.0);
+        assert!(h.points[5].1.is_nan() && h.points[6].1.is_nan(), "{:?}", &h.points[5..]);
     }
 
     /// A plate 3 particles thick, Δx = 1 mm, 40 mm across, on a square lattice normal to z.

@@ -110,12 +110,24 @@ pub enum Pick {
     VonMises,
 }
 
+/// What a probe's history holds of the values it samples.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Record {
+    /// Each value as sampled.
+    Value,
+    /// The change from the first value, a field's or a measure's (`relative = true`).
+    Change,
+    /// The integral in time from the first sample, by the trapezoidal rule over the samples
+    /// (`integrate = true`): a power's work, a force's impulse.
+    Integral,
+}
+
 #[derive(Clone, Debug)]
 pub struct ProbeSpec {
     pub name: String,
     pub kind: ProbeKind,
-    /// Record the change from the first value, a field's or a measure's.
-    pub relative: bool,
+    /// What the history holds of the sampled values.
+    pub record: Record,
     pub unit: String,
     pub every: u64,
 }
