@@ -143,9 +143,12 @@ fn taylor_bar_about_its_axis_keeps_its_length_within_1_percent_and_its_foot_with
 
 /// The 12 mm Børvik plate about its axis at 399.6 m/s (CI: 1 mm near the axis, 150 µs): the
 /// projectile leaves slower than it came, and the kinetic energy, summed over the rings, starts at
-/// the 3D projectile's ½ m v² (m = ρ π R² L = 0.1973 kg) and never rises above it.
+/// the 3D projectile's ½ m v² (m = ρ π R² L = 0.1973 kg) and never rises above it. The energy the
+/// two energy equations count, Σ m (e + ½ |v|²), falls by about 4.6 % (727 J at CI); with the work
+/// of the hourglass pull and of the contact booked (probes with `integrate = true`) it is the
+/// impact's within 1 % at every sample (0.36 % at CI), and the pull's work is negative: a damper.
 #[test]
-fn borvik_plate_about_its_axis_is_perforated_and_its_rings_hold_the_projectiles_kinetic_energy() {
+fn borvik_plate_about_its_axis_is_perforated_holds_its_kinetic_energy_and_balances_its_energy_with_the_pull_booked() {
     let o = run_ci("borvik_axisymmetric");
     let v_i = 399.6;
     let proj = value(&o, "projectile_residual_velocity");
@@ -156,6 +159,19 @@ fn borvik_plate_about_its_axis_is_perforated_and_its_rings_hold_the_projectiles_
         (peak - ke0).abs() <= 0.01 * ke0,
         "the rings' kinetic energy peaks at {peak} J, the projectile's is {ke0} J"
     );
+    let history = |name: &str| &o.histories.iter().find(|(n, _)| n == name).unwrap_or_else(|| panic!("no `{name}`")).1;
+    let (total, pull, contact) = (history("total_energy"), history("hourglass_work"), history("contact_work"));
+    let at = |h: &[(f64, f64)], t: f64| h.iter().find(|p| p.0 == t).map(|p| p.1);
+    let mut sampled = 0;
+    for &(t, energy) in total {
+        let (Some(w_pull), Some(w_contact)) = (at(pull, t), at(contact, t)) else { continue };
+        sampled += 1;
+        let off = energy - w_pull - w_contact - ke0;
+        assert!(off.abs() <= 0.01 * ke0, "at {t} s the energy {energy} J less the pull's {w_pull} J and the contact's {w_contact} J is {off} J off the impact's {ke0} J");
+    }
+    assert!(sampled > 50, "the balance was checked at {sampled} times");
+    let pull_end = pull.last().expect("the pull's work").1;
+    assert!(pull_end < -0.01 * ke0, "the hourglass pull's work at the end is {pull_end} J");
 }
 
 #[test]
