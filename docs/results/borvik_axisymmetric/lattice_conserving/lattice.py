@@ -24,8 +24,9 @@ def folder(plate, phase, k):
 
 def speeds_at(path, times_us):
     """The projectile's speed (m/s, towards the plate) at each time (µs) from a run's histories.csv:
-    the first row at or after it, or the last row."""
-    rows = list(csv.reader(open(os.path.join(path, "histories.csv"))))[1:]
+    the first row at or after it, or the last row. Rows where the speed was not sampled (a probe
+    sampled at other steps, as the case's work probes since stop 125) are skipped."""
+    rows = [r for r in list(csv.reader(open(os.path.join(path, "histories.csv"))))[1:] if r[1] != ""]
     t = [float(r[0]) * 1e6 for r in rows]
     v = [-float(r[1]) for r in rows]
     return [v[min(bisect.bisect_left(t, x), len(t) - 1)] for x in times_us]
