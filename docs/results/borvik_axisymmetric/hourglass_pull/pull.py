@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""The shaped plate's hourglass pull on the Børvik plates about their axis (stop 124).
+"""The shaped plate's hourglass pull on the Børvik plates about their axis (stops 124–125).
 
     python3 docs/results/borvik_axisymmetric/hourglass_pull/pull.py
 
@@ -11,7 +11,11 @@ hardening m = -3 (`--set nonlocal_hardening=-3`), 8 mm at 298 m/s unless named _
 Δx = 4 mm / k. For each run, at 65, 100 and 150 µs: the projectile's speed, the work the pull has
 done on the bodies (the time integral of Σ m v · a_hourglass over the rings), the contact's, and
 the energy the balance misses (the projectile's kinetic energy at impact less Σ m (e + ½ |v|²)).
-Last, the no-pull series over the lattice, through ../lattice_conserving/lattice.py's report."""
+Last, the no-pull series over the lattice, through ../lattice_conserving/lattice.py's report, and
+the runs of the case itself (no power probes) with the pull weakened by the damage
+(damage_weakened_pull.diff, applied to a copy of the stdlib run with PAIRSUM_STDLIB, stop 125):
+  dw<place>_<plate>_k<k>      the case's hardening (m = 1)
+  dwm3<place>_<plate>_k<k>    m = -3"""
 import csv
 import os
 import sys
@@ -77,3 +81,6 @@ if __name__ == "__main__":
                 print(f"{4 / k:<8.3f} {lattice.residual(plate, '0', k, lambda p, ph, kk: run):8.2f} | " + " | ".join(cells))
     print("== no pull over the lattice (edge places -0.4, 0, +0.4)")
     lattice.report(lambda plate, place, k: folder("pwa0m3", plate, place, k), plates=(8, 12), phases=["m04", "0", "p04"])
+    for series, what in (("dw", "the case's hardening (m = 1)"), ("dwm3", "m = -3")):
+        print(f"== the pull weakened by the damage, {what}, over the lattice")
+        lattice.report(lambda plate, place, k: folder(series, plate, place, k), plates=(8, 12), phases=["m04", "0", "p04"])
