@@ -3,6 +3,7 @@
 //! plan of a stdlib solid model, and what a broken case file gets.
 
 mod common;
+use common::history;
 use pairsum::backend::cpu::CpuBackend;
 use pairsum::backend::Backend;
 use pairsum::engine::{checkpoint, setup, Engine};
@@ -36,16 +37,6 @@ fn rings_copy(tag: &str) -> (String, PathBuf, PathBuf) {
 /// Runs a case on the CPU at CI resolution and checks every result against its tolerance.
 fn run_and_check(name: &str, precision: Precision) {
     run_and_check_with(name, &[], precision);
-}
-
-/// The values a probe recorded, every one of them finite (a NaN would vanish from a least or a
-/// largest value folded with `f64::min` or `f64::max`).
-fn history<'a>(histories: &'a [(String, Vec<(f64, f64)>)], probe: &str) -> &'a [(f64, f64)] {
-    let points = &histories.iter().find(|(n, _)| n == probe).unwrap_or_else(|| panic!("no probe `{probe}`")).1;
-    if let Some((t, v)) = points.iter().find(|(t, v)| !t.is_finite() || !v.is_finite()) {
-        panic!("probe `{probe}` recorded {v} at t = {t}");
-    }
-    points
 }
 
 /// A bundled case's run on the CPU backend, with the `report.json` and `histories.csv` it wrote.

@@ -161,7 +161,7 @@ fn borvik_plate_about_its_axis_is_perforated_and_balances_its_energy_within_1_pe
         (peak - ke0).abs() <= 0.01 * ke0,
         "the rings' kinetic energy peaks at {peak} J, the projectile's is {ke0} J"
     );
-    let history = |name: &str| &o.histories.iter().find(|(n, _)| n == name).unwrap_or_else(|| panic!("no `{name}`")).1;
+    let history = |name: &str| common::history(&o.histories, name);
     let (total, pull, contact) = (history("total_energy"), history("hourglass_work"), history("contact_work"));
     let at = |h: &[(f64, f64)], t: f64| h.iter().find(|p| p.0 == t).map(|p| p.1);
     let mut sampled = 0;

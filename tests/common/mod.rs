@@ -212,6 +212,16 @@ pub fn assert_pinned(case: &str, set: &[(&str, &str)], f32: bool, results: &[(St
 pub const TENSILE_PART_MODEL: &str = "use kernels\nuse solid::principal\ngroup all\nkernel = cubic_spline\n\
      state s: symtensor [Pa]\nparticle tension -> pulled: symtensor [Pa] { pulled = tensile_part(s) }\nintegrate { }\n";
 
+/// The values a probe recorded, every one of them finite (a NaN would vanish from a least or a
+/// largest value folded with `f64::min` or `f64::max`).
+pub fn history<'a>(histories: &'a [(String, Vec<(f64, f64)>)], probe: &str) -> &'a [(f64, f64)] {
+    let points = &histories.iter().find(|(n, _)| n == probe).unwrap_or_else(|| panic!("no probe `{probe}`")).1;
+    if let Some((t, v)) = points.iter().find(|(t, v)| !t.is_finite() || !v.is_finite()) {
+        panic!("probe `{probe}` recorded {v} at t = {t}");
+    }
+    points
+}
+
 /// The largest magnitude of `values`; fails the test, naming `what`, at a NaN or an infinity.
 pub fn max_abs(what: &str, values: &[f64]) -> f64 {
     pairsum::compare::max_abs(values).unwrap_or_else(|e| panic!("{what}: {e}"))
