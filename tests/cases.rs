@@ -1420,9 +1420,9 @@ fn a_failure_band_beside_a_damage_length_is_error_c0048_naming_the_material_and_
 }
 
 /// The axisymmetric Børvik plate's switches take 0 or 1 only (before stops 120 and 121 any other
-/// value acted as 1): `conservative = 2`, `round_failed = 2`, `zero_pressure_floor = 0.5` and
-/// `nonlocal_rate = 2` are each error C0048 naming the switch's meaning and the value; the case's
-/// own values build the store.
+/// value acted as 1): `conservative = 2`, `round_failed = 2`, `zero_pressure_floor = 0.5`,
+/// `nonlocal_rate = 2` and `hourglass_damage = 0.5` are each error C0048 naming the switch's
+/// meaning and the value; the case's own values build the store.
 #[test]
 fn a_switch_other_than_0_or_1_on_the_axisymmetric_borvik_case_is_error_c0048_naming_its_meaning_and_value() {
     let store_with = |set: &[(&str, &str)]| build_store_with("borvik_axisymmetric", set);
@@ -1431,6 +1431,7 @@ fn a_switch_other_than_0_or_1_on_the_axisymmetric_borvik_case_is_error_c0048_nam
         ("round_failed", "2", "kernel turns round"),
         ("zero_pressure_floor", "0.5", "floored where it carries no pressure"),
         ("nonlocal_rate", "2", "rate term reads the strain rate averaged over damage_length"),
+        ("hourglass_damage", "0.5", "the damage weakens the pull as it weakens the stress"),
     ] {
         let err = store_with(&[(switch, value)]).expect_err(switch);
         for part in

@@ -238,13 +238,18 @@ fn block_lattice() -> Vec<[f64; 2]> {
 /// The block at rest with `initial` its particles' initial values: the largest |a| of the
 /// hourglass stiffness, the largest and the smallest a · u, each at the end.
 fn hourglass_pull(tag: &str, initial: &str) -> [f64; 3] {
+    hourglass_pull_of(tag, initial, "")
+}
+
+/// As `hourglass_pull`, with `material` further keys of the block's material.
+fn hourglass_pull_of(tag: &str, initial: &str, material: &str) -> [f64; 3] {
     let probes = [
         ("pull", "norm(dv_hourglass)", "max"),
         ("against_u_max", "dot(dv_hourglass, u)", "max"),
         ("against_u_min", "dot(dv_hourglass, u)", "min"),
     ];
-    let material = "bulk = \"2e5 Pa\"\nG = \"1e5 Pa\"";
-    one_step_of_the_block(&format!("hourglass-{tag}"), HOURGLASS_MODEL, initial, material, probes)
+    let material = format!("bulk = \"2e5 Pa\"\nG = \"1e5 Pa\"\n{material}");
+    one_step_of_the_block(&format!("hourglass-{tag}"), HOURGLASS_MODEL, initial, &material, probes)
 }
 
 /// A zig-zag along x of 1 mm (a tenth of the spacing) from a reference the kernels' shape (I)
@@ -292,6 +297,24 @@ fn the_shaped_hourglass_stiffness_pulls_a_zig_zag_back_as_its_formula_says_and_l
     let homogeneous = "kernel_shape = \"1.2 * I\", u = \"x - x / 1.2\"";
     let [still, ..] = hourglass_pull("homogeneous", homogeneous);
     assert!(still.is_finite() && still < 1e-9 * expected, "a homogeneous deformation pulled by {still:e}");
+}
+
+/// Weakened by the damage (`hourglass_damage = 1`, solid/shaped_hourglass.sph), the zig-zag's
+/// largest pull with D = 0.4 at every particle and the material's damage_coupling c = 0.5 is
+/// (1 − c D) = 0.8 of the undamaged block's, within 1e-9; with the switch off (the default) the
+/// damaged block is pulled as the undamaged one, within 1e-12.
+#[test]
+fn the_hourglass_pull_weakened_by_the_damage_is_one_less_c_d_of_the_full_pull_and_full_with_the_switch_off() {
+    let zigzag = "u = \"vec(0.001 [m] * sin(pi * x.x / 0.01 [m]), 0 [m])\"";
+    let damaged = format!("{zigzag}, D = \"0.4\"");
+    let [full, ..] = hourglass_pull("undamaged", zigzag);
+    let [weakened, against_max, _] =
+        hourglass_pull_of("weakened", &damaged, "damage_coupling = 0.5\nhourglass_damage = 1");
+    let [unweakened, ..] = hourglass_pull_of("switch-off", &damaged, "damage_coupling = 0.5");
+    assert!(full > 0.0 && full.is_finite(), "the undamaged pull {full:e}");
+    assert!((weakened / full - 0.8).abs() < 1e-9, "weakened {weakened:e} against 0.8 × {full:e}");
+    assert!(against_max < 0.0, "a damaged particle not pulled back: largest a · u = {against_max:e}");
+    assert!((unweakened / full - 1.0).abs() < 1e-12, "switch off: {unweakened:e} against {full:e}");
 }
 
 /// The hourglass viscosity of the shaped kernels (solid/shaped_kernel.sph's `hourglass_visc` β in

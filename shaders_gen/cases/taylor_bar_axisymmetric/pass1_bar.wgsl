@@ -296,35 +296,43 @@ fn st_ds_hoop(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 1u;
     return params[b];
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 4u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 4u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 5u;
     return params[b];
 }
 fn prm_conservative(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 15u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 16u;
     return params[b];
 }
 fn prm_hourglass_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 18u;
     return params[b];
 }
 fn prm_hourglass_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 19u;
+    return params[b];
+}
+fn prm_hourglass_damage(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 20u;
+    return params[b];
+}
+fn prm_damage_coupling(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 21u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -352,6 +360,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let conservative_i = prm_conservative(i);
     let hourglass_alpha_i = prm_hourglass_alpha(i);
     let hourglass_E_i = prm_hourglass_E(i);
+    let hourglass_damage_i = prm_hourglass_damage(i);
+    let damage_coupling_i = prm_damage_coupling(i);
     let x_i = ld_x(i);
     let v_i = ld_v(i);
     let dx_i = ld_dx(i);
@@ -415,13 +425,13 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             L = L + neg_m(((ldj_m(j, sgn) / ldj_rho(j, sgn)) * outer(g, x_ij)));
             grad_v = grad_v + outer((ldj_v(j, sgn) - v_i), ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * g));
         }
-        // pairsum shaped_hourglass (stdlib/solid/shaped_hourglass.sph:43)
+        // pairsum shaped_hourglass (stdlib/solid/shaped_hourglass.sph:55)
         if ((((body_i == ldj_body(j, sgn)) && (0.0 < 1.0)) && (0.0 < 1.0))) {
             let X_ij = (x_ij - (u_i - ldj_u(j, sgn)));
             let r0 = max(length(X_ij), 1e-9);
             let along = (x_ij / r_ij);
             let miss = dot((((0.5 * (kernel_shape_i + ldj_kernel_shape(j, sgn))) * X_ij) - x_ij), along);
-            let k_2 = (((((hourglass_alpha_i * ldj_m(j, sgn)) / rho0_i) * kernel_w_at(r0, (h_ratio_i * (0.5 * (dx_i + ldj_dx(j, sgn)))))) * hourglass_E_i) / (rho0_i * (r0 * r0)));
+            let k_2 = (((((((1.0 - ((hourglass_damage_i * damage_coupling_i) * (0.5 * (0.0 + 0.0)))) * hourglass_alpha_i) * ldj_m(j, sgn)) / rho0_i) * kernel_w_at(r0, (h_ratio_i * (0.5 * (dx_i + ldj_dx(j, sgn)))))) * hourglass_E_i) / (rho0_i * (r0 * r0)));
             let conservative = conservative_i;
             dv_hourglass = dv_hourglass + (((select(1.0, ((max(x_i[0], (0.1 * dx_i)) + abs(ldj_x(j, sgn)[0])) / (2.0 * max(x_i[0], (0.1 * dx_i)))), ((axisymmetric_i > 0.0) && (conservative > 0.0))) * k_2) * miss) * along);
             hourglass_rate2 = hourglass_rate2 + k_2;

@@ -264,31 +264,31 @@ fn st_dv(i: u32, v: vec2<f32>) {
     data[b + 1u] = v[1];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 1u;
     return params[b];
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 4u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 4u;
     return params[b];
 }
 fn prm_hourglass_visc(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 7u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 12u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 13u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 14u;
     return params[b];
 }
 fn prm_conservative(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 15u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -318,63 +318,63 @@ fn st_u_0(i: u32, v: vec2<f32>) {
     data[b + 1u] = v[1];
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 1u;
     return params[b];
 }
 fn prm_shape_floor(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 8u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 16u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 17u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 25u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 26u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 27u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 28u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 29u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 30u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 31u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 32u;
     return params[b];
 }
 fn prm_C_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 33u;
     return params[b];
 }
 fn prm_taylor_quinney(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 37u + 32u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 34u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -58,11 +58,11 @@ fn st_c(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 0u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 18u;
     return params[b];
 }
 @compute @workgroup_size(64)

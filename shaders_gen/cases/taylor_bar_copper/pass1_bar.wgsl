@@ -313,27 +313,35 @@ fn st_ds(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 1u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 6u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 17u;
     return params[b];
 }
 fn prm_hourglass_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 19u;
     return params[b];
 }
 fn prm_hourglass_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 20u;
+    return params[b];
+}
+fn prm_hourglass_damage(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 21u;
+    return params[b];
+}
+fn prm_damage_coupling(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 22u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -359,6 +367,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let h_ratio_i = prm_h_ratio(i);
     let hourglass_alpha_i = prm_hourglass_alpha(i);
     let hourglass_E_i = prm_hourglass_E(i);
+    let hourglass_damage_i = prm_hourglass_damage(i);
+    let damage_coupling_i = prm_damage_coupling(i);
     let v_i = ld_v(i);
     let dx_i = ld_dx(i);
     let body_i = ld_body(i);
@@ -421,13 +431,13 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             L = L + neg_m(((ldj_m(j, sgn) / ldj_rho(j, sgn)) * outer(g, x_ij)));
             grad_v = grad_v + outer((ldj_v(j, sgn) - v_i), ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * g));
         }
-        // pairsum shaped_hourglass (stdlib/solid/shaped_hourglass.sph:43)
+        // pairsum shaped_hourglass (stdlib/solid/shaped_hourglass.sph:55)
         if ((((body_i == ldj_body(j, sgn)) && (0.0 < 1.0)) && (0.0 < 1.0))) {
             let X_ij = (x_ij - (u_i - ldj_u(j, sgn)));
             let r0 = max(length(X_ij), 1e-9);
             let along = (x_ij / r_ij);
             let miss = dot((((0.5 * (kernel_shape_i + ldj_kernel_shape(j, sgn))) * X_ij) - x_ij), along);
-            let k_2 = (((((hourglass_alpha_i * ldj_m(j, sgn)) / rho0_i) * kernel_w_at(r0, (h_ratio_i * (0.5 * (dx_i + ldj_dx(j, sgn)))))) * hourglass_E_i) / (rho0_i * (r0 * r0)));
+            let k_2 = (((((((1.0 - ((hourglass_damage_i * damage_coupling_i) * (0.5 * (0.0 + 0.0)))) * hourglass_alpha_i) * ldj_m(j, sgn)) / rho0_i) * kernel_w_at(r0, (h_ratio_i * (0.5 * (dx_i + ldj_dx(j, sgn)))))) * hourglass_E_i) / (rho0_i * (r0 * r0)));
             dv_hourglass = dv_hourglass + (((1.0 * k_2) * miss) * along);
             hourglass_rate2 = hourglass_rate2 + k_2;
         }

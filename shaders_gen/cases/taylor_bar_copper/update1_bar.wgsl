@@ -323,63 +323,63 @@ fn st_u_0(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 1u;
     return params[b];
 }
 fn prm_shape_floor(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 9u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 17u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 18u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 26u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 27u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 28u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 29u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 30u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 31u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 32u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 33u;
     return params[b];
 }
 fn prm_C_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 32u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 34u;
     return params[b];
 }
 fn prm_taylor_quinney(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 33u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 35u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -722,59 +722,67 @@ fn st_rate_lap_sum(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 1u;
     return params[b];
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 5u;
     return params[b];
 }
 fn prm_nonlocal_skips_failed(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 6u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 7u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 11u;
     return params[b];
 }
 fn prm_delta(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 12u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 13u;
     return params[b];
 }
 fn prm_conservative(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 17u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 23u;
     return params[b];
 }
 fn prm_hourglass_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 24u;
     return params[b];
 }
 fn prm_hourglass_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 25u;
+    return params[b];
+}
+fn prm_hourglass_damage(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 26u;
+    return params[b];
+}
+fn prm_damage_coupling(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 27u;
     return params[b];
 }
 fn prm_contact_colour(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 31u;
     return params[b];
 }
 fn prm_contact_stiffness(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 32u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -819,6 +827,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let conservative_i = prm_conservative(i);
     let hourglass_alpha_i = prm_hourglass_alpha(i);
     let hourglass_E_i = prm_hourglass_E(i);
+    let hourglass_damage_i = prm_hourglass_damage(i);
+    let damage_coupling_i = prm_damage_coupling(i);
     let x_i = ld_x(i);
     let v_i = ld_v(i);
     let dx_i = ld_dx(i);
@@ -898,14 +908,14 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                     grad_v_2 = grad_v_2 + outer((ldj_v(j, sgn) - v_i), ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * g));
                 }
             }
-            // pairsum shaped_hourglass (stdlib/solid/shaped_hourglass.sph:43)
+            // pairsum shaped_hourglass (stdlib/solid/shaped_hourglass.sph:55)
             if (in_groups(2u, ints[j])) {
                 if ((((body_i == ldj_body(j, sgn)) && (D_i < 1.0)) && (ldj_D(j, sgn) < 1.0))) {
                     let X_ij = (x_ij - (u_i - ldj_u(j, sgn)));
                     let r0 = max(length(X_ij), 1e-9);
                     let along = (x_ij / r_ij);
                     let miss = dot((((0.5 * (kernel_shape_i + ldj_kernel_shape(j, sgn))) * X_ij) - x_ij), along);
-                    let k_2 = (((((hourglass_alpha_i * ldj_m(j, sgn)) / rho0_i) * kernel_w_at(r0, (h_ratio_i * (0.5 * (dx_i + ldj_dx(j, sgn)))))) * hourglass_E_i) / (rho0_i * (r0 * r0)));
+                    let k_2 = (((((((1.0 - ((hourglass_damage_i * damage_coupling_i) * (0.5 * (D_i + ldj_D(j, sgn))))) * hourglass_alpha_i) * ldj_m(j, sgn)) / rho0_i) * kernel_w_at(r0, (h_ratio_i * (0.5 * (dx_i + ldj_dx(j, sgn)))))) * hourglass_E_i) / (rho0_i * (r0 * r0)));
                     let conservative = conservative_i;
                     dv_hourglass = dv_hourglass + (((select(1.0, ((max(x_i[0], (0.1 * dx_i)) + abs(ldj_x(j, sgn)[0])) / (2.0 * max(x_i[0], (0.1 * dx_i)))), ((axisymmetric_i > 0.0) && (conservative > 0.0))) * k_2) * miss) * along);
                     hourglass_rate2 = hourglass_rate2 + k_2;

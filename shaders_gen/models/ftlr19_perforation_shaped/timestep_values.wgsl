@@ -67,11 +67,11 @@ fn st_hourglass_rate2(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 13u;
     return params[b];
 }
 fn prm_C_cfl(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 18u;
     return params[b];
 }
 @compute @workgroup_size(64)

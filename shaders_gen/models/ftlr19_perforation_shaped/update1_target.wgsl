@@ -453,131 +453,131 @@ fn st_u_0(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 1u;
     return params[b];
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 5u;
     return params[b];
 }
 fn prm_p_spall(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 8u;
     return params[b];
 }
 fn prm_zero_pressure_floor(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 9u;
     return params[b];
 }
 fn prm_round_failed(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 10u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 13u;
     return params[b];
 }
 fn prm_shape_floor(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 21u;
     return params[b];
 }
 fn prm_shape_aspect(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 22u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 23u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 28u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 29u;
     return params[b];
 }
 fn prm_eos_eta_peak(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 30u;
     return params[b];
 }
 fn prm_nonlocal_hardening(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 32u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 33u;
     return params[b];
 }
 fn prm_nonlocal_rate(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 33u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 34u;
     return params[b];
 }
 fn prm_damage_length(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 34u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 35u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 35u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 36u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 36u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 37u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 37u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 38u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 38u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 39u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 39u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 40u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 40u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 41u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 41u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 42u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 42u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 43u;
     return params[b];
 }
 fn prm_D1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 43u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 44u;
     return params[b];
 }
 fn prm_D2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 44u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 45u;
     return params[b];
 }
 fn prm_D3(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 45u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 46u;
     return params[b];
 }
 fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 46u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 47u;
     return params[b];
 }
 fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 47u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 48u;
     return params[b];
 }
 fn prm_failure_band(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 48u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 49u;
     return params[b];
 }
 fn prm_failure_band_spacing(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 49u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 50u;
     return params[b];
 }
 fn prm_nonlocal_weight(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 51u + 50u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 51u;
     return params[b];
 }
 @compute @workgroup_size(64)
