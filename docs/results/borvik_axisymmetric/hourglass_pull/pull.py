@@ -15,7 +15,11 @@ Last, the no-pull series over the lattice, through ../lattice_conserving/lattice
 the runs of the case itself (no power probes) with the pull weakened by the damage
 (damage_weakened_pull.diff, applied to a copy of the stdlib run with PAIRSUM_STDLIB, stop 125):
   dw<place>_<plate>_k<k>      the case's hardening (m = 1)
-  dwm3<place>_<plate>_k<k>    m = -3"""
+  dwm3<place>_<plate>_k<k>    m = -3
+and, since stop 126, with the committed stdlib's switch (`--set hourglass_damage=1`, the same
+figures bit for bit; their histories.csv kept every 20 steps, where every probe is sampled):
+  dwm3<place>_12_k16          m = -3 at 0.25 mm on 12 mm
+  dwm1<place>_8_k<k>          m = -1 on 8 mm"""
 import csv
 import os
 import sys
@@ -81,6 +85,6 @@ if __name__ == "__main__":
                 print(f"{4 / k:<8.3f} {lattice.residual(plate, '0', k, lambda p, ph, kk: run):8.2f} | " + " | ".join(cells))
     print("== no pull over the lattice (edge places -0.4, 0, +0.4)")
     lattice.report(lambda plate, place, k: folder("pwa0m3", plate, place, k), plates=(8, 12), phases=["m04", "0", "p04"])
-    for series, what in (("dw", "the case's hardening (m = 1)"), ("dwm3", "m = -3")):
+    for series, what in (("dw", "the case's hardening (m = 1)"), ("dwm1", "m = -1"), ("dwm3", "m = -3")):
         print(f"== the pull weakened by the damage, {what}, over the lattice")
         lattice.report(lambda plate, place, k: folder(series, plate, place, k), plates=(8, 12), phases=["m04", "0", "p04"])
