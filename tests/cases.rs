@@ -1393,11 +1393,28 @@ fn total_lagrangian_beam_vibration_2d_keeps_its_amplitude_within_1_percent_over_
     assert!((last / first - 1.0).abs() < 0.01, "amplitude {first:e} m in the first period, {last:e} m in the last");
 }
 
-/// Builds a bundled case's store with `--set` values: Ok, or the error's text (a model's `require`
-/// is checked here, C0048).
+/// Loads a bundled case with `--set` values and builds its store: Ok, or the error's text (a
+/// model's `require` is checked at load, C0048 at the material's key, and again at the store's
+/// setup).
 fn build_store_with(name: &str, set: &[(&str, &str)]) -> Result<(), String> {
-    let (scene, plan) = prepare(&case(name), &with_set(set)).unwrap_or_else(|e| panic!("{e}"));
+    let (scene, plan) = prepare(&case(name), &with_set(set)).map_err(|e| e.to_string())?;
     setup::build_store::<f64>(&plan, &scene.particles, &scene.materials).map(|_| ()).map_err(|e| e.to_string())
+}
+
+/// A broken `require` is reported when the case loads, at the line and column of the material's
+/// key that the condition reads: `--set hourglass_damage=0.5` on the axisymmetric Børvik case
+/// points at weldox's `hourglass_damage = ${hourglass_damage}`, found here in the case's text.
+#[test]
+fn a_broken_requirement_is_error_c0048_at_the_line_and_column_of_the_material_key_it_reads() {
+    let text = std::fs::read_to_string(case("borvik_axisymmetric")).unwrap();
+    let key = "hourglass_damage = ${hourglass_damage}";
+    let (line, row) = text.lines().enumerate().find(|(_, l)| l.trim_start().starts_with(key)).expect("the key");
+    let column = row.find('$').unwrap() + 1;
+    let err = build_store_with("borvik_axisymmetric", &[("hourglass_damage", "0.5")]).expect_err("0.5");
+    let at = format!("borvik_axisymmetric.toml:{}:{column}", line + 1);
+    for part in ["error[C0048]", "material `weldox`", &at, "the condition reads this value"] {
+        assert!(err.contains(part), "{part} not in: {err}");
+    }
 }
 
 /// A model's `require` holds for each material where it applies, checked when the case binds

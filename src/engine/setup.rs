@@ -294,22 +294,46 @@ fn check_requirements(
     materials: &[MaterialInput],
     resolved: &[Vec<Option<Vec<f64>>>],
 ) -> Result<(), SetupError> {
-    let model = &plan.model;
+    match broken_requirement(&plan.model, plan.dim, input, materials, resolved) {
+        Some(broken) => Err(broken.error),
+        None => Ok(()),
+    }
+}
+
+/// A `require` of the model that a material breaks (or that cannot be checked): the error, the
+/// material's index and the parameters the condition reads, for the case file to point at.
+pub struct BrokenRequirement {
+    pub error: SetupError,
+    pub material: usize,
+    pub reads: Vec<ParamId>,
+    /// Whether the condition could be evaluated (false: a parameter it reads is unbound).
+    pub evaluated: bool,
+}
+
+/// The first `require` of the model that a material with particles where it applies breaks, or
+/// cannot be checked for, with `resolved` its parameters' values (error C0048).
+pub fn broken_requirement(
+    model: &Model,
+    dim: usize,
+    input: &ParticleInput,
+    materials: &[MaterialInput],
+    resolved: &[Vec<Option<Vec<f64>>>],
+) -> Option<BrokenRequirement> {
     for r in &model.requirements {
+        let mut reads = BTreeSet::new();
+        ir::walk_expr(&r.cond, &mut |e| {
+            if let ir::ExprKind::Param(p, _) = e.kind {
+                reads.insert(p);
+            }
+        });
         for (mi, m) in materials.iter().enumerate() {
             if material_groups(input, mi).intersect(r.groups).is_empty() {
                 continue;
             }
             let mut params = resolved[mi].clone();
-            let holds = eval(model, plan.dim, &r.cond, &mut params, &mut BTreeSet::new(), None);
+            let holds = eval(model, dim, &r.cond, &mut params, &mut BTreeSet::new(), None);
             let values = || {
-                let mut read = BTreeSet::new();
-                ir::walk_expr(&r.cond, &mut |e| {
-                    if let ir::ExprKind::Param(p, _) = e.kind {
-                        read.insert(p);
-                    }
-                });
-                let shown: Vec<String> = read
+                let shown: Vec<String> = reads
                     .iter()
                     .map(|p| {
                         let value = params[p.index()].as_ref().map_or("unbound".to_string(), |v| format!("{}", v[0]));
@@ -319,27 +343,22 @@ fn check_requirements(
                     .collect();
                 shown.join(", ")
             };
-            match holds {
-                Ok(v) if v[0] != 0.0 => {}
-                Ok(_) => {
-                    return Err(SetupError::new(
-                        "C0048",
-                        format!("material `{}` breaks a requirement of the model: {} ({})", m.name, r.why, values()),
-                    ))
-                }
+            let message = match &holds {
+                Ok(v) if v[0] != 0.0 => continue,
+                Ok(_) => format!("material `{}` breaks a requirement of the model: {} ({})", m.name, r.why, values()),
                 Err(what) => {
-                    return Err(SetupError::new(
-                        "C0048",
-                        format!(
-                            "cannot check a requirement of the model (`{}`) for material `{}`: {what}",
-                            r.why, m.name
-                        ),
-                    ))
+                    format!("cannot check a requirement of the model (`{}`) for material `{}`: {what}", r.why, m.name)
                 }
-            }
+            };
+            return Some(BrokenRequirement {
+                error: SetupError::new("C0048", message),
+                material: mi,
+                reads: reads.into_iter().collect(),
+                evaluated: holds.is_ok(),
+            });
         }
     }
-    Ok(())
+    None
 }
 
 /// The scene's fields (x, v, vol, dx, body) and the initial values computed from them, per

@@ -1184,6 +1184,7 @@ fn build(
     }
     outputs.sort();
     outputs.dedup();
+    requirements_hold(case, &model, &particles, &materials, cx)?;
     let groups = particles.groups();
     let kernel = case.kernel.as_ref().map(|k| k.get_ref().clone());
     if let Some(k) = case.kernel.as_ref().filter(|k| model.kernel_id(k.get_ref()).is_none()) {
@@ -2159,6 +2160,36 @@ fn axis_of_symmetry(case: &CaseFile, model: &Model, mirrors: &mut Vec<Mirror>, c
 
 /// By parameter id: the value every material a body uses binds the parameter to (its default
 /// resolved), where they all agree; the plan takes the branches these decide
+/// Every `require` of the model that the case's materials decide holds (error C0048 at the keys
+/// of the material that the broken condition reads, else at the material's first key). A
+/// condition that reads a scene constant (gravity, a load) cannot be decided here: the store's
+/// setup checks it, naming the case file.
+fn requirements_hold(
+    case: &CaseFile,
+    model: &Model,
+    particles: &ParticleInput,
+    materials: &[MaterialInput],
+    cx: &mut Ctx,
+) -> Option<()> {
+    let resolved: Vec<_> = materials.iter().map(|m| crate::engine::setup::resolve_material(model, cx.dim, m)).collect();
+    let broken = crate::engine::setup::broken_requirement(model, cx.dim, particles, materials, &resolved)
+        .filter(|b| b.evaluated);
+    let Some(broken) = broken else { return Some(()) };
+    let keys = case.materials.get(&materials[broken.material].name);
+    let read: Vec<&Value> = broken.reads.iter().filter_map(|p| keys?.get(&model.params[p.index()].name)).collect();
+    let mut d = Diagnostic::error(broken.error.code, broken.error.message);
+    if let Some((first, rest)) = read.split_first() {
+        d = d.at(cx.span(first.span()), "the condition reads this value");
+        for v in rest {
+            d = d.also(cx.span(v.span()), "and this one");
+        }
+    } else if let Some(v) = keys.and_then(|k| k.values().next()) {
+        d = d.at(cx.span(v.span()), "in this material");
+    }
+    cx.diags.push(d);
+    None
+}
+
 /// (`schedule/settle.rs`).
 fn settled_params(
     model: &Model,
