@@ -19,9 +19,12 @@ the runs of the case itself (no power probes) with the pull weakened by the dama
 and, since stop 126, with the committed stdlib's switch (`--set hourglass_damage=1`, the same
 figures bit for bit; their histories.csv kept every 20 steps, where every probe is sampled):
   dwm3<place>_12_k16          m = -3 at 0.25 mm on 12 mm
-  dwm1<place>_8_k<k>          m = -1 on 8 mm"""
+  dwm1<place>_8_k<k>          m = -1 on 8 mm
+and, since stop 127, m = -3 at two more edge places, m02 and p02 (-0.2, +0.2), on both plates:
+  dwm3<place>_<plate>_k<k>    five places a level, with the speeds at 40, 65, 100 and 150 µs"""
 import csv
 import os
+import statistics as st
 import sys
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -29,6 +32,7 @@ sys.path.insert(0, os.path.join(HERE, "..", "lattice_conserving"))
 import lattice  # noqa: E402
 
 TIMES = [65, 100, 150]  # µs
+STAGES = [40, 65, 100, 150]  # µs, the five-place means
 SERIES = [("pwm3", "α = 0.01 (the case)"), ("pwa005m3", "α = 0.005"), ("pwa0m3", "α = 0, no pull")]
 
 
@@ -88,3 +92,16 @@ if __name__ == "__main__":
     for series, what in (("dw", "the case's hardening (m = 1)"), ("dwm1", "m = -1"), ("dwm3", "m = -3")):
         print(f"== the pull weakened by the damage, {what}, over the lattice")
         lattice.report(lambda plate, place, k: folder(series, plate, place, k), plates=(8, 12), phases=["m04", "0", "p04"])
+    print("== the pull weakened by the damage, m = -3, over five edge places (-0.4, -0.2, 0, +0.2, +0.4; stop 127)")
+    lattice.report(lambda plate, place, k: folder("dwm3", plate, place, k), plates=(8, 12))
+    print("mean speed (m/s) over the five edge places ± standard error, and what is lost after 100 µs")
+    for plate in (8, 12):
+        for k in (6, 8, 10, 12, 16):
+            runs = [folder("dwm3", plate, place, k) for place in lattice.PHASES]
+            if not all(os.path.exists(os.path.join(r, "report.md")) for r in runs):
+                continue
+            speeds = list(zip(*(lattice.speeds_at(r, STAGES) for r in runs)))
+            cells = [f"{st.mean(s):.2f} ± {st.stdev(s) / len(s) ** 0.5:.2f}" for s in speeds]
+            lost = [a - b for a, b in zip(speeds[2], speeds[3])]
+            print(f"{plate} mm, Δx {4 / k:.3f} mm: at " + " / ".join(f"{t} µs {c}" for t, c in zip(STAGES, cells))
+                  + f"; lost after 100 µs {st.mean(lost):.2f} ± {st.stdev(lost) / len(lost) ** 0.5:.2f}")
