@@ -131,6 +131,14 @@ pub fn prepare(path: &Path, opts: &scene::Options) -> Result<(Scene, Plan), RunF
         let d = (*e.0).note(format!("while planning the case `{}`", path.display()));
         input_error(&sources, &[d])
     })?;
+    let resolved = setup::resolved_materials(&plan, &scene.materials);
+    if let Some((mi, e)) = setup::unbound_parameter(&plan, &scene.particles, &scene.materials, &resolved) {
+        let mut d = Diagnostic::error(e.code, e.message);
+        if let Some(span) = scene.material_spans.get(mi).copied().flatten() {
+            d = d.at(span, "in this material");
+        }
+        return Err(input_error(&sources, &[d]));
+    }
     Ok((scene, plan))
 }
 

@@ -1401,6 +1401,29 @@ fn build_store_with(name: &str, set: &[(&str, &str)]) -> Result<(), String> {
     setup::build_store::<f64>(&plan, &scene.particles, &scene.materials).map(|_| ()).map_err(|e| e.to_string())
 }
 
+/// A parameter the model reads that a material leaves unbound is reported when the case loads
+/// (so `pairsum check` reports it), at the material's first key: `cases/elastic_wave.toml`
+/// without its `E` leaves the shear modulus G (which defaults from E) unbound, error C0046 at
+/// `rho0`'s value, found here in the case's text.
+#[test]
+fn a_parameter_a_material_leaves_unbound_is_error_c0046_at_the_line_and_column_of_its_first_key() {
+    let text = std::fs::read_to_string(case("elastic_wave")).unwrap();
+    assert!(text.contains("\nE = \"100 MPa\"\n"), "the case binds E on a line of its own");
+    let dir = std::env::temp_dir().join(format!("pairsum_c0046_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("wave.toml");
+    let without_e = text.replace("\nE = \"100 MPa\"\n", "\n");
+    std::fs::write(&path, &without_e).unwrap();
+    let err = prepare(&path, &Default::default()).err().map(|e| e.to_string());
+    std::fs::remove_dir_all(&dir).unwrap();
+    let err = err.expect("a material without E");
+    let (line, row) = without_e.lines().enumerate().find(|(_, l)| l.starts_with("rho0 = ")).expect("rho0");
+    let at = format!("wave.toml:{}:{}", line + 1, row.find('"').unwrap() + 1);
+    for part in ["error[C0046]", "material `bar` does not bind parameter `G`", &at, "in this material"] {
+        assert!(err.contains(part), "{part} not in: {err}");
+    }
+}
+
 /// A broken `require` is reported when the case loads, at the line and column of the material's
 /// key that the condition reads: `--set hourglass_damage=0.5` on the axisymmetric Børvik case
 /// points at weldox's `hourglass_damage = ${hourglass_damage}`, found here in the case's text.

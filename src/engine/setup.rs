@@ -231,7 +231,6 @@ pub fn build_store<T: Real>(
     input: &ParticleInput,
     materials: &[MaterialInput],
 ) -> Result<Store<T>, SetupError> {
-    let model = &plan.model;
     if input.is_empty() {
         return Err(SetupError::new("C0011", "the scene has no particles"));
     }
@@ -250,31 +249,49 @@ pub fn build_store<T: Real>(
     }
     // Parameters: every material its values; a parameter the plan reads on a group must be
     // bound (or defaulted) for every material with particles on that group.
-    let used = plan.params_read();
-    for (mi, (m, values)) in materials.iter().zip(&resolved).enumerate() {
-        let groups = material_groups(input, mi);
+    if let Some((_, e)) = unbound_parameter(plan, input, materials, &resolved) {
+        return Err(e);
+    }
+    for (mi, values) in resolved.iter().enumerate() {
         for (p, v) in values.iter().enumerate() {
-            match v {
-                Some(v) => store.params.set(mi, ParamId(p as u32), v),
-                None => {
-                    let need = used.get(&ParamId(p as u32)).copied().unwrap_or_default();
-                    if !need.intersect(groups).is_empty() {
-                        let param = &model.params[p];
-                        return Err(SetupError::new("C0046", format!(
-                            "material `{}` does not bind parameter `{}` ({}), which the model reads on {}: give it a value in `[materials.{}]`",
-                            m.name,
-                            param.name,
-                            param.ty,
-                            model.group_names(need.intersect(groups)),
-                            m.name
-                        )));
-                    }
-                }
+            if let Some(v) = v {
+                store.params.set(mi, ParamId(p as u32), v);
             }
         }
     }
     check_requirements(plan, input, materials, &resolved)?;
     Ok(store)
+}
+
+/// The first parameter that the plan reads on a group where a material has particles but that
+/// the material neither binds nor defaults (error C0046), with the material's index.
+pub fn unbound_parameter(
+    plan: &Plan,
+    input: &ParticleInput,
+    materials: &[MaterialInput],
+    resolved: &[Vec<Option<Vec<f64>>>],
+) -> Option<(usize, SetupError)> {
+    let model = &plan.model;
+    let used = plan.params_read();
+    for (mi, (m, values)) in materials.iter().zip(resolved).enumerate() {
+        let groups = material_groups(input, mi);
+        for (p, _) in values.iter().enumerate().filter(|(_, v)| v.is_none()) {
+            let need = used.get(&ParamId(p as u32)).copied().unwrap_or_default().intersect(groups);
+            if !need.is_empty() {
+                let param = &model.params[p];
+                let message = format!(
+                    "material `{}` does not bind parameter `{}` ({}), which the model reads on {}: give it a value in `[materials.{}]`",
+                    m.name,
+                    param.name,
+                    param.ty,
+                    model.group_names(need),
+                    m.name
+                );
+                return Some((mi, SetupError::new("C0046", message)));
+            }
+        }
+    }
+    None
 }
 
 /// The groups that material `mi` has particles on.

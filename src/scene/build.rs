@@ -579,6 +579,8 @@ fn build(
     }
     // Materials.
     let mut materials = vec![];
+    let material_spans: Vec<Option<Span>> =
+        case.materials.values().map(|values| first_key(values).map(|v| cx.span(v.span()))).collect();
     let used: std::collections::BTreeSet<&str> =
         case.bodies.get_ref().iter().map(|b| b.material.get_ref().as_str()).collect();
     for (mat_name, values) in &case.materials {
@@ -1271,6 +1273,7 @@ fn build(
         kernel,
         particles,
         materials,
+        material_spans,
         bodies,
         mirrors,
         config,
@@ -2160,6 +2163,11 @@ fn axis_of_symmetry(case: &CaseFile, model: &Model, mirrors: &mut Vec<Mirror>, c
 
 /// By parameter id: the value every material a body uses binds the parameter to (its default
 /// resolved), where they all agree; the plan takes the branches these decide
+/// A material's key that comes first in the case file.
+fn first_key(values: &BTreeMap<String, Value>) -> Option<&Value> {
+    values.values().min_by_key(|v| v.span().start)
+}
+
 /// Every `require` of the model that the case's materials decide holds (error C0048 at the keys
 /// of the material that the broken condition reads, else at the material's first key). A
 /// condition that reads a scene constant (gravity, a load) cannot be decided here: the store's
@@ -2183,7 +2191,7 @@ fn requirements_hold(
         for v in rest {
             d = d.also(cx.span(v.span()), "and this one");
         }
-    } else if let Some(v) = keys.and_then(|k| k.values().next()) {
+    } else if let Some(v) = keys.and_then(first_key) {
         d = d.at(cx.span(v.span()), "in this material");
     }
     cx.diags.push(d);

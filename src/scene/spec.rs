@@ -163,6 +163,9 @@ pub struct Scene {
     pub kernel: Option<String>,
     pub particles: ParticleInput,
     pub materials: Vec<MaterialInput>,
+    /// Where each material's keys begin in the case file (its first key), for the errors found
+    /// once the plan is built (a parameter the model reads that a material leaves unbound).
+    pub material_spans: Vec<Option<crate::diag::Span>>,
     pub bodies: Vec<BodyInfo>,
     pub mirrors: Vec<Mirror>,
     pub config: RunConfig,
