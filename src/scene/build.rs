@@ -2161,8 +2161,6 @@ fn axis_of_symmetry(case: &CaseFile, model: &Model, mirrors: &mut Vec<Mirror>, c
     Some(())
 }
 
-/// By parameter id: the value every material a body uses binds the parameter to (its default
-/// resolved), where they all agree; the plan takes the branches these decide
 /// A material's key that comes first in the case file.
 fn first_key(values: &BTreeMap<String, Value>) -> Option<&Value> {
     values.values().min_by_key(|v| v.span().start)
@@ -2198,6 +2196,8 @@ fn requirements_hold(
     None
 }
 
+/// By parameter id: the value every material a body uses binds the parameter to (its default
+/// resolved), where they all agree; the plan takes the branches these decide
 /// (`schedule/settle.rs`).
 fn settled_params(
     model: &Model,
