@@ -1403,10 +1403,11 @@ fn build_store_with(name: &str, set: &[(&str, &str)]) -> Result<(), String> {
 
 /// A parameter the model reads that a material leaves unbound is reported when the case loads
 /// (so `pairsum check` reports it), at the material's first key: `cases/elastic_wave.toml`
-/// without its `E` leaves the shear modulus G (which defaults from E) unbound, error C0046 at
-/// `rho0`'s value, found here in the case's text.
+/// without its `E` leaves the shear modulus G (which defaults from E) unbound, error C0046 naming
+/// `E`, the parameter left out, and G as defaulting from it, at `rho0`'s value, found here in the
+/// case's text.
 #[test]
-fn a_parameter_a_material_leaves_unbound_is_error_c0046_at_the_line_and_column_of_its_first_key() {
+fn a_parameter_a_material_leaves_unbound_is_error_c0046_naming_it_at_the_line_and_column_of_its_first_key() {
     let text = std::fs::read_to_string(case("elastic_wave")).unwrap();
     assert!(text.contains("\nE = \"100 MPa\"\n"), "the case binds E on a line of its own");
     let dir = std::env::temp_dir().join(format!("pairsum_c0046_{}", std::process::id()));
@@ -1419,7 +1420,13 @@ fn a_parameter_a_material_leaves_unbound_is_error_c0046_at_the_line_and_column_o
     let err = err.expect("a material without E");
     let (line, row) = without_e.lines().enumerate().find(|(_, l)| l.starts_with("rho0 = ")).expect("rho0");
     let at = format!("wave.toml:{}:{}", line + 1, row.find('"').unwrap() + 1);
-    for part in ["error[C0046]", "material `bar` does not bind parameter `G`", &at, "in this material"] {
+    for part in [
+        "error[C0046]",
+        "material `bar` does not bind parameter `E`",
+        "from which `G` defaults",
+        &at,
+        "in this material",
+    ] {
         assert!(err.contains(part), "{part} not in: {err}");
     }
 }
@@ -1570,6 +1577,24 @@ fn borvik_3d_bodies_own_stresses_exert_no_net_force_on_them_with_conservative_pa
             );
         }
     }
+}
+
+/// C0042 points at the unused material's first key in the file, not at the key that sorts first:
+/// `zeta = 1` above `alpha = 2`.
+#[test]
+fn a_material_no_body_uses_is_warned_at_the_line_and_column_of_its_first_key_in_the_file() {
+    let dir = out_dir("unused-material-first-key");
+    std::fs::create_dir_all(&dir).expect("dir");
+    let path = dir.join("spare.toml");
+    let text = std::fs::read_to_string(case("elastic_wave")).expect("case");
+    let with_spare = format!("{text}\n[materials.spare]\nzeta = 1\nalpha = 2\n");
+    std::fs::write(&path, &with_spare).expect("write");
+    let (scene, _) = prepare(&path, &Default::default()).unwrap_or_else(|e| panic!("{e}"));
+    let _ = std::fs::remove_dir_all(&dir);
+    let warnings = scene.warnings.join("\n");
+    let line = with_spare.lines().position(|l| l == "zeta = 1").expect("zeta") + 1;
+    let at = format!("spare.toml:{line}:8");
+    assert!(warnings.contains("C0042") && warnings.contains(&at), "{at} not in: {warnings}");
 }
 
 /// A material no body uses is not checked against the model (a case that switches models keeps

@@ -278,20 +278,60 @@ pub fn unbound_parameter(
         for (p, _) in values.iter().enumerate().filter(|(_, v)| v.is_none()) {
             let need = used.get(&ParamId(p as u32)).copied().unwrap_or_default().intersect(groups);
             if !need.is_empty() {
-                let param = &model.params[p];
-                let message = format!(
-                    "material `{}` does not bind parameter `{}` ({}), which the model reads on {}: give it a value in `[materials.{}]`",
-                    m.name,
-                    param.name,
-                    param.ty,
-                    model.group_names(need),
-                    m.name
-                );
+                let message = unbound_message(model, &m.name, ParamId(p as u32), values, &model.group_names(need));
                 return Some((mi, SetupError::new("C0046", message)));
             }
         }
     }
     None
+}
+
+/// C0046's text for parameter `p`, which material `material` leaves unbound: where `p` has a
+/// default that reads parameters the material leaves unbound too (`G = E / (2 (1 + ν))` without
+/// `E`), it names those, which are what the user left out, and says that `p` defaults from them.
+fn unbound_message(model: &Model, material: &str, p: ParamId, values: &[Option<Vec<f64>>], groups: &str) -> String {
+    let param = &model.params[p.index()];
+    let sources = unbound_sources(model, p, values);
+    if sources.is_empty() {
+        return format!(
+            "material `{material}` does not bind parameter `{}` ({}), which the model reads on {groups}: give it a value in `[materials.{material}]`",
+            param.name, param.ty
+        );
+    }
+    let named: Vec<String> = sources
+        .iter()
+        .map(|q| format!("`{}` ({})", model.params[q.index()].name, model.params[q.index()].ty))
+        .collect();
+    let (noun, them) = if named.len() == 1 { ("parameter", "it a value") } else { ("parameters", "them values") };
+    format!(
+        "material `{material}` does not bind {noun} {}, from which `{}` defaults, which the model reads on {groups}: give {them} in `[materials.{material}]` (or give `{}` one)",
+        named.join(" and "),
+        param.name,
+        param.name
+    )
+}
+
+/// The parameters without a default that `p`'s default reads, directly or through other
+/// defaults, and that `values` (a material's, resolved) leaves unbound, in declaration order.
+fn unbound_sources(model: &Model, p: ParamId, values: &[Option<Vec<f64>>]) -> Vec<ParamId> {
+    let mut sources = BTreeSet::new();
+    let mut seen = BTreeSet::from([p]);
+    let mut todo = vec![p];
+    while let Some(q) = todo.pop() {
+        let Some(default) = &model.params[q.index()].default else { continue };
+        ir::walk_expr(default, &mut |e| {
+            if let ir::ExprKind::Param(r, _) = e.kind {
+                if values[r.index()].is_none() && seen.insert(r) {
+                    if model.params[r.index()].default.is_some() {
+                        todo.push(r);
+                    } else {
+                        sources.insert(r);
+                    }
+                }
+            }
+        });
+    }
+    sources.into_iter().collect()
 }
 
 /// The groups that material `mi` has particles on.
