@@ -586,7 +586,7 @@ fn build(
     for (mat_name, values) in &case.materials {
         let mut mi = MaterialInput { name: mat_name.clone(), ..Default::default() };
         let unused = !used.contains(mat_name.as_str());
-        if let Some(first) = values.values().next().filter(|_| unused) {
+        if let Some(first) = first_key(values).filter(|_| unused) {
             let msg = format!("material `{mat_name}` is used by no body: its keys are not checked against the model");
             cx.diags.push(Diagnostic::warning("C0042", msg).at(cx.span(first.span()), "in this material"));
         }
