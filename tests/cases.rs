@@ -1579,16 +1579,23 @@ fn borvik_3d_bodies_own_stresses_exert_no_net_force_on_them_with_conservative_pa
     }
 }
 
+/// `cases/elastic_wave.toml` with a material `spare` of `keys` that no body uses, written to a
+/// fresh folder: the folder, the case's path and its text.
+fn elastic_wave_with_spare(tag: &str, keys: &str) -> (PathBuf, PathBuf, String) {
+    let dir = out_dir(tag);
+    std::fs::create_dir_all(&dir).expect("dir");
+    let path = dir.join("spare.toml");
+    let text = std::fs::read_to_string(case("elastic_wave")).expect("case");
+    let with_spare = format!("{text}\n[materials.spare]\n{keys}");
+    std::fs::write(&path, &with_spare).expect("write");
+    (dir, path, with_spare)
+}
+
 /// C0042 points at the unused material's first key in the file, not at the key that sorts first:
 /// `zeta = 1` above `alpha = 2`.
 #[test]
 fn a_material_no_body_uses_is_warned_at_the_line_and_column_of_its_first_key_in_the_file() {
-    let dir = out_dir("unused-material-first-key");
-    std::fs::create_dir_all(&dir).expect("dir");
-    let path = dir.join("spare.toml");
-    let text = std::fs::read_to_string(case("elastic_wave")).expect("case");
-    let with_spare = format!("{text}\n[materials.spare]\nzeta = 1\nalpha = 2\n");
-    std::fs::write(&path, &with_spare).expect("write");
+    let (dir, path, with_spare) = elastic_wave_with_spare("unused-material-first-key", "zeta = 1\nalpha = 2\n");
     let (scene, _) = prepare(&path, &Default::default()).unwrap_or_else(|e| panic!("{e}"));
     let _ = std::fs::remove_dir_all(&dir);
     let warnings = scene.warnings.join("\n");
@@ -1601,11 +1608,8 @@ fn a_material_no_body_uses_is_warned_at_the_line_and_column_of_its_first_key_in_
 /// the other model's materials): a warning, not error C0007.
 #[test]
 fn a_material_no_body_uses_is_a_warning_not_an_unknown_parameter_error() {
-    let dir = out_dir("unused-material");
-    std::fs::create_dir_all(&dir).expect("dir");
-    let path = dir.join("spare.toml");
+    let (dir, path, _) = elastic_wave_with_spare("unused-material", "not_a_parameter = 1\n");
     let text = std::fs::read_to_string(case("elastic_wave")).expect("case");
-    std::fs::write(&path, format!("{text}\n[materials.spare]\nnot_a_parameter = 1\n")).expect("write");
     let (scene, _) = prepare(&path, &Default::default()).unwrap_or_else(|e| panic!("{e}"));
     let warnings = scene.warnings.join("\n");
     assert!(warnings.contains("C0042") && warnings.contains("material `spare` is used by no body"), "{warnings}");
