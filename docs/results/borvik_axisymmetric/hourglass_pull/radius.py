@@ -9,16 +9,18 @@ perimeter it shears by φ Δx / 10 mm. That is a change of the problem, not of t
 The symmetric places −0.4 … +0.4 cancel it to first order in the level's mean, but it is counted
 as noise in the level's standard error. For the m = −3 runs with the weakened pull over five
 places (dwm3<place>_<plate>_k<k>, stop 127; on 12 mm nine places from 0.667 to 0.333 mm, stop 128),
-this prints
-  - one slope dv/dR common to all levels (each level its own intercept), least squares;
-  - each level's values with that slope taken out, v − (dv/dR) φ Δx, their mean and standard
-    error, and the `pairsum uncertainty` arguments;
-  - the slope from the energy balance: with the plate's work W ∝ R and the projectile's and plug's
-    masses ∝ R², v_r² = a (v_i² − b / R), so dv_r/dR = (a v_i² − v_r²) / (2 v_r R), with
+this prints, per plate,
+  - the slope dv/dR from the energy balance: with the plate's work W ∝ R and the projectile's and
+    plug's masses ∝ R², v_r² = a (v_i² − b / R), so dv_r/dR = (a v_i² − v_r²) / (2 v_r R), with
     a = M / (M + m_plug) (M = 197 g, the plug a disc of the projectile's radius through the plate);
-  - the runs at R = 9.5 / 10.5 mm (0.5 mm, k = 8; both plates) and 9.6 / 10.4 mm (0.4 mm, k = 10;
-    12 mm), edge place 0 on their lattice (r95_<plate>_k8, r105_<plate>_k8, r96_12_k10,
-    r104_12_k10): the slope measured directly, each run one draw of the lattice's noise."""
+  - one slope common to all levels (each its own intercept), fitted to the places: it mixes the
+    radius with the lattice's own dependence on the place, which over one period correlates with
+    φ, so it is shown, not used;
+  - the slope measured directly, from runs at R = 9.5 / 10.5 mm (0.5 mm, k = 8; both plates) and
+    9.6 / 10.4 mm (0.4 mm, k = 10; 12 mm) with the edge at place 0 on their lattice
+    (r95_<plate>_k8, r105_<plate>_k8, r96_12_k10, r104_12_k10);
+  - each level's values with the measured slope taken out, v − (dv/dR) φ Δx, their mean and
+    standard error beside the values as run, and the `pairsum uncertainty` arguments."""
 import math
 import os
 import statistics as st
@@ -43,7 +45,7 @@ def levels(plate):
     """{k: [(φ Δx in mm, residual)]} for the levels with the five places run, with any more."""
     out = {}
     for k in KS:
-        runs = [(phi * 4 / k, lattice.residual(plate, p, k, folder)) for p, phi in PLACES.items()]
+        runs = [(phi * 4 / k, lattice.residual(plate, p, k, folder)) for p, phi in sorted(PLACES.items(), key=lambda pp: pp[1])]
         if all(lattice.residual(plate, p, k, folder) is not None for p in FIVE):
             out[k] = [(x, v) for x, v in runs if v is not None]
     return out
@@ -75,10 +77,15 @@ def report(plate):
     data = levels(plate)
     if not data:
         return
-    slope, se = common_slope(data)
     finest = st.mean(v for _, v in data[max(data)])
-    print(f"== {plate} mm: common slope {slope:.1f} ± {se:.1f} m/s per mm of radius; "
-          f"from the energy balance {balance_slope(plate, finest):.1f}")
+    fitted, se = common_slope(data)
+    print(f"== {plate} mm: dv/dR from the energy balance {balance_slope(plate, finest):.1f} m/s per mm; "
+          f"fitted to the places, one slope for all levels, {fitted:.1f} ± {se:.1f}; measured:")
+    measured = direct_slopes(plate)
+    if not measured:
+        return
+    slope = st.mean(measured)
+    print(f"  each level with the measured {slope:.2f} m/s per mm taken out, v − (dv/dR) φ Δx:")
     args = []
     for k, runs in data.items():
         raw = [v for _, v in runs]
@@ -91,19 +98,25 @@ def report(plate):
     print("  pairsum uncertainty " + " ".join(args))
 
 
-def measured():
-    for plate, small, large, k in ((12, "r95", "r105", 8), (12, "r96", "r104", 10), (8, "r95", "r105", 8)):
-        v = [lattice.residual(plate, "0", k, lambda p, ph, kk, n=n: os.path.join(HERE, f"{n}_{p}_k{kk}"))
+RADIUS_RUNS = ((12, "r95", "r105", 8), (12, "r96", "r104", 10), (8, "r95", "r105", 8))
+
+
+def direct_slopes(plate):
+    """dv/dR from the runs at two radii with the edge at place 0 on their lattice, printed."""
+    slopes = []
+    for p, small, large, k in RADIUS_RUNS:
+        v = [lattice.residual(p, "0", k, lambda pp, ph, kk, n=n: os.path.join(HERE, f"{n}_{pp}_k{kk}"))
              for n in (small, large)]
-        if None in v:
+        if p != plate or None in v:
             continue
         middle = lattice.residual(plate, "0", k, folder)
         dr = (int(large[1:]) - int(small[1:])) / 10
-        print(f"== {plate} mm, Δx {4 / k:.3f} mm, R {int(small[1:]) / 10} / 10 / {int(large[1:]) / 10} mm at edge place 0: "
-              f"{v[0]:.2f} / {middle:.2f} / {v[1]:.2f} m/s, slope {(v[1] - v[0]) / dr:.1f} m/s per mm")
+        slopes.append((v[1] - v[0]) / dr)
+        print(f"  Δx {4 / k:.3f} mm, R {int(small[1:]) / 10} / 10 / {int(large[1:]) / 10} mm at edge place 0: "
+              f"{v[0]:.2f} / {middle:.2f} / {v[1]:.2f} m/s, slope {slopes[-1]:.1f} m/s per mm")
+    return slopes
 
 
 if __name__ == "__main__":
     for plate in (12, 8):
         report(plate)
-    measured()
