@@ -1410,7 +1410,7 @@ fn build_store_with(name: &str, set: &[(&str, &str)]) -> Result<(), String> {
 fn a_parameter_a_material_leaves_unbound_is_error_c0046_naming_it_at_the_line_and_column_of_its_first_key() {
     let text = std::fs::read_to_string(case("elastic_wave")).unwrap();
     assert!(text.contains("\nE = \"100 MPa\"\n"), "the case binds E on a line of its own");
-    let dir = std::env::temp_dir().join(format!("pairsum_c0046_{}", std::process::id()));
+    let dir = out_dir("c0046");
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("wave.toml");
     let without_e = text.replace("\nE = \"100 MPa\"\n", "\n");

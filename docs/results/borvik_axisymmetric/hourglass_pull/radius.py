@@ -45,25 +45,24 @@ def levels(plate):
     """{k: [(φ Δx in mm, residual)]} for the levels with the five places run, with any more."""
     out = {}
     for k in KS:
-        runs = [(phi * 4 / k, lattice.residual(plate, p, k, folder)) for p, phi in sorted(PLACES.items(), key=lambda pp: pp[1])]
-        if all(lattice.residual(plate, p, k, folder) is not None for p in FIVE):
-            out[k] = [(x, v) for x, v in runs if v is not None]
+        run = {p: lattice.residual(plate, p, k, folder) for p in PLACES}
+        if all(run[p] is not None for p in FIVE):
+            out[k] = sorted((PLACES[p] * 4 / k, v) for p, v in run.items() if v is not None)
     return out
 
 
 def common_slope(data):
     """The slope of v on the radius's shift, one for all levels, each level its own intercept:
     the slope of the values about their level's mean on the shifts about theirs."""
-    sxy = sxx = 0.0
+    centred = []
     for runs in data.values():
         mx = st.mean(x for x, _ in runs)
         my = st.mean(v for _, v in runs)
-        sxy += sum((x - mx) * (v - my) for x, v in runs)
-        sxx += sum((x - mx) ** 2 for x, _ in runs)
-    slope = sxy / sxx
-    dof = sum(len(r) for r in data.values()) - len(data) - 1
-    rss = sum((v - st.mean(w for _, w in runs) - slope * (x - st.mean(y for y, _ in runs))) ** 2
-              for runs in data.values() for x, v in runs)
+        centred += [(x - mx, v - my) for x, v in runs]
+    sxx = sum(x * x for x, _ in centred)
+    slope = sum(x * v for x, v in centred) / sxx
+    dof = len(centred) - len(data) - 1
+    rss = sum((v - slope * x) ** 2 for x, v in centred)
     return slope, math.sqrt(rss / dof / sxx)
 
 
