@@ -1236,6 +1236,51 @@ fn a_select_that_a_parameter_settles_drops_the_pair_sum_only_its_other_branch_re
     }
 }
 
+/// A pair sum's accumulator that only an unneeded output reads is dropped with that output
+/// (schedule/live.rs): with `switch = 0` nothing reads `spread`, so the pair sum keeps `w_sum` and
+/// folds nothing into `moment`; with `switch = 1` it folds both, and Σ_j W_ij is the same.
+#[test]
+fn an_accumulator_only_an_unneeded_output_reads_is_dropped_from_its_pair_sum() {
+    let m = model(
+        "use kernels\ngroup g\nkernel = wendland_c2\nparam switch: scalar [-] = 0\n\
+         pairsum shepard -> w_sum: scalar [1/m^3], spread: scalar [m^2] {\n\
+             acc moment: scalar [1/m]\n w_sum += W_ij\n moment += W_ij * r_ij^2\n\
+             finally { spread = moment / max(w_sum, 1e-12 [1/m^3]) }\n}\n\
+         particle choose -> out: scalar [m^2] { out = select(switch > 0, spread, 0 [m^2]) }\n\
+         integrate { x' = v  v' = 0 }\n",
+    );
+    let (n, dx) = (6, 0.01);
+    let inp = input(2, lattice(2, n, dx), dx);
+    let mut sums = vec![];
+    for switch in [0.0, 1.0] {
+        let mat = material(&m, &[("rho0", vec![1000.0]), ("h_ratio", vec![1.3]), ("switch", vec![switch])]);
+        let settled = m.params.iter().map(|p| (p.name == "switch").then(|| vec![switch])).collect();
+        let sc = pairsum::schedule::SceneSpec { settled, ..scene(&m, 2, &["out", "w_sum"], IntegratorKind::Euler) };
+        let mut b = backend::<f64>(&m, &sc, &inp, &[mat], vec![]);
+        let plan = b.plan();
+        let shepard = plan
+            .passes
+            .iter()
+            .flat_map(|p| p.pair_sums.iter())
+            .map(|e| plan.equation(*e))
+            .find(|e| e.name == "shepard");
+        let Some(pairsum::ir::Equation { kind: pairsum::ir::EquationKind::PairSum { accumulators, .. }, .. }) = shepard
+        else {
+            panic!("switch = {switch}: shepard is in no pass")
+        };
+        let folded: Vec<&str> = accumulators.iter().map(|a| m.field(a.field).name.as_str()).collect();
+        assert_eq!(
+            folded.contains(&"shepard.moment"),
+            switch > 0.0,
+            "switch = {switch}: shepard folds into {folded:?}"
+        );
+        b.evaluate(Default::default()).expect("evaluate");
+        sums.push(field_by_id(&b, "w_sum").1);
+    }
+    assert!(sums[0].iter().all(|w| *w > 0.0), "Σ_j W_ij with switch = 0: {:?}", sums[0]);
+    assert_eq!(sums[0], sums[1], "Σ_j W_ij with and without the dropped accumulator");
+}
+
 /// A state that nothing writes keeps its constant initial value all run (schedule/settle.rs):
 /// a pair sum that spares "failed" pairs reads it as that constant, and the plan stores no `D`;
 /// where a body's `initial` sets it (to 1: no pair intact), or an equation writes it, it is stored.

@@ -173,6 +173,7 @@ pub fn pruned(e: &Equation, model: &Model, drop: &BTreeSet<FieldId>) -> Equation
         drop_unused_lets(stmts);
     }
     out.writes.retain(|f| !drop.contains(f));
+    drop_unread_accumulators(&mut out);
     let (mut reads, mut params) = (BTreeSet::new(), BTreeSet::new());
     for s in stmts_of(&out) {
         ir::walk_stmts(s, &mut |x| match x.kind {
@@ -188,6 +189,31 @@ pub fn pruned(e: &Equation, model: &Model, drop: &BTreeSet<FieldId>) -> Equation
     out.reads = reads;
     out.params = params;
     out
+}
+
+/// Removes a pair sum's accumulators that are not its outputs and that nothing reads any more
+/// (only a dropped output read them), with the statements that fold into them, until none is left.
+fn drop_unread_accumulators(e: &mut Equation) {
+    loop {
+        let mut read: BTreeSet<FieldId> = e.writes.iter().copied().collect();
+        for stmts in stmts_of(e) {
+            ir::walk_stmts(stmts, &mut |x| {
+                if let ExprKind::Field(f, _) = x.kind {
+                    read.insert(f);
+                }
+            });
+        }
+        let EquationKind::PairSum { accumulators, .. } = &mut e.kind else { return };
+        let unread: BTreeSet<FieldId> = accumulators.iter().map(|a| a.field).filter(|f| !read.contains(f)).collect();
+        if unread.is_empty() {
+            return;
+        }
+        accumulators.retain(|a| !unread.contains(&a.field));
+        for stmts in stmts_of_mut(e) {
+            drop_writes(stmts, &unread);
+            drop_unused_lets(stmts);
+        }
+    }
 }
 
 fn drop_writes(stmts: &mut Vec<ir::Stmt>, drop: &BTreeSet<FieldId>) {

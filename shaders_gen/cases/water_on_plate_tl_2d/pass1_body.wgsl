@@ -498,7 +498,6 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // pairsum extrapolated_pressure: accumulators
     var p_wall: f32 = 0.0;
     var c: f32 = 0.0;
-    var p_over_rho2: f32 = 0.0;
     var weighted: f32 = 0.0;
     var weight: f32 = 0.0;
     // pairsum deformation_gradient: accumulators
