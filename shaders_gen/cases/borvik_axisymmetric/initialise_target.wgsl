@@ -59,23 +59,23 @@ fn st_e(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 0u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 12u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 27u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 28u;
     return params[b];
 }
 fn prm_eos_eta_peak(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 29u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -189,23 +189,23 @@ fn st_p_contact(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 6u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 10u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 22u;
     return params[b];
 }
 fn prm_contact_colour(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 30u;
     return params[b];
 }
 fn prm_contact_stiffness(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 31u;
     return params[b];
 }
 @compute @workgroup_size(64)

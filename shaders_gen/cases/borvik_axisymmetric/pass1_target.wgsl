@@ -360,63 +360,63 @@ fn st_lap_weight(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 1u;
     return params[b];
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 4u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 4u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 6u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 10u;
     return params[b];
 }
 fn prm_delta(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 11u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 12u;
     return params[b];
 }
 fn prm_conservative(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 16u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 22u;
     return params[b];
 }
 fn prm_hourglass_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 23u;
     return params[b];
 }
 fn prm_hourglass_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 24u;
     return params[b];
 }
 fn prm_hourglass_damage(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 25u;
     return params[b];
 }
 fn prm_damage_coupling(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 26u;
     return params[b];
 }
 fn prm_contact_colour(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 30u;
     return params[b];
 }
 fn prm_contact_stiffness(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 31u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -569,7 +569,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         if ((body_i != ldj_body(j, sgn))) {
             colour_other = colour_other + ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * W_ij);
         }
-        // pairsum nonlocal_strain_laplacian (stdlib/damage/nonlocal_strain.sph:117)
+        // pairsum nonlocal_strain_laplacian (stdlib/damage/nonlocal_strain.sph:134)
         if (in_groups(2u, ints[j])) {
             let m_j = ldj_m(j, sgn);
             let rho_j = ldj_rho(j, sgn);

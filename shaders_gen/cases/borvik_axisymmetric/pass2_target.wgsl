@@ -311,35 +311,35 @@ fn st_a_contact(i: u32, v: vec2<f32>) {
     data[b + 1u] = v[1];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 1u;
     return params[b];
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 4u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 4u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 13u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 14u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 15u;
     return params[b];
 }
 fn prm_conservative(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 16u;
     return params[b];
 }
 fn prm_hourglass_visc(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 19u;
     return params[b];
 }
 fn prm_damage_coupling(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 26u;
     return params[b];
 }
 @compute @workgroup_size(64)

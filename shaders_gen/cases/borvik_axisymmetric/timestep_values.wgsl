@@ -59,11 +59,11 @@ fn st_hourglass_rate2(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 12u;
     return params[b];
 }
 fn prm_C_cfl(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 17u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -423,123 +423,123 @@ fn st_eps_nl_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 1u;
     return params[b];
 }
 fn prm_p_spall(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 7u;
     return params[b];
 }
 fn prm_zero_pressure_floor(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 8u;
     return params[b];
 }
 fn prm_round_failed(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 9u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 12u;
     return params[b];
 }
 fn prm_shape_floor(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 20u;
     return params[b];
 }
 fn prm_shape_aspect(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 21u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 22u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 27u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 28u;
     return params[b];
 }
 fn prm_eos_eta_peak(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 29u;
     return params[b];
 }
 fn prm_nonlocal_hardening(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 32u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 32u;
     return params[b];
 }
 fn prm_damage_length(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 34u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 34u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 35u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 35u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 36u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 36u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 37u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 37u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 38u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 38u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 39u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 39u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 40u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 40u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 41u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 41u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 42u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 42u;
     return params[b];
 }
 fn prm_D1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 43u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 43u;
     return params[b];
 }
 fn prm_D2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 44u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 44u;
     return params[b];
 }
 fn prm_D3(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 45u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 45u;
     return params[b];
 }
 fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 46u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 46u;
     return params[b];
 }
 fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 47u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 47u;
     return params[b];
 }
 fn prm_nonlocal_weight(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 50u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 51u;
     return params[b];
 }
 fn prm__constraint0(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 51u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 52u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 fn prm__symmetry0(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 55u + 53u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 56u + 54u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 @compute @workgroup_size(64)
@@ -622,7 +622,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let lap_sum = ld_lap_sum(i);
     let lap_weight = ld_lap_weight(i);
     let l2 = (prm_damage_length(i) * prm_damage_length(i));
-    let nonlocal = select(eps_p_2, ((eps_p_2 + (l2 * lap_sum)) / (1.0 + (l2 * lap_weight))), (prm_damage_length(i) > 0.0));
+    let jacobi = ((eps_p_2 + (l2 * lap_sum)) / (1.0 + (l2 * lap_weight)));
+    let nonlocal = select(eps_p_2, jacobi, (prm_damage_length(i) > 0.0));
     let D = D_i;
     let eps_nl_new = nonlocal;
     let eps_nl = eps_nl_i;

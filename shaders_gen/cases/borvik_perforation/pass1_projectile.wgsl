@@ -564,27 +564,27 @@ fn st_a_contact(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 7u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 10u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 14u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 15u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 16u;
     return params[b];
 }
 fn prm_K_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 19u;
     return params[b];
 }
 @compute @workgroup_size(64)

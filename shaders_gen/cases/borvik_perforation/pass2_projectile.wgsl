@@ -512,23 +512,23 @@ fn st_dv(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_delta(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 8u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 9u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 14u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 15u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 16u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -250,83 +250,83 @@ fn st_e_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 0u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 9u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 10u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 11u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 12u;
     return params[b];
 }
 fn prm_eos_eta_peak(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 13u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 23u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 24u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 25u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 26u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 27u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 28u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 29u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 30u;
     return params[b];
 }
 fn prm_D1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 31u;
     return params[b];
 }
 fn prm_D2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 32u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 32u;
     return params[b];
 }
 fn prm_D3(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 33u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 33u;
     return params[b];
 }
 fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 34u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 34u;
     return params[b];
 }
 fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 35u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 35u;
     return params[b];
 }
 fn prm__constraint0(i: u32) -> vec3<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 49u + 40u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 50u + 41u;
     return vec3<f32>(params[b], params[b + 1u], params[b + 2u]);
 }
 @compute @workgroup_size(64)

@@ -66,23 +66,23 @@ fn st_c(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 0u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 8u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 9u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 10u;
     return params[b];
 }
 fn prm_eos_eta_peak(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 11u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -510,23 +510,23 @@ fn st_dv(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 7u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 12u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 13u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 14u;
     return params[b];
 }
 fn prm_damage_coupling(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 15u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -232,87 +232,87 @@ fn st_e_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 0u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 7u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 8u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 9u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 10u;
     return params[b];
 }
 fn prm_eos_eta_peak(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 11u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 19u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 20u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 21u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 22u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 23u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 24u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 25u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 26u;
     return params[b];
 }
 fn prm_p_spall(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 27u;
     return params[b];
 }
 fn prm_D1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 28u;
     return params[b];
 }
 fn prm_D2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 29u;
     return params[b];
 }
 fn prm_D3(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 30u;
     return params[b];
 }
 fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 31u;
     return params[b];
 }
 fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 32u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 32u;
     return params[b];
 }
 fn prm_C_v(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 44u + 36u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 45u + 37u;
     return params[b];
 }
 @compute @workgroup_size(64)

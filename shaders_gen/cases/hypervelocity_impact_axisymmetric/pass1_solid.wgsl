@@ -549,27 +549,27 @@ fn st_lap_weight(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_nonlocal_skips_failed(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 6u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 7u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 12u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 13u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 14u;
     return params[b];
 }
 fn prm_damage_coupling(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 15u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -682,7 +682,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let pi_ij = select(0.0, (((((-visc_a_i) * c_bar) * phi) + (visc_b_i * (phi * phi))) / rho_bar), (vr < 0.0));
             let p2 = ldj_rho(j, sgn);
             dv = dv + (ldj_m(j, sgn) * (((div_m(sig_i, (rho_i * rho_i)) + div_m(sig_j, (p2 * p2))) - (pi_ij * eye())) * gradW_ij));
-            // pairsum nonlocal_strain_laplacian (stdlib/damage/nonlocal_strain.sph:117)
+            // pairsum nonlocal_strain_laplacian (stdlib/damage/nonlocal_strain.sph:134)
             if ((body_i == ldj_body(j, sgn))) {
                 let m_j = ldj_m(j, sgn);
                 let rho_j = ldj_rho(j, sgn);

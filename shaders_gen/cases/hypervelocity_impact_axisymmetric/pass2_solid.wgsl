@@ -480,19 +480,19 @@ fn st_de(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 12u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 13u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 14u;
     return params[b];
 }
 fn prm_damage_coupling(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 15u;
     return params[b];
 }
 @compute @workgroup_size(64)

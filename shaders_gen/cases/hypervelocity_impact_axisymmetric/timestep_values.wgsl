@@ -43,15 +43,15 @@ fn st_h(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 8u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 9u;
     return params[b];
 }
 fn prm_cfl_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 37u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 38u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -304,99 +304,99 @@ fn st_eps_nl_0(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 0u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 7u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 8u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 9u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 10u;
     return params[b];
 }
 fn prm_eos_eta_peak(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 11u;
     return params[b];
 }
 fn prm_damage_length(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 18u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 19u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 20u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 21u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 22u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 23u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 24u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 25u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 26u;
     return params[b];
 }
 fn prm_p_spall(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 27u;
     return params[b];
 }
 fn prm_D1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 28u;
     return params[b];
 }
 fn prm_D2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 29u;
     return params[b];
 }
 fn prm_D3(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 30u;
     return params[b];
 }
 fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 31u;
     return params[b];
 }
 fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 32u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 32u;
     return params[b];
 }
 fn prm_nonlocal_weight(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 35u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 36u;
     return params[b];
 }
 fn prm_C_v(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 36u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 37u;
     return params[b];
 }
 fn prm__symmetry0(i: u32) -> vec2<f32> {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 38u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 39u;
     return vec2<f32>(params[b], params[b + 1u]);
 }
 @compute @workgroup_size(64)
@@ -474,7 +474,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let lap_sum = ld_lap_sum(i);
     let lap_weight = ld_lap_weight(i);
     let l2 = (prm_damage_length(i) * prm_damage_length(i));
-    let nonlocal = ((eps_p_2 + (l2 * lap_sum)) / (1.0 + (l2 * lap_weight)));
+    let jacobi = ((eps_p_2 + (l2 * lap_sum)) / (1.0 + (l2 * lap_weight)));
+    let nonlocal = jacobi;
     let D = D_i;
     let eps_nl_new = nonlocal;
     let eps_nl = eps_nl_i;

@@ -509,10 +509,26 @@ fn ldj_D(j: u32, sgn: vec3<f32>) -> f32 {
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
+fn ld_eps_nl(i: u32) -> f32 {
+    let b = u32(info[20 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_eps_nl(i: u32, v: f32) {
+    let b = u32(info[20 + G] + i32(i) * 1);
+    data[b] = v;
+}
 fn ldj_eps_nl(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[20u];
     let b = u32(base + i32(j) * 1);
     return data[b];
+}
+fn ld_rate_nl(i: u32) -> f32 {
+    let b = u32(info[21 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_rate_nl(i: u32, v: f32) {
+    let b = u32(info[21 + G] + i32(i) * 1);
+    data[b] = v;
 }
 fn ldj_rate_nl(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[21u];
@@ -574,40 +590,56 @@ fn st_lap_weight(i: u32, v: f32) {
     let b = u32(info[29 + G] + i32(i) * 1);
     data[b] = v;
 }
-fn ld_rate_lap_sum(i: u32) -> f32 {
+fn ld_lap_eps_nl(i: u32) -> f32 {
     let b = u32(info[30 + G] + i32(i) * 1);
     return data[b];
 }
-fn st_rate_lap_sum(i: u32, v: f32) {
+fn st_lap_eps_nl(i: u32, v: f32) {
     let b = u32(info[30 + G] + i32(i) * 1);
     data[b] = v;
 }
+fn ld_rate_lap_sum(i: u32) -> f32 {
+    let b = u32(info[31 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_rate_lap_sum(i: u32, v: f32) {
+    let b = u32(info[31 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_lap_rate_nl(i: u32) -> f32 {
+    let b = u32(info[32 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_lap_rate_nl(i: u32, v: f32) {
+    let b = u32(info[32 + G] + i32(i) * 1);
+    data[b] = v;
+}
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 5u;
     return params[b];
 }
 fn prm_nonlocal_skips_failed(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 6u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 7u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 12u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 13u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 14u;
     return params[b];
 }
 fn prm_damage_coupling(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 15u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -628,13 +660,17 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // pairsum nonlocal_strain_laplacian: accumulators
     var lap_sum: f32 = 0.0;
     var lap_weight: f32 = 0.0;
+    var lap_eps_nl: f32 = 0.0;
     var sum: f32 = 0.0;
     var weight: f32 = 0.0;
     var moment: f32 = 0.0;
+    var difference: f32 = 0.0;
     // pairsum nonlocal_rate_laplacian: accumulators
     var rate_lap_sum: f32 = 0.0;
+    var lap_rate_nl: f32 = 0.0;
     var sum_2: f32 = 0.0;
     var moment_2: f32 = 0.0;
+    var difference_2: f32 = 0.0;
     let s_2 = ld_s(i);
     let s_hoop = ld_s_hoop(i);
     let D = ld_D(i);
@@ -653,6 +689,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let p_i = ld_p(i);
     let c_i = ld_c(i);
     let D_i = ld_D(i);
+    let eps_nl_i = ld_eps_nl(i);
+    let rate_nl_i = ld_rate_nl(i);
     let xi = pos3(i);
     let hi = h_of(i);
     let mirrors = u32(globals[72u]);
@@ -724,7 +762,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let pi_ij = select(0.0, (((((-visc_a_i) * c_bar) * phi) + (visc_b_i * (phi * phi))) / rho_bar), (vr < 0.0));
             let p2 = ldj_rho(j, sgn);
             dv = dv + (ldj_m(j, sgn) * (((div_m(sig_i, (rho_i * rho_i)) + div_m(sig_j, (p2 * p2))) - (pi_ij * eye())) * gradW_ij));
-            // pairsum nonlocal_strain_laplacian (stdlib/damage/nonlocal_strain.sph:117)
+            // pairsum nonlocal_strain_laplacian (stdlib/damage/nonlocal_strain.sph:134)
             if ((body_i == ldj_body(j, sgn))) {
                 let m_j = ldj_m(j, sgn);
                 let rho_j = ldj_rho(j, sgn);
@@ -738,8 +776,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 sum = sum + (k_3 * ldj_eps_nl(j, sgn));
                 weight = weight + k_3;
                 moment = moment + (k_3 * (r_ij * r_ij));
+                difference = difference + (k_3 * (ldj_eps_nl(j, sgn) - eps_nl_i));
             }
-            // pairsum nonlocal_rate_laplacian (stdlib/damage/nonlocal_strain.sph:143)
+            // pairsum nonlocal_rate_laplacian (stdlib/damage/nonlocal_strain.sph:163)
             if ((body_i == ldj_body(j, sgn))) {
                 let m_j_2 = ldj_m(j, sgn);
                 let rho_j_2 = ldj_rho(j, sgn);
@@ -752,6 +791,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 let k_5 = select(k_4, 0.0, ((nonlocal_skips_failed_i > 0.0) && (D_j_2 >= 1.0)));
                 sum_2 = sum_2 + (k_5 * ldj_rate_nl(j, sgn));
                 moment_2 = moment_2 + (k_5 * (r_ij * r_ij));
+                difference_2 = difference_2 + (k_5 * (ldj_rate_nl(j, sgn) - rate_nl_i));
             }
         }
         }}}
@@ -772,8 +812,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let exact_for_quadratics = ((2.0 * 3.0) / max(moment, 1e-12));
     lap_sum = (exact_for_quadratics * sum);
     lap_weight = (exact_for_quadratics * weight);
+    lap_eps_nl = (exact_for_quadratics * difference);
     // then nonlocal_rate_laplacian
     rate_lap_sum = (((2.0 * 3.0) / max(moment_2, 1e-12)) * sum_2);
+    lap_rate_nl = (((2.0 * 3.0) / max(moment_2, 1e-12)) * difference_2);
     // then continuity_from_strain_rate
     var drho_i: f32 = ld_drho(i);
     let w_5 = min((ld_x(i)[0] / (2.0 * ld_dx(i))), 1.0);
@@ -786,5 +828,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     st_dv(i, dv);
     st_lap_sum(i, lap_sum);
     st_lap_weight(i, lap_weight);
+    st_lap_eps_nl(i, lap_eps_nl);
     st_rate_lap_sum(i, rate_lap_sum);
+    st_lap_rate_nl(i, lap_rate_nl);
 }

@@ -495,23 +495,23 @@ fn st_de(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 5u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 12u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 13u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 14u;
     return params[b];
 }
 fn prm_damage_coupling(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 15u;
     return params[b];
 }
 @compute @workgroup_size(64)

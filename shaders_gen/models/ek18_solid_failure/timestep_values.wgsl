@@ -51,15 +51,15 @@ fn st_h(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 8u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 9u;
     return params[b];
 }
 fn prm_cfl_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 38u + 37u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 39u + 38u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -70,7 +70,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     if (i >= n) { return; }
     let t = globals[0u];
     let dt = globals[1u];
-    let scratch = u32(info[41]);
+    let scratch = u32(info[44]);
     data[scratch + 0u * n + i] = (prm_cfl_alpha(i) * ld_h(i));
     data[scratch + 1u * n + i] = ((prm_S_s(i) * length(ld_v(i))) + prm_c0(i));
 }

@@ -51,11 +51,11 @@ fn st_h(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 9u;
     return params[b];
 }
 fn prm_C_cfl(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 39u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 40u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -66,7 +66,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     if (i >= n) { return; }
     let t = globals[0u];
     let dt = globals[1u];
-    let scratch = u32(info[83]);
+    let scratch = u32(info[89]);
     data[scratch + 0u * n + i] = (prm_C_cfl(i) * ld_h(i));
     data[scratch + 1u * n + i] = (prm_c0(i) + length(ld_v(i)));
 }

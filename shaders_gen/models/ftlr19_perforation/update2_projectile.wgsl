@@ -148,39 +148,39 @@ fn st_a_contact(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn ld_x_0(i: u32) -> vec3<f32> {
-    let b = u32(info[65 + G] + i32(i) * 3);
+    let b = u32(info[69 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_x_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[65 + G] + i32(i) * 3);
+    let b = u32(info[69 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_v_0(i: u32) -> vec3<f32> {
-    let b = u32(info[67 + G] + i32(i) * 3);
+    let b = u32(info[71 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_v_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[67 + G] + i32(i) * 3);
+    let b = u32(info[71 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_rho_0(i: u32) -> f32 {
-    let b = u32(info[69 + G] + i32(i) * 1);
+    let b = u32(info[73 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho_0(i: u32, v: f32) {
-    let b = u32(info[69 + G] + i32(i) * 1);
+    let b = u32(info[73 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s_0(i: u32) -> mat3x3<f32> {
-    let b = u32(info[73 + G] + i32(i) * 6);
+    let b = u32(info[77 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s_0(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[73 + G] + i32(i) * 6);
+    let b = u32(info[77 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -189,31 +189,31 @@ fn st_s_0(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_e_0(i: u32) -> f32 {
-    let b = u32(info[75 + G] + i32(i) * 1);
+    let b = u32(info[79 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_e_0(i: u32, v: f32) {
-    let b = u32(info[75 + G] + i32(i) * 1);
+    let b = u32(info[79 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 0u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 9u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 11u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 12u;
     return params[b];
 }
 fn prm_eos_eta_peak(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 40u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 41u + 13u;
     return params[b];
 }
 @compute @workgroup_size(64)

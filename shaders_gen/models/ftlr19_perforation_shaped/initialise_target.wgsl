@@ -66,23 +66,23 @@ fn st_e(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 0u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 13u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 28u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 29u;
     return params[b];
 }
 fn prm_eos_eta_peak(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 30u;
     return params[b];
 }
 @compute @workgroup_size(64)

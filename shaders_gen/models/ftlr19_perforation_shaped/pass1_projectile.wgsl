@@ -523,27 +523,27 @@ fn st_p_contact(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 5u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 7u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 11u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 23u;
     return params[b];
 }
 fn prm_contact_colour(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 31u;
     return params[b];
 }
 fn prm_contact_stiffness(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 32u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 32u;
     return params[b];
 }
 @compute @workgroup_size(64)

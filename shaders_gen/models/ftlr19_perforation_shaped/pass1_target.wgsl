@@ -590,11 +590,27 @@ fn ldj_D(j: u32, sgn: vec3<f32>) -> f32 {
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
+fn ld_eps_nl(i: u32) -> f32 {
+    let b = u32(info[51 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_eps_nl(i: u32, v: f32) {
+    let b = u32(info[51 + G] + i32(i) * 1);
+    data[b] = v;
+}
 fn ldj_eps_nl(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[51u + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
+}
+fn ld_rate_nl(i: u32) -> f32 {
+    let b = u32(info[53 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_rate_nl(i: u32, v: f32) {
+    let b = u32(info[53 + G] + i32(i) * 1);
+    data[b] = v;
 }
 fn ldj_rate_nl(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[53u + ints[j]];
@@ -713,76 +729,92 @@ fn st_lap_weight(i: u32, v: f32) {
     let b = u32(info[87 + G] + i32(i) * 1);
     data[b] = v;
 }
-fn ld_rate_lap_sum(i: u32) -> f32 {
+fn ld_lap_eps_nl(i: u32) -> f32 {
     let b = u32(info[89 + G] + i32(i) * 1);
     return data[b];
 }
-fn st_rate_lap_sum(i: u32, v: f32) {
+fn st_lap_eps_nl(i: u32, v: f32) {
     let b = u32(info[89 + G] + i32(i) * 1);
     data[b] = v;
 }
+fn ld_rate_lap_sum(i: u32) -> f32 {
+    let b = u32(info[91 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_rate_lap_sum(i: u32, v: f32) {
+    let b = u32(info[91 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_lap_rate_nl(i: u32) -> f32 {
+    let b = u32(info[93 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_lap_rate_nl(i: u32, v: f32) {
+    let b = u32(info[93 + G] + i32(i) * 1);
+    data[b] = v;
+}
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 0u;
     return params[b];
 }
 fn prm_h_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 1u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 1u;
     return params[b];
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 5u;
     return params[b];
 }
 fn prm_nonlocal_skips_failed(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 6u;
     return params[b];
 }
 fn prm_bulk(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 7u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 11u;
     return params[b];
 }
 fn prm_delta(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 12u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 13u;
     return params[b];
 }
 fn prm_conservative(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 17u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 23u;
     return params[b];
 }
 fn prm_hourglass_alpha(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 24u;
     return params[b];
 }
 fn prm_hourglass_E(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 25u;
     return params[b];
 }
 fn prm_hourglass_damage(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 26u;
     return params[b];
 }
 fn prm_damage_coupling(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 27u;
     return params[b];
 }
 fn prm_contact_colour(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 31u;
     return params[b];
 }
 fn prm_contact_stiffness(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 32u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 32u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -812,13 +844,17 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // pairsum nonlocal_strain_laplacian: accumulators
     var lap_sum: f32 = 0.0;
     var lap_weight: f32 = 0.0;
+    var lap_eps_nl: f32 = 0.0;
     var sum_2: f32 = 0.0;
     var weight: f32 = 0.0;
     var moment: f32 = 0.0;
+    var difference: f32 = 0.0;
     // pairsum nonlocal_rate_laplacian: accumulators
     var rate_lap_sum: f32 = 0.0;
+    var lap_rate_nl: f32 = 0.0;
     var sum_3: f32 = 0.0;
     var moment_2: f32 = 0.0;
+    var difference_2: f32 = 0.0;
     let rho0_i = prm_rho0(i);
     let h_ratio_i = prm_h_ratio(i);
     let axisymmetric_i = prm_axisymmetric(i);
@@ -839,6 +875,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let kernel_norm_i = ld_kernel_norm(i);
     let u_i = ld_u(i);
     let D_i = ld_D(i);
+    let eps_nl_i = ld_eps_nl(i);
+    let rate_nl_i = ld_rate_nl(i);
     let xi = pos3(i);
     let hi = h_of(i);
     let mirrors = u32(globals[72u]);
@@ -950,7 +988,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             if ((body_i != ldj_body(j, sgn))) {
                 colour_other = colour_other + ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * W_ij);
             }
-            // pairsum nonlocal_strain_laplacian (stdlib/damage/nonlocal_strain.sph:117)
+            // pairsum nonlocal_strain_laplacian (stdlib/damage/nonlocal_strain.sph:134)
             if (in_groups(2u, ints[j])) {
                 let m_j = ldj_m(j, sgn);
                 let rho_j = ldj_rho(j, sgn);
@@ -964,8 +1002,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 sum_2 = sum_2 + (k_4 * ldj_eps_nl(j, sgn));
                 weight = weight + k_4;
                 moment = moment + (k_4 * (r_ij * r_ij));
+                difference = difference + (k_4 * (ldj_eps_nl(j, sgn) - eps_nl_i));
             }
-            // pairsum nonlocal_rate_laplacian (stdlib/damage/nonlocal_strain.sph:143)
+            // pairsum nonlocal_rate_laplacian (stdlib/damage/nonlocal_strain.sph:163)
             if (in_groups(2u, ints[j])) {
                 let m_j_2 = ldj_m(j, sgn);
                 let rho_j_2 = ldj_rho(j, sgn);
@@ -978,6 +1017,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 let k_6 = select(k_5, 0.0, ((nonlocal_skips_failed_i > 0.0) && (D_j_2 >= 1.0)));
                 sum_3 = sum_3 + (k_6 * ldj_rate_nl(j, sgn));
                 moment_2 = moment_2 + (k_6 * (r_ij * r_ij));
+                difference_2 = difference_2 + (k_6 * (ldj_rate_nl(j, sgn) - rate_nl_i));
             }
         }
         }}}
@@ -1010,8 +1050,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let exact_for_quadratics = ((2.0 * 3.0) / max(moment, 1e-12));
     lap_sum = (exact_for_quadratics * sum_2);
     lap_weight = (exact_for_quadratics * weight);
+    lap_eps_nl = (exact_for_quadratics * difference);
     // then nonlocal_rate_laplacian
     rate_lap_sum = (((2.0 * 3.0) / max(moment_2, 1e-12)) * sum_3);
+    lap_rate_nl = (((2.0 * 3.0) / max(moment_2, 1e-12)) * difference_2);
     // then compressive_share
     var compression_i: f32 = ld_compression(i);
     let w_5 = min((x_i[0] / (2.0 * dx_i)), 1.0);
@@ -1032,5 +1074,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     st_p_contact(i, p_contact_i);
     st_lap_sum(i, lap_sum);
     st_lap_weight(i, lap_weight);
+    st_lap_eps_nl(i, lap_eps_nl);
     st_rate_lap_sum(i, rate_lap_sum);
+    st_lap_rate_nl(i, lap_rate_nl);
 }

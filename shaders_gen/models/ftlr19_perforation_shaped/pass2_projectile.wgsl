@@ -588,31 +588,31 @@ fn st_a_contact(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 5u;
     return params[b];
 }
 fn prm_delta(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 12u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 13u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 14u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 15u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 16u;
     return params[b];
 }
 fn prm_conservative(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 17u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 17u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -148,56 +148,64 @@ fn st_eps_nl(i: u32, v: f32) {
     let b = u32(info[51 + G] + i32(i) * 1);
     data[b] = v;
 }
+fn ld_rate_nl(i: u32) -> f32 {
+    let b = u32(info[53 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_rate_nl(i: u32, v: f32) {
+    let b = u32(info[53 + G] + i32(i) * 1);
+    data[b] = v;
+}
 fn ld_x_0(i: u32) -> vec3<f32> {
-    let b = u32(info[91 + G] + i32(i) * 3);
+    let b = u32(info[95 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_x_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[91 + G] + i32(i) * 3);
+    let b = u32(info[95 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_v_0(i: u32) -> vec3<f32> {
-    let b = u32(info[93 + G] + i32(i) * 3);
+    let b = u32(info[97 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_v_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[93 + G] + i32(i) * 3);
+    let b = u32(info[97 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_m_0(i: u32) -> f32 {
-    let b = u32(info[95 + G] + i32(i) * 1);
+    let b = u32(info[99 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_m_0(i: u32, v: f32) {
-    let b = u32(info[95 + G] + i32(i) * 1);
+    let b = u32(info[99 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_rho_0(i: u32) -> f32 {
-    let b = u32(info[97 + G] + i32(i) * 1);
+    let b = u32(info[101 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho_0(i: u32, v: f32) {
-    let b = u32(info[97 + G] + i32(i) * 1);
+    let b = u32(info[101 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s_hoop_0(i: u32) -> f32 {
-    let b = u32(info[99 + G] + i32(i) * 1);
+    let b = u32(info[103 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_s_hoop_0(i: u32, v: f32) {
-    let b = u32(info[99 + G] + i32(i) * 1);
+    let b = u32(info[103 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s_0(i: u32) -> mat3x3<f32> {
-    let b = u32(info[101 + G] + i32(i) * 6);
+    let b = u32(info[105 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s_0(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[101 + G] + i32(i) * 6);
+    let b = u32(info[105 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -206,11 +214,11 @@ fn st_s_0(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_e_0(i: u32) -> f32 {
-    let b = u32(info[103 + G] + i32(i) * 1);
+    let b = u32(info[107 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_e_0(i: u32, v: f32) {
-    let b = u32(info[103 + G] + i32(i) * 1);
+    let b = u32(info[107 + G] + i32(i) * 1);
     data[b] = v;
 }
 @compute @workgroup_size(64)
@@ -235,6 +243,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var D_0_i: f32 = 0.0;
     var eps_p_0_i: f32 = 0.0;
     var eps_nl_0_i: f32 = 0.0;
+    var rate_nl_0_i: f32 = 0.0;
     x_0_i = ld_x(i);
     v_0_i = ld_v(i);
     m_0_i = ld_m(i);
@@ -247,6 +256,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     D_0_i = ld_D(i);
     eps_p_0_i = ld_eps_p(i);
     eps_nl_0_i = ld_eps_nl(i);
+    rate_nl_0_i = ld_rate_nl(i);
     st_x_0(i, x_0_i);
     st_v_0(i, v_0_i);
     st_m_0(i, m_0_i);

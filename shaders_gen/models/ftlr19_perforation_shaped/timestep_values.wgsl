@@ -67,11 +67,11 @@ fn st_hourglass_rate2(i: u32, v: f32) {
     data[b] = v;
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 13u;
     return params[b];
 }
 fn prm_C_cfl(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 18u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -82,7 +82,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     if (i >= n) { return; }
     let t = globals[0u];
     let dt = globals[1u];
-    let scratch = u32(info[115]);
+    let scratch = u32(info[121]);
     data[scratch + 0u * n + i] = select(pinf(), (prm_C_cfl(i) * ld_h(i)), in_groups(1u, ints[i]));
     data[scratch + 1u * n + i] = select((-pinf()), (prm_c0(i) + length(ld_v(i))), in_groups(1u, ints[i]));
     data[scratch + 2u * n + i] = select(pinf(), (prm_C_cfl(i) * ld_h_short(i)), in_groups(2u, ints[i]));

@@ -180,55 +180,55 @@ fn st_a_contact(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn ld_x_0(i: u32) -> vec3<f32> {
-    let b = u32(info[91 + G] + i32(i) * 3);
+    let b = u32(info[95 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_x_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[91 + G] + i32(i) * 3);
+    let b = u32(info[95 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_v_0(i: u32) -> vec3<f32> {
-    let b = u32(info[93 + G] + i32(i) * 3);
+    let b = u32(info[97 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_v_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[93 + G] + i32(i) * 3);
+    let b = u32(info[97 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_m_0(i: u32) -> f32 {
-    let b = u32(info[95 + G] + i32(i) * 1);
+    let b = u32(info[99 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_m_0(i: u32, v: f32) {
-    let b = u32(info[95 + G] + i32(i) * 1);
+    let b = u32(info[99 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_rho_0(i: u32) -> f32 {
-    let b = u32(info[97 + G] + i32(i) * 1);
+    let b = u32(info[101 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho_0(i: u32, v: f32) {
-    let b = u32(info[97 + G] + i32(i) * 1);
+    let b = u32(info[101 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s_hoop_0(i: u32) -> f32 {
-    let b = u32(info[99 + G] + i32(i) * 1);
+    let b = u32(info[103 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_s_hoop_0(i: u32, v: f32) {
-    let b = u32(info[99 + G] + i32(i) * 1);
+    let b = u32(info[103 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s_0(i: u32) -> mat3x3<f32> {
-    let b = u32(info[101 + G] + i32(i) * 6);
+    let b = u32(info[105 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s_0(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[101 + G] + i32(i) * 6);
+    let b = u32(info[105 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -237,35 +237,35 @@ fn st_s_0(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_e_0(i: u32) -> f32 {
-    let b = u32(info[103 + G] + i32(i) * 1);
+    let b = u32(info[107 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_e_0(i: u32, v: f32) {
-    let b = u32(info[103 + G] + i32(i) * 1);
+    let b = u32(info[107 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 0u;
     return params[b];
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 5u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 13u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 28u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 29u;
     return params[b];
 }
 fn prm_eos_eta_peak(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 52u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 53u + 30u;
     return params[b];
 }
 @compute @workgroup_size(64)

@@ -72,7 +72,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let n = u32(info[0]);
     let i = k;
     if (i >= n) { return; }
-    let scratch = u32(info[115]) + 5u * n;
+    let scratch = u32(info[121]) + 5u * n;
     var speed2 = 0.0;
     var energy = 0.0;
     var kinetic = 0.0;

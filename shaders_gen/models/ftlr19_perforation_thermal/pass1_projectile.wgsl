@@ -535,19 +535,19 @@ fn st_a_contact(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 5u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 7u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 10u;
     return params[b];
 }
 fn prm_K_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 19u;
     return params[b];
 }
 @compute @workgroup_size(64)

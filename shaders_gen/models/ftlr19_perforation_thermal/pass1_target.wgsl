@@ -507,11 +507,27 @@ fn ldj_D(j: u32, sgn: vec3<f32>) -> f32 {
     let b = u32(base + i32(j) * 1);
     return data[b];
 }
+fn ld_eps_nl(i: u32) -> f32 {
+    let b = u32(info[41 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_eps_nl(i: u32, v: f32) {
+    let b = u32(info[41 + G] + i32(i) * 1);
+    data[b] = v;
+}
 fn ldj_eps_nl(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[41u + ints[j]];
     if (base == -2147483648) { return 0.0; }
     let b = u32(base + i32(j) * 1);
     return data[b];
+}
+fn ld_rate_nl(i: u32) -> f32 {
+    let b = u32(info[43 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_rate_nl(i: u32, v: f32) {
+    let b = u32(info[43 + G] + i32(i) * 1);
+    data[b] = v;
 }
 fn ldj_rate_nl(j: u32, sgn: vec3<f32>) -> f32 {
     let base = info[43u + ints[j]];
@@ -568,32 +584,48 @@ fn st_lap_weight(i: u32, v: f32) {
     let b = u32(info[61 + G] + i32(i) * 1);
     data[b] = v;
 }
-fn ld_rate_lap_sum(i: u32) -> f32 {
+fn ld_lap_eps_nl(i: u32) -> f32 {
     let b = u32(info[63 + G] + i32(i) * 1);
     return data[b];
 }
-fn st_rate_lap_sum(i: u32, v: f32) {
+fn st_lap_eps_nl(i: u32, v: f32) {
     let b = u32(info[63 + G] + i32(i) * 1);
     data[b] = v;
 }
+fn ld_rate_lap_sum(i: u32) -> f32 {
+    let b = u32(info[65 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_rate_lap_sum(i: u32, v: f32) {
+    let b = u32(info[65 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_lap_rate_nl(i: u32) -> f32 {
+    let b = u32(info[67 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_lap_rate_nl(i: u32, v: f32) {
+    let b = u32(info[67 + G] + i32(i) * 1);
+    data[b] = v;
+}
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 5u;
     return params[b];
 }
 fn prm_nonlocal_skips_failed(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 6u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 6u;
     return params[b];
 }
 fn prm_det_min(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 7u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 7u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 10u;
     return params[b];
 }
 fn prm_K_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 19u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 19u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -620,13 +652,17 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     // pairsum nonlocal_strain_laplacian: accumulators
     var lap_sum: f32 = 0.0;
     var lap_weight: f32 = 0.0;
+    var lap_eps_nl: f32 = 0.0;
     var sum: f32 = 0.0;
     var weight: f32 = 0.0;
     var moment: f32 = 0.0;
+    var difference: f32 = 0.0;
     // pairsum nonlocal_rate_laplacian: accumulators
     var rate_lap_sum: f32 = 0.0;
+    var lap_rate_nl: f32 = 0.0;
     var sum_2: f32 = 0.0;
     var moment_2: f32 = 0.0;
+    var difference_2: f32 = 0.0;
     let nonlocal_skips_failed_i = prm_nonlocal_skips_failed(i);
     let G_i = prm_G(i);
     let K_p_i = prm_K_p(i);
@@ -636,6 +672,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let m_i = ld_m(i);
     let rho_i = ld_rho(i);
     let h_i = ld_h(i);
+    let eps_nl_i = ld_eps_nl(i);
+    let rate_nl_i = ld_rate_nl(i);
     let xi = pos3(i);
     let hi = h_of(i);
     let mirrors = u32(globals[72u]);
@@ -704,7 +742,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 let f3 = select(0.0, ((mass * pen_rate) / dt), (pen_rate > 0.0));
                 a_contact = a_contact + (((K_p_i * max(max(f1, f2), f3)) / m_i) * n_2);
             }
-            // pairsum nonlocal_strain_laplacian (stdlib/damage/nonlocal_strain.sph:117)
+            // pairsum nonlocal_strain_laplacian (stdlib/damage/nonlocal_strain.sph:134)
             if (in_groups(2u, ints[j])) {
                 let m_j = ldj_m(j, sgn);
                 let rho_j = ldj_rho(j, sgn);
@@ -718,8 +756,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 sum = sum + (k_3 * ldj_eps_nl(j, sgn));
                 weight = weight + k_3;
                 moment = moment + (k_3 * (r_ij * r_ij));
+                difference = difference + (k_3 * (ldj_eps_nl(j, sgn) - eps_nl_i));
             }
-            // pairsum nonlocal_rate_laplacian (stdlib/damage/nonlocal_strain.sph:143)
+            // pairsum nonlocal_rate_laplacian (stdlib/damage/nonlocal_strain.sph:163)
             if (in_groups(2u, ints[j])) {
                 let m_j_2 = ldj_m(j, sgn);
                 let rho_j_2 = ldj_rho(j, sgn);
@@ -732,6 +771,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 let k_5 = select(k_4, 0.0, ((nonlocal_skips_failed_i > 0.0) && (D_j_2 >= 1.0)));
                 sum_2 = sum_2 + (k_5 * ldj_rate_nl(j, sgn));
                 moment_2 = moment_2 + (k_5 * (r_ij * r_ij));
+                difference_2 = difference_2 + (k_5 * (ldj_rate_nl(j, sgn) - rate_nl_i));
             }
         }
         }}}
@@ -752,8 +792,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let exact_for_quadratics = ((2.0 * 3.0) / max(moment, 1e-12));
     lap_sum = (exact_for_quadratics * sum);
     lap_weight = (exact_for_quadratics * weight);
+    lap_eps_nl = (exact_for_quadratics * difference);
     // then nonlocal_rate_laplacian
     rate_lap_sum = (((2.0 * 3.0) / max(moment_2, 1e-12)) * sum_2);
+    lap_rate_nl = (((2.0 * 3.0) / max(moment_2, 1e-12)) * difference_2);
     st_L_inv(i, L_inv);
     st_edot(i, edot);
     st_spin(i, spin);
@@ -762,5 +804,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     st_a_contact(i, a_contact);
     st_lap_sum(i, lap_sum);
     st_lap_weight(i, lap_weight);
+    st_lap_eps_nl(i, lap_eps_nl);
     st_rate_lap_sum(i, rate_lap_sum);
+    st_lap_rate_nl(i, lap_rate_nl);
 }

@@ -564,31 +564,31 @@ fn st_dv(i: u32, v: vec3<f32>) {
     data[b + 2u] = v[2];
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 5u;
     return params[b];
 }
 fn prm_delta(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 8u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 8u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 9u;
     return params[b];
 }
 fn prm_visc_a(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 14u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 14u;
     return params[b];
 }
 fn prm_visc_b(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 15u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 15u;
     return params[b];
 }
 fn prm_eta_ratio(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 16u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 16u;
     return params[b];
 }
 fn prm_conservative(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 18u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 18u;
     return params[b];
 }
 @compute @workgroup_size(64)

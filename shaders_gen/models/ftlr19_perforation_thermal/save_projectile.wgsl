@@ -114,6 +114,14 @@ fn st_eps_nl(i: u32, v: f32) {
     let b = u32(info[41 + G] + i32(i) * 1);
     data[b] = v;
 }
+fn ld_rate_nl(i: u32) -> f32 {
+    let b = u32(info[43 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_rate_nl(i: u32, v: f32) {
+    let b = u32(info[43 + G] + i32(i) * 1);
+    data[b] = v;
+}
 fn ld_T(i: u32) -> f32 {
     let b = u32(info[45 + G] + i32(i) * 1);
     return data[b];
@@ -123,39 +131,39 @@ fn st_T(i: u32, v: f32) {
     data[b] = v;
 }
 fn ld_x_0(i: u32) -> vec3<f32> {
-    let b = u32(info[65 + G] + i32(i) * 3);
+    let b = u32(info[69 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_x_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[65 + G] + i32(i) * 3);
+    let b = u32(info[69 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_v_0(i: u32) -> vec3<f32> {
-    let b = u32(info[67 + G] + i32(i) * 3);
+    let b = u32(info[71 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_v_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[67 + G] + i32(i) * 3);
+    let b = u32(info[71 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_rho_0(i: u32) -> f32 {
-    let b = u32(info[69 + G] + i32(i) * 1);
+    let b = u32(info[73 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho_0(i: u32, v: f32) {
-    let b = u32(info[69 + G] + i32(i) * 1);
+    let b = u32(info[73 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s_0(i: u32) -> mat3x3<f32> {
-    let b = u32(info[73 + G] + i32(i) * 6);
+    let b = u32(info[77 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s_0(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[73 + G] + i32(i) * 6);
+    let b = u32(info[77 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -164,11 +172,11 @@ fn st_s_0(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_e_0(i: u32) -> f32 {
-    let b = u32(info[75 + G] + i32(i) * 1);
+    let b = u32(info[79 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_e_0(i: u32, v: f32) {
-    let b = u32(info[75 + G] + i32(i) * 1);
+    let b = u32(info[79 + G] + i32(i) * 1);
     data[b] = v;
 }
 @compute @workgroup_size(64)
@@ -190,6 +198,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var D_0_i: f32 = 0.0;
     var eps_p_0_i: f32 = 0.0;
     var eps_nl_0_i: f32 = 0.0;
+    var rate_nl_0_i: f32 = 0.0;
     var T_0_i: f32 = 0.0;
     x_0_i = ld_x(i);
     v_0_i = ld_v(i);
@@ -200,6 +209,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     D_0_i = ld_D(i);
     eps_p_0_i = ld_eps_p(i);
     eps_nl_0_i = ld_eps_nl(i);
+    rate_nl_0_i = ld_rate_nl(i);
     T_0_i = ld_T(i);
     st_x_0(i, x_0_i);
     st_v_0(i, v_0_i);

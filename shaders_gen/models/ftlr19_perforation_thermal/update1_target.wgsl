@@ -240,48 +240,64 @@ fn st_lap_weight(i: u32, v: f32) {
     let b = u32(info[61 + G] + i32(i) * 1);
     data[b] = v;
 }
-fn ld_rate_lap_sum(i: u32) -> f32 {
+fn ld_lap_eps_nl(i: u32) -> f32 {
     let b = u32(info[63 + G] + i32(i) * 1);
     return data[b];
 }
-fn st_rate_lap_sum(i: u32, v: f32) {
+fn st_lap_eps_nl(i: u32, v: f32) {
     let b = u32(info[63 + G] + i32(i) * 1);
     data[b] = v;
 }
+fn ld_rate_lap_sum(i: u32) -> f32 {
+    let b = u32(info[65 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_rate_lap_sum(i: u32, v: f32) {
+    let b = u32(info[65 + G] + i32(i) * 1);
+    data[b] = v;
+}
+fn ld_lap_rate_nl(i: u32) -> f32 {
+    let b = u32(info[67 + G] + i32(i) * 1);
+    return data[b];
+}
+fn st_lap_rate_nl(i: u32, v: f32) {
+    let b = u32(info[67 + G] + i32(i) * 1);
+    data[b] = v;
+}
 fn ld_x_0(i: u32) -> vec3<f32> {
-    let b = u32(info[65 + G] + i32(i) * 3);
+    let b = u32(info[69 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_x_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[65 + G] + i32(i) * 3);
+    let b = u32(info[69 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_v_0(i: u32) -> vec3<f32> {
-    let b = u32(info[67 + G] + i32(i) * 3);
+    let b = u32(info[71 + G] + i32(i) * 3);
     return vec3<f32>(data[b], data[b + 1u], data[b + 2u]);
 }
 fn st_v_0(i: u32, v: vec3<f32>) {
-    let b = u32(info[67 + G] + i32(i) * 3);
+    let b = u32(info[71 + G] + i32(i) * 3);
     data[b] = v[0];
     data[b + 1u] = v[1];
     data[b + 2u] = v[2];
 }
 fn ld_rho_0(i: u32) -> f32 {
-    let b = u32(info[69 + G] + i32(i) * 1);
+    let b = u32(info[73 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_rho_0(i: u32, v: f32) {
-    let b = u32(info[69 + G] + i32(i) * 1);
+    let b = u32(info[73 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn ld_s_0(i: u32) -> mat3x3<f32> {
-    let b = u32(info[73 + G] + i32(i) * 6);
+    let b = u32(info[77 + G] + i32(i) * 6);
     return mat3x3<f32>(vec3<f32>(data[b], data[b + 1u], data[b + 2u]), vec3<f32>(data[b + 1u], data[b + 3u], data[b + 4u]), vec3<f32>(data[b + 2u], data[b + 4u], data[b + 5u]));
 }
 fn st_s_0(i: u32, v: mat3x3<f32>) {
-    let b = u32(info[73 + G] + i32(i) * 6);
+    let b = u32(info[77 + G] + i32(i) * 6);
     data[b] = v[0][0];
     data[b + 1u] = v[1][0];
     data[b + 2u] = v[2][0];
@@ -290,123 +306,127 @@ fn st_s_0(i: u32, v: mat3x3<f32>) {
     data[b + 5u] = v[2][2];
 }
 fn ld_e_0(i: u32) -> f32 {
-    let b = u32(info[75 + G] + i32(i) * 1);
+    let b = u32(info[79 + G] + i32(i) * 1);
     return data[b];
 }
 fn st_e_0(i: u32, v: f32) {
-    let b = u32(info[75 + G] + i32(i) * 1);
+    let b = u32(info[79 + G] + i32(i) * 1);
     data[b] = v;
 }
 fn prm_rho0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 0u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 0u;
     return params[b];
 }
 fn prm_axisymmetric(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 5u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 5u;
     return params[b];
 }
 fn prm_c0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 9u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 9u;
     return params[b];
 }
 fn prm_G(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 10u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 10u;
     return params[b];
 }
 fn prm_S_s(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 11u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 11u;
     return params[b];
 }
 fn prm_gamma0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 12u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 12u;
     return params[b];
 }
 fn prm_eos_eta_peak(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 13u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 13u;
     return params[b];
 }
 fn prm_nonlocal_hardening(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 20u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 20u;
     return params[b];
 }
 fn prm_nonlocal_rate(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 21u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 21u;
     return params[b];
 }
 fn prm_damage_length(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 22u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 22u;
     return params[b];
 }
 fn prm_jc_A(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 23u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 23u;
     return params[b];
 }
 fn prm_jc_B(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 24u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 24u;
     return params[b];
 }
 fn prm_jc_C(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 25u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 25u;
     return params[b];
 }
 fn prm_jc_n(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 26u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 26u;
     return params[b];
 }
 fn prm_jc_m(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 27u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 27u;
     return params[b];
 }
 fn prm_eps_rate0(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 28u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 28u;
     return params[b];
 }
 fn prm_T_melt(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 29u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 29u;
     return params[b];
 }
 fn prm_T_room(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 30u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 30u;
     return params[b];
 }
 fn prm_D1(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 31u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 31u;
     return params[b];
 }
 fn prm_D2(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 32u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 32u;
     return params[b];
 }
 fn prm_D3(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 33u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 33u;
     return params[b];
 }
 fn prm_D4(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 34u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 34u;
     return params[b];
 }
 fn prm_D5(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 35u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 35u;
     return params[b];
 }
 fn prm_failure_band(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 36u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 36u;
     return params[b];
 }
 fn prm_failure_band_spacing(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 37u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 37u;
+    return params[b];
+}
+fn prm_nonlocal_time(i: u32) -> f32 {
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 38u;
     return params[b];
 }
 fn prm_nonlocal_weight(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 38u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 39u;
     return params[b];
 }
 fn prm_C_p(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 40u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 41u;
     return params[b];
 }
 fn prm_taylor_quinney(i: u32) -> f32 {
-    let b = ints[arrayLength(&ints) / 2u + i] * 42u + 41u;
+    let b = ints[arrayLength(&ints) / 2u + i] * 43u + 42u;
     return params[b];
 }
 @compute @workgroup_size(64)
@@ -442,7 +462,12 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let e_hoop = select(0.0, (((w * v_i[0]) / max(x_i[0], (0.1 * ld_dx(i)))) + ((1.0 - w) * ld_edot(i)[0][0])), (prm_axisymmetric(i) > 0.0));
     let d = (dev(e) - ((e_hoop / 3.0) * eye()));
     let d_hoop = select(0.0, (e_hoop - ((trace(e) + e_hoop) / 3.0)), (prm_axisymmetric(i) > 0.0));
-    rate_nl_i = ((sqrt(((2.0 / 3.0) * (ddot(d, d) + (d_hoop * d_hoop)))) + (l2 * ld_rate_lap_sum(i))) / (1.0 + (l2 * ld_lap_weight(i))));
+    let source = sqrt(((2.0 / 3.0) * (ddot(d, d) + (d_hoop * d_hoop))));
+    let jacobi = ((source + (l2 * ld_rate_lap_sum(i))) / (1.0 + (l2 * ld_lap_weight(i))));
+    let lap_weight = ld_lap_weight(i);
+    let l2_2 = (prm_damage_length(i) * prm_damage_length(i));
+    let relaxed = (rate_nl_i + (min((dt / max(prm_nonlocal_time(i), 1e-30)), (1.0 / (1.0 + ((2.0 * l2_2) * lap_weight)))) * ((source - rate_nl_i) + (l2 * ld_lap_rate_nl(i)))));
+    rate_nl_i = select(jacobi, relaxed, (prm_nonlocal_time(i) > 0.0));
     // radial_return
     var s_hoop_i: f32 = ld_s_hoop(i);
     var eps_p_i: f32 = ld_eps_p(i);
@@ -492,17 +517,23 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var D_i: f32 = ld_D(i);
     var eps_nl_i: f32 = ld_eps_nl(i);
     let eps_p_3 = eps_p_i;
+    let eps_nl = eps_nl_i;
     let lap_sum = ld_lap_sum(i);
-    let lap_weight = ld_lap_weight(i);
-    let l2_2 = (prm_damage_length(i) * prm_damage_length(i));
-    let nonlocal = select(eps_p_3, ((eps_p_3 + (l2_2 * lap_sum)) / (1.0 + (l2_2 * lap_weight))), (prm_damage_length(i) > 0.0));
+    let lap_weight_2 = ld_lap_weight(i);
+    let lap_eps_nl = ld_lap_eps_nl(i);
+    let l2_3 = (prm_damage_length(i) * prm_damage_length(i));
+    let jacobi_2 = ((eps_p_3 + (l2_3 * lap_sum)) / (1.0 + (l2_3 * lap_weight_2)));
+    let lap_weight_3 = lap_weight_2;
+    let l2_4 = (prm_damage_length(i) * prm_damage_length(i));
+    let relaxed_2 = (eps_nl + (min((dt / max(prm_nonlocal_time(i), 1e-30)), (1.0 / (1.0 + ((2.0 * l2_4) * lap_weight_3)))) * ((eps_p_3 - eps_nl) + (l2_3 * lap_eps_nl))));
+    let nonlocal = select(eps_p_3, select(jacobi_2, relaxed_2, (prm_nonlocal_time(i) > 0.0)), (prm_damage_length(i) > 0.0));
     let D = D_i;
     let eps_nl_new = nonlocal;
-    let eps_nl = eps_nl_i;
+    let eps_nl_2 = eps_nl_i;
     let deps_p = deps_p_i;
     let spacing = select(ld_dx(i), prm_failure_band_spacing(i), (prm_failure_band_spacing(i) > 0.0));
     let local = select(deps_p, ((deps_p * spacing) / max(prm_failure_band(i), 1e-30)), (prm_failure_band(i) > 0.0));
-    let mixed = ((prm_nonlocal_weight(i) * (eps_nl_new - eps_nl)) + ((1.0 - prm_nonlocal_weight(i)) * deps_p));
+    let mixed = ((prm_nonlocal_weight(i) * (eps_nl_new - eps_nl_2)) + ((1.0 - prm_nonlocal_weight(i)) * deps_p));
     let deps_p_2 = select(local, max(mixed, 0.0), (prm_damage_length(i) > 0.0));
     let p = ld_p(i);
     let s_3 = s_i;
