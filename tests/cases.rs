@@ -1490,6 +1490,25 @@ fn a_switch_other_than_0_or_1_on_the_axisymmetric_borvik_case_is_error_c0048_nam
     assert_eq!(store_with(&[]), Ok(()));
 }
 
+/// `nonlocal_time` τ (damage/nonlocal_strain.sph) is the time ε̄_p relaxes over, so not negative,
+/// and it relaxes the strain averaged over a damage length, so it needs one: on the axisymmetric
+/// Børvik plate τ = −1 µs and τ = 4 µs without a damage length are each error C0048 naming the
+/// reason and the value, and τ = 4 µs with the case's 2 mm builds the store.
+#[test]
+fn a_nonlocal_time_below_zero_or_without_a_damage_length_is_error_c0048_and_four_us_with_one_builds() {
+    let store_with = |set: &[(&str, &str)]| build_store_with("borvik_axisymmetric", set);
+    let err = store_with(&[("nonlocal_time", "-1")]).expect_err("negative");
+    for part in ["C0048", "material `weldox`", "τ ≥ 0", "nonlocal_time = -0.000001 s"] {
+        assert!(err.contains(part), "{part} not in: {err}");
+    }
+    let err = store_with(&[("nonlocal_time", "4"), ("damage_length", "0"), ("nonlocal_hardening", "0")])
+        .expect_err("no damage length");
+    for part in ["C0048", "set damage_length > 0", "nonlocal_time = 0.000004 s"] {
+        assert!(err.contains(part), "{part} not in: {err}");
+    }
+    assert_eq!(store_with(&[("nonlocal_time", "4")]), Ok(()));
+}
+
 /// The over-nonlocal damage driver's weight m (damage/nonlocal_strain.sph) mixes in ε̄_p, so it
 /// needs a damage length, and it is a share, so not negative: on the Børvik plate m = 2 without a
 /// damage length and m = −1 with one are each error C0048 naming the reason, and m = 2 with a

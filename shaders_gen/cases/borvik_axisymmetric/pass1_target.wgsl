@@ -569,7 +569,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         if ((body_i != ldj_body(j, sgn))) {
             colour_other = colour_other + ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * W_ij);
         }
-        // pairsum nonlocal_strain_laplacian (stdlib/damage/nonlocal_strain.sph:134)
+        // pairsum nonlocal_strain_laplacian (stdlib/damage/nonlocal_strain.sph:136)
         if (in_groups(2u, ints[j])) {
             let m_j = ldj_m(j, sgn);
             let rho_j = ldj_rho(j, sgn);

@@ -682,7 +682,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let pi_ij = select(0.0, (((((-visc_a_i) * c_bar) * phi) + (visc_b_i * (phi * phi))) / rho_bar), (vr < 0.0));
             let p2 = ldj_rho(j, sgn);
             dv = dv + (ldj_m(j, sgn) * (((div_m(sig_i, (rho_i * rho_i)) + div_m(sig_j, (p2 * p2))) - (pi_ij * eye())) * gradW_ij));
-            // pairsum nonlocal_strain_laplacian (stdlib/damage/nonlocal_strain.sph:134)
+            // pairsum nonlocal_strain_laplacian (stdlib/damage/nonlocal_strain.sph:136)
             if ((body_i == ldj_body(j, sgn))) {
                 let m_j = ldj_m(j, sgn);
                 let rho_j = ldj_rho(j, sgn);

@@ -762,7 +762,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let pi_ij = select(0.0, (((((-visc_a_i) * c_bar) * phi) + (visc_b_i * (phi * phi))) / rho_bar), (vr < 0.0));
             let p2 = ldj_rho(j, sgn);
             dv = dv + (ldj_m(j, sgn) * (((div_m(sig_i, (rho_i * rho_i)) + div_m(sig_j, (p2 * p2))) - (pi_ij * eye())) * gradW_ij));
-            // pairsum nonlocal_strain_laplacian (stdlib/damage/nonlocal_strain.sph:134)
+            // pairsum nonlocal_strain_laplacian (stdlib/damage/nonlocal_strain.sph:136)
             if ((body_i == ldj_body(j, sgn))) {
                 let m_j = ldj_m(j, sgn);
                 let rho_j = ldj_rho(j, sgn);
@@ -778,7 +778,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 moment = moment + (k_3 * (r_ij * r_ij));
                 difference = difference + (k_3 * (ldj_eps_nl(j, sgn) - eps_nl_i));
             }
-            // pairsum nonlocal_rate_laplacian (stdlib/damage/nonlocal_strain.sph:163)
+            // pairsum nonlocal_rate_laplacian (stdlib/damage/nonlocal_strain.sph:165)
             if ((body_i == ldj_body(j, sgn))) {
                 let m_j_2 = ldj_m(j, sgn);
                 let rho_j_2 = ldj_rho(j, sgn);

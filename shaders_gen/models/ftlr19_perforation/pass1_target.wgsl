@@ -742,7 +742,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 let f3 = select(0.0, ((mass * pen_rate) / dt), (pen_rate > 0.0));
                 a_contact = a_contact + (((K_p_i * max(max(f1, f2), f3)) / m_i) * n_2);
             }
-            // pairsum nonlocal_strain_laplacian (stdlib/damage/nonlocal_strain.sph:134)
+            // pairsum nonlocal_strain_laplacian (stdlib/damage/nonlocal_strain.sph:136)
             if (in_groups(2u, ints[j])) {
                 let m_j = ldj_m(j, sgn);
                 let rho_j = ldj_rho(j, sgn);
@@ -758,7 +758,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 moment = moment + (k_3 * (r_ij * r_ij));
                 difference = difference + (k_3 * (ldj_eps_nl(j, sgn) - eps_nl_i));
             }
-            // pairsum nonlocal_rate_laplacian (stdlib/damage/nonlocal_strain.sph:163)
+            // pairsum nonlocal_rate_laplacian (stdlib/damage/nonlocal_strain.sph:165)
             if (in_groups(2u, ints[j])) {
                 let m_j_2 = ldj_m(j, sgn);
                 let rho_j_2 = ldj_rho(j, sgn);

@@ -988,7 +988,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             if ((body_i != ldj_body(j, sgn))) {
                 colour_other = colour_other + ((ldj_m(j, sgn) / ldj_rho(j, sgn)) * W_ij);
             }
-            // pairsum nonlocal_strain_laplacian (stdlib/damage/nonlocal_strain.sph:134)
+            // pairsum nonlocal_strain_laplacian (stdlib/damage/nonlocal_strain.sph:136)
             if (in_groups(2u, ints[j])) {
                 let m_j = ldj_m(j, sgn);
                 let rho_j = ldj_rho(j, sgn);
@@ -1004,7 +1004,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 moment = moment + (k_4 * (r_ij * r_ij));
                 difference = difference + (k_4 * (ldj_eps_nl(j, sgn) - eps_nl_i));
             }
-            // pairsum nonlocal_rate_laplacian (stdlib/damage/nonlocal_strain.sph:163)
+            // pairsum nonlocal_rate_laplacian (stdlib/damage/nonlocal_strain.sph:165)
             if (in_groups(2u, ints[j])) {
                 let m_j_2 = ldj_m(j, sgn);
                 let rho_j_2 = ldj_rho(j, sgn);
