@@ -7,7 +7,7 @@ The closest setting (`--set hourglass_damage=1 --set nonlocal_hardening=-3`) wit
 a fixed time τ (`--set nonlocal_time=τ` in µs; damage/nonlocal_strain.sph), against the same
 setting with one Jacobi step a correction (stops 125–128, ../hourglass_pull/dwm3*). Prints, per
 plate, the projectile's speed (m/s) at 20, 40, 65 and 100 µs and its residual at 150 µs for each
-level; the residual against τ at 0.5 mm on 12 mm; and the 12 mm levels over the edge places run
+level; the residual against τ at 0.5 mm on 12 mm; and both plates' levels over the edge places run
 at τ = 4 µs."""
 import csv
 import os
@@ -56,10 +56,10 @@ def sensitivity():
             print(f"  τ = {tau} µs ({name}): {s[-1]:.2f} (at 20 / 40 µs {s[0]:.2f} / {s[1]:.2f}; natural {natural[0]:.2f} / {natural[1]:.2f})")
 
 
-def places():
-    print("\n12 mm at τ = 4 µs at the edge places −0.4 / 0 / +0.4: residual (m/s), and the mean of those run")
+def places(plate):
+    print(f"\n{plate} mm at τ = 4 µs at the edge places −0.4 / 0 / +0.4: residual (m/s), and the mean of those run")
     for k in KS:
-        values = [run(os.path.join(HERE, f"t4{p}_12_k{k}")) for p in ("m04", "", "p04")]
+        values = [run(os.path.join(HERE, f"t4{p}_{plate}_k{k}")) for p in ("m04", "", "p04")]
         run_ = [v[-1] for v in values if v]
         mean = f"  → {st.mean(run_):.2f}" if len(run_) > 1 else ""
         print(f"  {DX[k]} mm: " + " / ".join(f"{v[-1]:.2f}" if v else "—" for v in values) + mean)
@@ -69,4 +69,5 @@ if __name__ == "__main__":
     ladder(12)
     ladder(8)
     sensitivity()
-    places()
+    places(12)
+    places(8)
