@@ -656,13 +656,12 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var sum: f32 = 0.0;
     var weight: f32 = 0.0;
     var moment: f32 = 0.0;
-    var difference: f32 = 0.0;
     // pairsum nonlocal_rate_laplacian: accumulators
     var rate_lap_sum: f32 = 0.0;
     var lap_rate_nl: f32 = 0.0;
     var sum_2: f32 = 0.0;
     var moment_2: f32 = 0.0;
-    var difference_2: f32 = 0.0;
+    var weight_2: f32 = 0.0;
     let nonlocal_skips_failed_i = prm_nonlocal_skips_failed(i);
     let G_i = prm_G(i);
     let K_p_i = prm_K_p(i);
@@ -672,8 +671,6 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let m_i = ld_m(i);
     let rho_i = ld_rho(i);
     let h_i = ld_h(i);
-    let eps_nl_i = ld_eps_nl(i);
-    let rate_nl_i = ld_rate_nl(i);
     let xi = pos3(i);
     let hi = h_of(i);
     let mirrors = u32(globals[72u]);
@@ -756,9 +753,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 sum = sum + (k_3 * ldj_eps_nl(j, sgn));
                 weight = weight + k_3;
                 moment = moment + (k_3 * (r_ij * r_ij));
-                difference = difference + (k_3 * (ldj_eps_nl(j, sgn) - eps_nl_i));
             }
-            // pairsum nonlocal_rate_laplacian (stdlib/damage/nonlocal_strain.sph:165)
+            // pairsum nonlocal_rate_laplacian (stdlib/damage/nonlocal_strain.sph:163)
             if (in_groups(2u, ints[j])) {
                 let m_j_2 = ldj_m(j, sgn);
                 let rho_j_2 = ldj_rho(j, sgn);
@@ -771,7 +767,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 let k_5 = select(k_4, 0.0, ((nonlocal_skips_failed_i > 0.0) && (D_j_2 >= 1.0)));
                 sum_2 = sum_2 + (k_5 * ldj_rate_nl(j, sgn));
                 moment_2 = moment_2 + (k_5 * (r_ij * r_ij));
-                difference_2 = difference_2 + (k_5 * (ldj_rate_nl(j, sgn) - rate_nl_i));
+                weight_2 = weight_2 + k_5;
             }
         }
         }}}
@@ -792,10 +788,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let exact_for_quadratics = ((2.0 * 3.0) / max(moment, 1e-12));
     lap_sum = (exact_for_quadratics * sum);
     lap_weight = (exact_for_quadratics * weight);
-    lap_eps_nl = (exact_for_quadratics * difference);
+    lap_eps_nl = (exact_for_quadratics * (sum - (weight * ld_eps_nl(i))));
     // then nonlocal_rate_laplacian
-    rate_lap_sum = (((2.0 * 3.0) / max(moment_2, 1e-12)) * sum_2);
-    lap_rate_nl = (((2.0 * 3.0) / max(moment_2, 1e-12)) * difference_2);
+    let exact_for_quadratics_2 = ((2.0 * 3.0) / max(moment_2, 1e-12));
+    rate_lap_sum = (exact_for_quadratics_2 * sum_2);
+    lap_rate_nl = (exact_for_quadratics_2 * (sum_2 - (weight_2 * ld_rate_nl(i))));
     st_L_inv(i, L_inv);
     st_edot(i, edot);
     st_spin(i, spin);

@@ -848,13 +848,12 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var sum_2: f32 = 0.0;
     var weight: f32 = 0.0;
     var moment: f32 = 0.0;
-    var difference: f32 = 0.0;
     // pairsum nonlocal_rate_laplacian: accumulators
     var rate_lap_sum: f32 = 0.0;
     var lap_rate_nl: f32 = 0.0;
     var sum_3: f32 = 0.0;
     var moment_2: f32 = 0.0;
-    var difference_2: f32 = 0.0;
+    var weight_2: f32 = 0.0;
     let rho0_i = prm_rho0(i);
     let h_ratio_i = prm_h_ratio(i);
     let axisymmetric_i = prm_axisymmetric(i);
@@ -875,8 +874,6 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let kernel_norm_i = ld_kernel_norm(i);
     let u_i = ld_u(i);
     let D_i = ld_D(i);
-    let eps_nl_i = ld_eps_nl(i);
-    let rate_nl_i = ld_rate_nl(i);
     let xi = pos3(i);
     let hi = h_of(i);
     let mirrors = u32(globals[72u]);
@@ -1002,9 +999,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 sum_2 = sum_2 + (k_4 * ldj_eps_nl(j, sgn));
                 weight = weight + k_4;
                 moment = moment + (k_4 * (r_ij * r_ij));
-                difference = difference + (k_4 * (ldj_eps_nl(j, sgn) - eps_nl_i));
             }
-            // pairsum nonlocal_rate_laplacian (stdlib/damage/nonlocal_strain.sph:165)
+            // pairsum nonlocal_rate_laplacian (stdlib/damage/nonlocal_strain.sph:163)
             if (in_groups(2u, ints[j])) {
                 let m_j_2 = ldj_m(j, sgn);
                 let rho_j_2 = ldj_rho(j, sgn);
@@ -1017,7 +1013,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 let k_6 = select(k_5, 0.0, ((nonlocal_skips_failed_i > 0.0) && (D_j_2 >= 1.0)));
                 sum_3 = sum_3 + (k_6 * ldj_rate_nl(j, sgn));
                 moment_2 = moment_2 + (k_6 * (r_ij * r_ij));
-                difference_2 = difference_2 + (k_6 * (ldj_rate_nl(j, sgn) - rate_nl_i));
+                weight_2 = weight_2 + k_6;
             }
         }
         }}}
@@ -1050,10 +1046,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let exact_for_quadratics = ((2.0 * 3.0) / max(moment, 1e-12));
     lap_sum = (exact_for_quadratics * sum_2);
     lap_weight = (exact_for_quadratics * weight);
-    lap_eps_nl = (exact_for_quadratics * difference);
+    lap_eps_nl = (exact_for_quadratics * (sum_2 - (weight * ld_eps_nl(i))));
     // then nonlocal_rate_laplacian
-    rate_lap_sum = (((2.0 * 3.0) / max(moment_2, 1e-12)) * sum_3);
-    lap_rate_nl = (((2.0 * 3.0) / max(moment_2, 1e-12)) * difference_2);
+    let exact_for_quadratics_2 = ((2.0 * 3.0) / max(moment_2, 1e-12));
+    rate_lap_sum = (exact_for_quadratics_2 * sum_3);
+    lap_rate_nl = (exact_for_quadratics_2 * (sum_3 - (weight_2 * ld_rate_nl(i))));
     // then compressive_share
     var compression_i: f32 = ld_compression(i);
     let w_5 = min((x_i[0] / (2.0 * dx_i)), 1.0);
